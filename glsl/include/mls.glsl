@@ -1,0 +1,145 @@
+// MLS reconstruction ([MLS] §3), f32 twin of src/recon/mls.rs (same stage names).
+// Variant macros: MLS_TERMS (1 constant, 4 linear, 10 quadratic), MLS_WEIGHT (0 Wendland,
+// 1 interpolating), MLS_ANALYTIC_GRADIENT (0 local, 1 analytic).
+// Kernels include this after neighbours.glsl's buffers are declared; the kernel enables
+// GL_EXT_control_flow_attributes.
+#ifndef VMLS_MLS_GLSL
+#define VMLS_MLS_GLSL
+
+#define MLS_PACKED (MLS_TERMS * (MLS_TERMS + 1) / 2)
+// Index of A[i][j], j <= i, in the packed lower triangle.
+#define TRI(i, j) ((i) * ((i) + 1) / 2 + (j))
+
+const float PIVOT_TOLERANCE = 1e-4;
+const float RHO_MIN = 1e-6;
+
+struct MlsSystem {
+    float a[MLS_PACKED];
+    float r[MLS_TERMS];
+    uint neighbours;
+    bool exact;
+    float exact_value;
+    vec3 inv_h;
+};
+
+struct MlsResult {
+    float value;
+    vec3 gradient;
+    uint neighbours;
+    uint terms;
+};
+
+// θ(ρ) and θ'(ρ)/ρ from ρ²; zero outside the support.
+vec2 mls_weight(float rho2) {
+    if (rho2 >= 1.0) {
+        return vec2(0.0);
+    }
+#if MLS_WEIGHT == 0
+    float q = 1.0 - rho2;
+    float q3 = q * q * q;
+    return vec2(q3 * q, -8.0 * q3);
+#else
+    float rho = sqrt(rho2);
+    if (rho < RHO_MIN) {
+        float lm = log(RHO_MIN);
+        return vec2(lm * lm - RHO_MIN * RHO_MIN + 2.0 * RHO_MIN - 1.0, 0.0);
+    }
+    float l = log(rho);
+    float theta = l * l - rho2 + 2.0 * rho - 1.0;
+    float dtheta = 2.0 * l / rho - 2.0 * rho + 2.0;
+    return vec2(max(theta, 0.0), dtheta / rho);
+#endif
+}
+
+void mls_basis(vec3 y, out float b[MLS_TERMS]) {
+    b[0] = 1.0;
+#if MLS_TERMS >= 4
+    b[1] = y.x;
+    b[2] = y.y;
+    b[3] = y.z;
+#endif
+#if MLS_TERMS >= 10
+    b[4] = y.x * y.x;
+    b[5] = y.y * y.y;
+    b[6] = y.z * y.z;
+    b[7] = y.x * y.y;
+    b[8] = y.x * y.z;
+    b[9] = y.y * y.z;
+#endif
+}
+
+void mls_accumulate(inout MlsSystem s, vec3 y, float rho2, float f, vec3 inv_h) {
+    float w = mls_weight(rho2).x;
+    if (w <= 0.0) {
+        return;
+    }
+#if MLS_WEIGHT == 1
+    if (rho2 < RHO_MIN * RHO_MIN) {
+        s.exact = true;
+        s.exact_value = f;
+    }
+#endif
+    if (s.neighbours == 0u) {
+        s.inv_h = inv_h;
+    }
+    s.neighbours += 1u;
+    float b[MLS_TERMS];
+    mls_basis(y, b);
+    [[unroll]] for (int i = 0; i < MLS_TERMS; ++i) {
+        float wb = w * b[i];
+        s.r[i] += wb * f;
+        [[unroll]] for (int j = 0; j <= i; ++j) {
+            s.a[TRI(i, j)] += wb * b[j];
+        }
+    }
+}
+
+// In-place LDLᵀ without square roots; returns the determined leading terms (10, 4, 1 or 0).
+uint mls_factor(inout float a[MLS_PACKED]) {
+    uint sound = 0u;
+    bool ok = true;
+    [[unroll]] for (int k = 0; k < MLS_TERMS; ++k) {
+        if (ok) {
+            float diag = a[TRI(k, k)];
+            float d = diag;
+            [[unroll]] for (int m = 0; m < k; ++m) {
+                d -= a[TRI(k, m)] * a[TRI(k, m)] * a[TRI(m, m)];
+            }
+            if (!(d > PIVOT_TOLERANCE * diag) || !(diag > 0.0)) {
+                ok = false;
+            } else {
+                a[TRI(k, k)] = d;
+                [[unroll]] for (int i = k + 1; i < MLS_TERMS; ++i) {
+                    float v = a[TRI(i, k)];
+                    [[unroll]] for (int m = 0; m < k; ++m) {
+                        v -= a[TRI(i, m)] * a[TRI(k, m)] * a[TRI(m, m)];
+                    }
+                    a[TRI(i, k)] = v / d;
+                }
+                sound = uint(k + 1);
+            }
+        }
+    }
+    if (sound >= 10u && MLS_TERMS >= 10) return 10u;
+    if (sound >= 4u && MLS_TERMS >= 4) return 4u;
+    return sound >= 1u ? 1u : 0u;
+}
+
+// Solves L D Lᵀ c = c for the leading n terms; the others become 0.
+void mls_solve(float l[MLS_PACKED], uint n, inout float c[MLS_TERMS]) {
+    [[unroll]] for (int i = 0; i < MLS_TERMS; ++i) {
+        [[unroll]] for (int m = 0; m < i; ++m) {
+            c[i] -= l[TRI(i, m)] * c[m];
+        }
+    }
+    [[unroll]] for (int i = 0; i < MLS_TERMS; ++i) {
+        c[i] = uint(i) < n ? c[i] / l[TRI(i, i)] : 0.0;
+    }
+    [[unroll]] for (int i = MLS_TERMS - 1; i >= 0; --i) {
+        [[unroll]] for (int m = i + 1; m < MLS_TERMS; ++m) {
+            c[i] -= l[TRI(m, i)] * c[m];
+        }
+    }
+}
+
+#endif

@@ -1,0 +1,160 @@
+// Neighbour loops and the MLS evaluation built on them: twin of GridNeighbours / Octree in
+// src/recon/ and of mls_evaluate in src/recon/mls.rs.
+// Variant macro MLS_NEIGHBOURS: 0 = implicit regular-grid neighbours, 1 = redundant octree
+// ([OCT], [MLS] §5.2). Needs `params` (RenderParams) declared by the kernel.
+#ifndef VMLS_NEIGHBOURS_GLSL
+#define VMLS_NEIGHBOURS_GLSL
+
+#include "mls.glsl"
+
+#if MLS_NEIGHBOURS == 0
+layout(std430, binding = BINDING_GRID) readonly buffer GridBuf { float grid[]; };
+#else
+layout(std430, binding = BINDING_SAMPLES) readonly buffer SamplesBuf { Sample samples[]; };
+layout(std430, binding = BINDING_NODES) readonly buffer NodesBuf { uvec4 nodes[]; };
+layout(std430, binding = BINDING_INDICES) readonly buffer IndicesBuf { uint indices[]; };
+#endif
+
+// Gradient correction of the analytic gradient: q_k = Σ ∂w_i/∂x_k (f_i − b_iᵀc) b_i.
+struct MlsGradient {
+    float qx[MLS_TERMS];
+    float qy[MLS_TERMS];
+    float qz[MLS_TERMS];
+};
+
+void mls_visit_gradient(inout MlsGradient g, vec3 y, float rho2, float f, vec3 inv_h,
+                        float c[MLS_TERMS]) {
+    vec2 w = mls_weight(rho2);
+    if (w.x <= 0.0) {
+        return;
+    }
+    float b[MLS_TERMS];
+    mls_basis(y, b);
+    float fit = 0.0;
+    [[unroll]] for (int t = 0; t < MLS_TERMS; ++t) {
+        fit += b[t] * c[t];
+    }
+    vec3 dw = -w.y * y * inv_h * (f - fit);
+    [[unroll]] for (int t = 0; t < MLS_TERMS; ++t) {
+        g.qx[t] += dw.x * b[t];
+        g.qy[t] += dw.y * b[t];
+        g.qz[t] += dw.z * b[t];
+    }
+}
+
+#if MLS_NEIGHBOURS == 0
+// Visits the grid points inside the support box of x; pass 0 accumulates the normal equations,
+// pass 1 the analytic-gradient correction. y = (i − g) / support_cells = (x_i − x) ⊙ h⁻¹.
+void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float c[MLS_TERMS]) {
+    vec3 gp = (x - params.grid_origin.xyz) * params.grid_inv_spacing.xyz;
+    float sc = params.support_cells;
+    float inv_sc = 1.0 / sc;
+    ivec3 lo = max(ivec3(ceil(gp - sc)), ivec3(0));
+    ivec3 hi = min(ivec3(floor(gp + sc)), params.grid_dims.xyz - 1);
+    vec3 inv_h = params.inv_support.xyz;
+    for (int k = lo.z; k <= hi.z; ++k) {
+        float yz = (float(k) - gp.z) * inv_sc;
+        for (int j = lo.y; j <= hi.y; ++j) {
+            float yy = (float(j) - gp.y) * inv_sc;
+            int row = params.grid_dims.x * (j + params.grid_dims.y * k);
+            for (int i = lo.x; i <= hi.x; ++i) {
+                vec3 y = vec3((float(i) - gp.x) * inv_sc, yy, yz);
+                float rho2 = dot(y, y);
+                if (rho2 < 1.0) {
+                    float f = grid[row + i];
+                    if (pass == 0u) {
+                        mls_accumulate(s, y, rho2, f, inv_h);
+                    } else {
+                        mls_visit_gradient(g, y, rho2, f, inv_h, c);
+                    }
+                }
+            }
+        }
+    }
+}
+#else
+// Descends to the leaf containing x; returns (begin, count) of its reference list.
+uvec2 octree_leaf(vec3 x) {
+    vec3 center = params.octree_root.xyz;
+    float half_side = params.octree_root.w;
+    if (any(greaterThan(abs(x - center), vec3(half_side)))) {
+        return uvec2(0u);
+    }
+    uint node = 0u;
+    for (int depth = 0; depth < 64; ++depth) {
+        uvec4 n = nodes[node];
+        if (n.x == 0u) {
+            return n.yz;
+        }
+        half_side *= 0.5;
+        bvec3 upper = greaterThanEqual(x, center);
+        center += mix(vec3(-half_side), vec3(half_side), upper);
+        node = n.x + (upper.x ? 1u : 0u) + (upper.y ? 2u : 0u) + (upper.z ? 4u : 0u);
+    }
+    return uvec2(0u);
+}
+
+void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float c[MLS_TERMS]) {
+    uvec2 leaf = octree_leaf(x);
+    for (uint r = leaf.x; r < leaf.x + leaf.y; ++r) {
+        Sample p = samples[indices[r]];
+        vec3 inv_h = p.inv_support.xyz;
+        vec3 y = (p.pos_value.xyz - x) * inv_h;
+        float rho2 = dot(y, y);
+        if (rho2 < 1.0) {
+            if (pass == 0u) {
+                mls_accumulate(s, y, rho2, p.pos_value.w, inv_h);
+            } else {
+                mls_visit_gradient(g, y, rho2, p.pos_value.w, inv_h, c);
+            }
+        }
+    }
+}
+#endif
+
+// f(x), ∇f(x); terms == 0 where no sample has weight (the field is undefined there).
+MlsResult mls_evaluate(vec3 x) {
+    MlsSystem s;
+    [[unroll]] for (int i = 0; i < MLS_PACKED; ++i) s.a[i] = 0.0;
+    [[unroll]] for (int i = 0; i < MLS_TERMS; ++i) s.r[i] = 0.0;
+    s.neighbours = 0u;
+    s.exact = false;
+    s.exact_value = 0.0;
+    s.inv_h = vec3(0.0);
+    MlsGradient g;
+    float c[MLS_TERMS];
+    [[unroll]] for (int i = 0; i < MLS_TERMS; ++i) {
+        g.qx[i] = 0.0;
+        g.qy[i] = 0.0;
+        g.qz[i] = 0.0;
+        c[i] = 0.0;
+    }
+    mls_gather(0u, x, s, g, c);
+    MlsResult res = MlsResult(0.0, vec3(0.0), s.neighbours, 0u);
+    if (s.neighbours == 0u) {
+        return res;
+    }
+    uint n = mls_factor(s.a);
+    if (n == 0u) {
+        return res;
+    }
+    c = s.r;
+    mls_solve(s.a, n, c);
+    res.terms = n;
+    res.value = s.exact ? s.exact_value : c[0];
+#if MLS_TERMS >= 4
+    if (n >= 4u) {
+        res.gradient = vec3(c[1], c[2], c[3]) * s.inv_h;
+    }
+#endif
+#if MLS_ANALYTIC_GRADIENT == 1
+    mls_gather(1u, x, s, g, c);
+    mls_solve(s.a, n, g.qx);
+    mls_solve(s.a, n, g.qy);
+    mls_solve(s.a, n, g.qz);
+    res.gradient += vec3(g.qx[0], g.qy[0], g.qz[0]);
+#endif
+    return res;
+}
+
+#endif

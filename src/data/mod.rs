@@ -1,0 +1,206 @@
+//! Data in: every loader turns a file (or a generator) into a [`Volume`], a regular grid of f32
+//! scalars with origin and per-axis spacing.
+//!
+//! Contract shared by all loaders:
+//! - values are stored x-fastest (`index = x + nx·(y + ny·z)`), converted to f32 (after any
+//!   scaling the format defines, e.g. NIfTI slope/intercept);
+//! - a NaN or ±Inf value is rejected with [`DataError::NonFinite`] naming the file and the first
+//!   offending sample (we reject rather than skip: a silently holed volume would render a wrong
+//!   image that looks plausible);
+//! - dimensions are checked with overflow-safe arithmetic and against [`MAX_SAMPLES`] before any
+//!   allocation, so an absurd header cannot exhaust memory;
+//! - every error names the file and the line or byte offset where the input stopped making sense.
+
+pub mod marschner_lobb;
+pub mod nifti;
+pub mod nrrd;
+pub mod vtk;
+
+use std::path::{Path, PathBuf};
+
+/// Largest grid we accept from a file: 2^30 samples (4 GiB of f32). Larger grids exceed every
+/// Vulkan storage-buffer limit we know of and would only fail later, less clearly.
+pub const MAX_SAMPLES: u64 = 1 << 30;
+
+/// A regular grid of scalar samples.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Volume {
+    /// Samples per axis (x, y, z), each ≥ 1.
+    pub dims: [usize; 3],
+    /// World position of sample (0, 0, 0).
+    pub origin: [f64; 3],
+    /// Distance between neighbouring samples per axis, each > 0.
+    pub spacing: [f64; 3],
+    /// `dims[0]·dims[1]·dims[2]` finite values, x fastest.
+    pub values: Vec<f32>,
+}
+
+impl Volume {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.values.len()
+    }
+
+    /// True when the grid holds no sample.
+    pub fn is_empty(&self) -> bool {
+        self.values.is_empty()
+    }
+
+    /// Linear index of grid point (i, j, k).
+    pub fn index(&self, i: usize, j: usize, k: usize) -> usize {
+        i + self.dims[0] * (j + self.dims[1] * k)
+    }
+
+    /// World position of grid point (i, j, k).
+    pub fn position(&self, i: usize, j: usize, k: usize) -> [f64; 3] {
+        [
+            self.origin[0] + i as f64 * self.spacing[0],
+            self.origin[1] + j as f64 * self.spacing[1],
+            self.origin[2] + k as f64 * self.spacing[2],
+        ]
+    }
+
+    /// Axis-aligned bounding box of the sample positions: (min, max).
+    pub fn bounds(&self) -> ([f64; 3], [f64; 3]) {
+        let mut max = self.origin;
+        for (a, m) in max.iter_mut().enumerate() {
+            *m += (self.dims[a].saturating_sub(1)) as f64 * self.spacing[a];
+        }
+        (self.origin, max)
+    }
+
+    /// Smallest and largest value.
+    pub fn value_range(&self) -> (f32, f32) {
+        self.values
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
+                (lo.min(v), hi.max(v))
+            })
+    }
+}
+
+/// Errors of the data layer. Every variant names the file it is about.
+#[derive(Debug, thiserror::Error)]
+pub enum DataError {
+    #[error("{path}: cannot read: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file does not follow its format: `location` is "line N" or "byte N".
+    #[error("{path}: {location}: expected {expected}, found {found}")]
+    Format {
+        path: PathBuf,
+        location: String,
+        expected: String,
+        found: String,
+    },
+    /// The file is valid but uses a feature we do not read.
+    #[error("{path}: {location}: unsupported {what}")]
+    Unsupported {
+        path: PathBuf,
+        location: String,
+        what: String,
+    },
+    #[error("{path}: data ends early: expected {expected} bytes/values, found {found}")]
+    Truncated {
+        path: PathBuf,
+        expected: u64,
+        found: u64,
+    },
+    #[error(
+        "{path}: sample {index} (x={x}, y={y}, z={z}) is {value}: NaN and infinite values are rejected"
+    )]
+    NonFinite {
+        path: PathBuf,
+        index: usize,
+        x: usize,
+        y: usize,
+        z: usize,
+        value: f32,
+    },
+    #[error("{path}: dimensions {dims:?} are too large: {reason}")]
+    TooLarge {
+        path: PathBuf,
+        dims: [u64; 3],
+        reason: String,
+    },
+    #[error("{path}: unknown volume format (expected .vtk, .nrrd, .nii or .nii.gz)")]
+    UnknownFormat { path: PathBuf },
+    #[error("{path}: no array named '{name}' (arrays in the file: {available})")]
+    NoSuchArray {
+        path: PathBuf,
+        name: String,
+        available: String,
+    },
+}
+
+/// Checks dims for zero, overflow and [`MAX_SAMPLES`]; returns the sample count.
+pub fn checked_sample_count(path: &Path, dims: [u64; 3]) -> Result<usize, DataError> {
+    if dims.contains(&0) {
+        return Err(DataError::TooLarge {
+            path: path.to_path_buf(),
+            dims,
+            reason: "every dimension must be at least 1".into(),
+        });
+    }
+    let n = dims[0]
+        .checked_mul(dims[1])
+        .and_then(|n| n.checked_mul(dims[2]))
+        .ok_or_else(|| DataError::TooLarge {
+            path: path.to_path_buf(),
+            dims,
+            reason: "the sample count overflows 64 bits".into(),
+        })?;
+    if n > MAX_SAMPLES {
+        return Err(DataError::TooLarge {
+            path: path.to_path_buf(),
+            dims,
+            reason: format!("{n} samples exceed the limit of {MAX_SAMPLES}"),
+        });
+    }
+    usize::try_from(n).map_err(|_| DataError::TooLarge {
+        path: path.to_path_buf(),
+        dims,
+        reason: "the sample count does not fit this machine's address space".into(),
+    })
+}
+
+/// Rejects the first NaN/Inf value, naming its grid position.
+pub fn check_finite(path: &Path, dims: [usize; 3], values: &[f32]) -> Result<(), DataError> {
+    if let Some((index, &value)) = values.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        let x = index % dims[0];
+        let y = (index / dims[0]) % dims[1];
+        let z = index / (dims[0] * dims[1]);
+        return Err(DataError::NonFinite {
+            path: path.to_path_buf(),
+            index,
+            x,
+            y,
+            z,
+            value,
+        });
+    }
+    Ok(())
+}
+
+/// Loads a volume file, choosing the reader by extension (`.vtk`, `.nrrd`, `.nii`, `.nii.gz`).
+/// `array` picks a named array where the format has several (VTK); `None` takes the first.
+pub fn load(path: &Path, array: Option<&str>) -> Result<Volume, DataError> {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    if name.ends_with(".vtk") {
+        vtk::load(path, array)
+    } else if name.ends_with(".nrrd") {
+        nrrd::load(path)
+    } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
+        nifti::load(path)
+    } else {
+        Err(DataError::UnknownFormat {
+            path: path.to_path_buf(),
+        })
+    }
+}

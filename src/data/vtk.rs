@@ -1,0 +1,712 @@
+//! VTK legacy reader (`.vtk`, file versions 1.0 to 5.1 as written by VTK ≤ 9 and ParaView):
+//! `DATASET STRUCTURED_POINTS` in ASCII or BINARY (big-endian) form.
+//!
+//! Contract and choices:
+//! - geometry: `DIMENSIONS`, `SPACING` (or its old name `ASPECT_RATIO`, each > 0, default 1),
+//!   `ORIGIN` (default 0); a dataset-level `FIELD` block (e.g. `TIME`) is skipped;
+//! - other dataset types (`STRUCTURED_GRID`, `RECTILINEAR_GRID`, `UNSTRUCTURED_GRID`,
+//!   `POLYDATA`, ...) and data-object files (no `DATASET`) are unsupported;
+//! - selectable point-data arrays are `SCALARS` (the `LOOKUP_TABLE` line may be absent),
+//!   `COLOR_SCALARS` and the arrays of a `FIELD` block. `array = None` takes the first of them,
+//!   a name takes the array of that name (`%XX` escapes in names are decoded, as VTK does);
+//! - multi-component arrays give their first component. `COLOR_SCALARS` give their first
+//!   component (red, not luminance) in [0, 1]: ASCII files store floats in [0, 1], BINARY files
+//!   bytes, which are divided by 255 so both forms give the same volume;
+//! - `VECTORS`, `NORMALS`, `TENSORS`, `TEXTURE_COORDINATES`, ids, lookup tables, cell data
+//!   (`CELL_DATA`, before or after the point data) and the VTK 5.1 `METADATA` blocks are parsed
+//!   past and never selected;
+//! - types: `bit`, `char` (signed), `signed_char`, `unsigned_char`, `short`, `unsigned_short`,
+//!   `int`, `unsigned_int`, `long`/`unsigned_long` (8 bytes in BINARY files, as written by VTK
+//!   on LP64 systems), `vtkIdType` (4 bytes in BINARY files: VTK writes ids as int),
+//!   `vtktype{int,uint}{8,16,32,64}`, `vtktypefloat32/64`, `float`, `double`; string and
+//!   variant arrays are unsupported because their layout cannot be skipped cheaply;
+//! - BINARY data is read by byte offset right after the header line that precedes it; ASCII
+//!   values are whitespace-separated tokens and may wrap across lines;
+//! - the chosen array must hold exactly one tuple per point (`POINT_DATA n` must equal the
+//!   product of `DIMENSIONS`); missing values give `Truncated` (or a format error at the token
+//!   where a keyword was found instead of a value), surplus values a format error at the line
+//!   after the array. The file past the chosen array is not otherwise validated.
+//!
+//! Errors name "line N"; in BINARY files they also give the byte offset, since binary data makes
+//! line numbers hard to follow.
+
+use super::nrrd::{Scalar, decode, parse_text, shown};
+use super::{DataError, Volume, check_finite, checked_sample_count};
+use std::path::Path;
+
+/// Reads and parses a legacy `.vtk` file; see the module documentation for `array`.
+pub fn load(path: &Path, array: Option<&str>) -> Result<Volume, DataError> {
+    let bytes = std::fs::read(path).map_err(|source| DataError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse(path, &bytes, array)
+}
+
+/// Every keyword that may start a line after the geometry; used to recognise surplus values.
+const KEYWORDS: &[&str] = &[
+    "POINT_DATA",
+    "CELL_DATA",
+    "SCALARS",
+    "COLOR_SCALARS",
+    "LOOKUP_TABLE",
+    "VECTORS",
+    "NORMALS",
+    "TEXTURE_COORDINATES",
+    "TENSORS",
+    "TENSORS6",
+    "GLOBAL_IDS",
+    "PEDIGREE_IDS",
+    "EDGE_FLAGS",
+    "FIELD",
+    "METADATA",
+];
+
+#[derive(Clone, Copy)]
+enum Elem {
+    Num(Scalar),
+    Bit,
+}
+
+/// A non-blank line split into whitespace-separated tokens.
+struct Line {
+    start: usize,
+    tokens: Vec<String>,
+}
+
+impl Line {
+    fn keyword(&self) -> String {
+        self.tokens
+            .first()
+            .map(|t| t.to_ascii_uppercase())
+            .unwrap_or_default()
+    }
+}
+
+/// Where the point data stands while sections are parsed.
+#[derive(Clone, Copy, PartialEq)]
+enum Section {
+    Geometry,
+    Point(u64),
+    Cell(u64),
+}
+
+struct Reader<'a> {
+    path: &'a Path,
+    bytes: &'a [u8],
+    pos: usize,
+    binary: bool,
+}
+
+impl<'a> Reader<'a> {
+    fn location(&self, at: usize) -> String {
+        let at = at.min(self.bytes.len());
+        let line = 1 + self.bytes[..at].iter().filter(|&&b| b == b'\n').count();
+        if self.binary {
+            format!("line {line} (byte {at})")
+        } else {
+            format!("line {line}")
+        }
+    }
+
+    fn format(
+        &self,
+        at: usize,
+        expected: impl Into<String>,
+        found: impl Into<String>,
+    ) -> DataError {
+        DataError::Format {
+            path: self.path.to_path_buf(),
+            location: self.location(at),
+            expected: expected.into(),
+            found: found.into(),
+        }
+    }
+
+    fn unsupported(&self, at: usize, what: impl Into<String>) -> DataError {
+        DataError::Unsupported {
+            path: self.path.to_path_buf(),
+            location: self.location(at),
+            what: what.into(),
+        }
+    }
+
+    /// The next line without its terminator, and its offset; `None` at the end of the input.
+    fn raw_line(&mut self) -> Option<(usize, &'a [u8])> {
+        let start = self.pos;
+        let rest = self.bytes.get(start..).filter(|r| !r.is_empty())?;
+        let len = rest.iter().position(|&b| b == b'\n');
+        self.pos += len.map_or(rest.len(), |n| n + 1);
+        let line = &rest[..len.unwrap_or(rest.len())];
+        Some((start, line.strip_suffix(b"\r").unwrap_or(line)))
+    }
+
+    /// The next line that is not blank.
+    fn line(&mut self) -> Option<Line> {
+        while let Some((start, raw)) = self.raw_line() {
+            let tokens: Vec<String> = String::from_utf8_lossy(raw)
+                .split_ascii_whitespace()
+                .map(str::to_owned)
+                .collect();
+            if !tokens.is_empty() {
+                return Some(Line { start, tokens });
+            }
+        }
+        None
+    }
+
+    fn peek_line(&mut self) -> Option<Line> {
+        let saved = self.pos;
+        let line = self.line();
+        self.pos = saved;
+        line
+    }
+
+    /// The next whitespace-separated token of ASCII data.
+    fn token(&mut self) -> Option<(usize, &'a [u8])> {
+        let rest = self.bytes.get(self.pos..)?;
+        let start = self.pos + rest.iter().position(|b| !b.is_ascii_whitespace())?;
+        let tail = &self.bytes[start..];
+        let len = tail
+            .iter()
+            .position(u8::is_ascii_whitespace)
+            .unwrap_or(tail.len());
+        self.pos = start + len;
+        Some((start, &tail[..len]))
+    }
+
+    /// Checks that `line` has exactly `n` tokens.
+    fn expect_tokens(&self, line: &Line, n: usize, form: &str) -> Result<(), DataError> {
+        if line.tokens.len() == n {
+            Ok(())
+        } else {
+            Err(self.format(line.start, format!("'{form}'"), line.tokens.join(" ")))
+        }
+    }
+
+    fn number<T: std::str::FromStr>(
+        &self,
+        line: &Line,
+        i: usize,
+        what: &str,
+    ) -> Result<T, DataError> {
+        let token = line.tokens.get(i).map_or("", String::as_str);
+        token
+            .parse()
+            .map_err(|_| self.format(line.start, what, format!("'{token}'")))
+    }
+
+    fn vec3(
+        &self,
+        line: &Line,
+        what: &str,
+        ok: impl Fn(f64) -> bool,
+    ) -> Result<[f64; 3], DataError> {
+        self.expect_tokens(line, 4, &format!("{} x y z", line.keyword()))?;
+        let mut v = [0.0; 3];
+        for (a, value) in v.iter_mut().enumerate() {
+            *value = self.number::<f64>(line, a + 1, what)?;
+            if !ok(*value) {
+                return Err(self.format(line.start, what, line.tokens[a + 1].clone()));
+            }
+        }
+        Ok(v)
+    }
+
+    fn elem(&self, line: &Line, name: &str) -> Result<Elem, DataError> {
+        let ty = match name.to_ascii_lowercase().as_str() {
+            "bit" => return Ok(Elem::Bit),
+            "char" | "signed_char" | "vtktypeint8" => Scalar::I8,
+            "unsigned_char" | "vtktypeuint8" => Scalar::U8,
+            "short" | "vtktypeint16" => Scalar::I16,
+            "unsigned_short" | "vtktypeuint16" => Scalar::U16,
+            "int" | "vtkidtype" | "vtktypeint32" => Scalar::I32,
+            "unsigned_int" | "vtktypeuint32" => Scalar::U32,
+            "long" | "vtktypeint64" => Scalar::I64,
+            "unsigned_long" | "vtktypeuint64" => Scalar::U64,
+            "float" | "vtktypefloat32" => Scalar::F32,
+            "double" | "vtktypefloat64" => Scalar::F64,
+            "string" | "utf8_string" | "unicode_string" | "variant" => {
+                return Err(self.unsupported(line.start, format!("{name} array")));
+            }
+            _ => {
+                let expected = "a VTK data type (unsigned_char, char, short, unsigned_short, \
+                                int, unsigned_int, long, unsigned_long, float, double, bit, \
+                                vtktypeint8 ... vtktypefloat64)";
+                return Err(self.format(line.start, expected, format!("'{name}'")));
+            }
+        };
+        Ok(Elem::Num(ty))
+    }
+
+    /// Reads `ntuples` tuples of `ncomp` values; with `keep`, returns component 0 of each.
+    fn array(
+        &mut self,
+        elem: Elem,
+        ncomp: u64,
+        ntuples: u64,
+        keep: bool,
+    ) -> Result<Vec<f32>, DataError> {
+        let total = ncomp.checked_mul(ntuples).ok_or_else(|| {
+            self.format(
+                self.pos,
+                "a value count that fits 64 bits",
+                format!("{ntuples}×{ncomp}"),
+            )
+        })?;
+        if self.binary {
+            let nbytes = match elem {
+                Elem::Num(t) => total.checked_mul(t.size() as u64),
+                Elem::Bit => Some(total.div_ceil(8)),
+            };
+            let nbytes = nbytes.ok_or_else(|| {
+                self.format(
+                    self.pos,
+                    "a byte count that fits 64 bits",
+                    format!("{total} values"),
+                )
+            })?;
+            let avail = (self.bytes.len() - self.pos) as u64;
+            if nbytes > avail {
+                return Err(DataError::Truncated {
+                    path: self.path.to_path_buf(),
+                    expected: nbytes,
+                    found: avail,
+                });
+            }
+            let data = &self.bytes[self.pos..self.pos + nbytes as usize];
+            self.pos += nbytes as usize;
+            return Ok(match (keep, elem) {
+                (false, _) => Vec::new(),
+                (true, Elem::Num(t)) => decode(data, t, true, ncomp as usize),
+                (true, Elem::Bit) => (0..ntuples)
+                    .map(|i| {
+                        let bit = i * ncomp;
+                        let byte = data.get((bit / 8) as usize).copied().unwrap_or(0);
+                        f32::from((byte >> (7 - bit % 8)) & 1)
+                    })
+                    .collect(),
+            });
+        }
+        let capacity = if keep {
+            ntuples.min((self.bytes.len() - self.pos) as u64 / 2 + 1)
+        } else {
+            0
+        };
+        let mut out = Vec::with_capacity(capacity as usize);
+        for i in 0..total {
+            let Some((at, token)) = self.token() else {
+                return Err(DataError::Truncated {
+                    path: self.path.to_path_buf(),
+                    expected: total,
+                    found: i,
+                });
+            };
+            let text = std::str::from_utf8(token).unwrap_or("");
+            let value = match elem {
+                Elem::Num(t) if keep && i % ncomp == 0 => parse_text(text, t),
+                Elem::Bit if keep && i % ncomp == 0 => match text {
+                    "0" => Some(0.0),
+                    "1" => Some(1.0),
+                    _ => None,
+                },
+                _ => text.parse::<f64>().ok().map(|_| 0.0),
+            };
+            match value {
+                Some(v) if keep && i % ncomp == 0 => out.push(v),
+                Some(_) => {}
+                None => {
+                    let ty = match elem {
+                        Elem::Num(t) => t.name(),
+                        Elem::Bit => "bit",
+                    };
+                    let expected = format!("a {ty} value (value {} of {total})", i + 1);
+                    return Err(self.format(at, expected, shown(token)));
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// Skips a VTK 5.1 `METADATA` block (ended by an empty line) if one follows.
+    fn skip_metadata(&mut self) {
+        if self.peek_line().is_some_and(|l| l.keyword() == "METADATA") {
+            self.line();
+            while let Some((_, raw)) = self.raw_line() {
+                if raw.iter().all(u8::is_ascii_whitespace) {
+                    break;
+                }
+            }
+        }
+    }
+
+    /// After the chosen array, the file must go on with a keyword (or, inside a FIELD block with
+    /// arrays left, an array header): anything else means more values than points.
+    fn check_follows(&mut self, field_arrays_left: u64, values: u64) -> Result<(), DataError> {
+        let Some(next) = self.peek_line() else {
+            return Ok(());
+        };
+        let t = &next.tokens;
+        let ok = if field_arrays_left > 0 {
+            t[0] == "NULL_ARRAY"
+                || (t.len() == 4 && t[1].parse::<u64>().is_ok() && t[2].parse::<u64>().is_ok())
+        } else {
+            KEYWORDS.contains(&next.keyword().as_str())
+        };
+        if ok {
+            return Ok(());
+        }
+        let expected =
+            format!("a keyword or the end of the file after the array's {values} values");
+        let found = match self.binary {
+            true => shown(self.bytes.get(next.start..).unwrap_or_default()),
+            false => format!("'{}'", t.join(" ")),
+        };
+        Err(self.format(next.start, expected, found))
+    }
+}
+
+/// Decodes VTK's `%XX` escapes in array names.
+fn decode_name(name: &str) -> String {
+    let b = name.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        let hex = b
+            .get(i + 1..i + 3)
+            .and_then(|h| std::str::from_utf8(h).ok());
+        match hex.and_then(|h| u8::from_str_radix(h, 16).ok()) {
+            Some(byte) if b[i] == b'%' => {
+                out.push(byte);
+                i += 3;
+            }
+            _ => {
+                out.push(b[i]);
+                i += 1;
+            }
+        }
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+/// One array about to be read: what it is, whether it may be chosen, and where it starts.
+struct Candidate {
+    name: String,
+    elem: Elem,
+    ncomp: u64,
+    ntuples: u64,
+    /// COLOR_SCALARS in a BINARY file: bytes to scale by 1/255.
+    scale_bytes: bool,
+    selectable: bool,
+}
+
+/// Parses legacy VTK bytes; `path` only names the file in errors.
+pub fn parse(path: &Path, bytes: &[u8], array: Option<&str>) -> Result<Volume, DataError> {
+    let mut r = Reader {
+        path,
+        bytes,
+        pos: 0,
+        binary: false,
+    };
+    let (_, first) = r.raw_line().unwrap_or_default();
+    if !first
+        .to_ascii_lowercase()
+        .starts_with(b"# vtk datafile version")
+    {
+        return Err(r.format(
+            0,
+            "the VTK legacy header '# vtk DataFile Version x.y'",
+            shown(first),
+        ));
+    }
+    r.raw_line(); // the title, free text
+    let form = r.line();
+    match form.as_ref().map(Line::keyword).as_deref() {
+        Some("ASCII") => {}
+        Some("BINARY") => r.binary = true,
+        _ => {
+            let at = form.as_ref().map_or(r.pos, |l| l.start);
+            let found = form.map_or("end of file".into(), |l| {
+                format!("'{}'", l.tokens.join(" "))
+            });
+            return Err(r.format(at, "ASCII or BINARY", found));
+        }
+    }
+    let dataset = r.line();
+    match dataset.as_ref().map(|l| (l.keyword(), l.tokens.get(1))) {
+        Some((k, Some(t))) if k == "DATASET" && t.eq_ignore_ascii_case("STRUCTURED_POINTS") => {}
+        Some((k, Some(t))) if k == "DATASET" => {
+            let at = dataset.as_ref().map_or(0, |l| l.start);
+            let what = format!("DATASET {t} (only STRUCTURED_POINTS is read)");
+            return Err(r.unsupported(at, what));
+        }
+        Some((k, _)) if k == "FIELD" => {
+            let at = dataset.as_ref().map_or(0, |l| l.start);
+            return Err(r.unsupported(at, "data-object file (FIELD without DATASET)"));
+        }
+        _ => {
+            let at = dataset.as_ref().map_or(r.pos, |l| l.start);
+            let found = dataset.map_or("end of file".into(), |l| {
+                format!("'{}'", l.tokens.join(" "))
+            });
+            return Err(r.format(at, "'DATASET STRUCTURED_POINTS'", found));
+        }
+    }
+
+    let mut dims: Option<[u64; 3]> = None;
+    let mut spacing = [1.0; 3];
+    let mut origin = [0.0; 3];
+    let mut count = 0usize;
+    let mut section = Section::Geometry;
+    let mut seen: Vec<String> = Vec::new();
+    while let Some(line) = r.line() {
+        let kw = line.keyword();
+        match (section, kw.as_str()) {
+            (Section::Geometry, "DIMENSIONS") => {
+                r.expect_tokens(&line, 4, "DIMENSIONS nx ny nz")?;
+                let mut d = [0u64; 3];
+                for (a, v) in d.iter_mut().enumerate() {
+                    *v = r.number(&line, a + 1, "a whole-number dimension")?;
+                }
+                dims = Some(d);
+            }
+            (Section::Geometry, "SPACING" | "ASPECT_RATIO") => {
+                let ok = |s: f64| s.is_finite() && s > 0.0;
+                spacing = r.vec3(&line, "a finite spacing > 0", ok)?;
+            }
+            (Section::Geometry, "ORIGIN") => {
+                origin = r.vec3(&line, "a finite origin coordinate", f64::is_finite)?;
+            }
+            (_, "POINT_DATA" | "CELL_DATA") => {
+                r.expect_tokens(&line, 2, &format!("{kw} count"))?;
+                let n: u64 = r.number(&line, 1, "a whole-number count")?;
+                if section == Section::Geometry {
+                    let d = dims.ok_or_else(|| {
+                        r.format(
+                            line.start,
+                            format!("DIMENSIONS before {kw}"),
+                            format!("'{kw}'"),
+                        )
+                    })?;
+                    count = checked_sample_count(path, d)?;
+                }
+                if kw == "POINT_DATA" && n != count as u64 {
+                    let expected = format!("POINT_DATA {count} (the product of DIMENSIONS)");
+                    return Err(r.format(line.start, expected, format!("POINT_DATA {n}")));
+                }
+                section = if kw == "POINT_DATA" {
+                    Section::Point(n)
+                } else {
+                    Section::Cell(n)
+                };
+            }
+            (Section::Geometry, "FIELD") | (Section::Point(_) | Section::Cell(_), _) => {
+                let n = match section {
+                    Section::Point(n) | Section::Cell(n) => Some(n),
+                    Section::Geometry => None,
+                };
+                let point = matches!(section, Section::Point(_));
+                let found = attribute(&mut r, &line, n, point, array, &mut seen)?;
+                if let Some(values) = found {
+                    let d = dims.unwrap_or([1; 3]).map(|v| v as usize);
+                    check_finite(path, d, &values)?;
+                    return Ok(Volume {
+                        dims: d,
+                        origin,
+                        spacing,
+                        values,
+                    });
+                }
+            }
+            _ => {
+                let expected = "DIMENSIONS, SPACING, ORIGIN, FIELD, POINT_DATA or CELL_DATA";
+                return Err(r.format(line.start, expected, format!("'{}'", line.tokens.join(" "))));
+            }
+        }
+    }
+    let end = r.bytes.len();
+    match array {
+        Some(name) => Err(DataError::NoSuchArray {
+            path: path.to_path_buf(),
+            name: name.to_string(),
+            available: if seen.is_empty() {
+                "none".into()
+            } else {
+                seen.join(", ")
+            },
+        }),
+        None if dims.is_none() => Err(r.format(end, "DIMENSIONS", "end of file")),
+        None => Err(r.format(
+            end,
+            "a point-data array (POINT_DATA with SCALARS, COLOR_SCALARS or FIELD)",
+            "end of file",
+        )),
+    }
+}
+
+/// Parses one attribute (`line` is its keyword line) and its data. `n` is the tuple count of
+/// the section (`None` for dataset-level field data). Returns the chosen array when this
+/// attribute holds it.
+fn attribute(
+    r: &mut Reader,
+    line: &Line,
+    n: Option<u64>,
+    point: bool,
+    want: Option<&str>,
+    seen: &mut Vec<String>,
+) -> Result<Option<Vec<f32>>, DataError> {
+    let kw = line.keyword();
+    let tuples = n.unwrap_or(0);
+    let t = &line.tokens;
+    let name = || decode_name(t.get(1).map_or("", String::as_str));
+    let mut candidates = Vec::new();
+    let fixed = |ncomp: u64| -> Result<Candidate, DataError> {
+        r.expect_tokens(line, 3, &format!("{kw} name type"))?;
+        Ok(Candidate {
+            name: name(),
+            elem: r.elem(line, &t[2])?,
+            ncomp,
+            ntuples: tuples,
+            scale_bytes: false,
+            selectable: false,
+        })
+    };
+    match kw.as_str() {
+        "SCALARS" => {
+            if !(3..=4).contains(&t.len()) {
+                return Err(r.format(line.start, "'SCALARS name type [numComp]'", t.join(" ")));
+            }
+            let ncomp = if t.len() == 4 {
+                r.number(line, 3, "a component count >= 1")?
+            } else {
+                1
+            };
+            let elem = r.elem(line, &t[2])?;
+            let has_table = if r.binary {
+                let rest = r.bytes.get(r.pos..).unwrap_or_default();
+                rest.len() >= 12 && rest[..12].eq_ignore_ascii_case(b"LOOKUP_TABLE")
+            } else {
+                r.peek_line().is_some_and(|l| l.keyword() == "LOOKUP_TABLE")
+            };
+            if has_table {
+                r.line();
+            }
+            candidates.push(Candidate {
+                name: name(),
+                elem,
+                ncomp,
+                ntuples: tuples,
+                scale_bytes: false,
+                selectable: point,
+            });
+        }
+        "COLOR_SCALARS" => {
+            r.expect_tokens(line, 3, "COLOR_SCALARS name nValues")?;
+            let elem = Elem::Num(if r.binary { Scalar::U8 } else { Scalar::F32 });
+            candidates.push(Candidate {
+                name: name(),
+                elem,
+                ncomp: r.number(line, 2, "a component count >= 1")?,
+                ntuples: tuples,
+                scale_bytes: r.binary,
+                selectable: point,
+            });
+        }
+        "LOOKUP_TABLE" => {
+            r.expect_tokens(line, 3, "LOOKUP_TABLE name size")?;
+            candidates.push(Candidate {
+                name: name(),
+                elem: Elem::Num(if r.binary { Scalar::U8 } else { Scalar::F32 }),
+                ncomp: 4,
+                ntuples: r.number(line, 2, "a table size")?,
+                scale_bytes: false,
+                selectable: false,
+            });
+        }
+        "VECTORS" | "NORMALS" => candidates.push(fixed(3)?),
+        "TENSORS" => candidates.push(fixed(9)?),
+        "TENSORS6" => candidates.push(fixed(6)?),
+        "GLOBAL_IDS" | "PEDIGREE_IDS" | "EDGE_FLAGS" => candidates.push(fixed(1)?),
+        "TEXTURE_COORDINATES" => {
+            r.expect_tokens(line, 4, "TEXTURE_COORDINATES name dim type")?;
+            candidates.push(Candidate {
+                name: name(),
+                elem: r.elem(line, &t[3])?,
+                ncomp: r.number(line, 2, "a dimension of 1 to 3")?,
+                ntuples: tuples,
+                scale_bytes: false,
+                selectable: false,
+            });
+        }
+        "FIELD" => {
+            r.expect_tokens(line, 3, "FIELD name numArrays")?;
+            let arrays: u64 = r.number(line, 2, "an array count")?;
+            for left in (0..arrays).rev() {
+                let Some(header) = r.line() else {
+                    let found = format!("end of file after {} arrays", arrays - left - 1);
+                    return Err(r.format(r.pos, format!("{arrays} FIELD arrays"), found));
+                };
+                if header.tokens[0] == "NULL_ARRAY" {
+                    continue;
+                }
+                r.expect_tokens(&header, 4, "arrayName numComponents numTuples dataType")?;
+                let c = Candidate {
+                    name: decode_name(&header.tokens[0]),
+                    elem: r.elem(&header, &header.tokens[3])?,
+                    ncomp: r.number(&header, 1, "a component count >= 1")?,
+                    ntuples: r.number(&header, 2, "a tuple count")?,
+                    scale_bytes: false,
+                    selectable: point,
+                };
+                if let Some(found) = read_candidate(r, &header, c, n, want, seen, left)? {
+                    return Ok(Some(found));
+                }
+            }
+            return Ok(None);
+        }
+        _ => {
+            let expected = "an attribute (SCALARS, COLOR_SCALARS, FIELD, VECTORS, ...), \
+                            POINT_DATA or CELL_DATA";
+            return Err(r.format(line.start, expected, format!("'{}'", t.join(" "))));
+        }
+    }
+    for c in candidates {
+        if let Some(found) = read_candidate(r, line, c, n, want, seen, 0)? {
+            return Ok(Some(found));
+        }
+    }
+    Ok(None)
+}
+
+/// Reads or skips one array; returns it when it is the chosen one.
+fn read_candidate(
+    r: &mut Reader,
+    header: &Line,
+    c: Candidate,
+    n: Option<u64>,
+    want: Option<&str>,
+    seen: &mut Vec<String>,
+    field_arrays_left: u64,
+) -> Result<Option<Vec<f32>>, DataError> {
+    if c.ncomp == 0 {
+        return Err(r.format(header.start, "a component count >= 1", "0"));
+    }
+    let chosen = c.selectable && want.is_none_or(|w| w == c.name);
+    if c.selectable {
+        seen.push(c.name.clone());
+    }
+    if chosen && Some(c.ntuples) != n {
+        let expected = format!("{} tuples (one per point)", n.unwrap_or(0));
+        return Err(r.format(header.start, expected, c.ntuples.to_string()));
+    }
+    let mut values = r.array(c.elem, c.ncomp, c.ntuples, chosen)?;
+    r.skip_metadata();
+    if !chosen {
+        return Ok(None);
+    }
+    r.check_follows(field_arrays_left, c.ntuples * c.ncomp)?;
+    if c.scale_bytes {
+        values.iter_mut().for_each(|v| *v /= 255.0);
+    }
+    Ok(Some(values))
+}

@@ -1,0 +1,173 @@
+//! Structs shared with GLSL, and the binding numbers of every kernel.
+//!
+//! Each struct is `#[repr(C)]` + `Pod` with explicit padding, a size assertion, and a twin of the
+//! same name in `glsl/include/types.glsl` (std430 layout). The test `tests/layout.rs` runs
+//! `glsl/layout_probe.comp`, which writes every field of every twin with a distinct value, and
+//! checks that each lands in the Rust field of the same name.
+//!
+//! Binding numbers exist only here: [`binding_defines`] hands them to shaderc as `BINDING_*`
+//! macros, so GLSL never spells a number.
+
+use bytemuck::{Pod, Zeroable};
+
+/// Descriptor-set-0 binding numbers, shared by all kernels.
+pub mod binding {
+    /// `RenderParams` (read-only).
+    pub const PARAMS: u32 = 0;
+    /// Regular-grid scalars, x fastest (read-only).
+    pub const GRID: u32 = 1;
+    /// `Sample` array for the octree path (read-only).
+    pub const SAMPLES: u32 = 2;
+    /// Octree nodes as `uvec4(child, begin, count, 0)` (read-only).
+    pub const NODES: u32 = 3;
+    /// Octree leaf reference list (read-only).
+    pub const INDICES: u32 = 4;
+    /// `TfPoint` array (read-only).
+    pub const TRANSFER: u32 = 5;
+    /// Output pixels, `vec4` per pixel.
+    pub const IMAGE: u32 = 6;
+    /// Per-pixel (or per-point) count of MLS evaluations.
+    pub const COUNTS: u32 = 7;
+    /// Evaluation points, `vec4` each (mls_eval).
+    pub const POINTS: u32 = 8;
+    /// `MlsOut` per point (mls_eval).
+    pub const RESULTS: u32 = 9;
+    /// Probe output (probe_fma, layout_probe).
+    pub const PROBE: u32 = 10;
+
+    /// Every binding with its macro name.
+    pub const ALL: [(&str, u32); 11] = [
+        ("BINDING_PARAMS", PARAMS),
+        ("BINDING_GRID", GRID),
+        ("BINDING_SAMPLES", SAMPLES),
+        ("BINDING_NODES", NODES),
+        ("BINDING_INDICES", INDICES),
+        ("BINDING_TRANSFER", TRANSFER),
+        ("BINDING_IMAGE", IMAGE),
+        ("BINDING_COUNTS", COUNTS),
+        ("BINDING_POINTS", POINTS),
+        ("BINDING_RESULTS", RESULTS),
+        ("BINDING_PROBE", PROBE),
+    ];
+}
+
+/// `#define BINDING_* n` for every binding, to pass to the shader compiler.
+pub fn binding_defines() -> Vec<(String, String)> {
+    binding::ALL
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect()
+}
+
+/// Scene constants of the ray caster and the MLS evaluator. GLSL twin: `RenderParams`.
+///
+/// All positions are relative to the scene's frame origin (the volume centre, subtracted on the
+/// host in f64) so that f32 keeps its precision for data far from the world origin.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct RenderParams {
+    /// Camera position (xyz).
+    pub eye: [f32; 4],
+    /// Unit view direction.
+    pub forward: [f32; 4],
+    /// Unit right vector.
+    pub right: [f32; 4],
+    /// Unit up vector (right × forward).
+    pub up: [f32; 4],
+    /// Ray clip box, min corner.
+    pub box_min: [f32; 4],
+    /// Ray clip box, max corner.
+    pub box_max: [f32; 4],
+    /// Background RGB.
+    pub background: [f32; 4],
+    /// Position of grid point (0,0,0).
+    pub grid_origin: [f32; 4],
+    /// 1 / grid spacing per axis.
+    pub grid_inv_spacing: [f32; 4],
+    /// 1 / support radius per axis, h = support × spacing ([MLS] §3, diagonal H).
+    pub inv_support: [f32; 4],
+    /// Octree root cube: centre xyz, half side w.
+    pub octree_root: [f32; 4],
+    /// Grid samples per axis (xyz), w unused.
+    pub grid_dims: [i32; 4],
+    pub width: u32,
+    pub height: u32,
+    /// 0 = perspective, 1 = orthographic.
+    pub projection: u32,
+    /// Number of transfer-function points.
+    pub tf_count: u32,
+    /// tan(fov_y / 2) (perspective).
+    pub tan_half_fov: f32,
+    /// Half the view height in world units (orthographic).
+    pub ortho_half_height: f32,
+    /// Integration step in world units.
+    pub step: f32,
+    /// Stop a ray when its transmittance falls below this.
+    pub min_transmittance: f32,
+    /// Support radius in grid-index units (the grid path's search radius).
+    pub support_cells: f32,
+    pub _pad: [f32; 3],
+}
+const _: () = assert!(std::mem::size_of::<RenderParams>() == 240);
+
+/// One transfer-function control point. GLSL twin: `TfPoint`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct TfPoint {
+    /// Emitted colour rgb and extinction τ (per world unit).
+    pub color_tau: [f32; 4],
+    /// Scalar value of the point.
+    pub s: f32,
+    pub _pad: [f32; 3],
+}
+const _: () = assert!(std::mem::size_of::<TfPoint>() == 32);
+
+/// A sample of the octree path. GLSL twin: `Sample`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct Sample {
+    /// Position xyz and value w.
+    pub pos_value: [f32; 4],
+    /// 1 / support radius per axis (xyz), w unused.
+    pub inv_support: [f32; 4],
+}
+const _: () = assert!(std::mem::size_of::<Sample>() == 32);
+
+/// Result of one MLS evaluation (mls_eval). GLSL twin: `MlsOut`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct MlsOut {
+    /// f(x) and ∇f(x).
+    pub value: f32,
+    pub gradient: [f32; 3],
+    /// Samples with non-zero weight.
+    pub neighbours: u32,
+    /// Basis terms actually solved for (1, 4; 0 = undefined, no sample has weight).
+    pub terms: u32,
+    pub _pad: [u32; 2],
+}
+const _: () = assert!(std::mem::size_of::<MlsOut>() == 32);
+
+/// Push constants of raycast.comp. GLSL twin: `RayPush`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct RayPush {
+    /// First image row of this band.
+    pub row_offset: u32,
+    /// Rows in this band.
+    pub rows: u32,
+    pub _pad: [u32; 2],
+}
+const _: () = assert!(std::mem::size_of::<RayPush>() == 16);
+
+/// Push constants of mls_eval.comp and probe_fma.comp. GLSL twin: `CountPush`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct CountPush {
+    /// Items to process.
+    pub count: u32,
+    /// Inner iterations (probe) or unused.
+    pub iterations: u32,
+    pub _pad: [u32; 2],
+}
+const _: () = assert!(std::mem::size_of::<CountPush>() == 16);

@@ -1,0 +1,18 @@
+//! vmls — volume Moving-Least-Squares ray casting and EWA splatting on Vulkan compute.
+//!
+//! Layers, bottom up:
+//! - [`vk`]: the Vulkan layer (the only module with `unsafe`): context, buffers, pipelines,
+//!   commands, timestamp queries, run-time GLSL compilation.
+//! - [`data`]: loaders and generators producing a [`data::Volume`].
+//! - [`recon`]: MLS reconstruction (f64 CPU reference) and the redundant octree [OCT].
+//! - [`render`]: cameras, transfer functions, the ray-casting integrator (CPU reference) and the
+//!   GPU renderer that drives the kernels in `glsl/`.
+//! - [`scene`]: the TOML scene contract.
+
+pub mod data;
+pub mod gpu_types;
+pub mod probe;
+pub mod recon;
+pub mod render;
+pub mod scene;
+pub mod vk;

@@ -1,0 +1,291 @@
+//! The `vmls` command line: `render`, `devices`, `probe`.
+//!
+//! Errors print one line (`vmls: error: …`, with the cause chain) and exit with status 1; usage
+//! errors exit with clap's status 2. Progress bars appear only when stderr is a terminal.
+
+use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use vmls::probe::{fma_probe, median, mls_probe, random_points};
+use vmls::render::gpu::{GpuField, render};
+use vmls::render::output::{format_of, write_image};
+use vmls::render::{Field, RaySetup, RenderError, load_volume};
+use vmls::scene::{Method, NeighbourMode, Scene};
+use vmls::vk::{Context, ContextOptions, ShaderCompiler};
+
+#[derive(Parser)]
+#[command(
+    name = "vmls",
+    version,
+    about = "Volume MLS ray casting on Vulkan compute"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(clap::Args)]
+struct DeviceArgs {
+    /// Device index or name substring (default: $VMLS_DEVICE, else discrete > integrated > CPU).
+    #[arg(long)]
+    device: Option<String>,
+    /// Enable the Khronos validation layer (also: VMLS_VALIDATION=1).
+    #[arg(long)]
+    validation: bool,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a scene (the built-in Marschner–Lobb scene when none is given).
+    Render {
+        /// Scene file (TOML).
+        scene: Option<PathBuf>,
+        /// Output image: .png (8-bit RGBA, clamped, no gamma) or .exr (32-bit float RGBA).
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Write statistics as JSON.
+        #[arg(long)]
+        stats: Option<PathBuf>,
+        /// Override a scene key: section.key=value (repeatable).
+        #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
+        set: Vec<String>,
+        #[command(flatten)]
+        device: DeviceArgs,
+    },
+    /// List Vulkan devices (* marks the default choice).
+    Devices,
+    /// Measure the FMA ceiling and MLS evaluation throughput side by side.
+    Probe {
+        /// Marschner–Lobb resolution of the probe field.
+        #[arg(long, default_value_t = 41)]
+        resolution: usize,
+        /// Evaluation points per dispatch.
+        #[arg(long, default_value_t = 65536)]
+        points: usize,
+        /// Timed repetitions (after one warm-up).
+        #[arg(long, default_value_t = 5)]
+        repeats: u32,
+        /// Write the results as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        #[command(flatten)]
+        device: DeviceArgs,
+    },
+}
+
+fn context(args: &DeviceArgs) -> Result<Context, RenderError> {
+    Ok(Context::new(&ContextOptions {
+        validation: args.validation.then_some(true),
+        device: args.device.clone(),
+        force_staging: false,
+    })?)
+}
+
+fn progress_bar(message: &'static str) -> ProgressBar {
+    if !std::io::stderr().is_terminal() {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(1000);
+    if let Ok(style) = ProgressStyle::with_template("{msg:>12} [{bar:40}] {percent:>3}% {elapsed}")
+    {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar.set_message(message);
+    bar
+}
+
+fn write_json(path: &Path, value: &serde_json::Value) -> Result<(), RenderError> {
+    let text = serde_json::to_string_pretty(value).unwrap_or_default();
+    std::fs::write(path, text + "\n").map_err(|e| RenderError::Output {
+        path: path.display().to_string(),
+        message: format!("cannot write: {e}"),
+    })
+}
+
+fn run_render(
+    scene_path: Option<&Path>,
+    output: &Path,
+    stats: Option<&Path>,
+    set: &[String],
+    device: &DeviceArgs,
+) -> Result<(), RenderError> {
+    let start = Instant::now();
+    format_of(output)?;
+    let scene = Scene::load(scene_path, set)?;
+    let volume = load_volume(&scene)?;
+    let bar = progress_bar("octree");
+    let field = Field::new(volume, scene.reconstruction, &scene.octree, |f| {
+        bar.set_position((f * 1000.0) as u64)
+    })?;
+    bar.finish_and_clear();
+    let ctx = context(device)?;
+    let compiler = ShaderCompiler::new()?;
+    let gpu_field = GpuField::upload(&ctx, &field)?;
+    let setup = RaySetup::new(&scene, &field)?;
+    let bar = progress_bar("render");
+    let image = render(
+        &ctx,
+        &compiler,
+        &field,
+        &gpu_field,
+        &scene.transfer,
+        &setup,
+        |f| bar.set_position((f * 1000.0) as u64),
+    )?;
+    bar.finish_and_clear();
+    let errors = ctx.validation_errors();
+    if errors > 0 {
+        return Err(RenderError::Output {
+            path: output.display().to_string(),
+            message: format!(
+                "{errors} Vulkan validation error(s) during the render; no image written"
+            ),
+        });
+    }
+    write_image(
+        output,
+        scene.camera.width,
+        scene.camera.height,
+        &image.pixels,
+    )?;
+    if let Some(stats) = stats {
+        let evaluations: u64 = image.counts.iter().map(|&c| u64::from(c)).sum();
+        let rays = image.counts.len() as u64;
+        let value = serde_json::json!({
+            "device": ctx.info().name,
+            "device_type": ctx.info().device_type,
+            "driver": ctx.info().driver,
+            "variant": image.variant,
+            "width": scene.camera.width,
+            "height": scene.camera.height,
+            "method": match scene.render.method { Method::Fixed => "fixed", Method::Reference => "reference" },
+            "step_world": setup.step,
+            "neighbours": match scene.reconstruction.neighbours { NeighbourMode::Grid => "grid", NeighbourMode::Octree => "octree" },
+            "gpu_ms": { "raycast": image.gpu_ms },
+            "bands": image.bands,
+            "wall_ms": start.elapsed().as_secs_f64() * 1e3,
+            "function_evaluations": evaluations,
+            "rays": rays,
+            "evaluations_per_ray": evaluations as f64 / rays.max(1) as f64,
+            "octree_nodes": field.octree.as_ref().map(|o| o.nodes.len()),
+            "octree_references": field.octree.as_ref().map(|o| o.indices.len()),
+        });
+        write_json(stats, &value)?;
+    }
+    Ok(())
+}
+
+fn run_probe(
+    resolution: usize,
+    points: usize,
+    repeats: u32,
+    json: Option<&Path>,
+    device: &DeviceArgs,
+) -> Result<(), RenderError> {
+    let ctx = context(device)?;
+    let compiler = ShaderCompiler::new()?;
+    println!("device: {} ({})", ctx.info().name, ctx.info().driver);
+    let fma = fma_probe(&ctx, &compiler, 16384, 4096, repeats)?;
+    println!(
+        "probe_fma: {:.1} GFLOP/s (median of {} dispatches, {:.2} ms each)",
+        fma.gflops,
+        fma.gpu_ms.len(),
+        median(&fma.gpu_ms)
+    );
+    let mut rows = Vec::new();
+    for mode in [NeighbourMode::Grid, NeighbourMode::Octree] {
+        let scene = Scene::load(
+            None,
+            &[
+                format!("volume.resolution={resolution}"),
+                format!(
+                    "reconstruction.neighbours=\"{}\"",
+                    if mode == NeighbourMode::Grid {
+                        "grid"
+                    } else {
+                        "octree"
+                    }
+                ),
+            ],
+        )?;
+        let field = Field::new(
+            load_volume(&scene)?,
+            scene.reconstruction,
+            &scene.octree,
+            |_| {},
+        )?;
+        let pts = random_points(&field, points, 0.0, 7);
+        let m = mls_probe(&ctx, &compiler, &field, &pts, repeats)?;
+        println!(
+            "{}: {:.2} M evaluations/s, {:.1} neighbours/evaluation, {:.1} GFLOP/s (39k+56) = {:.0}% of probe_fma",
+            m.variant,
+            m.evaluations_per_s * 1e-6,
+            m.mean_neighbours,
+            m.gflops,
+            100.0 * m.gflops / fma.gflops.max(1e-9)
+        );
+        rows.push(serde_json::json!({
+            "variant": m.variant,
+            "points": m.points,
+            "gpu_ms": m.gpu_ms,
+            "evaluations_per_s": m.evaluations_per_s,
+            "mean_neighbours": m.mean_neighbours,
+            "gflops": m.gflops,
+            "fraction_of_fma": m.gflops / fma.gflops.max(1e-9),
+        }));
+    }
+    if let Some(path) = json {
+        write_json(
+            path,
+            &serde_json::json!({
+                "device": ctx.info().name,
+                "fma": { "gflops": fma.gflops, "gpu_ms": fma.gpu_ms },
+                "mls": rows,
+            }),
+        )?;
+    }
+    Ok(())
+}
+
+fn report(error: &dyn std::error::Error) -> String {
+    let mut line = error.to_string();
+    let mut source = error.source();
+    while let Some(s) = source {
+        let text = s.to_string();
+        if !line.contains(&text) {
+            line.push_str(": ");
+            line.push_str(&text);
+        }
+        source = s.source();
+    }
+    line
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let result = match &cli.command {
+        Command::Render {
+            scene,
+            output,
+            stats,
+            set,
+            device,
+        } => run_render(scene.as_deref(), output, stats.as_deref(), set, device),
+        Command::Devices => Context::list_devices()
+            .map(|lines| lines.iter().for_each(|l| println!("{l}")))
+            .map_err(RenderError::from),
+        Command::Probe {
+            resolution,
+            points,
+            repeats,
+            json,
+            device,
+        } => run_probe(*resolution, *points, *repeats, json.as_deref(), device),
+    };
+    if let Err(e) = result {
+        eprintln!("vmls: error: {}", report(&e));
+        std::process::exit(1);
+    }
+}

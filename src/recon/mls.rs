@@ -1,0 +1,312 @@
+//! MLS reconstruction, f64 CPU reference of `glsl/include/mls.glsl` ([MLS] §3).
+//!
+//! Stage names match the shader: `mls_weight`, `mls_basis`, `mls_accumulate`, `mls_factor`,
+//! `mls_solve`, `mls_evaluate`.
+//!
+//! Contract of [`mls_evaluate`] at a point x:
+//! - local weighted least squares with the shifted, support-scaled basis
+//!   `y_i = (x_i − x) ⊙ h⁻¹` (constant: 1 term, linear: 4, quadratic: 10), so f(x) = c₀ and the
+//!   local gradient is `(c₁, c₂, c₃) ⊙ h⁻¹`;
+//! - normal equations solved by LDLᵀ without square roots; a pivot `d_k ≤ PIVOT_TOLERANCE·A_kk`
+//!   means the samples do not determine that many terms, and the solve falls back to the largest
+//!   lower-order basis whose pivots are all sound (quadratic → linear → constant). Because the
+//!   bases are nested, that is the leading block of the same factorisation;
+//! - `None` where no sample has weight (the field is undefined there), never NaN;
+//! - the analytic gradient adds `[A⁻¹ Σ_i ∂w_i/∂x (f_i − b_iᵀc) b_i]₀` to the local one: the
+//!   derivative of the MLS formula ([MLS] §3) with the basis frame fixed at x;
+//! - interpolating weight: θ(ρ) = ln(ρ)² − ρ² + 2ρ − 1 is singular at ρ = 0, so ρ is clamped to
+//!   `RHO_MIN` in the weight and its derivative, and a sample closer than `RHO_MIN` (in support
+//!   units) is hit exactly: f(x) = f_i there.
+
+// Index loops mirror the shader's packed-matrix code line for line; iterators would hide that.
+#![allow(clippy::needless_range_loop)]
+
+/// Largest number of basis terms (quadratic).
+pub const MAX_TERMS: usize = 10;
+/// Relative pivot below which a basis term counts as undetermined.
+pub const PIVOT_TOLERANCE: f64 = 1e-4;
+/// Smallest distance (support units) used in the interpolating weight.
+pub const RHO_MIN: f64 = 1e-6;
+
+/// Polynomial basis of the local fit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Basis {
+    Constant,
+    Linear,
+    Quadratic,
+}
+
+impl Basis {
+    /// Number of terms.
+    pub fn terms(self) -> usize {
+        match self {
+            Basis::Constant => 1,
+            Basis::Linear => 4,
+            Basis::Quadratic => 10,
+        }
+    }
+}
+
+/// Weight function θ of the distance in support units.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Weight {
+    /// θ(ρ) = (1 − ρ²)⁴ (compact, C³).
+    Wendland,
+    /// θ(ρ) = ln(ρ)² − ρ² + 2ρ − 1 (interpolating, singular at 0).
+    Interpolating,
+}
+
+/// Which gradient to return.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GradientMode {
+    /// (c₁, c₂, c₃) of the local fit (zero for the constant basis).
+    Local,
+    /// Derivative of the MLS formula.
+    Analytic,
+}
+
+/// Compile-time choices of an MLS variant.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MlsSettings {
+    pub basis: Basis,
+    pub weight: Weight,
+    pub gradient: GradientMode,
+}
+
+/// f, ∇f and diagnostics at one point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MlsValue {
+    pub value: f64,
+    pub gradient: [f64; 3],
+    /// Samples with non-zero weight.
+    pub neighbours: u32,
+    /// Basis terms actually solved for (after any fallback).
+    pub terms: u32,
+}
+
+/// Anything that can list the samples whose support may contain x: `visit(position, value,
+/// inverse support per axis)`. Samples with zero weight may be listed; they are skipped.
+pub trait Neighbours {
+    fn for_each(&self, x: [f64; 3], visit: &mut dyn FnMut([f64; 3], f64, [f64; 3]));
+}
+
+/// θ(ρ) and θ'(ρ)/ρ (the factor that turns ∂ρ into ∂w), for ρ < 1; zero outside.
+pub fn mls_weight(weight: Weight, rho: f64) -> (f64, f64) {
+    if rho >= 1.0 {
+        return (0.0, 0.0);
+    }
+    match weight {
+        Weight::Wendland => {
+            let q = 1.0 - rho * rho;
+            (q * q * q * q, -8.0 * q * q * q)
+        }
+        Weight::Interpolating => {
+            if rho < RHO_MIN {
+                // Clamped: the weight is constant inside the RHO_MIN ball.
+                let l = RHO_MIN.ln();
+                return (l * l - RHO_MIN * RHO_MIN + 2.0 * RHO_MIN - 1.0, 0.0);
+            }
+            let l = rho.ln();
+            let theta = l * l - rho * rho + 2.0 * rho - 1.0;
+            // θ'(ρ) = 2 ln ρ / ρ − 2ρ + 2.
+            let dtheta = 2.0 * l / rho - 2.0 * rho + 2.0;
+            (theta.max(0.0), dtheta / rho)
+        }
+    }
+}
+
+/// The shifted basis b(y) for the first `terms` terms.
+pub fn mls_basis(y: [f64; 3], terms: usize) -> [f64; MAX_TERMS] {
+    let mut b = [0.0; MAX_TERMS];
+    b[0] = 1.0;
+    if terms >= 4 {
+        b[1] = y[0];
+        b[2] = y[1];
+        b[3] = y[2];
+    }
+    if terms >= 10 {
+        b[4] = y[0] * y[0];
+        b[5] = y[1] * y[1];
+        b[6] = y[2] * y[2];
+        b[7] = y[0] * y[1];
+        b[8] = y[0] * y[2];
+        b[9] = y[1] * y[2];
+    }
+    b
+}
+
+/// Normal equations being accumulated.
+#[derive(Debug, Clone)]
+pub struct MlsSystem {
+    pub terms: usize,
+    pub a: [[f64; MAX_TERMS]; MAX_TERMS],
+    pub r: [f64; MAX_TERMS],
+    pub neighbours: u32,
+    /// Value of a sample hit exactly (interpolating weight only).
+    pub exact: Option<f64>,
+}
+
+impl MlsSystem {
+    fn new(terms: usize) -> Self {
+        Self {
+            terms,
+            a: [[0.0; MAX_TERMS]; MAX_TERMS],
+            r: [0.0; MAX_TERMS],
+            neighbours: 0,
+            exact: None,
+        }
+    }
+}
+
+/// Scaled offset y = (x_i − x) ⊙ h⁻¹ and its length ρ.
+fn offset(x: [f64; 3], p: [f64; 3], inv_h: [f64; 3]) -> ([f64; 3], f64) {
+    let y = [
+        (p[0] - x[0]) * inv_h[0],
+        (p[1] - x[1]) * inv_h[1],
+        (p[2] - x[2]) * inv_h[2],
+    ];
+    (y, (y[0] * y[0] + y[1] * y[1] + y[2] * y[2]).sqrt())
+}
+
+/// Adds one sample to the normal equations (lower triangle only, as in the shader).
+pub fn mls_accumulate(sys: &mut MlsSystem, weight: Weight, y: [f64; 3], rho: f64, f: f64) {
+    let (w, _) = mls_weight(weight, rho);
+    if w <= 0.0 {
+        return;
+    }
+    if weight == Weight::Interpolating && rho < RHO_MIN {
+        sys.exact = Some(f);
+    }
+    sys.neighbours += 1;
+    let b = mls_basis(y, sys.terms);
+    for i in 0..sys.terms {
+        let wb = w * b[i];
+        sys.r[i] += wb * f;
+        for j in 0..=i {
+            sys.a[i][j] += wb * b[j];
+        }
+    }
+}
+
+/// In-place LDLᵀ of the lower triangle. Returns how many leading basis terms are determined:
+/// 10, 4, 1, or 0 when even the constant term has no weight.
+pub fn mls_factor(a: &mut [[f64; MAX_TERMS]; MAX_TERMS], terms: usize) -> usize {
+    let mut sound = 0;
+    for k in 0..terms {
+        let diag = a[k][k];
+        let mut d = diag;
+        for m in 0..k {
+            d -= a[k][m] * a[k][m] * a[m][m];
+        }
+        // Written so that NaN also fails the test.
+        let sound_pivot = d > PIVOT_TOLERANCE * diag && diag > 0.0;
+        if !sound_pivot {
+            break;
+        }
+        a[k][k] = d;
+        for i in k + 1..terms {
+            let mut v = a[i][k];
+            for m in 0..k {
+                v -= a[i][m] * a[k][m] * a[m][m];
+            }
+            a[i][k] = v / d;
+        }
+        sound = k + 1;
+    }
+    // Only whole bases are usable: the leading block of a lower-order basis.
+    match sound {
+        s if s >= 10 && terms >= 10 => 10,
+        s if s >= 4 && terms >= 4 => 4,
+        s if s >= 1 => 1,
+        _ => 0,
+    }
+}
+
+/// Solves L D Lᵀ c = rhs for the leading `n` terms of a factorised matrix.
+pub fn mls_solve(
+    l: &[[f64; MAX_TERMS]; MAX_TERMS],
+    n: usize,
+    rhs: [f64; MAX_TERMS],
+) -> [f64; MAX_TERMS] {
+    let mut c = rhs;
+    for i in 0..n {
+        for m in 0..i {
+            c[i] -= l[i][m] * c[m];
+        }
+    }
+    for i in 0..n {
+        c[i] /= l[i][i];
+    }
+    for i in (0..n).rev() {
+        for m in i + 1..n {
+            c[i] -= l[m][i] * c[m];
+        }
+    }
+    for v in c.iter_mut().skip(n) {
+        *v = 0.0;
+    }
+    c
+}
+
+/// Evaluates the MLS reconstruction at x: `None` where no sample has weight.
+pub fn mls_evaluate(
+    settings: &MlsSettings,
+    neighbours: &dyn Neighbours,
+    x: [f64; 3],
+) -> Option<MlsValue> {
+    let mut sys = MlsSystem::new(settings.basis.terms());
+    let mut first_inv_h = [0.0; 3];
+    neighbours.for_each(x, &mut |p, f, inv_h| {
+        let (y, rho) = offset(x, p, inv_h);
+        if sys.neighbours == 0 {
+            first_inv_h = inv_h;
+        }
+        mls_accumulate(&mut sys, settings.weight, y, rho, f);
+    });
+    if sys.neighbours == 0 {
+        return None;
+    }
+    let mut l = sys.a;
+    let n = mls_factor(&mut l, sys.terms);
+    if n == 0 {
+        return None;
+    }
+    let c = mls_solve(&l, n, sys.r);
+    // The local gradient needs one support scale: samples of one scene share it ([MLS] §3 with
+    // a single H), and the octree path stores it per sample for later anisotropic data.
+    let inv_h = first_inv_h;
+    let mut gradient = if n >= 4 {
+        [c[1] * inv_h[0], c[2] * inv_h[1], c[3] * inv_h[2]]
+    } else {
+        [0.0; 3]
+    };
+    if settings.gradient == GradientMode::Analytic {
+        // q_k = Σ ∂w_i/∂x_k (f_i − b_iᵀc) b_i, with ∂ρ/∂x_k = −y_k h⁻¹_k / ρ.
+        let mut q = [[0.0; MAX_TERMS]; 3];
+        neighbours.for_each(x, &mut |p, f, inv_h| {
+            let (y, rho) = offset(x, p, inv_h);
+            let (w, dw_over_rho) = mls_weight(settings.weight, rho);
+            if w <= 0.0 {
+                return;
+            }
+            let b = mls_basis(y, n);
+            let fit: f64 = (0..n).map(|t| b[t] * c[t]).sum();
+            let residual = f - fit;
+            for k in 0..3 {
+                let dw = -dw_over_rho * y[k] * inv_h[k];
+                for t in 0..n {
+                    q[k][t] += dw * residual * b[t];
+                }
+            }
+        });
+        for k in 0..3 {
+            gradient[k] += mls_solve(&l, n, q[k])[0];
+        }
+    }
+    Some(MlsValue {
+        value: sys.exact.unwrap_or(c[0]),
+        gradient,
+        neighbours: sys.neighbours,
+        terms: n as u32,
+    })
+}

@@ -1,0 +1,83 @@
+//! Reconstruction: the MLS method ([MLS] §3) as an f64 CPU reference, and the neighbour
+//! structures it reads — implicit grid neighbours and the redundant octree ([OCT], [MLS] §5.2).
+//!
+//! The GPU twins are `glsl/include/mls.glsl` and `glsl/include/neighbours.glsl`.
+
+pub mod mls;
+pub mod octree;
+
+pub use mls::{Basis, GradientMode, MlsSettings, MlsValue, Neighbours, Weight, mls_evaluate};
+pub use octree::{Octree, OctreeSettings, SamplePoint};
+
+/// Errors of the reconstruction layer.
+#[derive(Debug, thiserror::Error)]
+pub enum ReconError {
+    #[error("octree: no samples to index")]
+    Empty,
+    #[error(
+        "octree: {refs} sample references exceed the limit of {limit}; raise octree.leaf_size or octree.leaf_budget, or lower reconstruction.support"
+    )]
+    TooManyReferences { refs: u64, limit: u64 },
+    #[error("octree: {key} = {value} is out of range ({expected})")]
+    Setting {
+        key: &'static str,
+        value: String,
+        expected: &'static str,
+    },
+}
+
+/// Implicit neighbours of a regular grid: the grid points inside the support box of x.
+///
+/// Positions are relative to the frame origin the caller chose (see `render::Frame`), exactly
+/// as on the GPU.
+#[derive(Debug, Clone, Copy)]
+pub struct GridNeighbours<'a> {
+    pub dims: [usize; 3],
+    pub origin: [f64; 3],
+    pub spacing: [f64; 3],
+    pub values: &'a [f32],
+    /// Support radius in sample spacings (h = support × spacing per axis).
+    pub support: f64,
+}
+
+impl GridNeighbours<'_> {
+    /// 1 / h per axis.
+    pub fn inv_support(&self) -> [f64; 3] {
+        [
+            1.0 / (self.support * self.spacing[0]),
+            1.0 / (self.support * self.spacing[1]),
+            1.0 / (self.support * self.spacing[2]),
+        ]
+    }
+}
+
+impl Neighbours for GridNeighbours<'_> {
+    fn for_each(&self, x: [f64; 3], visit: &mut dyn FnMut([f64; 3], f64, [f64; 3])) {
+        let inv_h = self.inv_support();
+        let mut lo = [0usize; 3];
+        let mut hi = [0usize; 3];
+        for a in 0..3 {
+            let g = (x[a] - self.origin[a]) / self.spacing[a];
+            let l = (g - self.support).ceil().max(0.0);
+            let h = (g + self.support).floor().min(self.dims[a] as f64 - 1.0);
+            if l.is_nan() || h.is_nan() || l > h {
+                return;
+            }
+            lo[a] = l as usize;
+            hi[a] = h as usize;
+        }
+        for k in lo[2]..=hi[2] {
+            for j in lo[1]..=hi[1] {
+                for i in lo[0]..=hi[0] {
+                    let p = [
+                        self.origin[0] + i as f64 * self.spacing[0],
+                        self.origin[1] + j as f64 * self.spacing[1],
+                        self.origin[2] + k as f64 * self.spacing[2],
+                    ];
+                    let f = self.values[i + self.dims[0] * (j + self.dims[1] * k)];
+                    visit(p, f64::from(f), inv_h);
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,373 @@
+//! GPU driver of the ray caster and the MLS evaluator: builds the shader variant a scene needs,
+//! uploads only the buffers that variant reads, and runs it.
+//!
+//! Variants are compile-time choices passed to shaderc as macros (DESIGN §7): basis
+//! (`MLS_TERMS`), weight (`MLS_WEIGHT`), gradient (`MLS_ANALYTIC_GRADIENT`) and neighbour
+//! structure (`MLS_NEIGHBOURS`). The image is rendered in bands of rows, one submission each, so
+//! that a long render reports progress and no single dispatch runs for minutes (which a
+//! desktop driver's watchdog would kill).
+
+use super::transfer::TransferFunction;
+use super::{Field, RaySetup};
+use crate::gpu_types::{
+    CountPush, MlsOut, RayPush, RenderParams, Sample, binding, binding_defines,
+};
+use crate::recon::mls::{Basis, GradientMode, Weight};
+use crate::scene::NeighbourMode;
+use crate::vk::{
+    BindGroup, Buffer, BufferUsage, ComputePipeline, Context, ShaderCompiler, ShaderSource, VkError,
+};
+
+/// `RenderParams::projection` of an orthographic camera (0 is perspective).
+const PROJECTION_ORTHOGRAPHIC: u32 = 1;
+
+/// Pixels per band (one submission each).
+const BAND_PIXELS: u32 = 16 * 1024;
+
+/// The compile-time choices of a kernel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Variant {
+    pub basis: Basis,
+    pub weight: Weight,
+    pub gradient: GradientMode,
+    pub neighbours: NeighbourMode,
+}
+
+impl Variant {
+    /// The variant a field needs.
+    pub fn of(field: &Field) -> Self {
+        let r = field.reconstruction;
+        Self {
+            basis: r.basis,
+            weight: r.weight,
+            gradient: r.gradient,
+            neighbours: r.neighbours,
+        }
+    }
+
+    /// shaderc macro definitions (plus the binding numbers).
+    pub fn defines(&self) -> Vec<(String, String)> {
+        let mut d = binding_defines();
+        let flag = |b: bool| if b { "1" } else { "0" }.to_string();
+        d.push(("MLS_TERMS".into(), self.basis.terms().to_string()));
+        d.push((
+            "MLS_WEIGHT".into(),
+            flag(self.weight == Weight::Interpolating),
+        ));
+        d.push((
+            "MLS_ANALYTIC_GRADIENT".into(),
+            flag(self.gradient == GradientMode::Analytic),
+        ));
+        d.push((
+            "MLS_NEIGHBOURS".into(),
+            flag(self.neighbours == NeighbourMode::Octree),
+        ));
+        d
+    }
+
+    /// Human-readable name, reported in `--stats` as `variant`.
+    pub fn name(&self, kernel: &str) -> String {
+        format!(
+            "{kernel}:{}-{}-{}-{}",
+            match self.basis {
+                Basis::Constant => "constant",
+                Basis::Linear => "linear",
+                Basis::Quadratic => "quadratic",
+            },
+            match self.weight {
+                Weight::Wendland => "wendland",
+                Weight::Interpolating => "interpolating",
+            },
+            match self.gradient {
+                GradientMode::Local => "local",
+                GradientMode::Analytic => "analytic",
+            },
+            match self.neighbours {
+                NeighbourMode::Grid => "grid",
+                NeighbourMode::Octree => "octree",
+            }
+        )
+    }
+}
+
+fn v4(v: glam::DVec3, w: f64) -> [f32; 4] {
+    [v.x as f32, v.y as f32, v.z as f32, w as f32]
+}
+
+/// Kernel constants for a field (and a ray setup, when rendering).
+pub fn render_params(field: &Field, setup: Option<&RaySetup>, tf_count: u32) -> RenderParams {
+    let s = field.reconstruction.support;
+    let inv_h = field.grid().inv_support();
+    let mut p = RenderParams {
+        grid_origin: v4(field.origin.into(), 0.0),
+        grid_inv_spacing: [
+            (1.0 / field.spacing[0]) as f32,
+            (1.0 / field.spacing[1]) as f32,
+            (1.0 / field.spacing[2]) as f32,
+            0.0,
+        ],
+        inv_support: [inv_h[0] as f32, inv_h[1] as f32, inv_h[2] as f32, 0.0],
+        grid_dims: [
+            field.dims[0] as i32,
+            field.dims[1] as i32,
+            field.dims[2] as i32,
+            0,
+        ],
+        support_cells: s as f32,
+        tf_count,
+        ..Default::default()
+    };
+    if let Some(o) = &field.octree {
+        p.octree_root = v4(o.root_center.into(), o.root_half);
+    }
+    if let Some(r) = setup {
+        match r.camera.projection {
+            super::camera::Projection::Perspective { fov_y_degrees } => {
+                p.tan_half_fov = (fov_y_degrees.to_radians() * 0.5).tan() as f32;
+            }
+            super::camera::Projection::Orthographic { view_height } => {
+                p.projection = PROJECTION_ORTHOGRAPHIC;
+                p.ortho_half_height = (0.5 * view_height) as f32;
+            }
+        }
+        p.eye = v4(glam::DVec3::from(r.camera.eye) - r.frame_origin, 0.0);
+        p.forward = v4(r.basis.forward, 0.0);
+        p.right = v4(r.basis.right, 0.0);
+        p.up = v4(r.basis.up, 0.0);
+        p.box_min = v4(r.box_lo, 0.0);
+        p.box_max = v4(r.box_hi, 0.0);
+        p.background = v4(r.background.into(), 0.0);
+        p.width = r.camera.width;
+        p.height = r.camera.height;
+        p.step = r.step as f32;
+        p.min_transmittance = r.min_transmittance as f32;
+    }
+    p
+}
+
+/// The field's data on the GPU: grid values, or samples + octree.
+pub struct GpuField {
+    grid: Option<Buffer>,
+    octree: Option<[Buffer; 3]>,
+}
+
+impl GpuField {
+    /// Uploads what the field's variant reads and nothing else.
+    pub fn upload(ctx: &Context, field: &Field) -> Result<Self, VkError> {
+        match &field.octree {
+            None => Ok(Self {
+                grid: Some(Buffer::from_slice(ctx, "grid", &field.values)?),
+                octree: None,
+            }),
+            Some(o) => {
+                let samples: Vec<Sample> = o
+                    .samples
+                    .iter()
+                    .map(|s| Sample {
+                        pos_value: v4(s.position.into(), s.value),
+                        inv_support: v4(s.inv_support.into(), 0.0),
+                    })
+                    .collect();
+                Ok(Self {
+                    grid: None,
+                    octree: Some([
+                        Buffer::from_slice(ctx, "octree samples", &samples)?,
+                        Buffer::from_slice(ctx, "octree nodes", &o.nodes)?,
+                        Buffer::from_slice(ctx, "octree indices", &o.indices)?,
+                    ]),
+                })
+            }
+        }
+    }
+
+    /// (binding, buffer) pairs of the neighbour data.
+    fn bindings(&self) -> Vec<(u32, &Buffer)> {
+        let mut b = Vec::new();
+        if let Some(g) = &self.grid {
+            b.push((binding::GRID, g));
+        }
+        if let Some([s, n, i]) = &self.octree {
+            b.push((binding::SAMPLES, s));
+            b.push((binding::NODES, n));
+            b.push((binding::INDICES, i));
+        }
+        b
+    }
+}
+
+/// A rendered image as the GPU produced it.
+#[derive(Debug, Clone)]
+pub struct GpuImage {
+    /// RGBA per pixel, row 0 at the top: (C + T·background, 1 − T).
+    pub pixels: Vec<[f32; 4]>,
+    /// MLS evaluations per pixel.
+    pub counts: Vec<u32>,
+    /// Sum of the bands' GPU times.
+    pub gpu_ms: f64,
+    /// Submissions (bands).
+    pub bands: u32,
+    pub variant: String,
+}
+
+fn pipeline_for(
+    ctx: &Context,
+    compiler: &ShaderCompiler,
+    kernel: &str,
+    variant: &Variant,
+    data: &[u32],
+    push: u32,
+) -> Result<ComputePipeline, VkError> {
+    let spirv = compiler.compile(ShaderSource::File(kernel), &variant.defines())?;
+    let mut bindings = data.to_vec();
+    bindings.push(binding::PARAMS);
+    ComputePipeline::new(ctx, &variant.name(kernel), &spirv, &bindings, push)
+}
+
+/// Ray casts the field with the scene's fixed step; `progress` gets the fraction of rows done.
+pub fn render(
+    ctx: &Context,
+    compiler: &ShaderCompiler,
+    field: &Field,
+    gpu_field: &GpuField,
+    tf: &TransferFunction,
+    setup: &RaySetup,
+    mut progress: impl FnMut(f64),
+) -> Result<GpuImage, VkError> {
+    let variant = Variant::of(field);
+    let data = gpu_field.bindings();
+    let mut binding_ids: Vec<u32> = data.iter().map(|(b, _)| *b).collect();
+    binding_ids.extend([binding::TRANSFER, binding::IMAGE, binding::COUNTS]);
+    let pipeline = pipeline_for(
+        ctx,
+        compiler,
+        "raycast.comp",
+        &variant,
+        &binding_ids,
+        std::mem::size_of::<RayPush>() as u32,
+    )?;
+    let (w, h) = (setup.camera.width, setup.camera.height);
+    let pixels = u64::from(w) * u64::from(h);
+    let gpu_tf = tf.to_gpu();
+    let params = render_params(field, Some(setup), gpu_tf.len() as u32);
+    let params_buf = Buffer::from_slice(ctx, "render params", &[params])?;
+    let tf_buf = Buffer::from_slice(ctx, "transfer function", &gpu_tf)?;
+    let image = Buffer::new(ctx, "image", pixels * 16, BufferUsage::Storage)?;
+    let counts = Buffer::new(ctx, "evaluation counts", pixels * 4, BufferUsage::Storage)?;
+    let mut all = data;
+    all.extend([
+        (binding::PARAMS, &params_buf),
+        (binding::TRANSFER, &tf_buf),
+        (binding::IMAGE, &image),
+        (binding::COUNTS, &counts),
+    ]);
+    let group = BindGroup::new(ctx, &pipeline, &all)?;
+    let band_rows = (BAND_PIXELS / w.max(1))
+        .clamp(8, h.max(8))
+        .next_multiple_of(8);
+    let mut gpu_ms = 0.0;
+    let mut bands = 0;
+    let mut row = 0;
+    while row < h {
+        let rows = band_rows.min(h - row);
+        let push = RayPush {
+            row_offset: row,
+            rows,
+            _pad: [0; 2],
+        };
+        let timings = ctx.submit(|rec| {
+            rec.dispatch(
+                &pipeline,
+                &group,
+                bytemuck::bytes_of(&push),
+                [w.div_ceil(8), rows.div_ceil(8), 1],
+                "raycast",
+            )
+        })?;
+        gpu_ms += timings.iter().filter_map(|t| t.gpu_ms).sum::<f64>();
+        bands += 1;
+        row += rows;
+        progress(f64::from(row) / f64::from(h));
+    }
+    let mut pixels_out: Vec<[f32; 4]> = image.read(ctx)?;
+    pixels_out.truncate(pixels as usize);
+    let mut counts_out: Vec<u32> = counts.read(ctx)?;
+    counts_out.truncate(pixels as usize);
+    Ok(GpuImage {
+        pixels: pixels_out,
+        counts: counts_out,
+        gpu_ms,
+        bands,
+        variant: variant.name("raycast"),
+    })
+}
+
+/// Evaluates the field at `points` (frame-relative) with `mls_eval.comp`. Returns the results
+/// and the GPU milliseconds of each of `repeats` dispatches (for throughput measurement).
+pub fn evaluate(
+    ctx: &Context,
+    compiler: &ShaderCompiler,
+    field: &Field,
+    gpu_field: &GpuField,
+    points: &[[f64; 3]],
+    repeats: u32,
+) -> Result<(Vec<MlsOut>, Vec<f64>), VkError> {
+    let variant = Variant::of(field);
+    let data = gpu_field.bindings();
+    let mut binding_ids: Vec<u32> = data.iter().map(|(b, _)| *b).collect();
+    binding_ids.extend([binding::POINTS, binding::RESULTS]);
+    let pipeline = pipeline_for(
+        ctx,
+        compiler,
+        "mls_eval.comp",
+        &variant,
+        &binding_ids,
+        std::mem::size_of::<CountPush>() as u32,
+    )?;
+    let n = points.len();
+    let gpu_points: Vec<[f32; 4]> = points
+        .iter()
+        .map(|p| [p[0] as f32, p[1] as f32, p[2] as f32, 0.0])
+        .collect();
+    let params_buf = Buffer::from_slice(ctx, "mls params", &[render_params(field, None, 0)])?;
+    let points_buf = Buffer::from_slice(ctx, "mls points", &gpu_points)?;
+    let results = Buffer::new(
+        ctx,
+        "mls results",
+        (n as u64) * std::mem::size_of::<MlsOut>() as u64,
+        BufferUsage::Storage,
+    )?;
+    let mut all = data;
+    all.extend([
+        (binding::PARAMS, &params_buf),
+        (binding::POINTS, &points_buf),
+        (binding::RESULTS, &results),
+    ]);
+    let group = BindGroup::new(ctx, &pipeline, &all)?;
+    let push = CountPush {
+        count: u32::try_from(n).map_err(|_| VkError::Usage(format!("{n} points")))?,
+        iterations: 0,
+        _pad: [0; 2],
+    };
+    let groups = (n as u32).div_ceil(64).max(1);
+    let (gx, gy) = if groups > 65535 {
+        (65535, groups.div_ceil(65535))
+    } else {
+        (groups, 1)
+    };
+    let mut times = Vec::new();
+    for _ in 0..repeats.max(1) {
+        let t = ctx.submit(|rec| {
+            rec.dispatch(
+                &pipeline,
+                &group,
+                bytemuck::bytes_of(&push),
+                [gx, gy, 1],
+                "mls_eval",
+            )
+        })?;
+        times.extend(t.iter().filter_map(|t| t.gpu_ms));
+    }
+    let mut out: Vec<MlsOut> = results.read(ctx)?;
+    out.truncate(n);
+    Ok((out, times))
+}

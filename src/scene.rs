@@ -1,0 +1,545 @@
+//! The scene file: the external contract of `vmls render`.
+//!
+//! A scene is TOML with the sections `[volume]`, `[reconstruction]`, `[octree]`, `[transfer]`,
+//! `[camera]` and `[render]`; every key is optional and has the default of the built-in scene
+//! (Marschner–Lobb 41³). `--set section.key=value` overrides are applied to the parsed table
+//! before validation, with the value read as TOML (falling back to a bare string).
+//!
+//! Every unknown section or key, wrong type and out-of-range value is a [`SceneError`] that
+//! names the key (`camera.fov_y`) and what was expected. Relative paths resolve against the
+//! scene file's directory.
+//!
+//! Where the issue text was ambiguous: `camera.height` is the image height in pixels, so the
+//! orthographic view height is `camera.view_height` (world units).
+
+use crate::recon::{Basis, GradientMode, OctreeSettings, Weight};
+use crate::render::camera::{Camera, Projection};
+use crate::render::transfer::TransferFunction;
+use std::path::{Path, PathBuf};
+use toml::{Table, Value};
+
+/// Errors of the scene layer.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    #[error("{path}: cannot read: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: invalid TOML: {message}")]
+    Toml { path: String, message: String },
+    #[error("{origin}: key '{key}': expected {expected}, found {found}")]
+    Key {
+        origin: String,
+        key: String,
+        expected: String,
+        found: String,
+    },
+    #[error("{origin}: unknown key '{key}' (known keys{context}: {known})")]
+    UnknownKey {
+        origin: String,
+        key: String,
+        context: String,
+        known: String,
+    },
+    #[error("--set {arg}: {message}")]
+    Set { arg: String, message: String },
+}
+
+/// Where the volume comes from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum VolumeSource {
+    MarschnerLobb {
+        resolution: usize,
+    },
+    File {
+        path: PathBuf,
+        array: Option<String>,
+    },
+}
+
+/// How neighbours are found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NeighbourMode {
+    Grid,
+    Octree,
+}
+
+/// The integrator.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Method {
+    /// Midpoint rule with `render.step`.
+    Fixed,
+    /// Midpoint rule with `render.reference_step`: ground truth.
+    Reference,
+}
+
+/// `[reconstruction]`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reconstruction {
+    pub basis: Basis,
+    pub weight: Weight,
+    pub gradient: GradientMode,
+    /// h = support × sample spacing, per axis.
+    pub support: f64,
+    pub neighbours: NeighbourMode,
+}
+
+/// `[render]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RenderSettings {
+    pub method: Method,
+    /// Step in sample spacings (the smallest spacing of the grid).
+    pub step: f64,
+    /// Step of the reference method, in sample spacings.
+    pub reference_step: f64,
+    pub background: [f64; 3],
+    /// Rays stop when the transmittance falls below this.
+    pub min_transmittance: f64,
+}
+
+/// A validated scene.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scene {
+    pub volume: VolumeSource,
+    pub reconstruction: Reconstruction,
+    pub octree: OctreeSettings,
+    pub transfer: TransferFunction,
+    pub camera: Camera,
+    pub render: RenderSettings,
+}
+
+const KNOWN: &[(&str, &[&str])] = &[
+    ("volume", &["generator", "resolution", "file", "scalars"]),
+    (
+        "reconstruction",
+        &[
+            "method",
+            "basis",
+            "weight",
+            "support",
+            "gradient",
+            "neighbours",
+        ],
+    ),
+    ("octree", &["leaf_budget", "max_depth", "leaf_size"]),
+    ("transfer", &["points"]),
+    (
+        "camera",
+        &[
+            "eye",
+            "target",
+            "up",
+            "fov_y",
+            "projection",
+            "view_height",
+            "width",
+            "height",
+        ],
+    ),
+    (
+        "render",
+        &[
+            "method",
+            "step",
+            "reference_step",
+            "background",
+            "min_transmittance",
+        ],
+    ),
+];
+
+/// The built-in default scene (Marschner–Lobb 41³), as a scene file would spell it.
+pub const DEFAULT_SCENE: &str = r#"
+[volume]
+generator = "marschner-lobb"
+resolution = 41
+[reconstruction]
+method = "mls"
+basis = "linear"
+weight = "wendland"
+support = 2.4
+gradient = "local"
+neighbours = "grid"
+[transfer]
+# A translucent blue shell below 0.5, a dense bright band at the 0.5 level set, orange above.
+points = [[0.0, 0.0, 0.0, 0.0, 0.0], [0.35, 0.1, 0.2, 0.5, 0.3], [0.45, 0.2, 0.5, 1.0, 1.5],
+          [0.5, 1.0, 0.95, 0.8, 60.0], [0.55, 1.0, 0.5, 0.1, 2.0], [1.0, 1.0, 0.3, 0.1, 3.0]]
+[camera]
+eye = [3.6, 2.4, 2.9]
+target = [0.0, 0.0, 0.0]
+up = [0.0, 0.0, 1.0]
+fov_y = 32.0
+width = 256
+height = 256
+[render]
+method = "fixed"
+step = 0.25
+background = [0.0, 0.0, 0.0]
+"#;
+
+fn describe(v: &Value) -> String {
+    match v {
+        Value::String(s) => format!("\"{s}\""),
+        other => other.to_string(),
+    }
+}
+
+/// Typed access to one section, with errors naming `section.key`.
+struct Section<'a> {
+    origin: &'a str,
+    name: &'static str,
+    table: Option<&'a Table>,
+}
+
+impl<'a> Section<'a> {
+    fn key(&self, key: &str) -> String {
+        format!("{}.{key}", self.name)
+    }
+
+    fn err(&self, key: &str, expected: &str, found: &Value) -> SceneError {
+        SceneError::Key {
+            origin: self.origin.to_string(),
+            key: self.key(key),
+            expected: expected.to_string(),
+            found: describe(found),
+        }
+    }
+
+    fn get(&self, key: &str) -> Option<&'a Value> {
+        self.table.and_then(|t| t.get(key))
+    }
+
+    fn float(&self, key: &str, default: f64, lo: f64, hi: f64) -> Result<f64, SceneError> {
+        let Some(v) = self.get(key) else {
+            return Ok(default);
+        };
+        let x = match v {
+            Value::Float(f) => *f,
+            Value::Integer(i) => *i as f64,
+            _ => return Err(self.err(key, "a number", v)),
+        };
+        if !(x.is_finite() && x >= lo && x <= hi) {
+            return Err(self.err(key, &format!("a number in [{lo}, {hi}]"), v));
+        }
+        Ok(x)
+    }
+
+    fn positive(&self, key: &str, default: f64, hi: f64) -> Result<f64, SceneError> {
+        let x = self.float(key, default, 0.0, hi)?;
+        if x <= 0.0 {
+            return Err(self.err(key, &format!("a number in (0, {hi}]"), &Value::Float(x)));
+        }
+        Ok(x)
+    }
+
+    fn int(&self, key: &str, default: i64, lo: i64, hi: i64) -> Result<i64, SceneError> {
+        let Some(v) = self.get(key) else {
+            return Ok(default);
+        };
+        match v {
+            Value::Integer(i) if (lo..=hi).contains(i) => Ok(*i),
+            _ => Err(self.err(key, &format!("an integer in [{lo}, {hi}]"), v)),
+        }
+    }
+
+    fn string(&self, key: &str) -> Result<Option<&'a str>, SceneError> {
+        match self.get(key) {
+            None => Ok(None),
+            Some(Value::String(s)) => Ok(Some(s)),
+            Some(v) => Err(self.err(key, "a string", v)),
+        }
+    }
+
+    fn choice<T: Copy>(
+        &self,
+        key: &str,
+        default: T,
+        options: &[(&str, T)],
+    ) -> Result<T, SceneError> {
+        let Some(v) = self.get(key) else {
+            return Ok(default);
+        };
+        let names: Vec<String> = options.iter().map(|(n, _)| format!("\"{n}\"")).collect();
+        let expected = format!("one of {}", names.join(", "));
+        match v {
+            Value::String(s) => options
+                .iter()
+                .find(|(n, _)| n == s)
+                .map(|(_, t)| *t)
+                .ok_or_else(|| self.err(key, &expected, v)),
+            _ => Err(self.err(key, &expected, v)),
+        }
+    }
+
+    fn vec3(&self, key: &str, default: [f64; 3]) -> Result<[f64; 3], SceneError> {
+        let Some(v) = self.get(key) else {
+            return Ok(default);
+        };
+        let bad = || self.err(key, "an array of 3 finite numbers", v);
+        let Value::Array(a) = v else {
+            return Err(bad());
+        };
+        if a.len() != 3 {
+            return Err(bad());
+        }
+        let mut out = [0.0; 3];
+        for (o, x) in out.iter_mut().zip(a) {
+            *o = match x {
+                Value::Float(f) if f.is_finite() => *f,
+                Value::Integer(i) => *i as f64,
+                _ => return Err(bad()),
+            };
+        }
+        Ok(out)
+    }
+}
+
+/// Parses a `--set section.key=value` argument into the table.
+fn apply_set(table: &mut Table, arg: &str) -> Result<(), SceneError> {
+    let set_err = |message: String| SceneError::Set {
+        arg: arg.to_string(),
+        message,
+    };
+    let (path, raw) = arg
+        .split_once('=')
+        .ok_or_else(|| set_err("expected section.key=value".into()))?;
+    let (section, key) = path
+        .trim()
+        .split_once('.')
+        .ok_or_else(|| set_err("expected section.key=value".into()))?;
+    let value = format!("v = {raw}")
+        .parse::<Table>()
+        .ok()
+        .and_then(|mut t| t.remove("v"))
+        .unwrap_or_else(|| Value::String(raw.trim().to_string()));
+    let entry = table
+        .entry(section.to_string())
+        .or_insert_with(|| Value::Table(Table::new()));
+    let Value::Table(t) = entry else {
+        return Err(set_err(format!("'{section}' is not a section")));
+    };
+    t.insert(key.to_string(), value);
+    Ok(())
+}
+
+fn check_known(table: &Table, origin: &str) -> Result<(), SceneError> {
+    for (section, value) in table {
+        let Some((_, keys)) = KNOWN.iter().find(|(s, _)| s == section) else {
+            return Err(SceneError::UnknownKey {
+                origin: origin.into(),
+                key: section.clone(),
+                context: " (sections)".into(),
+                known: KNOWN.iter().map(|(s, _)| *s).collect::<Vec<_>>().join(", "),
+            });
+        };
+        let Value::Table(t) = value else {
+            return Err(SceneError::Key {
+                origin: origin.into(),
+                key: section.clone(),
+                expected: "a section".into(),
+                found: describe(value),
+            });
+        };
+        for key in t.keys() {
+            if !keys.contains(&key.as_str()) {
+                return Err(SceneError::UnknownKey {
+                    origin: origin.into(),
+                    key: format!("{section}.{key}"),
+                    context: format!(" of [{section}]"),
+                    known: keys.join(", "),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+impl Scene {
+    /// Loads a scene file (or the built-in default with `None`) and applies `--set` overrides.
+    pub fn load(path: Option<&Path>, overrides: &[String]) -> Result<Self, SceneError> {
+        let (text, origin, base) = match path {
+            Some(p) => (
+                std::fs::read_to_string(p).map_err(|source| SceneError::Io {
+                    path: p.to_path_buf(),
+                    source,
+                })?,
+                p.display().to_string(),
+                p.parent().map(Path::to_path_buf).unwrap_or_default(),
+            ),
+            None => (
+                DEFAULT_SCENE.to_string(),
+                "built-in default scene".to_string(),
+                PathBuf::from("."),
+            ),
+        };
+        Self::parse(&text, &origin, &base, overrides)
+    }
+
+    /// Parses scene text; `origin` names it in errors, `base` resolves relative paths.
+    pub fn parse(
+        text: &str,
+        origin: &str,
+        base: &Path,
+        overrides: &[String],
+    ) -> Result<Self, SceneError> {
+        let mut table: Table = text
+            .parse()
+            .map_err(|e: toml::de::Error| SceneError::Toml {
+                path: origin.to_string(),
+                message: e.to_string(),
+            })?;
+        check_known(&table, origin)?;
+        for arg in overrides {
+            apply_set(&mut table, arg)?;
+        }
+        check_known(&table, &format!("{origin} with --set overrides"))?;
+        let section = |name: &'static str| Section {
+            origin,
+            name,
+            table: table.get(name).and_then(Value::as_table),
+        };
+
+        let vol = section("volume");
+        let volume = match (vol.string("generator")?, vol.string("file")?) {
+            (Some(_), Some(_)) => {
+                return Err(vol.err(
+                    "file",
+                    "either volume.generator or volume.file, not both",
+                    &Value::String("both given".into()),
+                ));
+            }
+            (_, Some(file)) => VolumeSource::File {
+                path: base.join(file),
+                array: vol.string("scalars")?.map(str::to_string),
+            },
+            (g, None) => {
+                if let Some(g) = g.filter(|g| *g != "marschner-lobb") {
+                    return Err(vol.err(
+                        "generator",
+                        "\"marschner-lobb\"",
+                        &Value::String(g.into()),
+                    ));
+                }
+                VolumeSource::MarschnerLobb {
+                    resolution: vol.int("resolution", 41, 2, 1024)? as usize,
+                }
+            }
+        };
+
+        let rec = section("reconstruction");
+        rec.choice("method", (), &[("mls", ())])?;
+        let reconstruction = Reconstruction {
+            basis: rec.choice(
+                "basis",
+                Basis::Linear,
+                &[
+                    ("constant", Basis::Constant),
+                    ("linear", Basis::Linear),
+                    ("quadratic", Basis::Quadratic),
+                ],
+            )?,
+            weight: rec.choice(
+                "weight",
+                Weight::Wendland,
+                &[
+                    ("wendland", Weight::Wendland),
+                    ("interpolating", Weight::Interpolating),
+                ],
+            )?,
+            gradient: rec.choice(
+                "gradient",
+                GradientMode::Local,
+                &[
+                    ("local", GradientMode::Local),
+                    ("analytic", GradientMode::Analytic),
+                ],
+            )?,
+            support: rec.float("support", 2.4, 0.5, 16.0)?,
+            neighbours: rec.choice(
+                "neighbours",
+                NeighbourMode::Grid,
+                &[
+                    ("grid", NeighbourMode::Grid),
+                    ("octree", NeighbourMode::Octree),
+                ],
+            )?,
+        };
+
+        let oct = section("octree");
+        let defaults = OctreeSettings::default();
+        let octree = OctreeSettings {
+            leaf_budget: oct.int("leaf_budget", defaults.leaf_budget as i64, 1, 1 << 20)? as usize,
+            max_depth: oct.int("max_depth", i64::from(defaults.max_depth), 0, 20)? as u32,
+            leaf_size: oct.positive("leaf_size", defaults.leaf_size, 1e3)?,
+            max_references: defaults.max_references,
+        };
+
+        let tf = section("transfer");
+        let transfer = match tf.get("points") {
+            None => {
+                TransferFunction::new(vec![[0.0, 0.0, 0.0, 0.0, 0.0], [1.0, 1.0, 1.0, 1.0, 8.0]])
+            }
+            Some(v) => {
+                TransferFunction::from_toml(v).map_err(|expected| tf.err("points", &expected, v))?
+            }
+        };
+
+        let cam = section("camera");
+        let projection = cam.choice("projection", 0, &[("perspective", 0), ("orthographic", 1)])?;
+        let projection = if projection == 0 {
+            if cam.get("view_height").is_some() {
+                return Err(cam.err(
+                    "view_height",
+                    "no view_height with a perspective projection (use fov_y)",
+                    cam.get("view_height").unwrap_or(&Value::Boolean(true)),
+                ));
+            }
+            Projection::Perspective {
+                fov_y_degrees: cam.float("fov_y", 30.0, 1e-3, 179.0)?,
+            }
+        } else {
+            Projection::Orthographic {
+                view_height: cam.positive("view_height", 2.0, 1e12)?,
+            }
+        };
+        let camera = Camera {
+            eye: cam.vec3("eye", [3.0, 2.0, 2.5])?,
+            target: cam.vec3("target", [0.0; 3])?,
+            up: cam.vec3("up", [0.0, 0.0, 1.0])?,
+            projection,
+            width: cam.int("width", 256, 1, 16384)? as u32,
+            height: cam.int("height", 256, 1, 16384)? as u32,
+        };
+        if let Err(message) = camera.basis() {
+            return Err(SceneError::Key {
+                origin: origin.into(),
+                key: "camera.eye / camera.target / camera.up".into(),
+                expected: "eye ≠ target and up not parallel to the view direction".into(),
+                found: message,
+            });
+        }
+
+        let ren = section("render");
+        let render = RenderSettings {
+            method: ren.choice(
+                "method",
+                Method::Fixed,
+                &[("fixed", Method::Fixed), ("reference", Method::Reference)],
+            )?,
+            step: ren.positive("step", 0.25, 1e3)?,
+            reference_step: ren.positive("reference_step", 1.0 / 32.0, 1e3)?,
+            background: ren.vec3("background", [0.0; 3])?,
+            min_transmittance: ren.float("min_transmittance", 1e-4, 0.0, 1.0)?,
+        };
+        Ok(Self {
+            volume,
+            reconstruction,
+            octree,
+            transfer,
+            camera,
+            render,
+        })
+    }
+}

@@ -1,0 +1,239 @@
+//! Storage buffers allocated through gpu-allocator, with upload and readback that work on
+//! unified memory (lavapipe: every allocation is mapped) and on discrete GPUs (staging copies).
+
+use super::context::{Context, Shared};
+use super::{VkError, VkResultExt};
+use ash::vk;
+use gpu_allocator::MemoryLocation;
+use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+
+/// What a buffer is for; decides where gpu-allocator places it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BufferUsage {
+    /// Read or written by kernels; filled by uploads, read by readbacks.
+    Storage,
+    /// Host-visible staging memory for transfers.
+    Staging,
+}
+
+/// A Vulkan buffer with its memory. Freed on drop.
+pub struct Buffer {
+    shared: Arc<Shared>,
+    pub(crate) handle: vk::Buffer,
+    allocation: Option<Allocation>,
+    size: u64,
+    name: String,
+}
+
+impl Buffer {
+    /// Allocates `size` bytes (at least 4) named `name` for debugging and error messages.
+    pub fn new(ctx: &Context, name: &str, size: u64, usage: BufferUsage) -> Result<Self, VkError> {
+        let shared = ctx.shared.clone();
+        let size = size.max(4).next_multiple_of(4);
+        if usage == BufferUsage::Storage && size > shared.info.max_storage_buffer_range {
+            return Err(VkError::Limit {
+                resource: format!("buffer '{name}'"),
+                bytes: size,
+                limit: shared.info.max_storage_buffer_range,
+                limit_name: "maxStorageBufferRange",
+            });
+        }
+        let vk_usage = match usage {
+            BufferUsage::Storage => {
+                vk::BufferUsageFlags::STORAGE_BUFFER
+                    | vk::BufferUsageFlags::TRANSFER_DST
+                    | vk::BufferUsageFlags::TRANSFER_SRC
+            }
+            BufferUsage::Staging => {
+                vk::BufferUsageFlags::TRANSFER_SRC | vk::BufferUsageFlags::TRANSFER_DST
+            }
+        };
+        let location = match usage {
+            BufferUsage::Storage => MemoryLocation::GpuOnly,
+            BufferUsage::Staging => MemoryLocation::GpuToCpu,
+        };
+        let info = vk::BufferCreateInfo::default()
+            .size(size)
+            .usage(vk_usage)
+            .sharing_mode(vk::SharingMode::EXCLUSIVE);
+        // SAFETY: valid create info on a live device.
+        let handle = unsafe { shared.device.create_buffer(&info, None) }
+            .call("vkCreateBuffer", || {
+                format!("buffer '{name}' ({size} bytes)")
+            })?;
+        // SAFETY: `handle` was just created on this device.
+        let requirements = unsafe { shared.device.get_buffer_memory_requirements(handle) };
+        let allocation = shared.allocator().allocate(&AllocationCreateDesc {
+            name,
+            requirements,
+            location,
+            linear: true,
+            allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+        });
+        let allocation = match allocation {
+            Ok(a) => a,
+            Err(source) => {
+                // SAFETY: the buffer is unused and has no memory bound.
+                unsafe { shared.device.destroy_buffer(handle, None) };
+                let resource = format!("buffer '{name}'");
+                return Err(match source {
+                    gpu_allocator::AllocationError::OutOfMemory => VkError::OutOfMemory {
+                        resource,
+                        bytes: size,
+                        source,
+                    },
+                    _ => VkError::Allocation {
+                        resource,
+                        bytes: size,
+                        source,
+                    },
+                });
+            }
+        };
+        // SAFETY: the allocation satisfies the buffer's requirements and is not bound elsewhere.
+        let bound = unsafe {
+            shared
+                .device
+                .bind_buffer_memory(handle, allocation.memory(), allocation.offset())
+        };
+        if let Err(result) = bound {
+            // SAFETY: the buffer is unused.
+            unsafe { shared.device.destroy_buffer(handle, None) };
+            let _ = shared.allocator().free(allocation);
+            return Err(VkError::Call {
+                call: "vkBindBufferMemory",
+                what: format!("buffer '{name}'"),
+                result,
+            });
+        }
+        shared.set_name(handle, name);
+        shared.live_allocations.fetch_add(1, Ordering::SeqCst);
+        Ok(Self {
+            shared,
+            handle,
+            allocation: Some(allocation),
+            size,
+            name: name.to_string(),
+        })
+    }
+
+    /// Allocates a storage buffer holding `data`.
+    pub fn from_slice<T: bytemuck::Pod>(
+        ctx: &Context,
+        name: &str,
+        data: &[T],
+    ) -> Result<Self, VkError> {
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        let buffer = Self::new(ctx, name, bytes.len() as u64, BufferUsage::Storage)?;
+        buffer.write(ctx, bytes)?;
+        Ok(buffer)
+    }
+
+    /// Size in bytes (rounded up to a multiple of 4).
+    pub fn size(&self) -> u64 {
+        self.size
+    }
+
+    /// Debug name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn mapped(&self) -> bool {
+        !self.shared.force_staging
+            && self
+                .allocation
+                .as_ref()
+                .is_some_and(|a| a.mapped_ptr().is_some())
+    }
+
+    /// Copies `bytes` to the start of the buffer, directly when mapped, else through staging.
+    pub fn write(&self, ctx: &Context, bytes: &[u8]) -> Result<(), VkError> {
+        if bytes.len() as u64 > self.size {
+            return Err(VkError::Usage(format!(
+                "upload of {} bytes into buffer '{}' of {} bytes",
+                bytes.len(),
+                self.name,
+                self.size
+            )));
+        }
+        if self.mapped() {
+            let ptr = self.mapped_ptr()?;
+            // SAFETY: the mapping covers `size` ≥ bytes.len() bytes; no GPU work uses the buffer
+            // now because every submission is waited for before returning.
+            unsafe { std::ptr::copy_nonoverlapping(bytes.as_ptr(), ptr, bytes.len()) };
+            return Ok(());
+        }
+        let staging = Buffer::new(
+            ctx,
+            &format!("{} (upload)", self.name),
+            bytes.len() as u64,
+            BufferUsage::Staging,
+        )?;
+        let ptr = staging.mapped_ptr()?;
+        // SAFETY: the staging mapping holds at least bytes.len() bytes and is not in use.
+        unsafe { std::ptr::copy_nonoverlapping(bytes.as_ptr(), ptr, bytes.len()) };
+        ctx.submit(|rec| {
+            rec.copy_buffer(&staging, self, bytes.len() as u64);
+            Ok(())
+        })?;
+        Ok(())
+    }
+
+    /// Reads the whole buffer back as `T`s.
+    pub fn read<T: bytemuck::Pod>(&self, ctx: &Context) -> Result<Vec<T>, VkError> {
+        let n = self.size as usize / std::mem::size_of::<T>().max(1);
+        let mut out = vec![T::zeroed(); n];
+        let dst: &mut [u8] = bytemuck::cast_slice_mut(&mut out);
+        if self.mapped() {
+            let ptr = self.mapped_ptr()?;
+            // SAFETY: the mapping covers `size` bytes ≥ dst.len(); all GPU work has completed.
+            unsafe { std::ptr::copy_nonoverlapping(ptr, dst.as_mut_ptr(), dst.len()) };
+            return Ok(out);
+        }
+        let staging = Buffer::new(
+            ctx,
+            &format!("{} (readback)", self.name),
+            self.size,
+            BufferUsage::Staging,
+        )?;
+        ctx.submit(|rec| {
+            rec.copy_buffer(self, &staging, self.size);
+            Ok(())
+        })?;
+        let ptr = staging.mapped_ptr()?;
+        // SAFETY: as above, for the staging buffer.
+        unsafe { std::ptr::copy_nonoverlapping(ptr, dst.as_mut_ptr(), dst.len()) };
+        Ok(out)
+    }
+
+    fn mapped_ptr(&self) -> Result<*mut u8, VkError> {
+        let allocation = self.allocation.as_ref();
+        allocation
+            .and_then(|a| a.mapped_ptr())
+            .map(|p| p.as_ptr().cast::<u8>())
+            .ok_or_else(|| {
+                VkError::Usage(format!(
+                    "buffer '{}' is not host-visible on this device",
+                    self.name
+                ))
+            })
+    }
+}
+
+impl Drop for Buffer {
+    fn drop(&mut self) {
+        // SAFETY: submissions are synchronous, so no pending GPU work references the buffer.
+        unsafe { self.shared.device.destroy_buffer(self.handle, None) };
+        if let Some(Err(e)) = self
+            .allocation
+            .take()
+            .map(|a| self.shared.allocator().free(a))
+        {
+            eprintln!("vmls: freeing buffer '{}' failed: {e}", self.name);
+        }
+        self.shared.live_allocations.fetch_sub(1, Ordering::SeqCst);
+    }
+}

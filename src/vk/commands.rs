@@ -1,0 +1,314 @@
+//! Recording and synchronous submission of compute work, with timestamp queries around every
+//! dispatch.
+//!
+//! Synchronisation is deliberately simple: every command after the first waits for all earlier
+//! compute and transfer writes (one global memory barrier), and the submission ends with a
+//! barrier that makes all writes visible to the host. Submissions are waited for before
+//! [`Context::submit`] returns, which is what lets buffers and bind groups be freed on drop
+//! without tracking in-flight work.
+
+use super::buffer::Buffer;
+use super::context::{Context, Shared};
+use super::pipeline::{BindGroup, ComputePipeline};
+use super::{VkError, VkResultExt};
+use ash::vk;
+
+/// Timestamp pairs per submission; further dispatches run untimed.
+const MAX_TIMED_DISPATCHES: u32 = 128;
+
+/// GPU time of one dispatch.
+#[derive(Debug, Clone)]
+pub struct DispatchTiming {
+    pub label: String,
+    /// Milliseconds between the timestamps around the dispatch; `None` when the device has no
+    /// timestamps on this queue or the submission had too many dispatches.
+    pub gpu_ms: Option<f64>,
+}
+
+/// Records commands into one command buffer; handed out by [`Context::submit`].
+pub struct Recorder<'a> {
+    shared: &'a Shared,
+    cmd: vk::CommandBuffer,
+    queries: Option<vk::QueryPool>,
+    labels: Vec<String>,
+    commands: u32,
+}
+
+impl Recorder<'_> {
+    fn barrier(&mut self) {
+        if self.commands > 0 {
+            let barrier = [vk::MemoryBarrier::default()
+                .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
+                .dst_access_mask(
+                    vk::AccessFlags::SHADER_READ
+                        | vk::AccessFlags::SHADER_WRITE
+                        | vk::AccessFlags::TRANSFER_READ
+                        | vk::AccessFlags::TRANSFER_WRITE,
+                )];
+            let stages = vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER;
+            // SAFETY: `cmd` is in the recording state.
+            unsafe {
+                self.shared.device.cmd_pipeline_barrier(
+                    self.cmd,
+                    stages,
+                    stages,
+                    vk::DependencyFlags::empty(),
+                    &barrier,
+                    &[],
+                    &[],
+                )
+            };
+        }
+        self.commands += 1;
+    }
+
+    /// Records a dispatch of `groups` workgroups with `push` as push constants.
+    pub fn dispatch(
+        &mut self,
+        pipeline: &ComputePipeline,
+        bind_group: &BindGroup<'_>,
+        push: &[u8],
+        groups: [u32; 3],
+        label: &str,
+    ) -> Result<(), VkError> {
+        if push.len() != pipeline.push_size as usize {
+            return Err(VkError::Usage(format!(
+                "dispatch '{label}': {} bytes of push constants for pipeline '{}' which declares {}",
+                push.len(),
+                pipeline.name(),
+                pipeline.push_size
+            )));
+        }
+        let max = self.shared.info.max_workgroup_count;
+        if groups.iter().zip(max.iter()).any(|(g, m)| g > m) || groups.contains(&0) {
+            return Err(VkError::Usage(format!(
+                "dispatch '{label}': {groups:?} workgroups (each must be in 1..={max:?}, maxComputeWorkGroupCount)"
+            )));
+        }
+        self.barrier();
+        let device = &self.shared.device;
+        let index = u32::try_from(self.labels.len()).unwrap_or(u32::MAX);
+        let timed = self.queries.filter(|_| index < MAX_TIMED_DISPATCHES);
+        // SAFETY: `cmd` is recording; pipeline, layout and set are live and compatible (the
+        // bind group was made for a pipeline with this set layout); push size was checked.
+        unsafe {
+            if let Some(pool) = timed {
+                device.cmd_write_timestamp(
+                    self.cmd,
+                    vk::PipelineStageFlags::TOP_OF_PIPE,
+                    pool,
+                    2 * index,
+                );
+            }
+            device.cmd_bind_pipeline(self.cmd, vk::PipelineBindPoint::COMPUTE, pipeline.pipeline);
+            device.cmd_bind_descriptor_sets(
+                self.cmd,
+                vk::PipelineBindPoint::COMPUTE,
+                pipeline.layout,
+                0,
+                &[bind_group.set],
+                &[],
+            );
+            if !push.is_empty() {
+                device.cmd_push_constants(
+                    self.cmd,
+                    pipeline.layout,
+                    vk::ShaderStageFlags::COMPUTE,
+                    0,
+                    push,
+                );
+            }
+            device.cmd_dispatch(self.cmd, groups[0], groups[1], groups[2]);
+            if let Some(pool) = timed {
+                device.cmd_write_timestamp(
+                    self.cmd,
+                    vk::PipelineStageFlags::BOTTOM_OF_PIPE,
+                    pool,
+                    2 * index + 1,
+                );
+            }
+        }
+        self.labels.push(label.to_string());
+        Ok(())
+    }
+
+    /// Copies `size` bytes from the start of `src` to the start of `dst`.
+    pub fn copy_buffer(&mut self, src: &Buffer, dst: &Buffer, size: u64) {
+        self.barrier();
+        let region = [vk::BufferCopy::default().size(size.min(src.size()).min(dst.size()))];
+        // SAFETY: `cmd` is recording; both buffers are live with TRANSFER usage.
+        unsafe {
+            self.shared
+                .device
+                .cmd_copy_buffer(self.cmd, src.handle, dst.handle, &region)
+        };
+    }
+
+    /// Fills the whole buffer with a 32-bit pattern.
+    pub fn fill(&mut self, buffer: &Buffer, value: u32) {
+        self.barrier();
+        // SAFETY: `cmd` is recording; the buffer is live with TRANSFER_DST usage and its size is a
+        // multiple of 4.
+        unsafe {
+            self.shared
+                .device
+                .cmd_fill_buffer(self.cmd, buffer.handle, 0, vk::WHOLE_SIZE, value)
+        };
+    }
+}
+
+/// Owns the transient objects of one submission, destroyed in any exit path.
+struct Transient<'a> {
+    shared: &'a Shared,
+    pool: vk::CommandPool,
+    fence: vk::Fence,
+    queries: Option<vk::QueryPool>,
+}
+
+impl Drop for Transient<'_> {
+    fn drop(&mut self) {
+        // SAFETY: the submission finished (we waited for the fence) or never happened; these
+        // objects are not used after this point.
+        unsafe {
+            let device = &self.shared.device;
+            if let Some(q) = self.queries {
+                device.destroy_query_pool(q, None);
+            }
+            device.destroy_fence(self.fence, None);
+            device.destroy_command_pool(self.pool, None);
+        }
+    }
+}
+
+impl Context {
+    /// Records commands with `record`, submits them to the compute queue and waits. Returns the
+    /// GPU time of each dispatch in recording order.
+    pub fn submit(
+        &self,
+        record: impl FnOnce(&mut Recorder<'_>) -> Result<(), VkError>,
+    ) -> Result<Vec<DispatchTiming>, VkError> {
+        let shared = &*self.shared;
+        let device = &shared.device;
+        let what = || "a compute submission".to_string();
+        let pool_info = vk::CommandPoolCreateInfo::default()
+            .queue_family_index(shared.queue_family)
+            .flags(vk::CommandPoolCreateFlags::TRANSIENT);
+        // SAFETY: valid create info on a live device.
+        let pool = unsafe { device.create_command_pool(&pool_info, None) }
+            .call("vkCreateCommandPool", what)?;
+        // SAFETY: as above.
+        let fence = match unsafe { device.create_fence(&vk::FenceCreateInfo::default(), None) } {
+            Ok(f) => f,
+            Err(result) => {
+                // SAFETY: the pool is unused.
+                unsafe { device.destroy_command_pool(pool, None) };
+                return Err(VkError::Call {
+                    call: "vkCreateFence",
+                    what: what(),
+                    result,
+                });
+            }
+        };
+        let mut transient = Transient {
+            shared,
+            pool,
+            fence,
+            queries: None,
+        };
+        if shared.info.timestamp_period_ns.is_some() {
+            let info = vk::QueryPoolCreateInfo::default()
+                .query_type(vk::QueryType::TIMESTAMP)
+                .query_count(2 * MAX_TIMED_DISPATCHES);
+            // SAFETY: valid create info.
+            transient.queries = Some(
+                unsafe { device.create_query_pool(&info, None) }.call("vkCreateQueryPool", what)?,
+            );
+        }
+        let alloc = vk::CommandBufferAllocateInfo::default()
+            .command_pool(pool)
+            .level(vk::CommandBufferLevel::PRIMARY)
+            .command_buffer_count(1);
+        // SAFETY: the pool is live.
+        let cmd = unsafe { device.allocate_command_buffers(&alloc) }
+            .call("vkAllocateCommandBuffers", what)?
+            .into_iter()
+            .next()
+            .ok_or_else(|| VkError::Usage("no command buffer allocated".into()))?;
+        let begin = vk::CommandBufferBeginInfo::default()
+            .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT);
+        // SAFETY: fresh command buffer.
+        unsafe { device.begin_command_buffer(cmd, &begin) }.call("vkBeginCommandBuffer", what)?;
+        if let Some(q) = transient.queries {
+            // SAFETY: recording; the pool has this many queries.
+            unsafe { device.cmd_reset_query_pool(cmd, q, 0, 2 * MAX_TIMED_DISPATCHES) };
+        }
+        let mut recorder = Recorder {
+            shared,
+            cmd,
+            queries: transient.queries,
+            labels: Vec::new(),
+            commands: 0,
+        };
+        let recorded = record(&mut recorder);
+        let labels = std::mem::take(&mut recorder.labels);
+        // Make every write visible to the host before the fence signals (readbacks map memory).
+        let to_host = [vk::MemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
+            .dst_access_mask(vk::AccessFlags::HOST_READ)];
+        // SAFETY: recording.
+        unsafe {
+            device.cmd_pipeline_barrier(
+                cmd,
+                vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::HOST,
+                vk::DependencyFlags::empty(),
+                &to_host,
+                &[],
+                &[],
+            )
+        };
+        // SAFETY: recording.
+        unsafe { device.end_command_buffer(cmd) }.call("vkEndCommandBuffer", what)?;
+        recorded?;
+        let cmds = [cmd];
+        let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
+        {
+            let queue = shared.queue();
+            // SAFETY: the command buffer is executable; the queue is externally synchronised by
+            // the mutex guard.
+            unsafe { device.queue_submit(*queue, &submit, fence) }.call("vkQueueSubmit", what)?;
+        }
+        // SAFETY: the fence belongs to this submission.
+        unsafe { device.wait_for_fences(&[fence], true, u64::MAX) }
+            .call("vkWaitForFences", what)?;
+        let mut timings: Vec<DispatchTiming> = labels
+            .into_iter()
+            .map(|label| DispatchTiming {
+                label,
+                gpu_ms: None,
+            })
+            .collect();
+        if let (Some(q), Some(period)) = (transient.queries, shared.info.timestamp_period_ns) {
+            let n = timings.len().min(MAX_TIMED_DISPATCHES as usize);
+            if n > 0 {
+                let mut stamps = vec![0u64; 2 * n];
+                // SAFETY: the submission completed, so these queries are available.
+                unsafe {
+                    device.get_query_pool_results(
+                        q,
+                        0,
+                        &mut stamps,
+                        vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
+                    )
+                }
+                .call("vkGetQueryPoolResults", what)?;
+                for (i, t) in timings.iter_mut().take(n).enumerate() {
+                    let ticks = stamps[2 * i + 1].saturating_sub(stamps[2 * i]);
+                    t.gpu_ms = Some(ticks as f64 * period * 1e-6);
+                }
+            }
+        }
+        drop(transient);
+        Ok(timings)
+    }
+}

@@ -1,0 +1,87 @@
+//! The Vulkan layer: the only module of vmls that contains `unsafe`.
+//!
+//! Contract:
+//! - [`Context`] owns (or wraps) an instance, a device with one compute queue and a gpu-allocator
+//!   allocator; every resource ([`Buffer`], [`ComputePipeline`], [`BindGroup`]) holds an `Arc` to
+//!   the context's shared state, so the device is destroyed only after the last resource.
+//! - Every Vulkan or allocator failure is a [`VkError`] naming the call and the resource; no
+//!   function here panics on a driver result.
+//! - With validation on, the Khronos layer's error messages are counted
+//!   ([`Context::validation_errors`]); tests fail when the count is non-zero.
+//! - Work is recorded through [`Recorder`] and submitted synchronously by [`Context::submit`],
+//!   which returns the GPU time of every dispatch from timestamp queries.
+
+mod buffer;
+mod commands;
+mod context;
+mod pipeline;
+mod shader;
+
+pub use buffer::{Buffer, BufferUsage};
+pub use commands::{DispatchTiming, Recorder};
+pub use context::{Context, ContextOptions, DeviceInfo, RawContext};
+pub use pipeline::{BindGroup, ComputePipeline};
+pub use shader::{ShaderCompiler, ShaderSource, shader_names};
+
+use ash::vk;
+
+/// Errors of the Vulkan layer.
+#[derive(Debug, thiserror::Error)]
+pub enum VkError {
+    #[error("cannot load the Vulkan loader (libvulkan.so.1): {0}; run tools/setup")]
+    Loading(String),
+    #[error("{call} failed for {what}: {result}")]
+    Call {
+        call: &'static str,
+        what: String,
+        result: vk::Result,
+    },
+    #[error("no Vulkan device with a compute queue was found{0}")]
+    NoDevice(String),
+    #[error("no Vulkan device matches '{wanted}'; available: {available}")]
+    DeviceNotFound { wanted: String, available: String },
+    #[error(
+        "the Khronos validation layer was requested but is not installed (package vulkan-validationlayers; run tools/setup)"
+    )]
+    NoValidationLayer,
+    #[error("out of GPU memory allocating {bytes} bytes for {resource}: {source}")]
+    OutOfMemory {
+        resource: String,
+        bytes: u64,
+        #[source]
+        source: gpu_allocator::AllocationError,
+    },
+    #[error("cannot allocate {bytes} bytes for {resource}: {source}")]
+    Allocation {
+        resource: String,
+        bytes: u64,
+        #[source]
+        source: gpu_allocator::AllocationError,
+    },
+    #[error("{resource} needs {bytes} bytes but the device allows at most {limit} ({limit_name})")]
+    Limit {
+        resource: String,
+        bytes: u64,
+        limit: u64,
+        limit_name: &'static str,
+    },
+    #[error("shader {name}: {message}")]
+    Shader { name: String, message: String },
+    #[error("{0}")]
+    Usage(String),
+}
+
+/// Attaches the call name and the resource to a raw `vk::Result`.
+pub(crate) trait VkResultExt<T> {
+    fn call(self, call: &'static str, what: impl FnOnce() -> String) -> Result<T, VkError>;
+}
+
+impl<T> VkResultExt<T> for Result<T, vk::Result> {
+    fn call(self, call: &'static str, what: impl FnOnce() -> String) -> Result<T, VkError> {
+        self.map_err(|result| VkError::Call {
+            call,
+            what: what(),
+            result,
+        })
+    }
+}

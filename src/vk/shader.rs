@@ -1,0 +1,159 @@
+//! Run-time GLSL → SPIR-V compilation with shaderc.
+//!
+//! The kernels in `glsl/` are embedded in the binary, so `vmls` runs from any directory; setting
+//! `VMLS_GLSL_DIR` to a directory with the same layout compiles from there instead (for shader
+//! work without rebuilding). Includes are resolved against the `glsl/` root and `glsl/include/`.
+//! Every variant is a set of macro definitions; results are cached per process by a hash of
+//! the kernel source and its definitions.
+
+use super::VkError;
+use std::collections::HashMap;
+use std::hash::{Hash, Hasher};
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+
+macro_rules! embed {
+    ($($name:literal),* $(,)?) => {
+        &[$(($name, include_str!(concat!("../../glsl/", $name)))),*]
+    };
+}
+
+/// Every GLSL file of the project, by its path relative to `glsl/`.
+static SOURCES: &[(&str, &str)] = embed![
+    "include/types.glsl",
+    "include/mls.glsl",
+    "include/neighbours.glsl",
+    "include/transfer.glsl",
+    "include/camera.glsl",
+    "raycast.comp",
+    "mls_eval.comp",
+    "probe_fma.comp",
+    "layout_probe.comp",
+];
+
+/// Names of the embedded GLSL files.
+pub fn shader_names() -> impl Iterator<Item = &'static str> {
+    SOURCES.iter().map(|(n, _)| *n)
+}
+
+/// A kernel to compile: an embedded file by name, or literal text (probes, tests).
+#[derive(Debug, Clone, Copy)]
+pub enum ShaderSource<'a> {
+    File(&'a str),
+    Text { name: &'a str, text: &'a str },
+}
+
+/// shaderc compiler with a per-process cache of compiled variants.
+pub struct ShaderCompiler {
+    compiler: Mutex<shaderc::Compiler>,
+    cache: Mutex<HashMap<u64, Arc<Vec<u32>>>>,
+    dir: Option<PathBuf>,
+}
+
+fn lookup(dir: &Option<PathBuf>, name: &str) -> Result<String, String> {
+    if let Some(dir) = dir {
+        let path = dir.join(name);
+        return std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()));
+    }
+    SOURCES
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, t)| (*t).to_string())
+        .ok_or_else(|| {
+            format!(
+                "no GLSL file '{name}' (known: {})",
+                shader_names().collect::<Vec<_>>().join(", ")
+            )
+        })
+}
+
+impl ShaderCompiler {
+    /// Starts the compiler (glslang initialisation costs ~100 ms once per process).
+    pub fn new() -> Result<Self, VkError> {
+        let compiler = shaderc::Compiler::new().map_err(|e| VkError::Shader {
+            name: "(compiler)".into(),
+            message: format!("cannot start shaderc: {e}"),
+        })?;
+        Ok(Self {
+            compiler: Mutex::new(compiler),
+            cache: Mutex::new(HashMap::new()),
+            dir: std::env::var_os("VMLS_GLSL_DIR").map(PathBuf::from),
+        })
+    }
+
+    /// Compiles a kernel with the given `#define NAME VALUE` pairs.
+    pub fn compile(
+        &self,
+        source: ShaderSource<'_>,
+        defines: &[(String, String)],
+    ) -> Result<Arc<Vec<u32>>, VkError> {
+        let (name, text) = match source {
+            ShaderSource::File(name) => (
+                name,
+                lookup(&self.dir, name).map_err(|message| VkError::Shader {
+                    name: name.into(),
+                    message,
+                })?,
+            ),
+            ShaderSource::Text { name, text } => (name, text.to_string()),
+        };
+        let mut hasher = std::collections::hash_map::DefaultHasher::new();
+        text.hash(&mut hasher);
+        defines.hash(&mut hasher);
+        let key = hasher.finish();
+        if let Some(hit) = self
+            .cache
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .get(&key)
+        {
+            return Ok(hit.clone());
+        }
+        let shader_err = |message: String| VkError::Shader {
+            name: name.to_string(),
+            message,
+        };
+        let mut options = shaderc::CompileOptions::new()
+            .map_err(|e| shader_err(format!("cannot create compile options: {e}")))?;
+        options.set_target_env(
+            shaderc::TargetEnv::Vulkan,
+            shaderc::EnvVersion::Vulkan1_2 as u32,
+        );
+        options.set_optimization_level(shaderc::OptimizationLevel::Performance);
+        options.set_generate_debug_info();
+        for (k, v) in defines {
+            options.add_macro_definition(k, Some(v));
+        }
+        let dir = self.dir.clone();
+        options.set_include_callback(move |requested, _kind, _from, _depth| {
+            let found = lookup(&dir, requested)
+                .map(|t| (requested.to_string(), t))
+                .or_else(|_| {
+                    let nested = format!("include/{requested}");
+                    lookup(&dir, &nested).map(|t| (nested, t))
+                })?;
+            Ok(shaderc::ResolvedInclude {
+                resolved_name: found.0,
+                content: found.1,
+            })
+        });
+        let artifact = self
+            .compiler
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .compile_into_spirv(
+                &text,
+                shaderc::ShaderKind::Compute,
+                name,
+                "main",
+                Some(&options),
+            )
+            .map_err(|e| shader_err(e.to_string()))?;
+        let words = Arc::new(artifact.as_binary().to_vec());
+        self.cache
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .insert(key, words.clone());
+        Ok(words)
+    }
+}
