@@ -11,6 +11,7 @@
 #define TRI(i, j) ((i) * ((i) + 1) / 2 + (j))
 
 const float PIVOT_TOLERANCE = 1e-4;
+const float QUADRATIC_PIVOT_TOLERANCE = 1e-2;
 const float RHO_MIN = 1e-6;
 
 struct MlsSystem {
@@ -105,7 +106,8 @@ uint mls_factor(inout float a[MLS_PACKED]) {
             [[unroll]] for (int m = 0; m < k; ++m) {
                 d -= a[TRI(k, m)] * a[TRI(k, m)] * a[TRI(m, m)];
             }
-            if (!(d > PIVOT_TOLERANCE * diag) || !(diag > 0.0)) {
+            float tolerance = k >= 4 ? QUADRATIC_PIVOT_TOLERANCE : PIVOT_TOLERANCE;
+            if (!(d > tolerance * diag) || !(diag > 0.0)) {
                 ok = false;
             } else {
                 a[TRI(k, k)] = d;

@@ -338,7 +338,7 @@ pub fn parse(path: &Path, bytes: &[u8]) -> Result<Volume, DataError> {
             "end of file".into(),
         ));
     }
-    let missing = |field: &str| err(end_line, &format!("a '{field}' field"), "none".into());
+    let missing = |field: &str| err(end_line, &format!("the '{field}' field"), "none".into());
 
     let ty = h.ty.as_ref().ok_or_else(|| missing("type"))?.value;
     let dimension = h.dimension.as_ref().ok_or_else(|| missing("dimension"))?;

@@ -8,7 +8,8 @@
 //!   `y_i = (x_i − x) ⊙ h⁻¹` (constant: 1 term, linear: 4, quadratic: 10), so f(x) = c₀ and the
 //!   local gradient is `(c₁, c₂, c₃) ⊙ h⁻¹`;
 //! - normal equations solved by LDLᵀ without square roots; a pivot `d_k ≤ PIVOT_TOLERANCE·A_kk`
-//!   means the samples do not determine that many terms, and the solve falls back to the largest
+//!   (`QUADRATIC_PIVOT_TOLERANCE` for second-order terms) means the samples do not determine that
+//!   many terms, and the solve falls back to the largest
 //!   lower-order basis whose pivots are all sound (quadratic → linear → constant). Because the
 //!   bases are nested, that is the leading block of the same factorisation;
 //! - `None` where no sample has weight (the field is undefined there), never NaN;
@@ -23,8 +24,12 @@
 
 /// Largest number of basis terms (quadratic).
 pub const MAX_TERMS: usize = 10;
-/// Relative pivot below which a basis term counts as undetermined.
+/// Relative pivot `d_k / A_kk` below which a constant or linear term counts as undetermined.
 pub const PIVOT_TOLERANCE: f64 = 1e-4;
+/// The same for the six second-order terms. A pivot of t amplifies rounding by about 1/t, and
+/// f32 rounding (6e-8) at the 1e-4 level gave 7e-4 errors near grid boundaries, where the
+/// quadratic system is nearly singular; at 1e-2 those points fall back to the linear basis.
+pub const QUADRATIC_PIVOT_TOLERANCE: f64 = 1e-2;
 /// Smallest distance (support units) used in the interpolating weight.
 pub const RHO_MIN: f64 = 1e-6;
 
@@ -199,7 +204,12 @@ pub fn mls_factor(a: &mut [[f64; MAX_TERMS]; MAX_TERMS], terms: usize) -> usize 
             d -= a[k][m] * a[k][m] * a[m][m];
         }
         // Written so that NaN also fails the test.
-        let sound_pivot = d > PIVOT_TOLERANCE * diag && diag > 0.0;
+        let tolerance = if k >= 4 {
+            QUADRATIC_PIVOT_TOLERANCE
+        } else {
+            PIVOT_TOLERANCE
+        };
+        let sound_pivot = d > tolerance * diag && diag > 0.0;
         if !sound_pivot {
             break;
         }

@@ -1,0 +1,449 @@
+//! GPU MLS kernels (f32) against the f64 CPU reference, plus analytic properties of MLS.
+mod common;
+
+use common::*;
+use vmls::data::Volume;
+use vmls::gpu_types::MlsOut;
+use vmls::probe::random_points;
+use vmls::recon::mls::{MlsSettings, mls_evaluate};
+use vmls::recon::{Basis, GradientMode, OctreeSettings, Weight};
+use vmls::render::Field;
+use vmls::render::gpu::{GpuField, evaluate};
+use vmls::scene::{NeighbourMode, Reconstruction};
+
+fn volume_from(
+    dims: [usize; 3],
+    spacing: [f64; 3],
+    origin: [f64; 3],
+    f: impl Fn([f64; 3]) -> f64,
+) -> Volume {
+    let mut values = Vec::new();
+    for k in 0..dims[2] {
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                let p = [
+                    origin[0] + i as f64 * spacing[0],
+                    origin[1] + j as f64 * spacing[1],
+                    origin[2] + k as f64 * spacing[2],
+                ];
+                values.push(f(p) as f32);
+            }
+        }
+    }
+    Volume {
+        dims,
+        origin,
+        spacing,
+        values,
+    }
+}
+
+fn field_of(volume: Volume, r: Reconstruction) -> Field {
+    Field::new(volume, r, &OctreeSettings::default(), |_| {}).expect("field")
+}
+
+struct Comparison {
+    max_value_error: f64,
+    max_gradient_error: f64,
+    terms_mismatch: usize,
+    defined: usize,
+}
+
+/// Evaluates on the GPU and the CPU at the same points and measures the differences, relative
+/// to the data range (values) and to the largest CPU gradient (gradients).
+fn compare(field: &Field, points: &[[f64; 3]]) -> Comparison {
+    let (ctx, compiler) = gpu();
+    let gpu_field = GpuField::upload(&ctx, field).expect("upload");
+    let (out, _) = evaluate(&ctx, &compiler, field, &gpu_field, points, 1).expect("mls_eval");
+    drop(gpu_field);
+    finish(ctx);
+    let (lo, hi) = field
+        .values
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(l, h), &v| {
+            (l.min(f64::from(v)), h.max(f64::from(v)))
+        });
+    let range = (hi - lo).max(1e-30);
+    let neighbours = field.neighbours();
+    let cpu: Vec<_> = points
+        .iter()
+        .map(|p| mls_evaluate(&field.mls(), neighbours.as_ref(), *p))
+        .collect();
+    let grad_scale = cpu
+        .iter()
+        .flatten()
+        .map(|m| m.gradient.iter().map(|g| g.abs()).fold(0.0, f64::max))
+        .fold(1e-30, f64::max);
+    let mut c = Comparison {
+        max_value_error: 0.0,
+        max_gradient_error: 0.0,
+        terms_mismatch: 0,
+        defined: 0,
+    };
+    for (g, m) in out.iter().zip(&cpu) {
+        let g: &MlsOut = g;
+        assert!(
+            g.value.is_finite() && g.gradient.iter().all(|x| x.is_finite()),
+            "GPU produced a non-finite value: {g:?}"
+        );
+        match m {
+            None => {
+                if g.terms != 0 {
+                    c.terms_mismatch += 1;
+                }
+            }
+            Some(m) => {
+                if g.terms != m.terms {
+                    c.terms_mismatch += 1;
+                    continue;
+                }
+                c.defined += 1;
+                c.max_value_error = c
+                    .max_value_error
+                    .max((f64::from(g.value) - m.value).abs() / range);
+                for k in 0..3 {
+                    c.max_gradient_error = c
+                        .max_gradient_error
+                        .max((f64::from(g.gradient[k]) - m.gradient[k]).abs() / grad_scale);
+                }
+            }
+        }
+    }
+    c
+}
+
+#[test]
+fn gpu_matches_cpu_for_every_variant() {
+    // (basis, support, value tolerance, gradient tolerance): f32 against f64, relative to the
+    // data range and to the largest gradient. The quadratic system is the worst conditioned.
+    let cases = [
+        (Basis::Constant, 1.6, 2e-6, 5e-5),
+        (Basis::Linear, 2.4, 5e-6, 1e-4),
+        (Basis::Quadratic, 1.8, 5e-5, 2e-3),
+    ];
+    for (basis, support, tol_v, tol_g) in cases {
+        for weight in [Weight::Wendland, Weight::Interpolating] {
+            for gradient in [GradientMode::Local, GradientMode::Analytic] {
+                for neighbours in [NeighbourMode::Grid, NeighbourMode::Octree] {
+                    let field = ml_field(13, recon(basis, weight, gradient, neighbours, support));
+                    // A margin of −3% puts some points outside the grid: boundary fallbacks
+                    // and undefined points are compared too.
+                    let margin = -0.03;
+                    let points = random_points(&field, 1500, margin, 11);
+                    let c = compare(&field, &points);
+                    let label = format!("{basis:?}/{weight:?}/{gradient:?}/{neighbours:?}");
+                    assert!(
+                        c.defined > 1000,
+                        "{label}: only {} defined points",
+                        c.defined
+                    );
+                    assert!(
+                        c.terms_mismatch <= 3,
+                        "{label}: {} points solved a different basis",
+                        c.terms_mismatch
+                    );
+                    eprintln!(
+                        "{label}: value {:.2e} gradient {:.2e} mismatched terms {}",
+                        c.max_value_error, c.max_gradient_error, c.terms_mismatch
+                    );
+                    assert!(
+                        c.max_value_error <= tol_v,
+                        "{label}: value error {:.2e} > {tol_v:.0e}",
+                        c.max_value_error
+                    );
+                    assert!(
+                        c.max_gradient_error <= tol_g,
+                        "{label}: gradient error {:.2e} > {tol_g:.0e}",
+                        c.max_gradient_error
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn linear_basis_reproduces_linear_functions() {
+    let f = |p: [f64; 3]| 0.3 + 1.5 * p[0] - 0.7 * p[1] + 2.25 * p[2];
+    for weight in [Weight::Wendland, Weight::Interpolating] {
+        for gradient in [GradientMode::Local, GradientMode::Analytic] {
+            // Anisotropic spacing: the support is a diagonal H.
+            let vol = volume_from([9, 7, 6], [0.25, 0.3, 0.4], [-1.0, -0.9, -1.0], f);
+            let field = field_of(
+                vol,
+                recon(Basis::Linear, weight, gradient, NeighbourMode::Grid, 2.4),
+            );
+            let points = random_points(&field, 400, 0.0, 3);
+            let neighbours = field.neighbours();
+            for p in &points {
+                let m = mls_evaluate(&field.mls(), neighbours.as_ref(), *p).expect("defined");
+                let world = [
+                    p[0] + field.frame_origin.x,
+                    p[1] + field.frame_origin.y,
+                    p[2] + field.frame_origin.z,
+                ];
+                assert!(
+                    (m.value - f(world)).abs() < 1e-6,
+                    "value {} vs {}",
+                    m.value,
+                    f(world)
+                );
+                let expect = [1.5, -0.7, 2.25];
+                for k in 0..3 {
+                    assert!(
+                        (m.gradient[k] - expect[k]).abs() < 1e-6,
+                        "{weight:?} {gradient:?} gradient {:?}",
+                        m.gradient
+                    );
+                }
+            }
+            let c = compare(&field, &points);
+            assert!(
+                c.max_value_error < 1e-5,
+                "GPU value error {:.2e}",
+                c.max_value_error
+            );
+            assert!(
+                c.max_gradient_error < 1e-4,
+                "GPU gradient error {:.2e}",
+                c.max_gradient_error
+            );
+        }
+    }
+}
+
+#[test]
+fn quadratic_basis_reproduces_quadratics() {
+    let f = |p: [f64; 3]| 1.0 + p[0] * p[0] - 0.5 * p[1] * p[2] + 0.25 * p[2];
+    let vol = volume_from([8, 8, 8], [0.3; 3], [-1.0; 3], f);
+    let field = field_of(
+        vol,
+        recon(
+            Basis::Quadratic,
+            Weight::Wendland,
+            GradientMode::Analytic,
+            NeighbourMode::Grid,
+            1.8,
+        ),
+    );
+    let neighbours = field.neighbours();
+    for p in random_points(&field, 300, 0.2, 5) {
+        let m = mls_evaluate(&field.mls(), neighbours.as_ref(), p).expect("defined");
+        let w = [
+            p[0] + field.frame_origin.x,
+            p[1] + field.frame_origin.y,
+            p[2] + field.frame_origin.z,
+        ];
+        assert_eq!(m.terms, 10, "quadratic basis solved at {p:?}");
+        // The grid stores f32: reproduction is exact up to the data's rounding.
+        assert!((m.value - f(w)).abs() < 1e-6, "{} vs {}", m.value, f(w));
+        let g = [2.0 * w[0], -0.5 * w[2], -0.5 * w[1] + 0.25];
+        for k in 0..3 {
+            assert!(
+                (m.gradient[k] - g[k]).abs() < 1e-5,
+                "gradient {:?} vs {g:?}",
+                m.gradient
+            );
+        }
+    }
+}
+
+#[test]
+fn analytic_gradient_matches_finite_differences() {
+    for basis in [Basis::Constant, Basis::Linear, Basis::Quadratic] {
+        for weight in [Weight::Wendland, Weight::Interpolating] {
+            let support = if basis == Basis::Quadratic { 1.8 } else { 2.4 };
+            let field = ml_field(
+                15,
+                recon(
+                    basis,
+                    weight,
+                    GradientMode::Analytic,
+                    NeighbourMode::Grid,
+                    support,
+                ),
+            );
+            let mls = MlsSettings {
+                gradient: GradientMode::Local,
+                ..field.mls()
+            };
+            let neighbours = field.neighbours();
+            let eps = 1e-6;
+            for p in random_points(&field, 100, 0.1, 9) {
+                let m = mls_evaluate(&field.mls(), neighbours.as_ref(), p).expect("defined");
+                for k in 0..3 {
+                    let (mut a, mut b) = (p, p);
+                    a[k] += eps;
+                    b[k] -= eps;
+                    let fa = mls_evaluate(&mls, neighbours.as_ref(), a)
+                        .expect("defined")
+                        .value;
+                    let fb = mls_evaluate(&mls, neighbours.as_ref(), b)
+                        .expect("defined")
+                        .value;
+                    let fd = (fa - fb) / (2.0 * eps);
+                    assert!(
+                        (m.gradient[k] - fd).abs() < 1e-5 * (1.0 + fd.abs()),
+                        "{basis:?}/{weight:?}: analytic {} vs finite difference {fd}",
+                        m.gradient[k]
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn coplanar_samples_fall_back_to_a_lower_order_basis() {
+    // A single z-layer: the linear and quadratic systems are singular in z.
+    let vol = volume_from([9, 9, 1], [0.25; 3], [0.0; 3], |p| p[0] + 2.0 * p[1]);
+    for basis in [Basis::Linear, Basis::Quadratic] {
+        let field = field_of(
+            vol.clone(),
+            recon(
+                basis,
+                Weight::Wendland,
+                GradientMode::Analytic,
+                NeighbourMode::Grid,
+                2.4,
+            ),
+        );
+        let neighbours = field.neighbours();
+        let p = [0.1, -0.05, 0.0];
+        let m = mls_evaluate(&field.mls(), neighbours.as_ref(), p).expect("defined");
+        assert_eq!(m.terms, 1, "{basis:?}: expected the constant fallback");
+        assert!(m.value.is_finite() && m.gradient.iter().all(|g| g.is_finite()));
+        let (ctx, compiler) = gpu();
+        let gf = GpuField::upload(&ctx, &field).expect("upload");
+        let (out, _) = evaluate(&ctx, &compiler, &field, &gf, &[p], 1).expect("eval");
+        drop(gf);
+        finish(ctx);
+        assert_eq!(out[0].terms, 1);
+        assert!((f64::from(out[0].value) - m.value).abs() < 1e-5);
+    }
+}
+
+#[test]
+fn no_weight_means_undefined_not_nan() {
+    let field = ml_field(
+        9,
+        recon(
+            Basis::Linear,
+            Weight::Wendland,
+            GradientMode::Local,
+            NeighbourMode::Octree,
+            2.4,
+        ),
+    );
+    let far = [[5.0, 0.0, 0.0], [0.0, -3.0, 0.0], [1.0e6, 1.0e6, 1.0e6]];
+    let neighbours = field.neighbours();
+    for p in far {
+        assert!(mls_evaluate(&field.mls(), neighbours.as_ref(), p).is_none());
+    }
+    let (ctx, compiler) = gpu();
+    let gf = GpuField::upload(&ctx, &field).expect("upload");
+    let (out, _) = evaluate(&ctx, &compiler, &field, &gf, &far, 1).expect("eval");
+    drop(gf);
+    finish(ctx);
+    for o in out {
+        assert_eq!(o.terms, 0);
+        assert_eq!(o.neighbours, 0);
+        assert!(o.value.is_finite());
+    }
+}
+
+#[test]
+fn octree_and_grid_neighbours_agree() {
+    for basis in [Basis::Linear, Basis::Quadratic] {
+        let support = if basis == Basis::Linear { 2.4 } else { 1.8 };
+        let grid = ml_field(
+            17,
+            recon(
+                basis,
+                Weight::Wendland,
+                GradientMode::Local,
+                NeighbourMode::Grid,
+                support,
+            ),
+        );
+        let octree = ml_field(
+            17,
+            recon(
+                basis,
+                Weight::Wendland,
+                GradientMode::Local,
+                NeighbourMode::Octree,
+                support,
+            ),
+        );
+        let points = random_points(&grid, 2000, -0.02, 21);
+        let (gn, on) = (grid.neighbours(), octree.neighbours());
+        for p in &points {
+            let a = mls_evaluate(&grid.mls(), gn.as_ref(), *p);
+            let b = mls_evaluate(&octree.mls(), on.as_ref(), *p);
+            match (a, b) {
+                (None, None) => {}
+                (Some(a), Some(b)) => {
+                    assert_eq!(
+                        a.neighbours, b.neighbours,
+                        "same samples have weight at {p:?}"
+                    );
+                    assert!(
+                        (a.value - b.value).abs() < 1e-12,
+                        "{} vs {}",
+                        a.value,
+                        b.value
+                    );
+                }
+                other => panic!("grid and octree disagree on definedness at {p:?}: {other:?}"),
+            }
+        }
+        let (ctx, compiler) = gpu();
+        let (gg, og) = (
+            GpuField::upload(&ctx, &grid).expect("upload"),
+            GpuField::upload(&ctx, &octree).expect("upload"),
+        );
+        let (a, _) = evaluate(&ctx, &compiler, &grid, &gg, &points, 1).expect("eval");
+        let (b, _) = evaluate(&ctx, &compiler, &octree, &og, &points, 1).expect("eval");
+        drop((gg, og));
+        finish(ctx);
+        for (x, y) in a.iter().zip(&b) {
+            assert_eq!(x.neighbours, y.neighbours);
+            // Both f32, through different arithmetic (index offsets vs stored positions).
+            assert!(
+                (x.value - y.value).abs() < 3e-5,
+                "{basis:?}: GPU grid {} vs octree {} ({} terms)",
+                x.value,
+                y.value,
+                x.terms
+            );
+        }
+    }
+}
+
+#[test]
+fn quadratic_solves_the_full_basis_in_the_interior() {
+    let field = ml_field(
+        21,
+        recon(
+            Basis::Quadratic,
+            Weight::Wendland,
+            GradientMode::Local,
+            NeighbourMode::Grid,
+            1.8,
+        ),
+    );
+    let neighbours = field.neighbours();
+    let points = random_points(&field, 2000, 0.1, 17);
+    let full = points
+        .iter()
+        .filter(|p| {
+            mls_evaluate(&field.mls(), neighbours.as_ref(), **p).is_some_and(|m| m.terms == 10)
+        })
+        .count();
+    assert_eq!(
+        full,
+        points.len(),
+        "interior points that fell back below the quadratic basis"
+    );
+}
