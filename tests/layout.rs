@@ -1,0 +1,145 @@
+//! Proves that every struct shared with GLSL has the same layout on both sides: the probe kernel
+//! writes field number k into field k of each GLSL struct; each Rust field must hold its number.
+mod common;
+
+use bytemuck::{Pod, from_bytes};
+use common::*;
+use vmls::gpu_types::*;
+use vmls::vk::{BindGroup, Buffer, BufferUsage, ComputePipeline, ShaderSource};
+
+fn v(k: f32) -> [f32; 4] {
+    [k, k + 0.25, k + 0.5, k + 0.75]
+}
+
+fn take<'a, T: Pod>(bytes: &'a [u8], offset: &mut usize) -> &'a T {
+    let n = std::mem::size_of::<T>();
+    let t = from_bytes(&bytes[*offset..*offset + n]);
+    *offset += n;
+    t
+}
+
+#[test]
+fn glsl_and_rust_layouts_agree() {
+    let (ctx, compiler) = gpu();
+    let spirv = compiler
+        .compile(ShaderSource::File("layout_probe.comp"), &binding_defines())
+        .expect("compile");
+    let pipeline =
+        ComputePipeline::new(&ctx, "layout_probe", &spirv, &[binding::PROBE], 0).expect("pipeline");
+    let out = Buffer::new(&ctx, "layout probe", 4096, BufferUsage::Storage).expect("buffer");
+    let group = BindGroup::new(&ctx, &pipeline, &[(binding::PROBE, &out)]).expect("bind");
+    ctx.submit(|rec| rec.dispatch(&pipeline, &group, &[], [1, 1, 1], "layout_probe"))
+        .expect("submit");
+    let words: Vec<u32> = out.read(&ctx).expect("read");
+    let bytes: &[u8] = bytemuck::cast_slice(&words);
+    let mut at = 0;
+
+    let p: &RenderParams = take(bytes, &mut at);
+    let expected = RenderParams {
+        eye: v(1.0),
+        forward: v(2.0),
+        right: v(3.0),
+        up: v(4.0),
+        box_min: v(5.0),
+        box_max: v(6.0),
+        background: v(7.0),
+        grid_origin: v(8.0),
+        grid_inv_spacing: v(9.0),
+        inv_support: v(10.0),
+        octree_root: v(11.0),
+        grid_dims: [12, 13, 14, 15],
+        width: 16,
+        height: 17,
+        projection: 18,
+        tf_count: 19,
+        tan_half_fov: 20.0,
+        ortho_half_height: 21.0,
+        step: 22.0,
+        min_transmittance: 23.0,
+        support_cells: 24.0,
+        _pad: [25.0, 26.0, 27.0],
+    };
+    assert_eq!(*p, expected, "RenderParams");
+
+    let t: &TfPoint = take(bytes, &mut at);
+    assert_eq!(
+        *t,
+        TfPoint {
+            color_tau: v(1.0),
+            s: 2.0,
+            _pad: [3.0, 4.0, 5.0]
+        },
+        "TfPoint"
+    );
+
+    let s: &Sample = take(bytes, &mut at);
+    assert_eq!(
+        *s,
+        Sample {
+            pos_value: v(1.0),
+            inv_support: v(2.0)
+        },
+        "Sample"
+    );
+
+    let m: &MlsOut = take(bytes, &mut at);
+    let expected = MlsOut {
+        value: 1.0,
+        gradient: [2.0, 3.0, 4.0],
+        neighbours: 5,
+        terms: 6,
+        _pad: [7, 8],
+    };
+    assert_eq!(*m, expected, "MlsOut");
+
+    let r: &RayPush = take(bytes, &mut at);
+    assert_eq!(
+        *r,
+        RayPush {
+            row_offset: 1,
+            rows: 2,
+            _pad: [3, 4]
+        },
+        "RayPush"
+    );
+    let c: &CountPush = take(bytes, &mut at);
+    assert_eq!(
+        *c,
+        CountPush {
+            count: 1,
+            iterations: 2,
+            _pad: [3, 4]
+        },
+        "CountPush"
+    );
+
+    drop(group);
+    drop((out, pipeline));
+    finish(ctx);
+}
+
+#[test]
+fn binding_numbers_are_unique() {
+    let mut numbers: Vec<u32> = binding::ALL.iter().map(|(_, b)| *b).collect();
+    numbers.sort_unstable();
+    numbers.dedup();
+    assert_eq!(numbers.len(), binding::ALL.len());
+}
+
+#[test]
+fn fma_probe_matches_its_cpu_twin() {
+    let (ctx, compiler) = gpu();
+    let probe = vmls::probe::fma_probe(&ctx, &compiler, 256, 16, 1).expect("probe");
+    for (id, got) in probe.output.iter().enumerate() {
+        let want = vmls::probe::fma_reference(id as u32, 16);
+        for l in 0..4 {
+            // Same f32 FMA sequence on both sides; only the final summation order may differ.
+            assert!(
+                (got[l] - want[l]).abs() <= 1e-5 * want[l].abs().max(1.0),
+                "invocation {id}: {got:?} vs {want:?}"
+            );
+        }
+    }
+    assert!(probe.gflops > 0.0);
+    finish(ctx);
+}
