@@ -51,12 +51,19 @@ pub mod binding {
     ];
 }
 
-/// `#define BINDING_* n` for every binding, to pass to the shader compiler.
+/// Zeros stored before the first grid value (and at least as many after the last): kernels load
+/// a grid row as an 8-float window of two `vec4`s that may start up to 8 floats before a row
+/// and must stay inside the buffer.
+pub const GRID_PAD: usize = 8;
+
+/// `#define BINDING_* n` for every binding (and `GRID_PAD`), to pass to the shader compiler.
 pub fn binding_defines() -> Vec<(String, String)> {
-    binding::ALL
+    let mut d: Vec<(String, String)> = binding::ALL
         .iter()
         .map(|(k, v)| (k.to_string(), v.to_string()))
-        .collect()
+        .collect();
+    d.push(("GRID_PAD".into(), GRID_PAD.to_string()));
+    d
 }
 
 /// Scene constants of the ray caster and the MLS evaluator. GLSL twin: `RenderParams`.

@@ -8,7 +8,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use vmls::probe::{fma_probe, median, mls_probe, random_points};
+use vmls::probe::{coherent_order, fma_probe, median, mls_probe, random_points};
 use vmls::render::gpu::{GpuField, render};
 use vmls::render::output::{format_of, write_image};
 use vmls::render::{Field, RaySetup, RenderError, load_volume};
@@ -216,25 +216,32 @@ fn run_probe(
             &scene.octree,
             |_| {},
         )?;
-        let pts = random_points(&field, points, 0.0, 7);
-        let m = mls_probe(&ctx, &compiler, &field, &pts, repeats)?;
-        println!(
-            "{}: {:.2} M evaluations/s, {:.1} neighbours/evaluation, {:.1} GFLOP/s (39k+56) = {:.0}% of probe_fma",
-            m.variant,
-            m.evaluations_per_s * 1e-6,
-            m.mean_neighbours,
-            m.gflops,
-            100.0 * m.gflops / fma.gflops.max(1e-9)
-        );
-        rows.push(serde_json::json!({
-            "variant": m.variant,
-            "points": m.points,
-            "gpu_ms": m.gpu_ms,
-            "evaluations_per_s": m.evaluations_per_s,
-            "mean_neighbours": m.mean_neighbours,
-            "gflops": m.gflops,
-            "fraction_of_fma": m.gflops / fma.gflops.max(1e-9),
-        }));
+        let random = random_points(&field, points, 0.0, 7);
+        let coherent = coherent_order(&field, random.clone());
+        for (order, pts) in [("random", random), ("coherent", coherent)] {
+            let m = mls_probe(&ctx, &compiler, &field, &pts, repeats)?;
+            let best =
+                pts.len() as f64 / (m.gpu_ms.iter().copied().fold(f64::INFINITY, f64::min) * 1e-3);
+            println!(
+                "{} ({order} points): {:.2} M evaluations/s median ({:.2} best), {:.1} neighbours/evaluation, {:.1} GFLOP/s (39k+56) = {:.1}% of probe_fma",
+                m.variant,
+                m.evaluations_per_s * 1e-6,
+                best * 1e-6,
+                m.mean_neighbours,
+                m.gflops,
+                100.0 * m.gflops / fma.gflops.max(1e-9)
+            );
+            rows.push(serde_json::json!({
+                "variant": m.variant,
+                "order": order,
+                "points": m.points,
+                "gpu_ms": m.gpu_ms,
+                "evaluations_per_s": m.evaluations_per_s,
+                "mean_neighbours": m.mean_neighbours,
+                "gflops": m.gflops,
+                "fraction_of_fma": m.gflops / fma.gflops.max(1e-9),
+            }));
+        }
     }
     if let Some(path) = json {
         write_json(

@@ -155,6 +155,16 @@ pub fn random_points(field: &Field, n: usize, margin: f64, seed: u64) -> Vec<[f6
         .collect()
 }
 
+/// Reorders points by the cell of a coarse 16³ lattice over the field's box, so that
+/// neighbouring invocations evaluate nearby points, as neighbouring rays of a tile do.
+pub fn coherent_order(field: &Field, mut points: Vec<[f64; 3]>) -> Vec<[f64; 3]> {
+    let (lo, hi) = field.bounds();
+    let cell =
+        |p: &[f64; 3], a: usize| ((p[a] - lo[a]) / (hi[a] - lo[a]).max(1e-300) * 16.0) as i64;
+    points.sort_by_key(|p| (cell(p, 2), cell(p, 1), cell(p, 0)));
+    points
+}
+
 /// Times `mls_eval` over `points` (`repeats` timed dispatches after one warm-up).
 pub fn mls_probe(
     ctx: &Context,

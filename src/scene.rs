@@ -384,12 +384,19 @@ impl Scene {
         base: &Path,
         overrides: &[String],
     ) -> Result<Self, SceneError> {
-        let mut table: Table = text
-            .parse()
-            .map_err(|e: toml::de::Error| SceneError::Toml {
+        let mut table: Table = text.parse().map_err(|e: toml::de::Error| {
+            // toml's Display is a multi-line snippet; the CLI promises one line.
+            let at = e.span().map(|span| {
+                let before = text.get(..span.start).unwrap_or(text);
+                let line = before.matches('\n').count() + 1;
+                let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+                format!("line {line}, column {column}: ")
+            });
+            SceneError::Toml {
                 path: origin.to_string(),
-                message: e.to_string(),
-            })?;
+                message: format!("{}{}", at.unwrap_or_default(), e.message().trim()),
+            }
+        })?;
         check_known(&table, origin)?;
         for arg in overrides {
             apply_set(&mut table, arg)?;

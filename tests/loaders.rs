@@ -72,8 +72,71 @@ impl T {
     }
 }
 
+/// Each type with its VTK spellings, its NRRD spellings (separated by '|') and its NIfTI code.
+const TYPES: [(T, &str, &str, i16); 10] = [
+    (
+        T::I8,
+        "char|signed_char|vtktypeint8",
+        "signed char|int8|int8_t",
+        256,
+    ),
+    (
+        T::U8,
+        "unsigned_char|vtktypeuint8",
+        "uchar|unsigned char|uint8|uint8_t",
+        2,
+    ),
+    (
+        T::I16,
+        "short|vtktypeint16",
+        "short|short int|signed short|signed short int|int16|int16_t",
+        4,
+    ),
+    (
+        T::U16,
+        "unsigned_short|vtktypeuint16",
+        "ushort|unsigned short|unsigned short int|uint16|uint16_t",
+        512,
+    ),
+    (
+        T::I32,
+        "int|vtktypeint32|vtkIdType",
+        "int|signed int|int32|int32_t",
+        8,
+    ),
+    (
+        T::U32,
+        "unsigned_int|vtktypeuint32",
+        "uint|unsigned int|uint32|uint32_t",
+        768,
+    ),
+    (
+        T::I64,
+        "long|vtktypeint64",
+        "longlong|long long|long long int|signed long long|signed long long int|int64|int64_t",
+        1024,
+    ),
+    (
+        T::U64,
+        "unsigned_long|vtktypeuint64",
+        "ulonglong|unsigned long long|unsigned long long int|uint64|uint64_t",
+        1280,
+    ),
+    (T::F32, "float|vtktypefloat32", "float", 16),
+    (T::F64, "double|vtktypefloat64", "double", 64),
+];
+
 const DIMS: [usize; 3] = [2, 3, 4];
 const N: usize = 24;
+
+/// (type, spelling) for every spelling in column `vtk` (true) or NRRD (false) of [`TYPES`].
+fn spellings(vtk: bool) -> Vec<(T, &'static str)> {
+    let split = |(t, v, n, _): (T, &'static str, &'static str, i16)| {
+        let names = if vtk { v } else { n };
+        names.split('|').map(move |name| (t, name))
+    };
+    TYPES.into_iter().flat_map(split).collect()
+}
 
 fn ramp(t: T) -> Vec<f64> {
     (0..N).map(|i| t.value(i)).collect()
@@ -88,13 +151,30 @@ fn as_text(t: T, values: &[f64]) -> String {
     words.chunks(5).map(|c| c.join(" ") + "\n").collect()
 }
 
-/// Writes `bytes` to a file of this name in a per-process temporary directory.
-fn file(name: &str, bytes: &[u8]) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("vmls-loaders-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join(name);
+/// A file in the temporary directory, deleted when dropped.
+struct TempFile(PathBuf);
+
+impl std::ops::Deref for TempFile {
+    type Target = Path;
+
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for TempFile {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
+}
+
+/// Writes `bytes` to a temporary file whose name ends with `name` (so the extension picks the
+/// reader); the process id keeps concurrent test runs apart.
+fn file(name: &str, bytes: &[u8]) -> TempFile {
+    let pid = std::process::id();
+    let path = std::env::temp_dir().join(format!("vmls-loaders-{pid}-{name}"));
     std::fs::write(&path, bytes).unwrap();
-    path
+    TempFile(path)
 }
 
 fn gzip(bytes: &[u8]) -> Vec<u8> {
@@ -107,8 +187,9 @@ fn close(a: f64, b: f64) -> bool {
     (a - b).abs() <= 1e-6 * b.abs().max(1.0)
 }
 
-fn check(v: &Volume, dims: [usize; 3], spacing: [f64; 3], origin: [f64; 3], expected: &[f64]) {
-    assert_eq!(v.dims, dims);
+/// Checks a loaded 2×3×4 volume against its geometry and values.
+fn check(v: &Volume, spacing: [f64; 3], origin: [f64; 3], expected: &[f64]) {
+    assert_eq!(v.dims, DIMS);
     assert_eq!(v.values.len(), expected.len());
     for a in 0..3 {
         assert!(
@@ -133,6 +214,22 @@ fn mentions(e: &DataError, path: &Path, location: &str) {
     let name = path.file_name().unwrap().to_string_lossy();
     assert!(msg.contains(&*name), "{msg:?} does not name {name}");
     assert!(msg.contains(location), "{msg:?} lacks {location:?}");
+}
+
+/// Loads `bytes` saved as `name` (the extension picks the reader) and checks the error's
+/// variant (by its Debug name) and that its message names the file and contains `location`.
+fn fails(name: &str, bytes: &[u8], variant: &str, location: &str) {
+    fails_picking(name, bytes, None, variant, location);
+}
+
+fn fails_picking(name: &str, bytes: &[u8], array: Option<&str>, variant: &str, location: &str) {
+    let path = file(name, bytes);
+    let e = data::load(&path, array).unwrap_err();
+    assert!(
+        format!("{e:?}").starts_with(variant),
+        "{name}: expected {variant}, got {e:?}"
+    );
+    mentions(&e, &path, location);
 }
 
 // ---------------------------------------------------------------- VTK
@@ -160,34 +257,9 @@ fn vtk_data(t: T, values: &[f64], binary: bool) -> Vec<u8> {
     out
 }
 
-const VTK_TYPES: [(&str, T); 22] = [
-    ("unsigned_char", T::U8),
-    ("char", T::I8),
-    ("signed_char", T::I8),
-    ("short", T::I16),
-    ("unsigned_short", T::U16),
-    ("int", T::I32),
-    ("unsigned_int", T::U32),
-    ("long", T::I64),
-    ("unsigned_long", T::U64),
-    ("float", T::F32),
-    ("double", T::F64),
-    ("vtktypeint8", T::I8),
-    ("vtktypeuint8", T::U8),
-    ("vtktypeint16", T::I16),
-    ("vtktypeuint16", T::U16),
-    ("vtktypeint32", T::I32),
-    ("vtktypeuint32", T::U32),
-    ("vtktypeint64", T::I64),
-    ("vtktypeuint64", T::U64),
-    ("vtktypefloat32", T::F32),
-    ("vtktypefloat64", T::F64),
-    ("vtkIdType", T::I32),
-];
-
 #[test]
 fn vtk_every_scalar_type_ascii_and_binary_all_versions() {
-    for (name, t) in VTK_TYPES {
+    for (t, name) in spellings(true) {
         for binary in [false, true] {
             for version in ["2.0", "3.0", "4.2", "5.1"] {
                 for table in [true, false] {
@@ -199,7 +271,7 @@ fn vtk_every_scalar_type_ascii_and_binary_all_versions() {
                     b.extend(vtk_data(t, &ramp(t), binary));
                     let file_name = format!("t-{name}-{binary}-{version}-{table}.vtk");
                     let v = data::load(&file(&file_name, &b), None).unwrap();
-                    check(&v, DIMS, SP, OR, &ramp(t));
+                    check(&v, SP, OR, &ramp(t));
                 }
             }
         }
@@ -212,21 +284,12 @@ fn vtk_multi_component_scalars_take_first_component() {
         let tuples: Vec<f64> = (0..N)
             .flat_map(|i| [i as f64, -1.0, 100.0 + i as f64])
             .collect();
-        let mut b = vtk_head(
-            "4.2",
-            binary,
-            "ASPECT_RATIO 0.5 1 2\nORIGIN -1 0 3.5\nDIMENSIONS 2 3 4\n",
-        );
+        let geometry = "ASPECT_RATIO 0.5 1 2\nORIGIN -1 0 3.5\nDIMENSIONS 2 3 4\n";
+        let mut b = vtk_head("4.2", binary, geometry);
         b.extend(b"POINT_DATA 24\nSCALARS rgb float 3\nLOOKUP_TABLE default\n");
         b.extend(vtk_data(T::F32, &tuples, binary));
         let v = vtk::parse(Path::new("mem.vtk"), &b, None).unwrap();
-        check(
-            &v,
-            DIMS,
-            SP,
-            OR,
-            &(0..N).map(|i| i as f64).collect::<Vec<_>>(),
-        );
+        check(&v, SP, OR, &(0..N).map(|i| i as f64).collect::<Vec<_>>());
     }
 }
 
@@ -237,26 +300,16 @@ fn vtk_color_scalars_first_component_in_unit_range() {
     b.extend(b"POINT_DATA 24\nCOLOR_SCALARS colour 2\n");
     b.extend(vtk_data(T::F32, &ascii, false));
     let v = vtk::parse(Path::new("c.vtk"), &b, None).unwrap();
-    check(
-        &v,
-        DIMS,
-        SP,
-        OR,
-        &(0..N).map(|i| i as f64 / 24.0).collect::<Vec<_>>(),
-    );
+    let want: Vec<f64> = (0..N).map(|i| i as f64 / 24.0).collect();
+    check(&v, SP, OR, &want);
 
     let bytes: Vec<f64> = (0..N).flat_map(|i| [i as f64 * 10.0, 7.0]).collect();
     let mut b = vtk_head("3.0", true, GEOM);
     b.extend(b"POINT_DATA 24\nCOLOR_SCALARS colour 2\n");
     b.extend(vtk_data(T::U8, &bytes, true));
     let v = vtk::parse(Path::new("c.vtk"), &b, None).unwrap();
-    check(
-        &v,
-        DIMS,
-        SP,
-        OR,
-        &(0..N).map(|i| i as f64 * 10.0 / 255.0).collect::<Vec<_>>(),
-    );
+    let want: Vec<f64> = (0..N).map(|i| i as f64 * 10.0 / 255.0).collect();
+    check(&v, SP, OR, &want);
 }
 
 /// A 5.1-style file: dataset FIELD, CELL_DATA before POINT_DATA, a FIELD of two arrays with a
@@ -286,21 +339,17 @@ fn vtk_field_file(binary: bool) -> Vec<u8> {
 #[test]
 fn vtk_field_arrays_cell_data_and_selection_by_name() {
     for binary in [false, true] {
-        let path = file(&format!("field-{binary}.vtk"), &vtk_field_file(binary));
+        let name = format!("field-{binary}.vtk");
+        let path = file(&name, &vtk_field_file(binary));
         let first = vtk::load(&path, None).unwrap();
-        check(&first, DIMS, SP, OR, &ramp(T::F32));
+        check(&first, SP, OR, &ramp(T::F32));
         let second = vtk::load(&path, Some("wall temp")).unwrap();
-        check(&second, DIMS, SP, OR, &ramp(T::I16));
+        check(&second, SP, OR, &ramp(T::I16));
         let last = data::load(&path, Some("last")).unwrap();
-        check(&last, DIMS, SP, OR, &ramp(T::U8));
-
-        let e = vtk::load(&path, Some("cellid")).unwrap_err();
-        assert!(
-            matches!(&e, DataError::NoSuchArray { name, available, .. }
-            if name == "cellid" && available == "pressure, wall temp, last"),
-            "{e:?}"
-        );
-        mentions(&e, &path, "pressure, wall temp, last");
+        check(&last, SP, OR, &ramp(T::U8));
+        let listed = "no array named 'cellid' (arrays in the file: pressure, wall temp, last)";
+        let bytes = vtk_field_file(binary);
+        fails_picking(&name, &bytes, Some("cellid"), "NoSuchArray", listed);
     }
 }
 
@@ -311,13 +360,14 @@ fn vtk_structured_points_that_are_not_the_last_section() {
     b.extend(vtk_data(T::F64, &ramp(T::F64), false));
     b.extend(b"CELL_DATA 6\nSCALARS c float\nLOOKUP_TABLE default\n1 2 3 4 5 6\n");
     let v = vtk::parse(Path::new("m.vtk"), &b, None).unwrap();
-    check(&v, DIMS, SP, OR, &ramp(T::F64));
+    check(&v, SP, OR, &ramp(T::F64));
 }
 
-fn vtk_error(name: &str, bytes: &[u8], array: Option<&str>) -> (PathBuf, DataError) {
-    let path = file(name, bytes);
-    let e = vtk::load(&path, array).unwrap_err();
-    (path, e)
+/// A version 2.0 ASCII (or BINARY) file with the standard geometry, then `rest`.
+fn vtk_with(binary: bool, rest: &[u8]) -> Vec<u8> {
+    let mut b = vtk_head("2.0", binary, GEOM);
+    b.extend(rest);
+    b
 }
 
 #[test]
@@ -330,83 +380,50 @@ fn vtk_missing_file_names_the_path() {
 
 #[test]
 fn vtk_truncated_binary_and_ascii() {
-    let mut b = vtk_head("5.1", true, GEOM);
-    b.extend(b"POINT_DATA 24\nSCALARS s float 1\nLOOKUP_TABLE default\n");
+    let rest = b"POINT_DATA 24\nSCALARS s float 1\nLOOKUP_TABLE default\n";
+    let mut b = vtk_with(true, rest);
     b.extend(&packed(T::F32, &ramp(T::F32), true)[..90]);
-    let (path, e) = vtk_error("trunc-bin.vtk", &b, None);
-    assert!(
-        matches!(
-            e,
-            DataError::Truncated {
-                expected: 96,
-                found: 90,
-                ..
-            }
-        ),
-        "{e:?}"
-    );
-    mentions(&e, &path, "expected 96");
-
-    let mut b = vtk_head("2.0", false, GEOM);
-    b.extend(b"POINT_DATA 24\nSCALARS s float 1\nLOOKUP_TABLE default\n1 2 3\n");
-    let (path, e) = vtk_error("trunc-ascii.vtk", &b, None);
-    assert!(
-        matches!(
-            e,
-            DataError::Truncated {
-                expected: 24,
-                found: 3,
-                ..
-            }
-        ),
-        "{e:?}"
-    );
-    mentions(&e, &path, "found 3");
+    let expected = "expected 96 bytes/values, found 90";
+    fails("trunc-bin.vtk", &b, "Truncated", expected);
+    let rest = b"POINT_DATA 24\nSCALARS s float 1\nLOOKUP_TABLE default\n1 2 3\n";
+    let b = vtk_with(false, rest);
+    let expected = "expected 24 bytes/values, found 3";
+    fails("trunc-ascii.vtk", &b, "Truncated", expected);
 }
 
 #[test]
 fn vtk_wrong_counts() {
-    let mut b = vtk_head("2.0", false, GEOM);
-    b.extend(b"POINT_DATA 20\nSCALARS s float 1\n");
-    let (path, e) = vtk_error("count-pd.vtk", &b, None);
-    assert!(matches!(e, DataError::Format { .. }), "{e:?}");
-    mentions(&e, &path, "line 8");
-    mentions(&e, &path, "POINT_DATA 20");
+    let b = vtk_with(false, b"POINT_DATA 20\nSCALARS s float 1\n");
+    let expected = "line 8: expected POINT_DATA 24";
+    fails("count-pd.vtk", &b, "Format", expected);
 
     // One value too many: found on line 15 (24 values take lines 10 to 14, five per line).
-    let mut b = vtk_head("2.0", false, GEOM);
-    b.extend(b"POINT_DATA 24\nSCALARS s float 1\n");
+    let mut b = vtk_with(false, b"POINT_DATA 24\nSCALARS s float 1\n");
     b.extend(vtk_data(T::F32, &ramp(T::F32), false));
     b.extend(b"7\n");
-    let (path, e) = vtk_error("count-more.vtk", &b, None);
-    assert!(matches!(e, DataError::Format { .. }), "{e:?}");
-    mentions(&e, &path, "line 15");
+    fails("count-more.vtk", &b, "Format", "line 15");
 
-    // One value short, then the next keyword: reported where the keyword stands (line 15).
-    let mut b = vtk_head("2.0", false, GEOM);
-    b.extend(b"POINT_DATA 24\nSCALARS s float 1\n");
+    // One value short, then the next keyword: reported where the keyword stands.
+    let mut b = vtk_with(false, b"POINT_DATA 24\nSCALARS s float 1\n");
     b.extend(vtk_data(T::F32, &ramp(T::F32)[..23], false));
     b.extend(b"CELL_DATA 6\n");
-    let (path, e) = vtk_error("count-less.vtk", &b, None);
-    assert!(matches!(e, DataError::Format { .. }), "{e:?}");
-    mentions(&e, &path, "line 15");
-    mentions(&e, &path, "value 24 of 24");
+    let expected = "line 15: expected a float32 value (value 24 of 24)";
+    fails("count-less.vtk", &b, "Format", expected);
+
+    // A FIELD array that does not have one tuple per point cannot be the volume.
+    let b = vtk_with(false, b"POINT_DATA 24\nFIELD f 1\nshort 1 23 float\n");
+    let expected = "line 10: expected 24 tuples";
+    fails("count-field.vtk", &b, "Format", expected);
 }
 
 #[test]
 fn vtk_unknown_type_and_string_arrays() {
-    let mut b = vtk_head("2.0", false, GEOM);
-    b.extend(b"POINT_DATA 24\nSCALARS s quaternion 1\n");
-    let (path, e) = vtk_error("type.vtk", &b, None);
-    assert!(matches!(e, DataError::Format { .. }), "{e:?}");
-    mentions(&e, &path, "line 9");
-    mentions(&e, &path, "quaternion");
-
-    let mut b = vtk_head("2.0", false, GEOM);
-    b.extend(b"POINT_DATA 24\nFIELD f 1\nnames 1 24 string\n");
-    let (path, e) = vtk_error("string.vtk", &b, None);
-    assert!(matches!(e, DataError::Unsupported { .. }), "{e:?}");
-    mentions(&e, &path, "line 10");
+    let b = vtk_with(false, b"POINT_DATA 24\nSCALARS s quaternion 1\n");
+    fails("type.vtk", &b, "Format", "line 9");
+    fails("type.vtk", &b, "Format", "found 'quaternion'");
+    let b = vtk_with(false, b"POINT_DATA 24\nFIELD f 1\nnames 1 24 string\n");
+    let expected = "line 10: unsupported string array";
+    fails("string.vtk", &b, "Unsupported", expected);
 }
 
 #[test]
@@ -414,110 +431,61 @@ fn vtk_non_finite_values_name_the_sample() {
     for (binary, bad) in [(false, "nan"), (false, "-inf"), (true, "inf")] {
         let mut values = ramp(T::F32);
         values[13] = bad.parse().unwrap();
-        let mut b = vtk_head("2.0", binary, GEOM);
-        b.extend(b"POINT_DATA 24\nSCALARS s float\n");
+        let mut b = vtk_with(binary, b"POINT_DATA 24\nSCALARS s float\n");
         b.extend(vtk_data(T::F32, &values, binary));
-        let (path, e) = vtk_error(&format!("nan-{binary}-{bad}.vtk"), &b, None);
-        assert!(
-            matches!(
-                e,
-                DataError::NonFinite {
-                    index: 13,
-                    x: 1,
-                    y: 0,
-                    z: 2,
-                    ..
-                }
-            ),
-            "{e:?}"
-        );
-        mentions(&e, &path, "sample 13");
+        let name = format!("nan-{binary}-{bad}.vtk");
+        fails(&name, &b, "NonFinite", "sample 13 (x=1, y=0, z=2)");
     }
 }
 
 #[test]
 fn vtk_dimensions_overflow_and_limit() {
-    for (dims, reason) in [
-        ("4294967296 4294967296 2", "overflows"),
-        ("2048 1024 1024", "exceed the limit"),
+    // One layer of 1024×1024 more than MAX_SAMPLES allows.
+    let over = format!("1024 1024 {}", MAX_SAMPLES / (1024 * 1024) + 1);
+    let cases = [
+        ("4294967296 4294967296 2", "overflows 64 bits"),
+        (&over, "exceed the limit"),
         ("0 4 4", "at least 1"),
-    ] {
+    ];
+    for (dims, reason) in cases {
         let mut b = vtk_head("2.0", false, &format!("DIMENSIONS {dims}\n"));
         b.extend(b"POINT_DATA 8\nSCALARS s float\n1 2 3 4 5 6 7 8\n");
-        let (path, e) = vtk_error("huge.vtk", &b, None);
-        assert!(matches!(e, DataError::TooLarge { .. }), "{e:?}");
-        mentions(&e, &path, reason);
+        fails("huge.vtk", &b, "TooLarge", reason);
     }
-    assert!(2048u64 * 1024 * 1024 > MAX_SAMPLES);
 }
 
 #[test]
 fn vtk_unsupported_datasets() {
-    for ty in [
-        "STRUCTURED_GRID",
-        "RECTILINEAR_GRID",
-        "UNSTRUCTURED_GRID",
-        "POLYDATA",
-    ] {
+    for ty in "STRUCTURED_GRID RECTILINEAR_GRID UNSTRUCTURED_GRID POLYDATA".split(' ') {
         let b = format!("# vtk DataFile Version 3.0\nx\nASCII\nDATASET {ty}\nPOINTS 0 float\n");
-        let (path, e) = vtk_error("ds.vtk", b.as_bytes(), None);
-        assert!(matches!(e, DataError::Unsupported { .. }), "{e:?}");
-        mentions(&e, &path, "line 4");
-        mentions(&e, &path, ty);
+        let expected = format!("line 4: unsupported DATASET {ty}");
+        fails("ds.vtk", b.as_bytes(), "Unsupported", &expected);
     }
 }
 
 #[test]
 fn vtk_bad_headers_garbage_and_empty() {
-    let cases: [(&str, &[u8], &str); 5] = [
-        ("empty.vtk", b"", "line 1"),
-        ("garbage.vtk", b"\x89PNG\r\n\x1a\n\0\0\0\rIHDR", "line 1"),
-        (
-            "form.vtk",
-            b"# vtk DataFile Version 2.0\nt\nTEXT\n",
-            "line 3",
-        ),
-        (
-            "spacing.vtk",
-            b"# vtk DataFile Version 2.0\nt\nASCII\nDATASET STRUCTURED_POINTS\nSPACING 1 0 1\n",
-            "line 5",
-        ),
-        (
-            "nodims.vtk",
-            b"# vtk DataFile Version 2.0\nt\nASCII\nDATASET STRUCTURED_POINTS\nPOINT_DATA 1\n",
-            "line 5",
-        ),
-    ];
-    for (name, bytes, location) in cases {
-        let (path, e) = vtk_error(name, bytes, None);
-        assert!(matches!(e, DataError::Format { .. }), "{name}: {e:?}");
-        mentions(&e, &path, location);
-    }
+    const HEAD: &str = "# vtk DataFile Version 2.0\nt\nASCII\nDATASET STRUCTURED_POINTS\n";
+    fails("empty.vtk", b"", "Format", "line 1");
+    let bytes = b"\x89PNG\r\n\x1a\n\0\0\0\rIHDR";
+    fails("garbage.vtk", bytes, "Format", "line 1");
+    let bytes = b"# vtk DataFile Version 2.0\nt\nTEXT\n";
+    fails("form.vtk", bytes, "Format", "line 3");
+    let spacing = format!("{HEAD}SPACING 1 0 1\n");
+    fails("spacing.vtk", spacing.as_bytes(), "Format", "line 5");
+    let no_dims = format!("{HEAD}POINT_DATA 1\n");
+    fails("nodims.vtk", no_dims.as_bytes(), "Format", "line 5");
     // Binary garbage where the next keyword should be: the location gives the byte offset.
-    let mut b = vtk_head("2.0", true, GEOM);
-    b.extend(b"POINT_DATA 24\nSCALARS s unsigned_char\nLOOKUP_TABLE default\n");
-    let header_len = b.len();
+    let rest = b"POINT_DATA 24\nSCALARS s unsigned_char\nLOOKUP_TABLE default\n";
+    let mut b = vtk_with(true, rest);
+    let end_of_data = b.len() + N;
     b.extend(packed(T::U8, &ramp(T::U8), true));
     b.extend(b"\xff\xfe\n");
-    let (path, e) = vtk_error("surplus.vtk", &b, None);
-    assert!(matches!(e, DataError::Format { .. }), "{e:?}");
-    mentions(&e, &path, &format!("byte {}", header_len + N));
+    let expected = format!("(byte {end_of_data})");
+    fails("surplus.vtk", &b, "Format", &expected);
 }
 
 // ---------------------------------------------------------------- NRRD
-
-const NRRD_TYPES: [(&str, T); 10] = [
-    ("signed char", T::I8),
-    ("uchar", T::U8),
-    ("short int", T::I16),
-    ("unsigned short", T::U16),
-    ("int32_t", T::I32),
-    ("uint", T::U32),
-    ("long long", T::I64),
-    ("unsigned long long int", T::U64),
-    ("float", T::F32),
-    ("double", T::F64),
-];
 
 fn nrrd_file(fields: &str, data: &[u8]) -> Vec<u8> {
     let mut b = format!("NRRD0004\n# comment\nunits:=mm\n{fields}\n").into_bytes();
@@ -527,7 +495,7 @@ fn nrrd_file(fields: &str, data: &[u8]) -> Vec<u8> {
 
 #[test]
 fn nrrd_raw_both_endians_every_type() {
-    for (name, t) in NRRD_TYPES {
+    for (t, name) in spellings(false) {
         for (endian, big) in [("little", false), ("big", true)] {
             let fields = format!(
                 "type: {name}\ndimension: 3\nsizes: 2 3 4\nendian: {endian}\nencoding: raw\n\
@@ -535,7 +503,7 @@ fn nrrd_raw_both_endians_every_type() {
             );
             let b = nrrd_file(&fields, &packed(t, &ramp(t), big));
             let v = data::load(&file(&format!("t-{name}-{endian}.nrrd"), &b), None).unwrap();
-            check(&v, DIMS, SP, OR, &ramp(t));
+            check(&v, SP, OR, &ramp(t));
         }
     }
 }
@@ -543,31 +511,22 @@ fn nrrd_raw_both_endians_every_type() {
 #[test]
 fn nrrd_gzip_text_directions_and_skips() {
     let t = T::I16;
+    // Directions win over spacings (only their length is used); the origin over axis mins.
     let spatial = "space: right-anterior-superior\nspace directions: (0,0.5,0) (0.6,0.8,0) (0,0,-2)\n\
-                   space origin: (-1, 0, 3.5)\n";
+                   space origin: (-1, 0, 3.5)\nspacings: 7 7 7\naxis mins: 5 5 5\n";
     let gz = nrrd_file(
         &format!("type: int16\ndimension: 3\nsizes: 2 3 4\nendian: big\nencoding: gzip\n{spatial}"),
         &gzip(&packed(t, &ramp(t), true)),
     );
-    check(
-        &nrrd::parse(Path::new("g.nrrd"), &gz).unwrap(),
-        DIMS,
-        SP,
-        OR,
-        &ramp(t),
-    );
+    let v = nrrd::parse(Path::new("g.nrrd"), &gz).unwrap();
+    check(&v, SP, OR, &ramp(t));
 
     let text = nrrd_file(
         &format!("type: short\ndimension: 3\nsizes: 2 3 4\nencoding: ascii\n{spatial}"),
         as_text(t, &ramp(t)).as_bytes(),
     );
-    check(
-        &nrrd::parse(Path::new("a.nrrd"), &text).unwrap(),
-        DIMS,
-        SP,
-        OR,
-        &ramp(t),
-    );
+    let v = nrrd::parse(Path::new("a.nrrd"), &text).unwrap();
+    check(&v, SP, OR, &ramp(t));
 
     // A leading size-1 axis is dropped; line and byte skips; the default spacing is 1.
     let mut data = b"junk line\n\x00\x01\x02".to_vec();
@@ -578,7 +537,7 @@ fn nrrd_gzip_text_directions_and_skips() {
         &data,
     );
     let v = nrrd::parse(Path::new("s.nrrd"), &skipped).unwrap();
-    check(&v, DIMS, [1.0; 3], [0.0; 3], &ramp(T::F32));
+    check(&v, [1.0; 3], [0.0; 3], &ramp(T::F32));
 
     // byte skip -1: the data is the last bytes of the file.
     let mut data = b"whatever precedes".to_vec();
@@ -587,385 +546,193 @@ fn nrrd_gzip_text_directions_and_skips() {
         "type: uint16\ndimension: 3\nsizes: 2 3 4\nendian: little\nencoding: raw\nbyte skip: -1\n",
         &data,
     );
-    check(
-        &nrrd::parse(Path::new("t.nrrd"), &tail).unwrap(),
-        DIMS,
-        [1.0; 3],
-        [0.0; 3],
-        &ramp(T::U16),
-    );
+    let v = nrrd::parse(Path::new("t.nrrd"), &tail).unwrap();
+    check(&v, [1.0; 3], [0.0; 3], &ramp(T::U16));
 }
 
 #[test]
 fn nrrd_errors() {
     let raw = packed(T::F32, &ramp(T::F32), false);
-    let base = "type: float\ndimension: 3\nsizes: 2 3 4\nendian: little\n";
-    let gz_fields = format!("{base}encoding: gzip\n");
-    let gz_data_at = format!("byte {}", nrrd_file(&gz_fields, &[]).len());
-    let cases: Vec<(&str, Vec<u8>, &str, &str)> = vec![
-        ("empty.nrrd", vec![], "format", "line 1"),
-        ("magic.nrrd", b"NRRX0004\n\n".to_vec(), "format", "line 1"),
-        (
-            "detached.nrrd",
-            nrrd_file(&format!("{base}encoding: raw\ndata file: v.raw\n"), &[]),
-            "unsupported",
-            "line 9",
-        ),
-        (
-            "bzip.nrrd",
-            nrrd_file(&format!("{base}encoding: bzip2\n"), &raw),
-            "unsupported",
-            "line 8",
-        ),
-        (
-            "dim2.nrrd",
-            nrrd_file(
-                "type: float\ndimension: 2\nsizes: 4 6\nencoding: raw\nendian: little\n",
-                &raw,
-            ),
-            "unsupported",
-            "line 5",
-        ),
-        (
-            "type.nrrd",
-            nrrd_file("type: complex\n", &raw),
-            "format",
-            "line 4",
-        ),
-        (
-            "endian.nrrd",
-            nrrd_file(
-                "type: float\ndimension: 3\nsizes: 2 3 4\nencoding: raw\n",
-                &raw,
-            ),
-            "format",
-            "line 8",
-        ),
-        (
-            "sizes.nrrd",
-            nrrd_file(&format!("{base}encoding: raw\nspacings: 1 1\n"), &raw),
-            "format",
-            "line 9",
-        ),
-        (
-            "noend.nrrd",
-            b"NRRD0004\ntype: float\n".to_vec(),
-            "format",
-            "line 2",
-        ),
-        (
-            "truncated.nrrd",
-            nrrd_file(&format!("{base}encoding: raw\n"), &raw[..95]),
-            "truncated",
-            "expected 96",
-        ),
-        (
-            "truncgz.nrrd",
-            nrrd_file(&gz_fields, &gzip(&raw)[..30]),
-            "truncated",
-            "expected 96",
-        ),
-        (
-            "corruptgz.nrrd",
-            nrrd_file(&gz_fields, b"not gzip at all"),
-            "format",
-            &gz_data_at,
-        ),
-        (
-            "surplus.nrrd",
-            nrrd_file(
-                "type: int\ndimension: 3\nsizes: 1 1 2\nencoding: text\n",
-                b"1 2\n3\n",
-            ),
-            "format",
-            "line 10",
-        ),
-        (
-            "overflow.nrrd",
-            nrrd_file(
-                "type: float\ndimension: 3\nsizes: 4294967296 4294967296 2\nencoding: raw\nendian: big\n",
-                &raw,
-            ),
-            "too large",
-            "overflows",
-        ),
-        (
-            "limit.nrrd",
-            nrrd_file(
-                "type: float\ndimension: 3\nsizes: 1024 1024 1025\nencoding: raw\nendian: big\n",
-                &raw,
-            ),
-            "too large",
-            "exceed the limit",
-        ),
-    ];
-    for (name, bytes, kind, location) in cases {
-        let path = file(name, &bytes);
-        let e = nrrd::load(&path).unwrap_err();
-        let ok = match kind {
-            "format" => matches!(e, DataError::Format { .. }),
-            "unsupported" => matches!(e, DataError::Unsupported { .. }),
-            "truncated" => matches!(e, DataError::Truncated { .. }),
-            _ => matches!(e, DataError::TooLarge { .. }),
-        };
-        assert!(ok, "{name}: expected {kind}, got {e:?}");
-        mentions(&e, &path, location);
-    }
+    let with = |fields: &str, data: &[u8]| {
+        let base = "type: float\ndimension: 3\nsizes: 2 3 4\nendian: little\n";
+        nrrd_file(&format!("{base}{fields}"), data)
+    };
+    let gz_at = format!("byte {}", with("encoding: gzip\n", &[]).len());
+    fails("empty.nrrd", b"", "Format", "line 1");
+    fails("magic.nrrd", b"NRRX0004\n\n", "Format", "line 1");
+    let detached = with("encoding: raw\ndata file: v.raw\n", &[]);
+    fails("detached.nrrd", &detached, "Unsupported", "line 9");
+    let bzip = with("encoding: bzip2\n", &raw);
+    fails("bzip.nrrd", &bzip, "Unsupported", "line 8");
+    let dim2 = nrrd_file(
+        "type: float\ndimension: 2\nsizes: 4 6\nencoding: raw\n",
+        &raw,
+    );
+    fails("dim2.nrrd", &dim2, "Unsupported", "line 5");
+    let complex = nrrd_file("type: complex\n", &raw);
+    fails("type.nrrd", &complex, "Format", "line 4");
+    let endian = nrrd_file(
+        "type: float\ndimension: 3\nsizes: 2 3 4\nencoding: raw\n",
+        &raw,
+    );
+    fails("endian.nrrd", &endian, "Format", "line 8");
+    let spacings = with("encoding: raw\nspacings: 1 1\n", &raw);
+    fails("spacings.nrrd", &spacings, "Format", "line 9");
+    fails("noend.nrrd", b"NRRD0004\ntype: float\n", "Format", "line 2");
+    let short = with("encoding: raw\n", &raw[..95]);
+    fails("truncated.nrrd", &short, "Truncated", "expected 96");
+    let short_gz = with("encoding: gzip\n", &gzip(&raw)[..30]);
+    fails("truncgz.nrrd", &short_gz, "Truncated", "expected 96");
+    let corrupt_gz = with("encoding: gzip\n", b"not gzip at all");
+    fails("corruptgz.nrrd", &corrupt_gz, "Format", &gz_at);
+    let surplus = nrrd_file(
+        "type: int\ndimension: 3\nsizes: 1 1 2\nencoding: text\n",
+        b"1 2\n3\n",
+    );
+    fails("surplus.nrrd", &surplus, "Format", "line 10");
+    let sized = |sizes: &str| {
+        let fields =
+            format!("type: float\ndimension: 3\nsizes: {sizes}\nencoding: raw\nendian: big\n");
+        nrrd_file(&fields, &raw)
+    };
+    let overflow = sized("4294967296 4294967296 2");
+    fails("overflow.nrrd", &overflow, "TooLarge", "overflows");
+    let limit = sized("1024 1024 1025");
+    fails("limit.nrrd", &limit, "TooLarge", "exceed the limit");
 
     let mut values = ramp(T::F64);
     values[23] = f64::NAN;
-    let b = nrrd_file(
-        "type: double\ndimension: 3\nsizes: 2 3 4\nencoding: raw\nendian: big\n",
-        &packed(T::F64, &values, true),
-    );
-    let path = file("nan.nrrd", &b);
-    let e = nrrd::load(&path).unwrap_err();
-    assert!(
-        matches!(
-            e,
-            DataError::NonFinite {
-                index: 23,
-                x: 1,
-                y: 2,
-                z: 3,
-                ..
-            }
-        ),
-        "{e:?}"
-    );
-    mentions(&e, &path, "sample 23");
+    let fields = "type: double\ndimension: 3\nsizes: 2 3 4\nencoding: raw\nendian: big\n";
+    let nan = nrrd_file(fields, &packed(T::F64, &values, true));
+    let expected = "sample 23 (x=1, y=2, z=3) is NaN";
+    fails("nan.nrrd", &nan, "NonFinite", expected);
 }
 
 // ---------------------------------------------------------------- NIfTI
 
-const NIFTI_TYPES: [(i16, T); 10] = [
-    (2, T::U8),
-    (4, T::I16),
-    (8, T::I32),
-    (16, T::F32),
-    (64, T::F64),
-    (256, T::I8),
-    (512, T::U16),
-    (768, T::U32),
-    (1024, T::I64),
-    (1280, T::U64),
-];
-
-/// A NIfTI-1 header with fields that tests change, then the data.
-#[derive(Clone)]
+/// A NIfTI-1 header (2×3×4, pixdim 0.5 -1 2, data at byte 352) that tests then change.
 struct Nii {
+    h: Vec<u8>,
     big: bool,
-    dim: [i16; 8],
-    code: i16,
-    pixdim: [f32; 3],
-    vox_offset: f32,
-    slope: f32,
-    inter: f32,
-    qform: Option<[f32; 3]>,
-    sform: Option<[f32; 3]>,
-    magic: [u8; 4],
-}
-
-impl Default for Nii {
-    fn default() -> Self {
-        Nii {
-            big: false,
-            dim: [3, 2, 3, 4, 1, 1, 1, 1],
-            code: 16,
-            pixdim: [0.5, -1.0, 2.0],
-            vox_offset: 352.0,
-            slope: 0.0,
-            inter: 0.0,
-            qform: None,
-            sform: None,
-            magic: *b"n+1\0",
-        }
-    }
 }
 
 impl Nii {
-    fn build(&self, data: &[u8]) -> Vec<u8> {
-        let mut h = vec![0u8; 352];
-        let big = self.big;
-        let mut put =
-            |offset: usize, bytes: Vec<u8>| h[offset..offset + bytes.len()].copy_from_slice(&bytes);
-        put(0, T::I32.bytes(348.0, big));
-        for (i, &d) in self.dim.iter().enumerate() {
-            put(40 + 2 * i, T::I16.bytes(d.into(), big));
-        }
-        put(70, T::I16.bytes(self.code.into(), big));
-        for (i, &p) in self.pixdim.iter().enumerate() {
-            put(80 + 4 * i, T::F32.bytes(p.into(), big));
-        }
-        put(108, T::F32.bytes(self.vox_offset.into(), big));
-        put(112, T::F32.bytes(self.slope.into(), big));
-        put(116, T::F32.bytes(self.inter.into(), big));
-        if let Some(q) = self.qform {
-            put(252, T::I16.bytes(1.0, big));
-            (0..3).for_each(|a| put(268 + 4 * a, T::F32.bytes(q[a].into(), big)));
-        }
-        if let Some(s) = self.sform {
-            put(254, T::I16.bytes(2.0, big));
-            (0..3).for_each(|a| put(292 + 16 * a, T::F32.bytes(s[a].into(), big)));
-        }
-        put(344, self.magic.to_vec());
-        h.extend(data);
-        h
+    fn new(big: bool, code: i16) -> Self {
+        let mut n = Nii {
+            h: vec![0; 352],
+            big,
+        };
+        n.h[344..348].copy_from_slice(b"n+1\0");
+        let n = n.set(T::I32, 0, 348.0).dims([3, 2, 3, 4, 1, 1, 1, 1]);
+        let n = n.set(T::I16, 70, code.into()).set(T::F32, 108, 352.0);
+        n.set(T::F32, 80, 0.5)
+            .set(T::F32, 84, -1.0)
+            .set(T::F32, 88, 2.0)
+    }
+
+    fn set(mut self, t: T, offset: usize, v: f64) -> Self {
+        let b = t.bytes(v, self.big);
+        self.h[offset..offset + b.len()].copy_from_slice(&b);
+        self
+    }
+
+    fn dims(self, dim: [i16; 8]) -> Self {
+        let set = |n: Self, (i, d): (usize, i16)| n.set(T::I16, 40 + 2 * i, d.into());
+        dim.into_iter().enumerate().fold(self, set)
+    }
+
+    /// Sets qform_code (252) or sform_code (254) and the matching translation.
+    fn origin(self, code_at: usize, first: usize, stride: usize, o: [f64; 3]) -> Self {
+        let n = self.set(T::I16, code_at, 1.0).set(T::F32, first, o[0]);
+        n.set(T::F32, first + stride, o[1])
+            .set(T::F32, first + 2 * stride, o[2])
+    }
+
+    fn qform(self, o: [f64; 3]) -> Self {
+        self.origin(252, 268, 4, o)
+    }
+
+    fn sform(self, o: [f64; 3]) -> Self {
+        self.origin(254, 292, 16, o)
+    }
+
+    fn data(mut self, data: &[u8]) -> Vec<u8> {
+        self.h.extend(data);
+        self.h
     }
 }
 
 #[test]
 fn nifti_every_type_both_endians_plain_and_gzip() {
-    for (code, t) in NIFTI_TYPES {
+    for (t, _, _, code) in TYPES {
         for big in [false, true] {
-            let nii = Nii {
-                big,
-                code,
-                qform: Some([-1.0, 0.0, 3.5]),
-                sform: Some([9.0; 3]),
-                ..Nii::default()
-            };
-            let bytes = nii.build(&packed(t, &ramp(t), big));
-            let v = data::load(&file(&format!("t{code}-{big}.nii"), &bytes), None).unwrap();
-            check(&v, DIMS, SP, OR, &ramp(t));
-            let v =
-                data::load(&file(&format!("t{code}-{big}.nii.gz"), &gzip(&bytes)), None).unwrap();
-            check(&v, DIMS, SP, OR, &ramp(t));
+            let nii = Nii::new(big, code).qform(OR).sform([9.0; 3]);
+            let bytes = nii.data(&packed(t, &ramp(t), big));
+            let path = file(&format!("t{code}-{big}.nii"), &bytes);
+            check(&data::load(&path, None).unwrap(), SP, OR, &ramp(t));
+            let path = file(&format!("t{code}-{big}.nii.gz"), &gzip(&bytes));
+            check(&data::load(&path, None).unwrap(), SP, OR, &ramp(t));
         }
     }
 }
 
 #[test]
 fn nifti_scaling_sform_origin_and_pixdim_defaults() {
-    let nii = Nii {
-        code: 4,
-        slope: 0.5,
-        inter: -10.0,
-        sform: Some([-1.0, 0.0, 3.5]),
-        pixdim: [0.0, f32::NAN, 2.0],
-        dim: [4, 2, 3, 4, 1, 0, 0, 0],
-        vox_offset: 400.0,
-        ..Nii::default()
-    };
+    // 4-D with one time point; 48 extension bytes before the data at 400; pixdim 0 and NaN.
+    let nii = Nii::new(false, 4).dims([4, 2, 3, 4, 1, 0, 0, 0]).sform(OR);
+    let nii = nii
+        .set(T::F32, 112, 0.5)
+        .set(T::F32, 116, -10.0)
+        .set(T::F32, 108, 400.0);
+    let nii = nii.set(T::F32, 80, 0.0).set(T::F32, 84, f64::NAN);
     let mut data = vec![0u8; 48];
     data.extend(packed(T::I16, &ramp(T::I16), false));
-    let v = nifti::parse(Path::new("s.nii"), &nii.build(&data)).unwrap();
+    let v = nifti::parse(Path::new("s.nii"), &nii.data(&data)).unwrap();
     let want: Vec<f64> = ramp(T::I16).iter().map(|r| 0.5 * r - 10.0).collect();
-    check(&v, DIMS, [1.0, 1.0, 2.0], OR, &want);
+    check(&v, [1.0, 1.0, 2.0], OR, &want);
 }
 
 #[test]
 fn nifti_errors() {
     let raw = packed(T::F32, &ramp(T::F32), false);
-    let good = Nii::default();
-    let two = Nii {
-        magic: *b"ni1\0",
-        ..good.clone()
-    };
-    let series = Nii {
-        dim: [4, 2, 3, 4, 2, 1, 1, 1],
-        ..good.clone()
-    };
-    let rgb = Nii {
-        code: 128,
-        ..good.clone()
-    };
-    let odd = Nii {
-        code: 3,
-        ..good.clone()
-    };
-    let offset = Nii {
-        vox_offset: 100.5,
-        ..good.clone()
-    };
-    let negative = Nii {
-        dim: [3, 2, -3, 4, 1, 1, 1, 1],
-        ..good.clone()
-    };
-    let huge = Nii {
-        dim: [3, 32767, 32767, 32767, 1, 1, 1, 1],
-        ..good.clone()
-    };
-    let gz = gzip(&good.build(&raw));
-    let mut nifti2 = good.build(&raw);
+    let good = Nii::new(false, 16).data(&raw);
+    let gz = gzip(&good);
+    let mut nifti2 = good.clone();
     nifti2[..4].copy_from_slice(&540i32.to_le_bytes());
-    let cases: Vec<(&str, Vec<u8>, &str, &str)> = vec![
-        ("empty.nii", vec![], "format", "byte 0"),
-        (
-            "garbage.nii",
-            b"this is not a nifti file at all".to_vec(),
-            "format",
-            "byte 0",
-        ),
-        (
-            "short.nii",
-            good.build(&raw)[..200].to_vec(),
-            "truncated",
-            "expected 348",
-        ),
-        ("nifti2.nii", nifti2, "unsupported", "byte 0"),
-        ("pair.nii", two.build(&raw), "unsupported", "byte 344"),
-        ("series.nii", series.build(&raw), "unsupported", "byte 40"),
-        ("rgb.nii", rgb.build(&raw), "unsupported", "byte 70"),
-        ("code.nii", odd.build(&raw), "format", "byte 70"),
-        ("offset.nii", offset.build(&raw), "format", "byte 108"),
-        ("negative.nii", negative.build(&raw), "format", "byte 44"),
-        (
-            "huge.nii",
-            huge.build(&raw),
-            "too large",
-            "exceed the limit",
-        ),
-        (
-            "trunc.nii",
-            good.build(&raw[..50]),
-            "truncated",
-            "expected 96",
-        ),
-        (
-            "trunc.nii.gz",
-            gz[..gz.len() - 20].to_vec(),
-            "truncated",
-            "expected 96",
-        ),
-        (
-            "garbage.nii.gz",
-            vec![0x1f, 0x8b, 0, 1, 2, 3, 4, 5, 6, 7],
-            "format",
-            "byte 0",
-        ),
-    ];
-    for (name, bytes, kind, location) in cases {
-        let path = file(name, &bytes);
-        let e = data::load(&path, None).unwrap_err();
-        let ok = match kind {
-            "format" => matches!(e, DataError::Format { .. }),
-            "unsupported" => matches!(e, DataError::Unsupported { .. }),
-            "truncated" => matches!(e, DataError::Truncated { .. }),
-            _ => matches!(e, DataError::TooLarge { .. }),
-        };
-        assert!(ok, "{name}: expected {kind}, got {e:?}");
-        mentions(&e, &path, location);
-    }
+    let mut pair = good.clone();
+    pair[344..348].copy_from_slice(b"ni1\0");
+    let dims = |d: [i16; 8]| Nii::new(false, 16).dims(d).data(&raw);
+    let float = |offset: usize, v: f64| Nii::new(false, 16).set(T::F32, offset, v).data(&raw);
+    fails("empty.nii", b"", "Format", "byte 0");
+    fails("garbage.nii", b"not a NIfTI file", "Format", "byte 0");
+    fails("short.nii", &good[..200], "Truncated", "expected 348");
+    fails("nifti2.nii", &nifti2, "Unsupported", "byte 0");
+    fails("pair.nii", &pair, "Unsupported", "byte 344");
+    let series = dims([4, 2, 3, 4, 2, 1, 1, 1]);
+    fails("series.nii", &series, "Unsupported", "byte 40");
+    let rgb = Nii::new(false, 128).data(&raw);
+    fails("rgb.nii", &rgb, "Unsupported", "byte 70");
+    let code = Nii::new(false, 3).data(&raw);
+    fails("code.nii", &code, "Format", "byte 70");
+    fails("offset.nii", &float(108, 100.5), "Format", "byte 108");
+    fails("far.nii", &float(108, 1e30), "Format", "byte 108");
+    let nan_origin = Nii::new(false, 16).qform([0.0, f64::NAN, 0.0]).data(&raw);
+    fails("origin.nii", &nan_origin, "Format", "byte 272");
+    let negative = dims([3, 2, -3, 4, 1, 1, 1, 1]);
+    fails("negative.nii", &negative, "Format", "byte 44");
+    let huge = dims([3, 32767, 32767, 32767, 1, 1, 1, 1]);
+    fails("huge.nii", &huge, "TooLarge", "exceed the limit");
+    fails("trunc.nii", &good[..352 + 50], "Truncated", "expected 96");
+    let short_gz = &gz[..gz.len() - 20];
+    fails("trunc.nii.gz", short_gz, "Truncated", "expected 96");
+    let bad_gz = [0x1f, 0x8b, 0, 1, 2, 3, 4, 5, 6, 7];
+    fails("garbage.nii.gz", &bad_gz, "Format", "byte 0");
 
     let mut values = ramp(T::F32);
     values[7] = f64::INFINITY;
-    let path = file("inf.nii", &good.build(&packed(T::F32, &values, false)));
-    let e = nifti::load(&path).unwrap_err();
-    assert!(
-        matches!(
-            e,
-            DataError::NonFinite {
-                index: 7,
-                x: 1,
-                y: 0,
-                z: 1,
-                ..
-            }
-        ),
-        "{e:?}"
-    );
-    mentions(&e, &path, "sample 7");
+    let inf = Nii::new(true, 16).data(&packed(T::F32, &values, true));
+    let expected = "sample 7 (x=1, y=0, z=1) is inf";
+    fails("inf.nii", &inf, "NonFinite", expected);
 }
 
 #[test]

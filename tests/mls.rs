@@ -189,9 +189,9 @@ fn linear_basis_reproduces_linear_functions() {
                     f(world)
                 );
                 let expect = [1.5, -0.7, 2.25];
-                for k in 0..3 {
+                for (k, e) in expect.iter().enumerate() {
                     assert!(
-                        (m.gradient[k] - expect[k]).abs() < 1e-6,
+                        (m.gradient[k] - e).abs() < 1e-6,
                         "{weight:?} {gradient:?} gradient {:?}",
                         m.gradient
                     );

@@ -19,6 +19,10 @@
 //!   when `sform_code > 0`, else 0. Orientation (quaternion, sform rotation, axis flips) is
 //!   ignored: the volume is placed axis-aligned with positive spacing.
 //!
+//! Samples become f32: 32/64-bit integers and doubles lose precision past f32's 24-bit mantissa,
+//! which we accept because rendering works in f32; a double outside the f32 range becomes
+//! infinite and is rejected like any non-finite value.
+//!
 //! Errors name byte offsets; in a `.nii.gz` they are offsets in the decompressed stream.
 
 use super::nrrd::{Scalar, decode, gunzip, shown};
@@ -166,7 +170,9 @@ fn header(path: &Path, b: &[u8], suffix: &str) -> Result<Header, DataError> {
     }
     let data_start = vox_offset as usize;
     let count = checked_sample_count(path, dims.map(|d| d as u64))?;
-    let data_end = data_start as u64 + count as u64 * ty.size() as u64;
+    let data_end = (data_start as u64)
+        .checked_add(count as u64 * ty.size() as u64)
+        .ok_or_else(|| format(108, "a vox_offset inside the file", vox_offset.to_string()))?;
     Ok(Header {
         big_endian,
         dims,

@@ -1,5 +1,5 @@
 //! NRRD reader (`.nrrd`, header and data in one file), plus the typed-sample helpers that the
-//! VTK and NIfTI readers share ([`Scalar`], [`decode`], [`parse_text`], [`gunzip`], [`shown`]).
+//! VTK and NIfTI readers share (`Scalar`, `decode`, `parse_text`, `gunzip`, `shown`).
 //!
 //! Contract: the magic line `NRRD000X`, then `field: value` lines up to the first empty line;
 //! the data follows that empty line. Read fields:
@@ -23,6 +23,10 @@
 //! ignored; surplus values in a text encoding are an error (they signal wrong `sizes`).
 //! Header errors name the header line; data errors name the byte offset in the file (for gzip,
 //! the offset in the decompressed data).
+//!
+//! Samples become f32: 32/64-bit integers and doubles lose precision past f32's 24-bit mantissa,
+//! which we accept because rendering works in f32; a double outside the f32 range becomes
+//! infinite and is rejected like any non-finite value.
 
 use super::{DataError, Volume, check_finite, checked_sample_count};
 use std::io::Read;

@@ -1,5 +1,6 @@
-//! VTK legacy reader (`.vtk`, file versions 1.0 to 5.1 as written by VTK ≤ 9 and ParaView):
-//! `DATASET STRUCTURED_POINTS` in ASCII or BINARY (big-endian) form.
+//! VTK legacy reader (`.vtk`, file versions up to 5.1 as written by VTK 9 and ParaView; like VTK,
+//! the version number is not enforced): `DATASET STRUCTURED_POINTS`, ASCII or BINARY
+//! (big-endian).
 //!
 //! Contract and choices:
 //! - geometry: `DIMENSIONS`, `SPACING` (or its old name `ASPECT_RATIO`, each > 0, default 1),
@@ -27,6 +28,10 @@
 //!   where a keyword was found instead of a value), surplus values a format error at the line
 //!   after the array. The file past the chosen array is not otherwise validated.
 //!
+//! Samples become f32: 32/64-bit integers and doubles lose precision past f32's 24-bit mantissa,
+//! which we accept because rendering works in f32; a double outside the f32 range becomes
+//! infinite and is rejected like any non-finite value.
+//!
 //! Errors name "line N"; in BINARY files they also give the byte offset, since binary data makes
 //! line numbers hard to follow.
 
@@ -44,23 +49,9 @@ pub fn load(path: &Path, array: Option<&str>) -> Result<Volume, DataError> {
 }
 
 /// Every keyword that may start a line after the geometry; used to recognise surplus values.
-const KEYWORDS: &[&str] = &[
-    "POINT_DATA",
-    "CELL_DATA",
-    "SCALARS",
-    "COLOR_SCALARS",
-    "LOOKUP_TABLE",
-    "VECTORS",
-    "NORMALS",
-    "TEXTURE_COORDINATES",
-    "TENSORS",
-    "TENSORS6",
-    "GLOBAL_IDS",
-    "PEDIGREE_IDS",
-    "EDGE_FLAGS",
-    "FIELD",
-    "METADATA",
-];
+const KEYWORDS: &str = "POINT_DATA CELL_DATA SCALARS COLOR_SCALARS LOOKUP_TABLE VECTORS NORMALS \
+                        TEXTURE_COORDINATES TENSORS TENSORS6 GLOBAL_IDS PEDIGREE_IDS EDGE_FLAGS \
+                        FIELD METADATA";
 
 #[derive(Clone, Copy)]
 enum Elem {
@@ -123,6 +114,14 @@ impl<'a> Reader<'a> {
         }
     }
 
+    /// A format error at `line` (or at the end of the input), quoting what was found.
+    fn unexpected(&self, line: Option<&Line>, expected: impl Into<String>) -> DataError {
+        match line {
+            Some(l) => self.format(l.start, expected, format!("'{}'", l.tokens.join(" "))),
+            None => self.format(self.bytes.len(), expected, "end of file"),
+        }
+    }
+
     fn unsupported(&self, at: usize, what: impl Into<String>) -> DataError {
         DataError::Unsupported {
             path: self.path.to_path_buf(),
@@ -180,7 +179,7 @@ impl<'a> Reader<'a> {
         if line.tokens.len() == n {
             Ok(())
         } else {
-            Err(self.format(line.start, format!("'{form}'"), line.tokens.join(" ")))
+            Err(self.unexpected(Some(line), format!("'{form}'")))
         }
     }
 
@@ -351,7 +350,9 @@ impl<'a> Reader<'a> {
             t[0] == "NULL_ARRAY"
                 || (t.len() == 4 && t[1].parse::<u64>().is_ok() && t[2].parse::<u64>().is_ok())
         } else {
-            KEYWORDS.contains(&next.keyword().as_str())
+            KEYWORDS
+                .split_ascii_whitespace()
+                .any(|k| k == next.keyword())
         };
         if ok {
             return Ok(());
@@ -389,7 +390,7 @@ fn decode_name(name: &str) -> String {
     String::from_utf8_lossy(&out).into_owned()
 }
 
-/// One array about to be read: what it is, whether it may be chosen, and where it starts.
+/// One array about to be read: what it is and whether it may be chosen.
 struct Candidate {
     name: String,
     elem: Elem,
@@ -424,13 +425,7 @@ pub fn parse(path: &Path, bytes: &[u8], array: Option<&str>) -> Result<Volume, D
     match form.as_ref().map(Line::keyword).as_deref() {
         Some("ASCII") => {}
         Some("BINARY") => r.binary = true,
-        _ => {
-            let at = form.as_ref().map_or(r.pos, |l| l.start);
-            let found = form.map_or("end of file".into(), |l| {
-                format!("'{}'", l.tokens.join(" "))
-            });
-            return Err(r.format(at, "ASCII or BINARY", found));
-        }
+        _ => return Err(r.unexpected(form.as_ref(), "ASCII or BINARY")),
     }
     let dataset = r.line();
     match dataset.as_ref().map(|l| (l.keyword(), l.tokens.get(1))) {
@@ -444,13 +439,7 @@ pub fn parse(path: &Path, bytes: &[u8], array: Option<&str>) -> Result<Volume, D
             let at = dataset.as_ref().map_or(0, |l| l.start);
             return Err(r.unsupported(at, "data-object file (FIELD without DATASET)"));
         }
-        _ => {
-            let at = dataset.as_ref().map_or(r.pos, |l| l.start);
-            let found = dataset.map_or("end of file".into(), |l| {
-                format!("'{}'", l.tokens.join(" "))
-            });
-            return Err(r.format(at, "'DATASET STRUCTURED_POINTS'", found));
-        }
+        _ => return Err(r.unexpected(dataset.as_ref(), "'DATASET STRUCTURED_POINTS'")),
     }
 
     let mut dims: Option<[u64; 3]> = None;
@@ -520,7 +509,7 @@ pub fn parse(path: &Path, bytes: &[u8], array: Option<&str>) -> Result<Volume, D
             }
             _ => {
                 let expected = "DIMENSIONS, SPACING, ORIGIN, FIELD, POINT_DATA or CELL_DATA";
-                return Err(r.format(line.start, expected, format!("'{}'", line.tokens.join(" "))));
+                return Err(r.unexpected(Some(&line), expected));
             }
         }
     }
@@ -574,7 +563,7 @@ fn attribute(
     match kw.as_str() {
         "SCALARS" => {
             if !(3..=4).contains(&t.len()) {
-                return Err(r.format(line.start, "'SCALARS name type [numComp]'", t.join(" ")));
+                return Err(r.unexpected(Some(line), "'SCALARS name type [numComp]'"));
             }
             let ncomp = if t.len() == 4 {
                 r.number(line, 3, "a component count >= 1")?
@@ -667,7 +656,7 @@ fn attribute(
         _ => {
             let expected = "an attribute (SCALARS, COLOR_SCALARS, FIELD, VECTORS, ...), \
                             POINT_DATA or CELL_DATA";
-            return Err(r.format(line.start, expected, format!("'{}'", t.join(" "))));
+            return Err(r.unexpected(Some(line), expected));
         }
     }
     for c in candidates {

@@ -10,7 +10,7 @@
 use super::transfer::TransferFunction;
 use super::{Field, RaySetup};
 use crate::gpu_types::{
-    CountPush, MlsOut, RayPush, RenderParams, Sample, binding, binding_defines,
+    CountPush, GRID_PAD, MlsOut, RayPush, RenderParams, Sample, binding, binding_defines,
 };
 use crate::recon::mls::{Basis, GradientMode, Weight};
 use crate::scene::NeighbourMode;
@@ -25,9 +25,11 @@ const PROJECTION_ORTHOGRAPHIC: u32 = 1;
 const BAND_PIXELS: u32 = 16 * 1024;
 
 /// The compile-time choices of a kernel.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Variant {
     pub basis: Basis,
+    /// Support radius in sample spacings (sizes the grid specialisation's fixed loops).
+    pub support: f64,
     pub weight: Weight,
     pub gradient: GradientMode,
     pub neighbours: NeighbourMode,
@@ -39,6 +41,7 @@ impl Variant {
         let r = field.reconstruction;
         Self {
             basis: r.basis,
+            support: r.support,
             weight: r.weight,
             gradient: r.gradient,
             neighbours: r.neighbours,
@@ -48,6 +51,18 @@ impl Variant {
     /// shaderc macro definitions (plus the binding numbers).
     pub fn defines(&self) -> Vec<(String, String)> {
         let mut d = binding_defines();
+        // Grid points per axis that can fall inside a support of radius s (in spacings).
+        d.push((
+            "MLS_GRID_BOX".into(),
+            ((2.0 * self.support).floor() as u32 + 1).to_string(),
+        ));
+        // vec4s covering a row window: up to 3 leading values plus the box.
+        d.push((
+            "MLS_GRID_WINDOW".into(),
+            ((2.0 * self.support).floor() as u32 + 1 + 3)
+                .div_ceil(4)
+                .to_string(),
+        ));
         let flag = |b: bool| if b { "1" } else { "0" }.to_string();
         d.push(("MLS_TERMS".into(), self.basis.terms().to_string()));
         d.push((
@@ -155,10 +170,16 @@ impl GpuField {
     /// Uploads what the field's variant reads and nothing else.
     pub fn upload(ctx: &Context, field: &Field) -> Result<Self, VkError> {
         match &field.octree {
-            None => Ok(Self {
-                grid: Some(Buffer::from_slice(ctx, "grid", &field.values)?),
-                octree: None,
-            }),
+            None => {
+                // Padded front and back (GRID_PAD) and to a whole number of vec4s.
+                let mut padded = vec![0.0f32; GRID_PAD];
+                padded.extend_from_slice(&field.values);
+                padded.resize((padded.len() + 2 * GRID_PAD).next_multiple_of(4), 0.0);
+                Ok(Self {
+                    grid: Some(Buffer::from_slice(ctx, "grid", &padded)?),
+                    octree: None,
+                })
+            }
             Some(o) => {
                 let samples: Vec<Sample> = o
                     .samples

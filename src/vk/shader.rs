@@ -4,7 +4,8 @@
 //! `VMLS_GLSL_DIR` to a directory with the same layout compiles from there instead (for shader
 //! work without rebuilding). Includes are resolved against the `glsl/` root and `glsl/include/`.
 //! Every variant is a set of macro definitions; results are cached per process by a hash of
-//! the kernel source and its definitions.
+//! the kernel source and its definitions. `VMLS_SPIRV_DUMP=dir` writes every compiled variant
+//! there (for `spirv-dis`).
 
 use super::VkError;
 use std::collections::HashMap;
@@ -150,6 +151,12 @@ impl ShaderCompiler {
             )
             .map_err(|e| shader_err(e.to_string()))?;
         let words = Arc::new(artifact.as_binary().to_vec());
+        if let Some(dir) = std::env::var_os("VMLS_SPIRV_DUMP") {
+            // Best effort: a dump that cannot be written must not stop a render.
+            let path =
+                PathBuf::from(dir).join(format!("{}-{key:016x}.spv", name.replace('/', "_")));
+            let _ = std::fs::write(path, artifact.as_binary_u8());
+        }
         self.cache
             .lock()
             .unwrap_or_else(|p| p.into_inner())

@@ -1,0 +1,279 @@
+//! The `vmls` binary end to end, with validation on: the contract of `render`, `--stats`,
+//! `--set`, and one clear error line plus a non-zero exit (and no image) for every bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn vmls(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_vmls"))
+        .args(args)
+        .env("VMLS_VALIDATION", "1")
+        .env_remove("VMLS_DEVICE")
+        .output()
+        .expect("run vmls")
+}
+
+fn dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("vmls-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("temp dir");
+    d
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+/// Asserts failure with exactly one stderr line containing every `needle`, and no image.
+fn assert_fails(out: &Output, needles: &[&str], image: &Path) {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "expected exit 1, stderr: {stderr}"
+    );
+    assert_eq!(
+        stderr.trim_end().lines().count(),
+        1,
+        "expected one error line, got: {stderr}"
+    );
+    assert!(stderr.starts_with("vmls: error: "), "{stderr}");
+    for n in needles {
+        assert!(stderr.contains(n), "error line lacks '{n}': {stderr}");
+    }
+    assert!(!image.exists(), "an image was written despite the error");
+}
+
+#[test]
+fn default_scene_renders_png_with_stats() {
+    let d = dir("default");
+    let png = d.join("ml.png");
+    let stats = d.join("stats.json");
+    let out = vmls(&["render", "-o", s(&png), "--stats", s(&stats)]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        out.stderr.is_empty(),
+        "unexpected stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let img = image::open(&png).expect("png").to_rgba8();
+    assert_eq!(img.dimensions(), (256, 256));
+    // The default scene shows the volume: a good share of pixels is covered, some are not.
+    let covered = img.pixels().filter(|p| p[3] > 128).count();
+    assert!(
+        covered > 256 * 256 / 4 && covered < 256 * 256,
+        "{covered} covered pixels"
+    );
+    let st: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats")).expect("json");
+    for key in [
+        "device",
+        "variant",
+        "width",
+        "height",
+        "method",
+        "gpu_ms",
+        "wall_ms",
+        "function_evaluations",
+        "rays",
+    ] {
+        assert!(st.get(key).is_some(), "stats lack '{key}': {st}");
+    }
+    assert_eq!(st["rays"], 65536);
+    assert_eq!(st["method"], "fixed");
+    assert!(st["function_evaluations"].as_u64().expect("count") > 65536);
+    assert!(st["gpu_ms"]["raycast"].as_f64().expect("ms") > 0.0);
+    assert_eq!(st["variant"], "raycast:linear-wendland-local-grid");
+}
+
+#[test]
+fn exr_output_is_linear_float_rgba_and_set_overrides_apply() {
+    let d = dir("exr");
+    let exr = d.join("ml.exr");
+    let out = vmls(&[
+        "render",
+        "-o",
+        s(&exr),
+        "--set",
+        "camera.width=40",
+        "--set",
+        "camera.height=30",
+        "--set",
+        "render.background=[0.0, 0.0, 1.0]",
+        "--set",
+        "reconstruction.neighbours=octree",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let img = image::open(&exr).expect("exr").to_rgba32f();
+    assert_eq!(img.dimensions(), (40, 30));
+    // A corner ray misses the volume: pure background, alpha 0.
+    let corner = img.get_pixel(0, 0);
+    assert_eq!(corner.0, [0.0, 0.0, 1.0, 0.0]);
+    assert!(
+        img.pixels()
+            .all(|p| p.0.iter().all(|v| v.is_finite()) && (0.0..=1.0).contains(&p[3]))
+    );
+}
+
+#[test]
+fn scene_file_with_relative_volume_path() {
+    let d = dir("scene");
+    let n = 6;
+    let mut vtk = format!(
+        "# vtk DataFile Version 3.0\nramp\nASCII\nDATASET STRUCTURED_POINTS\nDIMENSIONS {n} {n} {n}\nSPACING 0.4 0.4 0.4\nORIGIN -1 -1 -1\nPOINT_DATA {}\nSCALARS density float 1\nLOOKUP_TABLE default\n",
+        n * n * n
+    );
+    for k in 0..n {
+        for _ in 0..n * n {
+            vtk.push_str(&format!("{}\n", k as f32 / (n - 1) as f32));
+        }
+    }
+    std::fs::create_dir_all(d.join("data")).expect("dir");
+    std::fs::write(d.join("data/ramp.vtk"), vtk).expect("write");
+    std::fs::write(
+        d.join("scene.toml"),
+        "[volume]\nfile = \"data/ramp.vtk\"\nscalars = \"density\"\n[camera]\nwidth = 16\nheight = 16\n",
+    )
+    .expect("write");
+    let png = d.join("out.png");
+    let out = vmls(&["render", s(&d.join("scene.toml")), "-o", s(&png)]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(png.exists());
+}
+
+#[test]
+fn bad_inputs_fail_with_one_clear_line() {
+    let d = dir("bad");
+    let png = d.join("never.png");
+    let write = |name: &str, text: &str| {
+        let p = d.join(name);
+        std::fs::write(&p, text).expect("write");
+        p
+    };
+    // Missing scene file.
+    let missing = d.join("nope.toml");
+    assert_fails(
+        &vmls(&["render", s(&missing), "-o", s(&png)]),
+        &["nope.toml", "cannot read"],
+        &png,
+    );
+    // Malformed TOML.
+    let p = write("broken.toml", "[camera\nwidth = 3\n");
+    assert_fails(
+        &vmls(&["render", s(&p), "-o", s(&png)]),
+        &["broken.toml", "TOML"],
+        &png,
+    );
+    // Unknown key and unknown section.
+    let p = write("key.toml", "[camera]\ncolour = 3\n");
+    assert_fails(
+        &vmls(&["render", s(&p), "-o", s(&png)]),
+        &["camera.colour", "fov_y"],
+        &png,
+    );
+    let p = write("section.toml", "[lights]\non = true\n");
+    assert_fails(&vmls(&["render", s(&p), "-o", s(&png)]), &["lights"], &png);
+    // Out-of-range value and wrong type.
+    let p = write("range.toml", "[camera]\nfov_y = 200.0\n");
+    assert_fails(
+        &vmls(&["render", s(&p), "-o", s(&png)]),
+        &["camera.fov_y", "200"],
+        &png,
+    );
+    let p = write("type.toml", "[render]\nstep = \"small\"\n");
+    assert_fails(
+        &vmls(&["render", s(&p), "-o", s(&png)]),
+        &["render.step", "a number"],
+        &png,
+    );
+    let p = write("choice.toml", "[reconstruction]\nbasis = \"cubic\"\n");
+    assert_fails(
+        &vmls(&["render", s(&p), "-o", s(&png)]),
+        &["reconstruction.basis", "\"linear\""],
+        &png,
+    );
+    let p = write(
+        "tf.toml",
+        "[transfer]\npoints = [[0.5, 1, 1, 1, 1], [0.2, 1, 1, 1, 1]]\n",
+    );
+    assert_fails(
+        &vmls(&["render", s(&p), "-o", s(&png)]),
+        &["transfer.points", "point 1"],
+        &png,
+    );
+    let p = write(
+        "cam.toml",
+        "[camera]\neye = [0, 0, 1]\ntarget = [0, 0, 0]\nup = [0, 0, 1]\n",
+    );
+    assert_fails(
+        &vmls(&["render", s(&p), "-o", s(&png)]),
+        &["camera", "parallel"],
+        &png,
+    );
+    // Bad --set arguments.
+    assert_fails(
+        &vmls(&["render", "-o", s(&png), "--set", "camera.width"]),
+        &["--set camera.width"],
+        &png,
+    );
+    assert_fails(
+        &vmls(&["render", "-o", s(&png), "--set", "camera.width=0"]),
+        &["camera.width"],
+        &png,
+    );
+    assert_fails(
+        &vmls(&["render", "-o", s(&png), "--set", "camera.zoom=2"]),
+        &["camera.zoom"],
+        &png,
+    );
+    // Unsupported output format.
+    let jpg = d.join("out.jpg");
+    assert_fails(
+        &vmls(&["render", "-o", s(&jpg)]),
+        &["out.jpg", ".png or .exr"],
+        &jpg,
+    );
+    // Missing volume file, and a volume with a NaN.
+    let p = write("vol.toml", "[volume]\nfile = \"absent.vtk\"\n");
+    assert_fails(
+        &vmls(&["render", s(&p), "-o", s(&png)]),
+        &["absent.vtk"],
+        &png,
+    );
+    write(
+        "nan.vtk",
+        "# vtk DataFile Version 3.0\nx\nASCII\nDATASET STRUCTURED_POINTS\nDIMENSIONS 2 2 2\nSPACING 1 1 1\nORIGIN 0 0 0\nPOINT_DATA 8\nSCALARS v float 1\nLOOKUP_TABLE default\n0 1 2 nan 4 5 6 7\n",
+    );
+    let p = write("nan.toml", "[volume]\nfile = \"nan.vtk\"\n");
+    assert_fails(
+        &vmls(&["render", s(&p), "-o", s(&png)]),
+        &["nan.vtk", "NaN"],
+        &png,
+    );
+    // No such device.
+    assert_fails(
+        &vmls(&["render", "-o", s(&png), "--device", "no-such-gpu"]),
+        &["no-such-gpu", "llvmpipe"],
+        &png,
+    );
+}
+
+#[test]
+fn devices_lists_lavapipe() {
+    let out = vmls(&["devices"]);
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("* 0:"), "{text}");
+}
