@@ -56,6 +56,13 @@ enum Command {
     },
     /// List Vulkan devices (* marks the default choice).
     Devices,
+    /// RMSE and largest difference of the RGB channels of two images of the same size.
+    Compare {
+        /// Image under test (.png or .exr).
+        image: PathBuf,
+        /// Reference image (.png or .exr).
+        reference: PathBuf,
+    },
     /// Measure the FMA ceiling and MLS evaluation throughput side by side.
     Probe {
         /// Marschner–Lobb resolution of the probe field.
@@ -256,6 +263,39 @@ fn run_probe(
     Ok(())
 }
 
+fn read_rgb(path: &Path) -> Result<image::Rgb32FImage, RenderError> {
+    image::open(path)
+        .map(|i| i.to_rgb32f())
+        .map_err(|e| RenderError::Output {
+            path: path.display().to_string(),
+            message: format!("cannot read image: {e}"),
+        })
+}
+
+fn compare(image: &Path, reference: &Path) -> Result<(), RenderError> {
+    let (a, b) = (read_rgb(image)?, read_rgb(reference)?);
+    if a.dimensions() != b.dimensions() {
+        return Err(RenderError::Output {
+            path: image.display().to_string(),
+            message: format!(
+                "size {:?} differs from the reference's {:?}",
+                a.dimensions(),
+                b.dimensions()
+            ),
+        });
+    }
+    let diffs: Vec<f64> = a
+        .as_raw()
+        .iter()
+        .zip(b.as_raw())
+        .map(|(x, y)| f64::from(x - y))
+        .collect();
+    let rmse = (diffs.iter().map(|d| d * d).sum::<f64>() / diffs.len().max(1) as f64).sqrt();
+    let max = diffs.iter().map(|d| d.abs()).fold(0.0, f64::max);
+    println!("rmse {rmse:.6} max {max:.6}");
+    Ok(())
+}
+
 fn report(error: &dyn std::error::Error) -> String {
     let mut line = error.to_string();
     let mut source = error.source();
@@ -280,6 +320,7 @@ fn main() {
             set,
             device,
         } => run_render(scene.as_deref(), output, stats.as_deref(), set, device),
+        Command::Compare { image, reference } => compare(image, reference),
         Command::Devices => Context::list_devices()
             .map(|lines| lines.iter().for_each(|l| println!("{l}")))
             .map_err(RenderError::from),
