@@ -286,17 +286,42 @@ fn compare_reports_rmse_and_rejects_size_mismatch() {
     let mut args = vec!["render", "-o", s(&a)];
     args.extend(small);
     assert!(vmls(&args).status.success());
-    let mut args = vec!["render", "-o", s(&b), "--set", "render.background=[1.0, 0.0, 0.0]"];
+    let mut args = vec![
+        "render",
+        "-o",
+        s(&b),
+        "--set",
+        "render.background=[1.0, 0.0, 0.0]",
+    ];
     args.extend(small);
     assert!(vmls(&args).status.success());
     let same = vmls(&["compare", s(&a), s(&a)]);
-    assert_eq!(String::from_utf8_lossy(&same.stdout).trim(), "rmse 0.000000 max 0.000000");
+    assert_eq!(
+        String::from_utf8_lossy(&same.stdout).trim(),
+        "rmse 0.000000 max 0.000000"
+    );
     // The red background shows through transmittance T in the red channel only.
     let out = vmls(&["compare", s(&a), s(&b)]);
     let text = String::from_utf8_lossy(&out.stdout);
-    let max: f64 = text.split_whitespace().nth(3).and_then(|v| v.parse().ok()).expect("max");
+    let max: f64 = text
+        .split_whitespace()
+        .nth(3)
+        .and_then(|v| v.parse().ok())
+        .expect("max");
     assert!(max > 0.9 && max <= 1.0, "{text}");
-    assert!(vmls(&["render", "-o", s(&c), "--set", "camera.width=5", "--set", "camera.height=5"]).status.success());
+    assert!(
+        vmls(&[
+            "render",
+            "-o",
+            s(&c),
+            "--set",
+            "camera.width=5",
+            "--set",
+            "camera.height=5"
+        ])
+        .status
+        .success()
+    );
     let bad = vmls(&["compare", s(&a), s(&c)]);
     assert_fails(&bad, &["a.exr", "differs"], &d.join("none.png"));
 }
