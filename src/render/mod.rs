@@ -8,6 +8,7 @@
 pub mod camera;
 pub mod gpu;
 pub mod output;
+pub mod preintegration;
 pub mod raycast;
 pub mod transfer;
 

@@ -1,0 +1,166 @@
+//! Preintegration tables against direct f64 quadrature, and their edge cases ([MLS] §4).
+//! Stated bound: every checked node within 1e-5 absolute of the reference (the target);
+//! the f32 storage of the tables alone contributes up to 6e-8.
+
+use vmls::render::preintegration::{
+    PreintegrationTables, direct_quadrature, segment_integral, table_lengths,
+};
+use vmls::render::transfer::TransferFunction;
+
+fn default_tf() -> TransferFunction {
+    TransferFunction::new(vec![
+        [0.0, 0.0, 0.0, 0.0, 0.0],
+        [0.35, 0.1, 0.2, 0.5, 0.3],
+        [0.45, 0.2, 0.5, 1.0, 1.5],
+        [0.5, 1.0, 0.95, 0.8, 60.0],
+        [0.55, 1.0, 0.5, 0.1, 2.0],
+        [1.0, 1.0, 0.3, 0.1, 3.0],
+    ])
+}
+
+/// Largest absolute difference between table nodes and direct quadrature over a sample of nodes
+/// (every 7th pair plus the whole diagonal and the corners).
+fn max_node_error(
+    tf: &TransferFunction,
+    s_range: (f64, f64),
+    lengths: &[f64],
+    n: usize,
+    steps: usize,
+) -> f64 {
+    let t = PreintegrationTables::build(tf, s_range, lengths, n, |_| {});
+    let mut worst: f64 = 0.0;
+    for (li, &l) in lengths.iter().enumerate() {
+        for b in 0..n {
+            for f in 0..n {
+                let corner = (f == 0 || f == n - 1) && (b == 0 || b == n - 1);
+                if !(corner || f == b || (f + n * b) % 7 == 0) {
+                    continue;
+                }
+                let (c, a) = direct_quadrature(tf, t.node(f), t.node(b), l, steps);
+                let e = t.tables[li][f + n * b];
+                for k in 0..3 {
+                    worst = worst.max((f64::from(e[k]) - c[k]).abs());
+                }
+                worst = worst.max((f64::from(e[3]) - a).abs());
+            }
+        }
+    }
+    worst
+}
+
+#[test]
+fn tables_match_direct_quadrature_at_nodes() {
+    // The integrator's lengths for ML 41³ at [MLS]'s settings, in world units (spacing 0.05).
+    let lengths: Vec<f64> = table_lengths(2.6, 0.1625)
+        .iter()
+        .map(|l| l * 0.05)
+        .collect();
+    let err = max_node_error(&default_tf(), (-0.1, 1.1), &lengths, 48, 20_000);
+    eprintln!("default TF, 5 lengths, 48²: max node error {err:.2e}");
+    assert!(err < 1e-5, "max node error {err:.2e}");
+}
+
+#[test]
+fn narrow_spike_is_integrated_exactly() {
+    // A spike 1/1000 of the range wide, very dense: between nodes it is invisible, but every
+    // node's segment that crosses it must carry its full contribution.
+    let tf = TransferFunction::new(vec![
+        [0.0, 0.0, 0.0, 0.0, 0.0],
+        [0.4995, 0.0, 0.0, 0.0, 0.0],
+        [0.5, 1.0, 0.2, 0.1, 500.0],
+        [0.5005, 0.0, 0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0, 0.0, 0.0],
+    ]);
+    let err = max_node_error(&tf, (0.0, 1.0), &[0.13, 0.065], 24, 400_000);
+    eprintln!("spike TF, 2 lengths, 24²: max node error {err:.2e}");
+    assert!(err < 1e-5, "max node error {err:.2e}");
+    // Sanity: a segment across the spike is visibly opaque.
+    let (_, a) = segment_integral(&tf, 0.0, 1.0, 0.13);
+    let expect = 1.0 - (-500.0f64 * 0.5 * 0.001 * 0.13).exp();
+    assert!((a - expect).abs() < 1e-12, "α {a} vs {expect}");
+}
+
+#[test]
+fn diagonal_matches_the_closed_form() {
+    let tf = default_tf();
+    for s in [0.0, 0.2, 0.47, 0.5, 0.52, 0.9] {
+        for l in [1e-6, 0.01, 0.3, 2.0] {
+            let (ct, tau) = tf.lookup(s);
+            let a = 1.0 - (-tau * l).exp();
+            let (c, alpha) = segment_integral(&tf, s, s, l);
+            assert!((alpha - a).abs() < 1e-14, "α({s},{s},{l})");
+            for k in 0..3 {
+                assert!((c[k] - ct[k] * a).abs() < 1e-14, "C({s},{s},{l})");
+            }
+        }
+    }
+}
+
+#[test]
+fn scalars_outside_the_domain_use_clamped_values() {
+    let tf = default_tf();
+    // Entirely above the domain: constant TF = the last point.
+    let (c, a) = segment_integral(&tf, 1.5, 3.0, 0.4);
+    let expect = 1.0 - (-3.0f64 * 0.4).exp();
+    assert!((a - expect).abs() < 1e-14 && (c[0] - expect).abs() < 1e-14);
+    // Crossing from below the domain into it.
+    let (c1, a1) = segment_integral(&tf, -1.0, 0.7, 0.05);
+    let (c2, a2) = direct_quadrature(&tf, -1.0, 0.7, 0.05, 200_000);
+    assert!((a1 - a2).abs() < 1e-9);
+    for k in 0..3 {
+        assert!((c1[k] - c2[k]).abs() < 1e-9);
+    }
+    // And the tables over a range wider than the domain.
+    let err = max_node_error(&tf, (-0.5, 1.5), &[0.05], 32, 20_000);
+    assert!(err < 1e-5, "max node error {err:.2e}");
+}
+
+#[test]
+fn zero_extinction_gives_nothing() {
+    let tf = TransferFunction::new(vec![[0.0, 1.0, 1.0, 1.0, 0.0], [1.0, 0.5, 0.5, 0.5, 0.0]]);
+    let t = PreintegrationTables::build(&tf, (0.0, 1.0), &[1.0, 0.5], 16, |_| {});
+    assert!(t.tables.iter().flatten().all(|e| *e == [0.0; 4]));
+}
+
+#[test]
+fn huge_extinction_saturates_without_nan() {
+    let tf = TransferFunction::new(vec![[0.0, 0.2, 0.4, 0.6, 1e9], [1.0, 1.0, 1.0, 1.0, 1e12]]);
+    for (f, b, l) in [
+        (0.0, 1.0, 1.0),
+        (0.3, 0.3, 10.0),
+        (1.0, 0.0, 1e-3),
+        (0.5, 0.6, 1e3),
+    ] {
+        let (c, a) = segment_integral(&tf, f, b, l);
+        assert!(a == 1.0, "α = {a}");
+        let (front, _) = tf.lookup(f);
+        for k in 0..3 {
+            // Opaque at once: the colour is the front colour.
+            assert!(
+                c[k].is_finite() && (c[k] - front[k]).abs() < 1e-6,
+                "C = {c:?} front {front:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn vanishing_length_is_linear_in_l() {
+    let tf = default_tf();
+    assert_eq!(segment_integral(&tf, 0.2, 0.6, 0.0), ([0.0; 3], 0.0));
+    for l in [1e-4, 1e-7, 1e-10] {
+        let (c, a) = segment_integral(&tf, 0.2, 0.6, l);
+        let (c_ref, a_ref) = direct_quadrature(&tf, 0.2, 0.6, l, 100_000);
+        assert!(a > 0.0 && c.iter().all(|x| x.is_finite()));
+        assert!(
+            (a - a_ref).abs() <= 1e-9 * a_ref.max(1e-300) + 1e-18,
+            "α {a} vs {a_ref} at l = {l}"
+        );
+        for k in 0..3 {
+            assert!(
+                (c[k] - c_ref[k]).abs() <= 1e-6 * c_ref[k].abs() + 1e-18,
+                "C {c:?} vs {c_ref:?} at l = {l}"
+            );
+        }
+    }
+}
