@@ -33,7 +33,7 @@ fn max_node_error(
         for b in 0..n {
             for f in 0..n {
                 let corner = (f == 0 || f == n - 1) && (b == 0 || b == n - 1);
-                if !(corner || f == b || (f + n * b) % 7 == 0) {
+                if !(corner || f == b || (f + n * b).is_multiple_of(7)) {
                     continue;
                 }
                 let (c, a) = direct_quadrature(tf, t.node(f), t.node(b), l, steps);
