@@ -123,6 +123,55 @@ pub fn segment_integral(tf: &TransferFunction, s_f: f64, s_b: f64, l: f64) -> Se
     (color, -(-depth).exp_m1())
 }
 
+/// The zero-length limit of a segment: the τ-weighted mean colour ∫cτ du / ∫τ du (the limit of
+/// C/α as l → 0) and the mean extinction τ̄ = ∫τ du, u ∈ [0, 1] along the segment. α of any
+/// length l is exactly 1 − e^{−l τ̄}. Exact per piece: τ is linear and cτ quadratic in u
+/// (Simpson's rule is exact for both).
+pub fn segment_limits(tf: &TransferFunction, s_f: f64, s_b: f64) -> [f64; 4] {
+    let mut cuts = vec![0.0];
+    if s_f != s_b {
+        let mut inner: Vec<f64> = tf
+            .points()
+            .iter()
+            .map(|p| (p[0] - s_f) / (s_b - s_f))
+            .filter(|u| *u > 0.0 && *u < 1.0)
+            .collect();
+        inner.sort_by(f64::total_cmp);
+        cuts.extend(inner);
+    }
+    cuts.push(1.0);
+    let s_at = |u: f64| s_f + (s_b - s_f) * u;
+    let (mut tau_sum, mut ctau) = (0.0, [0.0; 3]);
+    for w in cuts.windows(2) {
+        let du = w[1] - w[0];
+        let (c0, t0) = tf.lookup(s_at(w[0]));
+        let (cm, tm) = tf.lookup(s_at(0.5 * (w[0] + w[1])));
+        let (c1, t1) = tf.lookup(s_at(w[1]));
+        tau_sum += 0.5 * (t0 + t1) * du;
+        for k in 0..3 {
+            ctau[k] += du / 6.0 * (c0[k] * t0 + 4.0 * cm[k] * tm + c1[k] * t1);
+        }
+    }
+    if tau_sum > 0.0 {
+        [
+            ctau[0] / tau_sum,
+            ctau[1] / tau_sum,
+            ctau[2] / tau_sum,
+            tau_sum,
+        ]
+    } else {
+        // No extinction: the colour never shows; any value is exact. Take the mean colour.
+        let (c0, _) = tf.lookup(s_f);
+        let (c1, _) = tf.lookup(s_b);
+        [
+            0.5 * (c0[0] + c1[0]),
+            0.5 * (c0[1] + c1[1]),
+            0.5 * (c0[2] + c1[2]),
+            0.0,
+        ]
+    }
+}
+
 /// Reference: midpoint rule with `steps` steps and exact per-step exponentials, in f64.
 pub fn direct_quadrature(
     tf: &TransferFunction,
@@ -162,6 +211,19 @@ pub fn table_lengths(l_max: f64, l_min: f64) -> Vec<f64> {
     lengths
 }
 
+/// Extra halvings below `l_min` for clipped remainders: until the smallest length has optical
+/// depth ≤ 0.01 at the largest extinction `tau_max` (at most 12 more tables). Below that, the
+/// remainder's colour interpolates linearly in optical depth, with an error of order depth².
+pub fn remainder_levels(l_min: f64, tau_max: f64) -> usize {
+    let mut levels = 0;
+    let mut l = l_min;
+    while l * tau_max > 0.01 && levels < 12 {
+        l *= 0.5;
+        levels += 1;
+    }
+    levels
+}
+
 /// α and C over an N×N grid of (s_f, s_b) for each length.
 #[derive(Debug, Clone)]
 pub struct PreintegrationTables {
@@ -172,6 +234,8 @@ pub struct PreintegrationTables {
     pub lengths: Vec<f64>,
     /// Per length: `resolution²` entries `[C.r, C.g, C.b, α]`, index `f + resolution·b`.
     pub tables: Vec<Vec<[f32; 4]>>,
+    /// Zero-length limits `[mean colour rgb, τ̄]` ([`segment_limits`]), same indexing.
+    pub limits: Vec<[f32; 4]>,
 }
 
 impl PreintegrationTables {
@@ -200,6 +264,7 @@ impl PreintegrationTables {
             resolution,
             lengths: lengths.to_vec(),
             tables: Vec::new(),
+            limits: Vec::new(),
         };
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
         let rows_done = std::sync::atomic::AtomicUsize::new(0);
@@ -225,7 +290,79 @@ impl PreintegrationTables {
             });
             tables.tables.push(table);
         }
+        let mut limits = Vec::with_capacity(resolution * resolution);
+        for b in 0..resolution {
+            for f in 0..resolution {
+                let v = segment_limits(tf, tables.node(f), tables.node(b));
+                limits.push(v.map(|x| x as f32));
+            }
+        }
+        tables.limits = limits;
         tables
+    }
+
+    /// Bilinear lookup of `table` at (s_f, s_b), clamped to the table's range.
+    pub fn lookup(&self, table: &[[f32; 4]], s_f: f64, s_b: f64) -> [f64; 4] {
+        let n = self.resolution;
+        let scale = (n - 1) as f64 / (self.s_max - self.s_min);
+        let grid = |s: f64| ((s - self.s_min) * scale).clamp(0.0, (n - 1) as f64);
+        let (x, y) = (grid(s_f), grid(s_b));
+        let (x0, y0) = ((x as usize).min(n - 2), (y as usize).min(n - 2));
+        let (fx, fy) = (x - x0 as f64, y - y0 as f64);
+        let at = |i: usize, j: usize| table[i + n * j].map(f64::from);
+        let (a, b, c, d) = (
+            at(x0, y0),
+            at(x0 + 1, y0),
+            at(x0, y0 + 1),
+            at(x0 + 1, y0 + 1),
+        );
+        std::array::from_fn(|k| {
+            (a[k] * (1.0 - fx) + b[k] * fx) * (1.0 - fy) + (c[k] * (1.0 - fx) + d[k] * fx) * fy
+        })
+    }
+
+    /// α and C of a segment of any length r ∈ (0, lengths[0]] (stage `preintegrate_clipped`):
+    /// binary decomposition over the table lengths, composited front to back with s
+    /// interpolated at the split points; the remainder below the smallest length takes α from
+    /// τ̄ exactly and its colour from C/α interpolated linearly in optical depth between the
+    /// zero-length limit and the smallest table.
+    pub fn segment(&self, s_f: f64, s_b: f64, r: f64) -> SegmentResult {
+        let mut color = [0.0; 3];
+        let mut alpha = 0.0;
+        let mut done = 0.0;
+        let s_at = |x: f64| s_f + (s_b - s_f) * (x / r);
+        let mut add = |c: [f64; 3], a: f64, alpha: &mut f64| {
+            for k in 0..3 {
+                color[k] += (1.0 - *alpha) * c[k];
+            }
+            *alpha += (1.0 - *alpha) * a;
+        };
+        for (k, &l) in self.lengths.iter().enumerate() {
+            if r - done >= l * (1.0 - 1e-6) {
+                let e = self.lookup(&self.tables[k], s_at(done), s_at((done + l).min(r)));
+                add([e[0], e[1], e[2]], e[3], &mut alpha);
+                done = (done + l).min(r);
+            }
+        }
+        let rest = r - done;
+        if rest > 0.0 {
+            let (s0, s1) = (s_at(done), s_f + (s_b - s_f));
+            let zero = self.lookup(&self.limits, s0, s1);
+            let tau = zero[3];
+            let a = -(-rest * tau).exp_m1();
+            let smallest = self.lengths.len() - 1;
+            let e = self.lookup(&self.tables[smallest], s0, s1);
+            let t_small = self.lengths[smallest] * tau;
+            let mut c = [zero[0], zero[1], zero[2]];
+            if e[3] > 0.0 && t_small > 0.0 {
+                let f = (rest * tau / t_small).min(1.0);
+                for k in 0..3 {
+                    c[k] += (e[k] / e[3] - zero[k]) * f;
+                }
+            }
+            add(c.map(|x| x * a), a, &mut alpha);
+        }
+        (color, alpha)
     }
 }
 
