@@ -43,6 +43,9 @@ void main() {
     render_params._pad0 = 25.0;
     render_params._pad1 = 26.0;
     render_params._pad2 = 27.0;
+    render_params.preint_range = v(28.0);
+    render_params.preint_dims = uvec4(29u, 30u, 31u, 32u);
+    render_params.integrator = v(33.0);
 
     tf_point.color_tau = v(1.0);
     tf_point.s = 2.0;

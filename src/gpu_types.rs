@@ -34,9 +34,11 @@ pub mod binding {
     pub const RESULTS: u32 = 9;
     /// Probe output (probe_fma, layout_probe).
     pub const PROBE: u32 = 10;
+    /// Preintegration tables, `vec4` entries (read-only).
+    pub const PREINT: u32 = 11;
 
     /// Every binding with its macro name.
-    pub const ALL: [(&str, u32); 11] = [
+    pub const ALL: [(&str, u32); 12] = [
         ("BINDING_PARAMS", PARAMS),
         ("BINDING_GRID", GRID),
         ("BINDING_SAMPLES", SAMPLES),
@@ -48,6 +50,7 @@ pub mod binding {
         ("BINDING_POINTS", POINTS),
         ("BINDING_RESULTS", RESULTS),
         ("BINDING_PROBE", PROBE),
+        ("BINDING_PREINT", PREINT),
     ];
 }
 
@@ -114,8 +117,16 @@ pub struct RenderParams {
     /// Support radius in grid-index units (the grid path's search radius).
     pub support_cells: f32,
     pub _pad: [f32; 3],
+    /// Preintegration: s of the first and last table node, longest table length (world), and
+    /// the adaptive method's shortest interval l_min (world).
+    pub preint_range: [f32; 4],
+    /// Preintegration: table resolution N, number of length tables (the zero-length limits
+    /// follow them), unused ×2.
+    pub preint_dims: [u32; 4],
+    /// Adaptive ε, early-termination opacity, unused ×2.
+    pub integrator: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<RenderParams>() == 240);
+const _: () = assert!(std::mem::size_of::<RenderParams>() == 288);
 
 /// One transfer-function control point. GLSL twin: `TfPoint`.
 #[repr(C)]

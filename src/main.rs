@@ -11,8 +11,8 @@ use std::time::Instant;
 use vmls::probe::{coherent_order, fma_probe, median, mls_probe, random_points};
 use vmls::render::gpu::{GpuField, render};
 use vmls::render::output::{format_of, write_image};
-use vmls::render::{Field, RaySetup, RenderError, load_volume};
-use vmls::scene::{Method, NeighbourMode, Scene};
+use vmls::render::{Field, RaySetup, RenderError, build_tables, load_volume};
+use vmls::scene::{NeighbourMode, Scene};
 use vmls::vk::{Context, ContextOptions, ShaderCompiler};
 
 #[derive(Parser)]
@@ -131,6 +131,17 @@ fn run_render(
     let compiler = ShaderCompiler::new()?;
     let gpu_field = GpuField::upload(&ctx, &field)?;
     let setup = RaySetup::new(&scene, &field)?;
+    let bar = progress_bar("tables");
+    let table_start = Instant::now();
+    let tables = build_tables(
+        &setup,
+        &field,
+        &scene.transfer,
+        scene.render.table_resolution,
+        |f| bar.set_position((f * 1000.0) as u64),
+    );
+    let table_ms = table_start.elapsed().as_secs_f64() * 1e3;
+    bar.finish_and_clear();
     let bar = progress_bar("render");
     let image = render(
         &ctx,
@@ -138,6 +149,7 @@ fn run_render(
         &field,
         &gpu_field,
         &scene.transfer,
+        tables.as_ref(),
         &setup,
         |f| bar.set_position((f * 1000.0) as u64),
     )?;
@@ -167,7 +179,7 @@ fn run_render(
             "variant": image.variant,
             "width": scene.camera.width,
             "height": scene.camera.height,
-            "method": match scene.render.method { Method::Fixed => "fixed", Method::Reference => "reference" },
+            "method": scene.render.method.name(),
             "step_world": setup.step,
             "neighbours": match scene.reconstruction.neighbours { NeighbourMode::Grid => "grid", NeighbourMode::Octree => "octree" },
             "gpu_ms": { "raycast": image.gpu_ms },
@@ -176,6 +188,9 @@ fn run_render(
             "function_evaluations": evaluations,
             "rays": rays,
             "evaluations_per_ray": evaluations as f64 / rays.max(1) as f64,
+            "table_build_ms_cpu": tables.as_ref().map(|_| table_ms),
+            "table_lengths_world": tables.as_ref().map(|t| t.lengths.clone()),
+            "table_resolution": tables.as_ref().map(|t| t.resolution),
             "octree_nodes": field.octree.as_ref().map(|o| o.nodes.len()),
             "octree_references": field.octree.as_ref().map(|o| o.indices.len()),
         });

@@ -69,10 +69,31 @@ pub enum NeighbourMode {
 /// The integrator.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Method {
-    /// Midpoint rule with `render.step`.
+    /// Preintegration with a constant step `render.step`: one table lookup per interval.
     Fixed,
+    /// Midpoint rule with `render.step`, transfer function applied directly (for comparison).
+    Riemann,
     /// Midpoint rule with `render.reference_step`: ground truth.
     Reference,
+    /// [MLS] adaptive subdivision between `render.l_max` and `render.l_min`.
+    Adaptive,
+}
+
+impl Method {
+    /// The scene-file spelling.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Fixed => "fixed",
+            Method::Riemann => "riemann",
+            Method::Reference => "reference",
+            Method::Adaptive => "adaptive",
+        }
+    }
+
+    /// Whether the method reads preintegration tables.
+    pub fn preintegrated(self) -> bool {
+        matches!(self, Method::Fixed | Method::Adaptive)
+    }
 }
 
 /// `[reconstruction]`.
@@ -95,8 +116,17 @@ pub struct RenderSettings {
     /// Step of the reference method, in sample spacings.
     pub reference_step: f64,
     pub background: [f64; 3],
-    /// Rays stop when the transmittance falls below this.
+    /// Rays stop when the transmittance falls below this (riemann and reference methods).
     pub min_transmittance: f64,
+    /// Adaptive: shortest and longest interval, in sample spacings ([MLS]: 0.16 and 2.6).
+    pub l_min: f64,
+    pub l_max: f64,
+    /// Adaptive: subdivision tolerance ε of (1 − α)·|C1 − C2| / |C1| < ε ([MLS]: 0.03).
+    pub epsilon: f64,
+    /// Preintegrated methods stop a ray once its opacity exceeds this ([MLS]: 0.99).
+    pub early_termination: f64,
+    /// Preintegration table resolution per scalar axis.
+    pub table_resolution: usize,
 }
 
 /// A validated scene.
@@ -146,6 +176,11 @@ const KNOWN: &[(&str, &[&str])] = &[
             "reference_step",
             "background",
             "min_transmittance",
+            "l_min",
+            "l_max",
+            "epsilon",
+            "early_termination",
+            "table_resolution",
         ],
     ),
 ];
@@ -533,13 +568,30 @@ impl Scene {
             method: ren.choice(
                 "method",
                 Method::Fixed,
-                &[("fixed", Method::Fixed), ("reference", Method::Reference)],
+                &[
+                    ("fixed", Method::Fixed),
+                    ("riemann", Method::Riemann),
+                    ("reference", Method::Reference),
+                    ("adaptive", Method::Adaptive),
+                ],
             )?,
             step: ren.positive("step", 0.25, 1e3)?,
             reference_step: ren.positive("reference_step", 1.0 / 32.0, 1e3)?,
             background: ren.vec3("background", [0.0; 3])?,
             min_transmittance: ren.float("min_transmittance", 1e-4, 0.0, 1.0)?,
+            l_min: ren.positive("l_min", 0.16, 1e3)?,
+            l_max: ren.positive("l_max", 2.6, 1e3)?,
+            epsilon: ren.float("epsilon", 0.03, 0.0, 1e3)?,
+            early_termination: ren.float("early_termination", 0.99, 0.0, 1.0)?,
+            table_resolution: ren.int("table_resolution", 512, 2, 4096)? as usize,
         };
+        if render.l_min > render.l_max {
+            return Err(ren.err(
+                "l_min",
+                &format!("at most render.l_max = {}", render.l_max),
+                &Value::Float(render.l_min),
+            ));
+        }
         Ok(Self {
             volume,
             reconstruction,

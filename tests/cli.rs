@@ -87,7 +87,12 @@ fn default_scene_renders_png_with_stats() {
     assert_eq!(st["method"], "fixed");
     assert!(st["function_evaluations"].as_u64().expect("count") > 65536);
     assert!(st["gpu_ms"]["raycast"].as_f64().expect("ms") > 0.0);
-    assert_eq!(st["variant"], "raycast:linear-wendland-local-grid");
+    assert_eq!(st["variant"], "raycast:linear-wendland-local-grid-fixed");
+    assert!(
+        st["table_lengths_world"]
+            .as_array()
+            .is_some_and(|l| !l.is_empty())
+    );
 }
 
 #[test]

@@ -58,6 +58,9 @@ fn glsl_and_rust_layouts_agree() {
         min_transmittance: 23.0,
         support_cells: 24.0,
         _pad: [25.0, 26.0, 27.0],
+        preint_range: v(28.0),
+        preint_dims: [29, 30, 31, 32],
+        integrator: v(33.0),
     };
     assert_eq!(*p, expected, "RenderParams");
 

@@ -4,8 +4,9 @@ mod common;
 
 use common::*;
 use vmls::render::gpu::{GpuField, GpuImage, render};
+use vmls::render::preintegration::PreintegrationTables;
 use vmls::render::raycast::{PixelResult, raycast_image};
-use vmls::render::{Field, RaySetup, load_volume};
+use vmls::render::{Field, RaySetup, build_tables, load_volume};
 use vmls::scene::Scene;
 use vmls::vk::Context;
 
@@ -24,6 +25,17 @@ fn field(scene: &Scene) -> Field {
     .expect("field")
 }
 
+fn tables(scene: &Scene, field: &Field) -> Option<PreintegrationTables> {
+    let setup = RaySetup::new(scene, field).expect("setup");
+    build_tables(
+        &setup,
+        field,
+        &scene.transfer,
+        scene.render.table_resolution,
+        |_| {},
+    )
+}
+
 fn gpu_render(
     ctx: &Context,
     compiler: &vmls::vk::ShaderCompiler,
@@ -32,26 +44,45 @@ fn gpu_render(
 ) -> GpuImage {
     let setup = RaySetup::new(scene, field).expect("setup");
     let gf = GpuField::upload(ctx, field).expect("upload");
-    render(ctx, compiler, field, &gf, &scene.transfer, &setup, |_| {}).expect("render")
+    let t = tables(scene, field);
+    render(
+        ctx,
+        compiler,
+        field,
+        &gf,
+        &scene.transfer,
+        t.as_ref(),
+        &setup,
+        |_| {},
+    )
+    .expect("render")
 }
 
 fn cpu_render(scene: &Scene, field: &Field) -> Vec<PixelResult> {
+    let t = tables(scene, field);
     raycast_image(
         &RaySetup::new(scene, field).expect("setup"),
         field,
         &scene.transfer,
+        t.as_ref(),
     )
 }
 
-fn max_difference(gpu: &GpuImage, cpu: &[PixelResult]) -> f64 {
+/// Largest RGBA difference per pixel.
+fn pixel_differences(gpu: &GpuImage, cpu: &[PixelResult]) -> Vec<f64> {
     gpu.pixels
         .iter()
         .zip(cpu)
-        .flat_map(|(g, c)| (0..4).map(move |k| (f64::from(g[k]) - c.rgba[k]).abs()))
-        .fold(0.0, f64::max)
+        .map(|(g, c)| {
+            (0..4)
+                .map(|k| (f64::from(g[k]) - c.rgba[k]).abs())
+                .fold(0.0, f64::max)
+        })
+        .collect()
 }
 
 const SMALL: &[&str] = &[
+    "render.table_resolution=128",
     "volume.resolution=17",
     "camera.width=24",
     "camera.height=20",
@@ -63,7 +94,7 @@ fn constant_field_matches_the_analytic_integral() {
     // f ≡ 0.5 everywhere (a tilted plane has f = 0.5 on no grid point, so use a flat TF instead):
     // the transfer function is constant, τ = 1.7, colour (1, 0.5, 0.25). Orthographic rays along
     // +x cross the whole box, L = 2: α = 1 − exp(−τL), C = c·α, whatever the field values.
-    let s = scene(&[
+    let base = [
         "volume.resolution=9",
         "transfer.points=[[0.0, 1.0, 0.5, 0.25, 1.7], [1.0, 1.0, 0.5, 0.25, 1.7]]",
         "camera.projection=\"orthographic\"",
@@ -74,8 +105,8 @@ fn constant_field_matches_the_analytic_integral() {
         "camera.height=8",
         "render.step=0.3",
         "render.background=[0.2, 0.2, 0.2]",
-    ]);
-    let f = field(&s);
+        "render.table_resolution=64",
+    ];
     let alpha = 1.0 - (-1.7f64 * 2.0).exp();
     let expect = [
         alpha + 0.2 * (1.0 - alpha),
@@ -83,29 +114,40 @@ fn constant_field_matches_the_analytic_integral() {
         0.25 * alpha + 0.2 * (1.0 - alpha),
         alpha,
     ];
-    let (ctx, compiler) = gpu();
-    let g = gpu_render(&ctx, &compiler, &s, &f);
-    finish(ctx);
-    let c = cpu_render(&s, &f);
-    for (gp, cp) in g.pixels.iter().zip(&c) {
-        for k in 0..4 {
-            assert!(
-                (cp.rgba[k] - expect[k]).abs() < 1e-12,
-                "CPU {:?} vs {expect:?}",
-                cp.rgba
-            );
-            assert!(
-                (f64::from(gp[k]) - expect[k]).abs() < 2e-6,
-                "GPU {gp:?} vs {expect:?}"
-            );
+    // (method, CPU bound, GPU bound, evaluations per ray): the midpoint rule is exact for a
+    // constant τ; preintegration is exact up to its f32 tables; riemann evaluates 27 midpoints
+    // (2 / (0.3 · 0.25) = 26.7 steps), fixed 27 interval ends plus the entry point.
+    for (method, cpu_bound, gpu_bound, evals) in
+        [("riemann", 1e-12, 2e-6, 27), ("fixed", 1e-6, 3e-6, 28)]
+    {
+        let mut o = base.to_vec();
+        let m = format!("render.method=\"{method}\"");
+        o.push(&m);
+        let s = scene(&o);
+        let f = field(&s);
+        let (ctx, compiler) = gpu();
+        let g = gpu_render(&ctx, &compiler, &s, &f);
+        finish(ctx);
+        let c = cpu_render(&s, &f);
+        for (gp, cp) in g.pixels.iter().zip(&c) {
+            for k in 0..4 {
+                assert!(
+                    (cp.rgba[k] - expect[k]).abs() < cpu_bound,
+                    "{method}: CPU {:?} vs {expect:?}",
+                    cp.rgba
+                );
+                assert!(
+                    (f64::from(gp[k]) - expect[k]).abs() < gpu_bound,
+                    "{method}: GPU {gp:?} vs {expect:?}"
+                );
+            }
         }
+        assert!(
+            g.counts.iter().all(|&n| n == evals),
+            "{method}: evaluations per ray {:?}",
+            &g.counts[..8]
+        );
     }
-    // 2 / (0.3 · 0.25 spacing) = 26.67 → 27 steps per ray.
-    assert!(
-        g.counts.iter().all(|&n| n == 27),
-        "steps per ray: {:?}",
-        &g.counts[..8]
-    );
 }
 
 #[test]
@@ -126,6 +168,26 @@ fn gpu_image_matches_cpu_reference() {
             "camera.eye=[0.1, 0.2, 0.3]",
             "camera.target=[1.0, 0.5, 0.0]",
         ],
+        vec!["render.method=\"riemann\""],
+        vec!["render.method=\"adaptive\""],
+        vec![
+            "render.method=\"adaptive\"",
+            "reconstruction.neighbours=\"octree\"",
+        ],
+        vec!["render.method=\"adaptive\"", "camera.eye=[0.1, 0.2, 0.3]"],
+        // ε = 0 terminates through l_min; l_min = l_max never subdivides; l_max longer than
+        // the volume clips every interval.
+        vec!["render.method=\"adaptive\"", "render.epsilon=0.0"],
+        vec![
+            "render.method=\"adaptive\"",
+            "render.l_min=1.0",
+            "render.l_max=1.0",
+        ],
+        vec![
+            "render.method=\"adaptive\"",
+            "render.l_max=40.0",
+            "render.l_min=1.0",
+        ],
     ] {
         let mut o = SMALL.to_vec();
         o.extend(extra.iter().copied());
@@ -135,19 +197,34 @@ fn gpu_image_matches_cpu_reference() {
         let g = gpu_render(&ctx, &compiler, &s, &f);
         finish(ctx);
         let c = cpu_render(&s, &f);
-        let diff = max_difference(&g, &c);
-        // f32 vs f64 through ~100 compositing steps of a dense transfer function.
-        assert!(diff < 2e-4, "{extra:?}: max pixel difference {diff:.2e}");
-        let count_mismatch = g
+        let diffs = pixel_differences(&g, &c);
+        let max = diffs.iter().copied().fold(0.0, f64::max);
+        let loose = diffs.iter().filter(|d| **d > 2e-4).count();
+        let decisions = g
             .counts
             .iter()
             .zip(&c)
             .filter(|(a, b)| **a != b.evaluations)
             .count();
-        assert!(
-            count_mismatch <= g.counts.len() / 50,
-            "{extra:?}: {count_mismatch} rays took a different number of steps"
+        eprintln!(
+            "{extra:?}: max {max:.2e}, {loose} pixels > 2e-4, {decisions} rays with other step counts"
         );
+        if extra.iter().any(|e| e.contains("adaptive")) {
+            // Accept/subdivide is a threshold decision: f32 and f64 may take a different
+            // branch on a few rays, which then differ by up to the integration tolerance.
+            assert!(
+                loose <= diffs.len() / 10,
+                "{extra:?}: {loose} pixels differ by more than 2e-4"
+            );
+            assert!(max < 2e-2, "{extra:?}: max pixel difference {max:.2e}");
+        } else {
+            // f32 vs f64 through ~100 compositing steps of a dense transfer function.
+            assert!(max < 2e-4, "{extra:?}: max pixel difference {max:.2e}");
+            assert!(
+                decisions <= g.counts.len() / 50,
+                "{extra:?}: {decisions} rays took a different number of steps"
+            );
+        }
         assert!(
             g.pixels.iter().any(|p| p[3] > 0.5),
             "{extra:?}: image is empty"
@@ -205,7 +282,7 @@ fn midpoint_rule_converges_to_the_reference() {
     let mut errors = Vec::new();
     for step in ["render.step=1.0", "render.step=0.5", "render.step=0.25"] {
         let mut o = SMALL.to_vec();
-        o.push(step);
+        o.extend([step, "render.method=\"riemann\""]);
         let s = scene(&o);
         let f = field(&s);
         let c = cpu_render(&s, &f);

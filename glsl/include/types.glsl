@@ -29,6 +29,9 @@ struct RenderParams {
     float _pad0;
     float _pad1;
     float _pad2;
+    vec4 preint_range;
+    uvec4 preint_dims;
+    vec4 integrator;
 };
 
 struct TfPoint {

@@ -7,13 +7,15 @@
 //! that a long render reports progress and no single dispatch runs for minutes (which a
 //! desktop driver's watchdog would kill).
 
+use super::preintegration::PreintegrationTables;
+use super::raycast::adaptive;
 use super::transfer::TransferFunction;
 use super::{Field, RaySetup};
 use crate::gpu_types::{
     CountPush, GRID_PAD, MlsOut, RayPush, RenderParams, Sample, binding, binding_defines,
 };
 use crate::recon::mls::{Basis, GradientMode, Weight};
-use crate::scene::NeighbourMode;
+use crate::scene::{Method, NeighbourMode};
 use crate::vk::{
     BindGroup, Buffer, BufferUsage, ComputePipeline, Context, ShaderCompiler, ShaderSource, VkError,
 };
@@ -33,6 +35,10 @@ pub struct Variant {
     pub weight: Weight,
     pub gradient: GradientMode,
     pub neighbours: NeighbourMode,
+    /// The ray caster's integrator (`None` for kernels that do not integrate).
+    pub method: Option<Method>,
+    /// Adaptive stack entries (levels of subdivision).
+    pub adaptive_levels: usize,
 }
 
 impl Variant {
@@ -45,6 +51,17 @@ impl Variant {
             weight: r.weight,
             gradient: r.gradient,
             neighbours: r.neighbours,
+            method: None,
+            adaptive_levels: 1,
+        }
+    }
+
+    /// The ray caster's variant for a field and a ray setup.
+    pub fn for_render(field: &Field, setup: &RaySetup) -> Self {
+        Self {
+            method: Some(setup.method),
+            adaptive_levels: adaptive::stack_size(setup.l_max, setup.l_min),
+            ..Self::of(field)
         }
     }
 
@@ -77,13 +94,20 @@ impl Variant {
             "MLS_NEIGHBOURS".into(),
             flag(self.neighbours == NeighbourMode::Octree),
         ));
+        let ray_method = match self.method {
+            Some(Method::Fixed) => 1,
+            Some(Method::Adaptive) => 2,
+            _ => 0,
+        };
+        d.push(("RAY_METHOD".into(), ray_method.to_string()));
+        d.push(("ADAPTIVE_LEVELS".into(), self.adaptive_levels.to_string()));
         d
     }
 
     /// Human-readable name, reported in `--stats` as `variant`.
     pub fn name(&self, kernel: &str) -> String {
         format!(
-            "{kernel}:{}-{}-{}-{}",
+            "{kernel}:{}-{}-{}-{}{}",
             match self.basis {
                 Basis::Constant => "constant",
                 Basis::Linear => "linear",
@@ -100,7 +124,10 @@ impl Variant {
             match self.neighbours {
                 NeighbourMode::Grid => "grid",
                 NeighbourMode::Octree => "octree",
-            }
+            },
+            self.method
+                .map(|m| format!("-{}", m.name()))
+                .unwrap_or_default()
         )
     }
 }
@@ -156,8 +183,18 @@ pub fn render_params(field: &Field, setup: Option<&RaySetup>, tf_count: u32) -> 
         p.height = r.camera.height;
         p.step = r.step as f32;
         p.min_transmittance = r.min_transmittance as f32;
+        p.integrator = [r.epsilon as f32, r.early_termination as f32, 0.0, 0.0];
+        p.preint_range[3] = r.l_min as f32;
     }
     p
+}
+
+/// Adds the tables' description to the kernel constants.
+fn table_params(p: &mut RenderParams, tables: &PreintegrationTables) {
+    p.preint_range[0] = tables.s_min as f32;
+    p.preint_range[1] = tables.s_max as f32;
+    p.preint_range[2] = tables.lengths[0] as f32;
+    p.preint_dims = [tables.resolution as u32, tables.lengths.len() as u32, 0, 0];
 }
 
 /// The field's data on the GPU: grid values, or samples + octree.
@@ -244,20 +281,41 @@ fn pipeline_for(
     ComputePipeline::new(ctx, &variant.name(kernel), &spirv, &bindings, push)
 }
 
-/// Ray casts the field with the scene's fixed step; `progress` gets the fraction of rows done.
+/// Ray casts the field with the setup's method; `tables` must be the setup's preintegration
+/// tables for the preintegrated methods. `progress` gets the fraction of rows done.
+#[allow(clippy::too_many_arguments)]
 pub fn render(
     ctx: &Context,
     compiler: &ShaderCompiler,
     field: &Field,
     gpu_field: &GpuField,
     tf: &TransferFunction,
+    tables: Option<&PreintegrationTables>,
     setup: &RaySetup,
     mut progress: impl FnMut(f64),
 ) -> Result<GpuImage, VkError> {
-    let variant = Variant::of(field);
+    let variant = Variant::for_render(field, setup);
+    if setup.method.preintegrated() && tables.is_none() {
+        return Err(VkError::Usage(format!(
+            "method '{}' needs preintegration tables",
+            setup.method.name()
+        )));
+    }
     let data = gpu_field.bindings();
     let mut binding_ids: Vec<u32> = data.iter().map(|(b, _)| *b).collect();
     binding_ids.extend([binding::TRANSFER, binding::IMAGE, binding::COUNTS]);
+    let table_data: Option<Vec<[f32; 4]>> =
+        tables.filter(|_| setup.method.preintegrated()).map(|t| {
+            t.tables
+                .iter()
+                .flatten()
+                .chain(&t.limits)
+                .copied()
+                .collect()
+        });
+    if table_data.is_some() {
+        binding_ids.push(binding::PREINT);
+    }
     let pipeline = pipeline_for(
         ctx,
         compiler,
@@ -269,7 +327,14 @@ pub fn render(
     let (w, h) = (setup.camera.width, setup.camera.height);
     let pixels = u64::from(w) * u64::from(h);
     let gpu_tf = tf.to_gpu();
-    let params = render_params(field, Some(setup), gpu_tf.len() as u32);
+    let mut params = render_params(field, Some(setup), gpu_tf.len() as u32);
+    if let Some(t) = tables {
+        table_params(&mut params, t);
+    }
+    let table_buf = match &table_data {
+        Some(d) => Some(Buffer::from_slice(ctx, "preintegration tables", d)?),
+        None => None,
+    };
     let params_buf = Buffer::from_slice(ctx, "render params", &[params])?;
     let tf_buf = Buffer::from_slice(ctx, "transfer function", &gpu_tf)?;
     let image = Buffer::new(ctx, "image", pixels * 16, BufferUsage::Storage)?;
@@ -281,6 +346,9 @@ pub fn render(
         (binding::IMAGE, &image),
         (binding::COUNTS, &counts),
     ]);
+    if let Some(t) = &table_buf {
+        all.push((binding::PREINT, t));
+    }
     let group = BindGroup::new(ctx, &pipeline, &all)?;
     let band_rows = (BAND_PIXELS / w.max(1))
         .clamp(8, h.max(8))

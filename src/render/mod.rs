@@ -19,6 +19,8 @@ use crate::scene::{Method, NeighbourMode, Reconstruction, Scene, SceneError};
 use crate::vk::VkError;
 use camera::{Camera, ViewBasis};
 use glam::DVec3;
+use preintegration::PreintegrationTables;
+use transfer::TransferFunction;
 
 /// Errors of the render layer (and everything below it).
 #[derive(Debug, thiserror::Error)]
@@ -157,7 +159,7 @@ impl Neighbours for &Octree {
     }
 }
 
-/// Everything a ray needs besides the field: camera frame, clip box, step and compositing.
+/// Everything a ray needs besides the field: camera frame, clip box, integrator and compositing.
 #[derive(Debug, Clone, Copy)]
 pub struct RaySetup {
     pub camera: Camera,
@@ -165,9 +167,17 @@ pub struct RaySetup {
     pub frame_origin: DVec3,
     pub box_lo: DVec3,
     pub box_hi: DVec3,
-    /// Step length in world units.
+    pub method: Method,
+    /// Step length in world units (fixed, riemann, reference).
     pub step: f64,
+    /// Adaptive interval bounds in world units.
+    pub l_min: f64,
+    pub l_max: f64,
+    pub epsilon: f64,
+    /// Preintegrated methods stop at this opacity.
+    pub early_termination: f64,
     pub background: [f64; 3],
+    /// Riemann and reference methods stop below this transmittance.
     pub min_transmittance: f64,
 }
 
@@ -182,20 +192,81 @@ impl RaySetup {
         })?;
         let (box_lo, box_hi) = field.bounds();
         let spacings = match scene.render.method {
-            Method::Fixed => scene.render.step,
             Method::Reference => scene.render.reference_step,
+            _ => scene.render.step,
         };
+        let unit = field.min_spacing();
         Ok(Self {
             camera: scene.camera,
             basis,
             frame_origin: field.frame_origin,
             box_lo,
             box_hi,
-            step: spacings * field.min_spacing(),
+            method: scene.render.method,
+            step: spacings * unit,
+            l_min: scene.render.l_min * unit,
+            l_max: scene.render.l_max * unit,
+            epsilon: scene.render.epsilon,
+            early_termination: scene.render.early_termination,
             background: scene.render.background,
             min_transmittance: scene.render.min_transmittance,
         })
     }
+
+    /// The table lengths this setup's method reads (longest first), or none: fixed uses the
+    /// step, adaptive l_max, l_max/2, … ≥ l_min; both add halvings for clipped remainders
+    /// ([`preintegration::remainder_levels`]).
+    pub fn table_lengths(&self, tf: &TransferFunction) -> Vec<f64> {
+        let (top, bottom) = match self.method {
+            Method::Fixed => (self.step, self.step),
+            Method::Adaptive => (self.l_max, self.l_min),
+            Method::Riemann | Method::Reference => return Vec::new(),
+        };
+        let mut lengths = vec![top];
+        while let Some(&l) = lengths.last() {
+            if 0.5 * l < bottom * (1.0 - 1e-9) || lengths.len() >= 24 {
+                break;
+            }
+            lengths.push(0.5 * l);
+        }
+        let tau_max = tf.points().iter().map(|p| p[4]).fold(0.0, f64::max);
+        let last = lengths[lengths.len() - 1];
+        for _ in 0..preintegration::remainder_levels(last, tau_max) {
+            let l = lengths[lengths.len() - 1];
+            lengths.push(0.5 * l);
+        }
+        lengths
+    }
+}
+
+/// Builds the preintegration tables a setup needs (`None` for the direct methods). The scalar
+/// range covers the data with a 5% margin each side, because MLS may overshoot the samples;
+/// values beyond it are clamped to the range.
+pub fn build_tables(
+    setup: &RaySetup,
+    field: &Field,
+    tf: &TransferFunction,
+    resolution: usize,
+    progress: impl Fn(f64) + Sync,
+) -> Option<PreintegrationTables> {
+    let lengths = setup.table_lengths(tf);
+    if lengths.is_empty() {
+        return None;
+    }
+    let (lo, hi) = field
+        .values
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(l, h), &v| {
+            (l.min(f64::from(v)), h.max(f64::from(v)))
+        });
+    let margin = 0.05 * (hi - lo).max(1e-6);
+    Some(PreintegrationTables::build(
+        tf,
+        (lo - margin, hi + margin),
+        &lengths,
+        resolution,
+        progress,
+    ))
 }
 
 /// Loads or generates the scene's volume.

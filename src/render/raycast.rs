@@ -1,14 +1,24 @@
 //! Emission–absorption ray casting, f64 CPU twin of `glsl/raycast.comp` (stage `raycast`).
 //!
-//! Per ray: clip to the sample box, then n = ⌈L/δ⌉ midpoint steps of length δ (the last one
-//! shortened to end at the exit); per step a = 1 − exp(−τ(s)·δ), C += T·a·c(s), T *= 1 − a;
-//! stop when T < min_transmittance. Where no sample has weight the field is undefined and the
-//! step adds nothing. Pixel = (C + T·background, 1 − T).
+//! Per ray: clip to the sample box, then integrate with the setup's method ([MLS] §4):
+//! - `riemann`/`reference`: n = ⌈L/δ⌉ midpoint steps of length δ (the last one shortened to end
+//!   at the exit); per step a = 1 − exp(−τ(s)·δ), C += T·a·c(s), T *= 1 − a; stop when
+//!   T < min_transmittance;
+//! - `fixed`: preintegration, s evaluated at interval ends, one table lookup per interval;
+//! - `adaptive`: [MLS]'s subdivision (see `adaptive`).
+//!
+//! Where no sample has weight the field is undefined: a midpoint step there adds nothing, and
+//! so does a preintegrated interval with an undefined end. Pixel = (C + T·background, 1 − T).
+
+pub mod adaptive;
 
 use super::camera::clip_box;
+use super::preintegration::PreintegrationTables;
 use super::transfer::TransferFunction;
 use super::{Field, RaySetup};
-use crate::recon::mls::{Neighbours, mls_evaluate};
+use crate::recon::mls::{MlsSettings, Neighbours, mls_evaluate};
+use crate::scene::Method;
+use glam::DVec3;
 
 /// One pixel of the reference integrator.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -18,58 +28,136 @@ pub struct PixelResult {
     pub evaluations: u32,
 }
 
-/// Integrates the ray through pixel (px, py).
+/// Front-to-back accumulation along one ray.
+struct Ray<'a> {
+    o: DVec3,
+    d: DVec3,
+    mls: MlsSettings,
+    neighbours: &'a dyn Neighbours,
+    color: [f64; 3],
+    transmittance: f64,
+    evaluations: u32,
+}
+
+impl Ray<'_> {
+    /// f at parameter t (one counted MLS evaluation); `None` where no sample has weight.
+    fn eval(&mut self, t: f64) -> Option<f64> {
+        self.evaluations += 1;
+        mls_evaluate(&self.mls, self.neighbours, (self.o + self.d * t).to_array()).map(|m| m.value)
+    }
+
+    /// Composites a premultiplied segment (C, α) behind what is accumulated.
+    fn composite(&mut self, c: [f64; 3], alpha: f64) {
+        for (acc, ci) in self.color.iter_mut().zip(c) {
+            *acc += self.transmittance * ci;
+        }
+        self.transmittance *= 1.0 - alpha;
+    }
+}
+
+/// Midpoint rule (`riemann`, `reference`): n = ⌈L/δ⌉ steps, the last one shortened.
+fn integrate_riemann(ray: &mut Ray<'_>, setup: &RaySetup, tf: &TransferFunction, t0: f64, t1: f64) {
+    let steps = ((t1 - t0) / setup.step).ceil() as u64;
+    for i in 0..steps {
+        let ta = t0 + i as f64 * setup.step;
+        let dt = setup.step.min(t1 - ta);
+        if dt <= 0.0 {
+            break;
+        }
+        let Some(s) = ray.eval(ta + 0.5 * dt) else {
+            continue;
+        };
+        let (c, tau) = tf.lookup(s);
+        let a = 1.0 - (-tau * dt).exp();
+        ray.composite(c.map(|x| x * a), a);
+        if ray.transmittance < setup.min_transmittance {
+            break;
+        }
+    }
+}
+
+/// Preintegration with a constant step l (`fixed`): s at interval ends, one lookup of the
+/// l-table per interval; the last, shorter interval uses the clipped composite.
+fn integrate_fixed(
+    ray: &mut Ray<'_>,
+    setup: &RaySetup,
+    tables: &PreintegrationTables,
+    t0: f64,
+    t1: f64,
+) {
+    let l = setup.step;
+    let steps = ((t1 - t0) / l).ceil() as u64;
+    let mut prev = ray.eval(t0);
+    for i in 0..steps {
+        let ta = t0 + i as f64 * l;
+        let tb = (ta + l).min(t1);
+        if tb <= ta {
+            break;
+        }
+        let next = ray.eval(tb);
+        if let (Some(sa), Some(sb)) = (prev, next) {
+            let (c, a) = if i + 1 < steps {
+                let e = tables.lookup(&tables.tables[0], sa, sb);
+                ([e[0], e[1], e[2]], e[3])
+            } else {
+                tables.segment(sa, sb, tb - ta)
+            };
+            ray.composite(c, a);
+        }
+        prev = next;
+        if 1.0 - ray.transmittance > setup.early_termination {
+            break;
+        }
+    }
+}
+
+/// Integrates the ray through pixel (px, py) with the setup's method. `tables` must be the
+/// setup's preintegration tables for the preintegrated methods.
 pub fn raycast(
     setup: &RaySetup,
     field: &Field,
     neighbours: &dyn Neighbours,
     tf: &TransferFunction,
+    tables: Option<&PreintegrationTables>,
     px: u32,
     py: u32,
 ) -> PixelResult {
     let (o, d) = setup.camera.ray(&setup.basis, setup.frame_origin, px, py);
-    let mls = field.mls();
-    let mut color = [0.0f64; 3];
-    let mut transmittance = 1.0f64;
-    let mut evaluations = 0u32;
+    let mut ray = Ray {
+        o,
+        d,
+        mls: field.mls(),
+        neighbours,
+        color: [0.0; 3],
+        transmittance: 1.0,
+        evaluations: 0,
+    };
     if let Some((t0, t1)) = clip_box(o, d, setup.box_lo, setup.box_hi) {
-        let steps = ((t1 - t0) / setup.step).ceil() as u64;
-        for i in 0..steps {
-            let ta = t0 + i as f64 * setup.step;
-            let dt = setup.step.min(t1 - ta);
-            if dt <= 0.0 {
-                break;
-            }
-            let x = o + d * (ta + 0.5 * dt);
-            evaluations += 1;
-            let Some(m) = mls_evaluate(&mls, neighbours, x.to_array()) else {
-                continue;
-            };
-            let (c, tau) = tf.lookup(m.value);
-            let a = 1.0 - (-tau * dt).exp();
-            for (acc, ci) in color.iter_mut().zip(c) {
-                *acc += transmittance * a * ci;
-            }
-            transmittance *= 1.0 - a;
-            if transmittance < setup.min_transmittance {
-                break;
-            }
+        match (setup.method, tables) {
+            (Method::Fixed, Some(t)) => integrate_fixed(&mut ray, setup, t, t0, t1),
+            (Method::Adaptive, Some(t)) => adaptive::integrate(&mut ray, setup, t, t0, t1),
+            _ => integrate_riemann(&mut ray, setup, tf, t0, t1),
         }
     }
-    let bg = setup.background;
+    let (bg, tr) = (setup.background, ray.transmittance);
     PixelResult {
         rgba: [
-            color[0] + transmittance * bg[0],
-            color[1] + transmittance * bg[1],
-            color[2] + transmittance * bg[2],
-            1.0 - transmittance,
+            ray.color[0] + tr * bg[0],
+            ray.color[1] + tr * bg[1],
+            ray.color[2] + tr * bg[2],
+            1.0 - tr,
         ],
-        evaluations,
+        evaluations: ray.evaluations,
     }
 }
 
 /// Renders the whole image on the CPU (rows split over the available cores).
-pub fn raycast_image(setup: &RaySetup, field: &Field, tf: &TransferFunction) -> Vec<PixelResult> {
+pub fn raycast_image(
+    setup: &RaySetup,
+    field: &Field,
+    tf: &TransferFunction,
+    tables: Option<&PreintegrationTables>,
+) -> Vec<PixelResult> {
     let w = setup.camera.width as usize;
     let h = setup.camera.height as usize;
     let mut out = vec![
@@ -92,6 +180,7 @@ pub fn raycast_image(setup: &RaySetup, field: &Field, tf: &TransferFunction) -> 
                         field,
                         neighbours.as_ref(),
                         tf,
+                        tables,
                         (index % w) as u32,
                         (index / w) as u32,
                     );

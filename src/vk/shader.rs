@@ -26,6 +26,7 @@ static SOURCES: &[(&str, &str)] = embed![
     "include/neighbours.glsl",
     "include/transfer.glsl",
     "include/camera.glsl",
+    "include/preint.glsl",
     "raycast.comp",
     "mls_eval.comp",
     "probe_fma.comp",

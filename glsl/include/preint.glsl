@@ -1,0 +1,68 @@
+// Preintegration tables ([MLS] §4): f32 twin of PreintegrationTables::lookup and ::segment in
+// src/render/preintegration.rs. Table k (length preint_range.z · 2^−k) holds N² entries
+// (C.rgb, α) at index k·N² + f + N·b; the zero-length limits (mean colour, τ̄) follow the last
+// table. Needs `params` declared by the kernel.
+#ifndef VMLS_PREINT_GLSL
+#define VMLS_PREINT_GLSL
+
+layout(std430, binding = BINDING_PREINT) readonly buffer PreintBuf { vec4 preint[]; };
+
+// Bilinear lookup of table k at (s_f, s_b), clamped to the table's scalar range.
+vec4 preint_lookup(uint k, float s_f, float s_b) {
+    uint n = params.preint_dims.x;
+    float n1 = float(n - 1u);
+    float scale = n1 / (params.preint_range.y - params.preint_range.x);
+    float x = clamp((s_f - params.preint_range.x) * scale, 0.0, n1);
+    float y = clamp((s_b - params.preint_range.x) * scale, 0.0, n1);
+    uint x0 = min(uint(x), n - 2u);
+    uint y0 = min(uint(y), n - 2u);
+    float fx = x - float(x0);
+    float fy = y - float(y0);
+    uint base = k * n * n + x0 + n * y0;
+    vec4 a = mix(preint[base], preint[base + 1u], fx);
+    vec4 b = mix(preint[base + n], preint[base + n + 1u], fx);
+    return mix(a, b, fy);
+}
+
+// 1 − e^{−x} without cancellation for small x.
+float one_minus_exp(float x) {
+    return x < 1e-3 ? x * (1.0 - 0.5 * x) : 1.0 - exp(-x);
+}
+
+// (C, α) of a segment of any length r in (0, longest table]: binary decomposition over the
+// table lengths, then the remainder from the zero-length limits (stage preintegrate_clipped).
+vec4 preint_segment(float s_f, float s_b, float r) {
+    vec3 color = vec3(0.0);
+    float alpha = 0.0;
+    float done = 0.0;
+    uint levels = params.preint_dims.y;
+    float l = params.preint_range.z;
+    for (uint k = 0u; k < levels; ++k) {
+        if (r - done >= l * (1.0 - 1e-6)) {
+            float end = min(done + l, r);
+            vec4 e = preint_lookup(k, s_f + (s_b - s_f) * (done / r), s_f + (s_b - s_f) * (end / r));
+            color += (1.0 - alpha) * e.rgb;
+            alpha += (1.0 - alpha) * e.a;
+            done = end;
+        }
+        l *= 0.5;
+    }
+    float rest = r - done;
+    if (rest > 0.0) {
+        float s0 = s_f + (s_b - s_f) * (done / r);
+        vec4 zero = preint_lookup(levels, s0, s_b);
+        float tau = zero.a;
+        float a = one_minus_exp(rest * tau);
+        vec4 e = preint_lookup(levels - 1u, s0, s_b);
+        float t_small = 2.0 * l * tau;
+        vec3 c = zero.rgb;
+        if (e.a > 0.0 && t_small > 0.0) {
+            c += (e.rgb / e.a - zero.rgb) * min(rest * tau / t_small, 1.0);
+        }
+        color += (1.0 - alpha) * a * c;
+        alpha += (1.0 - alpha) * a;
+    }
+    return vec4(color, alpha);
+}
+
+#endif

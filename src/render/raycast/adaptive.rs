@@ -1,0 +1,127 @@
+//! [MLS] §4 adaptive subdivision, f64 twin of `integrate_adaptive` in `glsl/raycast.comp`.
+//!
+//! The ray is cut into intervals of l_max (the last one clipped at the exit). An interval [a, e]
+//! with scalars s_a, s_e is compared with its two halves: C1 = table(len)(s_a, s_e), C2 = the
+//! halves composited (one new evaluation at the midpoint). It is accepted when
+//! (1 − α_acc)·|C1 − C2| ≤ ε·|C1| (|·| the RGB norm) and the directional derivative does not
+//! change sign (∇f(a)·v · ∇f(e)·v ≥ 0, which could hide an isosurface), or when its half would
+//! be shorter than l_min; accepted intervals composite C2. Otherwise the midpoint is pushed
+//! and the left half is processed first, since its α is needed for the right half's test. The
+//! stack holds pending interval ends with their depths, strictly deeper towards the top except
+//! for the two halves of the last split: at most ⌊log2(l_max/l_min)⌋ + 1 entries.
+
+use super::Ray;
+use crate::render::RaySetup;
+use crate::render::preintegration::PreintegrationTables;
+
+/// A point on the ray: parameter, scalar (None = undefined) and directional derivative.
+#[derive(Debug, Clone, Copy)]
+struct Knot {
+    t: f64,
+    s: Option<f64>,
+    g: f64,
+}
+
+/// Stack entries needed for l_max/l_min (the shader's `ADAPTIVE_STACK`).
+pub fn stack_size(l_max: f64, l_min: f64) -> usize {
+    let mut levels = 1;
+    let mut l = l_max;
+    while 0.5 * l >= l_min * (1.0 - 1e-9) {
+        l *= 0.5;
+        levels += 1;
+    }
+    levels
+}
+
+fn knot(ray: &mut Ray<'_>, t: f64) -> Knot {
+    ray.evaluations += 1;
+    let x = (ray.o + ray.d * t).to_array();
+    match crate::recon::mls::mls_evaluate(&ray.mls, ray.neighbours, x) {
+        Some(m) => Knot {
+            t,
+            s: Some(m.value),
+            g: m.gradient[0] * ray.d.x + m.gradient[1] * ray.d.y + m.gradient[2] * ray.d.z,
+        },
+        None => Knot { t, s: None, g: 0.0 },
+    }
+}
+
+/// (C, α) of an interval of exactly `len` between two knots: table `level` when the interval
+/// is a full-length one (its length is then `lengths[level]` by construction), else the clipped
+/// composite. Undefined ends contribute nothing.
+fn segment(
+    tables: &PreintegrationTables,
+    a: &Knot,
+    e: &Knot,
+    len: f64,
+    level: Option<usize>,
+) -> ([f64; 3], f64) {
+    let (Some(sa), Some(se)) = (a.s, e.s) else {
+        return ([0.0; 3], 0.0);
+    };
+    match level {
+        Some(k) => {
+            let v = tables.lookup(&tables.tables[k], sa, se);
+            ([v[0], v[1], v[2]], v[3])
+        }
+        None => tables.segment(sa, se, len),
+    }
+}
+
+fn norm(c: [f64; 3]) -> f64 {
+    (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt()
+}
+
+/// Integrates [t0, t1] adaptively into `ray`. Each pending end carries the depth of the interval
+/// it closes, so lengths are exact (top length · 2^−depth) and, for full-length top intervals,
+/// equal table `depth` without comparing floats.
+pub(super) fn integrate(
+    ray: &mut Ray<'_>,
+    setup: &RaySetup,
+    tables: &PreintegrationTables,
+    t0: f64,
+    t1: f64,
+) {
+    let levels = stack_size(setup.l_max, setup.l_min);
+    let mut stack: Vec<(Knot, usize)> = Vec::with_capacity(levels);
+    let mut a = knot(ray, t0);
+    while a.t < t1 && 1.0 - ray.transmittance <= setup.early_termination {
+        let full = a.t + setup.l_max <= t1;
+        let top = if full { setup.l_max } else { t1 - a.t };
+        let end = if full { a.t + setup.l_max } else { t1 };
+        stack.push((knot(ray, end), 0));
+        while let Some(&(e, depth)) = stack.last() {
+            let len = top * 0.5f64.powi(depth as i32);
+            let level = full.then_some(depth);
+            let (c1, a1) = segment(tables, &a, &e, len, level);
+            let can_split = depth + 1 < levels && (full || 0.5 * len >= setup.l_min);
+            let (c, alpha) = if can_split {
+                let m = knot(ray, 0.5 * (a.t + e.t));
+                let half = level.map(|k| k + 1);
+                let (cl, al) = segment(tables, &a, &m, 0.5 * len, half);
+                let (cr, ar) = segment(tables, &m, &e, 0.5 * len, half);
+                let c2 = [0, 1, 2].map(|k| cl[k] + (1.0 - al) * cr[k]);
+                let a2 = al + (1.0 - al) * ar;
+                let diff = norm([0, 1, 2].map(|k| c1[k] - c2[k]));
+                let sign_change = a.g * e.g < 0.0;
+                if sign_change || ray.transmittance * diff > setup.epsilon * norm(c1) {
+                    // Both halves are one level deeper; the left one is processed first.
+                    if let Some(top) = stack.last_mut() {
+                        top.1 = depth + 1;
+                    }
+                    stack.push((m, depth + 1));
+                    continue;
+                }
+                (c2, a2)
+            } else {
+                (c1, a1)
+            };
+            ray.composite(c, alpha);
+            stack.pop();
+            a = e;
+            if 1.0 - ray.transmittance > setup.early_termination {
+                return;
+            }
+        }
+    }
+}
