@@ -14,6 +14,7 @@ layout(std430, binding = BINDING_PROBE) writeonly buffer ProbeBuf {
     MlsOut mls_out;
     RayPush ray_push;
     CountPush count_push;
+    IsoSurface iso_surface;
 };
 
 vec4 v(float k) { return vec4(k, k + 0.25, k + 0.5, k + 0.75); }
@@ -46,6 +47,14 @@ void main() {
     render_params.preint_range = v(28.0);
     render_params.preint_dims = uvec4(29u, 30u, 31u, 32u);
     render_params.integrator = v(33.0);
+    render_params.lighting = v(34.0);
+    render_params.iso_count = uvec4(35u, 36u, 37u, 38u);
+
+    iso_surface.color_opacity = v(1.0);
+    iso_surface.value = 2.0;
+    iso_surface._pad0 = 3.0;
+    iso_surface._pad1 = 4.0;
+    iso_surface._pad2 = 5.0;
 
     tf_point.color_tau = v(1.0);
     tf_point.s = 2.0;

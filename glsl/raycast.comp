@@ -22,30 +22,200 @@ layout(push_constant) uniform Push { RayPush band; };
 #include "preint.glsl"
 #endif
 
-// A point on the ray: (t, s, ∇f·d, defined ? 1 : 0).
-vec4 knot(vec3 o, vec3 d, float t, inout uint evaluations) {
+#if MAX_ISO > 0
+#include "shading.glsl"
+#endif
+
+// A point on the ray: (t, s, ∇f·d, defined ? 1 : 0); its gradient is returned separately.
+vec4 knot_gradient(vec3 o, vec3 d, float t, inout uint evaluations, out vec3 gradient) {
     MlsResult m = mls_evaluate(o + d * t);
     evaluations += 1u;
+    gradient = m.gradient;
     return vec4(t, m.value, dot(m.gradient, d), m.terms > 0u ? 1.0 : 0.0);
 }
 
+vec4 knot(vec3 o, vec3 d, float t, inout uint evaluations) {
+    vec3 unused;
+    return knot_gradient(o, d, t, evaluations, unused);
+}
+
+#if MAX_ISO > 0
+// Whether f crosses v in (a, e] (twin of interval::crosses).
+bool crosses(float sa, float se, float v) {
+    return (sa - v) * (se - v) < 0.0 || (se == v && sa != v);
+}
+
+const uint LOCATE_ITERATIONS = 12u;
+
+// Regula falsi (Illinois) for f = v between knots a and e; returns t, the gradient there.
+// A knot exactly at v is re-evaluated for its gradient (knots do not carry one).
+float locate_crossing(vec3 o, vec3 d, vec4 a, vec4 e, float v, inout uint evaluations,
+                      out vec3 gradient) {
+    if (e.y == v) {
+        knot_gradient(o, d, e.x, evaluations, gradient);
+        return e.x;
+    }
+    gradient = vec3(0.0);
+    vec2 lo = vec2(a.x, a.y - v);
+    vec2 hi = vec2(e.x, e.y - v);
+    float width = e.x - a.x;
+    float best = e.x;
+    for (uint it = 0u; it < LOCATE_ITERATIONS; ++it) {
+        float t = clamp(lo.x - lo.y * (hi.x - lo.x) / (hi.y - lo.y), lo.x, hi.x);
+        vec3 g;
+        vec4 k = knot_gradient(o, d, t, evaluations, g);
+        if (k.w == 0.0) {
+            return best;
+        }
+        best = t;
+        gradient = g;
+        float fk = k.y - v;
+        if (abs(fk) <= 1e-6 || hi.x - lo.x <= 1e-6 * width) {
+            break;
+        }
+        if ((fk < 0.0) == (lo.y < 0.0)) {
+            lo = vec2(t, fk);
+            hi.y *= 0.5;
+        } else {
+            hi = vec2(t, fk);
+            lo.y *= 0.5;
+        }
+    }
+    return best;
+}
+
+// Crossings of [a, e], sorted by t: up to MAX_ISO (t, iso index) pairs; returns their count.
+uint find_crossings(vec3 o, vec3 d, vec4 a, vec4 e, inout uint evaluations,
+                    out vec4 hit_t, out vec3 hit_g[MAX_ISO], out uvec4 hit_i) {
+    uint n = 0u;
+    hit_t = vec4(0.0);
+    hit_i = uvec4(0u);
+    [[unroll]] for (int i = 0; i < MAX_ISO; ++i) {
+        hit_g[i] = vec3(0.0);
+        if (uint(i) < params.iso_count.x && crosses(a.y, e.y, isos[i].value)) {
+            vec3 g;
+            float t = locate_crossing(o, d, a, e, isos[i].value, evaluations, g);
+            // Sorted insertion with constant indices only: find the slot, shift, store.
+            uint slot = n;
+            [[unroll]] for (int j = 0; j < MAX_ISO; ++j) {
+                if (uint(j) < n && hit_t[j] > t && uint(j) < slot) {
+                    slot = uint(j);
+                }
+            }
+            [[unroll]] for (int j = MAX_ISO - 1; j > 0; --j) {
+                if (uint(j) > slot && uint(j) <= n) {
+                    hit_t[j] = hit_t[j - 1];
+                    hit_g[j] = hit_g[j - 1];
+                    hit_i[j] = hit_i[j - 1];
+                }
+            }
+            [[unroll]] for (int j = 0; j < MAX_ISO; ++j) {
+                if (uint(j) == slot) {
+                    hit_t[j] = t;
+                    hit_g[j] = g;
+                    hit_i[j] = uint(i);
+                }
+            }
+            n += 1u;
+        }
+    }
+    return n;
+}
+
+#endif
+
+// Composites the shaded isosurfaces crossed between two knots (midpoint samples).
+void emit_crossings(vec3 o, vec3 d, vec4 a, vec4 e, inout vec3 color, inout float transmittance,
+                    inout uint evaluations) {
+#if MAX_ISO > 0
+    if (params.iso_count.x == 0u || a.w == 0.0 || e.w == 0.0) {
+        return;
+    }
+    vec4 hit_t;
+    vec3 hit_g[MAX_ISO];
+    uvec4 hit_i;
+    uint n = find_crossings(o, d, a, e, evaluations, hit_t, hit_g, hit_i);
+    [[unroll]] for (int j = 0; j < MAX_ISO; ++j) {
+        if (uint(j) < n) {
+            IsoSurface iso = isos[hit_i[j]];
+            color += transmittance * shade_surface(iso, hit_g[j], d);
+            transmittance *= 1.0 - iso.color_opacity.a;
+        }
+    }
+#endif
+}
+
+#if RAY_METHOD != 0
+// Composites [a, e] of exactly len (table `level` when full, else the clipped composite), split
+// at isosurface crossings (twin of interval::emit_interval).
+void emit_interval(vec3 o, vec3 d, vec4 a, vec4 e, float len, bool full, uint level,
+                   inout vec3 color, inout float transmittance, inout uint evaluations) {
+    if (a.w == 0.0 || e.w == 0.0) {
+        return;
+    }
+#if MAX_ISO > 0
+    vec4 hit_t;
+    vec3 hit_g[MAX_ISO];
+    uvec4 hit_i;
+    uint n = find_crossings(o, d, a, e, evaluations, hit_t, hit_g, hit_i);
+#else
+    uint n = 0u;
+#endif
+    if (n == 0u) {
+        vec4 c = full ? preint_lookup(level, a.y, e.y) : preint_segment(a.y, e.y, len);
+        color += transmittance * c.rgb;
+        transmittance *= 1.0 - c.a;
+        return;
+    }
+#if MAX_ISO > 0
+    float scale = len / (e.x - a.x);
+    float t = a.x;
+    float s = a.y;
+    [[unroll]] for (int j = 0; j < MAX_ISO; ++j) {
+        if (uint(j) < n) {
+            IsoSurface iso = isos[hit_i[j]];
+            float piece = (hit_t[j] - t) * scale;
+            if (piece > 0.0) {
+                vec4 c = preint_segment(s, iso.value, piece);
+                color += transmittance * c.rgb;
+                transmittance *= 1.0 - c.a;
+            }
+            color += transmittance * shade_surface(iso, hit_g[j], d);
+            transmittance *= 1.0 - iso.color_opacity.a;
+            t = hit_t[j];
+            s = iso.value;
+        }
+    }
+    float piece = (e.x - t) * scale;
+    if (piece > 0.0) {
+        vec4 c = preint_segment(s, e.y, piece);
+        color += transmittance * c.rgb;
+        transmittance *= 1.0 - c.a;
+    }
+#endif
+}
+#endif
+
 #if RAY_METHOD == 0
-// Midpoint rule (riemann, reference).
+// Midpoint rule (riemann, reference); isosurfaces crossed between consecutive samples are
+// composited before the later sample's step.
 void integrate(vec3 o, vec3 d, float t0, float t1, inout vec3 color, inout float transmittance,
                inout uint evaluations) {
     uint steps = uint(ceil((t1 - t0) / params.step));
+    vec4 prev = vec4(0.0);
     for (uint i = 0u; i < steps; ++i) {
         float ta = t0 + float(i) * params.step;
         float dt = min(params.step, t1 - ta);
         if (dt <= 0.0) {
             break;
         }
-        MlsResult m = mls_evaluate(o + d * (ta + 0.5 * dt));
-        evaluations += 1u;
-        if (m.terms == 0u) {
+        vec4 k = knot(o, d, ta + 0.5 * dt, evaluations);
+        emit_crossings(o, d, prev, k, color, transmittance, evaluations);
+        prev = k;
+        if (k.w == 0.0) {
             continue;
         }
-        vec4 ct = transfer_lookup(m.value, params.tf_count);
+        vec4 ct = transfer_lookup(k.y, params.tf_count);
         float a = 1.0 - exp(-ct.a * dt);
         color += transmittance * a * ct.rgb;
         transmittance *= 1.0 - a;
@@ -69,12 +239,8 @@ void integrate(vec3 o, vec3 d, float t0, float t1, inout vec3 color, inout float
             break;
         }
         vec4 next = knot(o, d, tb, evaluations);
-        if (prev.w > 0.0 && next.w > 0.0) {
-            vec4 c = i + 1u < steps ? preint_lookup(0u, prev.y, next.y)
-                                    : preint_segment(prev.y, next.y, tb - ta);
-            color += transmittance * c.rgb;
-            transmittance *= 1.0 - c.a;
-        }
+        emit_interval(o, d, prev, next, tb - ta, i + 1u < steps, 0u, color, transmittance,
+                      evaluations);
         prev = next;
         if (1.0 - transmittance > params.integrator.y) {
             break;
@@ -119,9 +285,9 @@ void integrate(vec3 o, vec3 d, float t0, float t1, inout vec3 color, inout float
                 vec4 m = knot(o, d, 0.5 * (a.x + e.x), evaluations);
                 vec4 cl = adaptive_segment(a, m, 0.5 * len, full, depth + 1u);
                 vec4 cr = adaptive_segment(m, e, 0.5 * len, full, depth + 1u);
-                vec4 c2 = vec4(cl.rgb + (1.0 - cl.a) * cr.rgb, cl.a + (1.0 - cl.a) * cr.a);
+                vec3 c2 = cl.rgb + (1.0 - cl.a) * cr.rgb;
                 bool sign_change = a.z * e.z < 0.0;
-                if (sign_change || transmittance * length(c.rgb - c2.rgb) > epsilon * length(c.rgb)) {
+                if (sign_change || transmittance * length(c.rgb - c2) > epsilon * length(c.rgb)) {
                     // Both halves are one level deeper; the left one is processed first.
                     float level = float(depth + 2u);
                     stack[sp - 1].w = packed.w > 0.0 ? level : -level;
@@ -129,10 +295,14 @@ void integrate(vec3 o, vec3 d, float t0, float t1, inout vec3 color, inout float
                     sp += 1;
                     continue;
                 }
-                c = c2;
+                // Accepted: the two halves, each split at any isosurface it crosses.
+                emit_interval(o, d, a, m, 0.5 * len, full, depth + 1u, color, transmittance,
+                              evaluations);
+                emit_interval(o, d, m, e, 0.5 * len, full, depth + 1u, color, transmittance,
+                              evaluations);
+            } else {
+                emit_interval(o, d, a, e, len, full, depth, color, transmittance, evaluations);
             }
-            color += transmittance * c.rgb;
-            transmittance *= 1.0 - c.a;
             sp -= 1;
             a = e;
             if (1.0 - transmittance > termination) {

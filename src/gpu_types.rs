@@ -36,9 +36,11 @@ pub mod binding {
     pub const PROBE: u32 = 10;
     /// Preintegration tables, `vec4` entries (read-only).
     pub const PREINT: u32 = 11;
+    /// `IsoSurface` array (read-only).
+    pub const ISO: u32 = 12;
 
     /// Every binding with its macro name.
-    pub const ALL: [(&str, u32); 12] = [
+    pub const ALL: [(&str, u32); 13] = [
         ("BINDING_PARAMS", PARAMS),
         ("BINDING_GRID", GRID),
         ("BINDING_SAMPLES", SAMPLES),
@@ -51,6 +53,7 @@ pub mod binding {
         ("BINDING_RESULTS", RESULTS),
         ("BINDING_PROBE", PROBE),
         ("BINDING_PREINT", PREINT),
+        ("BINDING_ISO", ISO),
     ];
 }
 
@@ -125,8 +128,24 @@ pub struct RenderParams {
     pub preint_dims: [u32; 4],
     /// Adaptive ε, early-termination opacity, unused ×2.
     pub integrator: [f32; 4],
+    /// Blinn–Phong ambient, diffuse, specular, shininess.
+    pub lighting: [f32; 4],
+    /// Number of isosurfaces, unused ×3.
+    pub iso_count: [u32; 4],
 }
-const _: () = assert!(std::mem::size_of::<RenderParams>() == 288);
+const _: () = assert!(std::mem::size_of::<RenderParams>() == 320);
+
+/// One isosurface. GLSL twin: `IsoSurface`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct IsoSurface {
+    /// Colour rgb and opacity.
+    pub color_opacity: [f32; 4],
+    /// Iso-value.
+    pub value: f32,
+    pub _pad: [f32; 3],
+}
+const _: () = assert!(std::mem::size_of::<IsoSurface>() == 32);
 
 /// One transfer-function control point. GLSL twin: `TfPoint`.
 #[repr(C)]

@@ -14,6 +14,7 @@
 
 use crate::recon::{Basis, GradientMode, OctreeSettings, Weight};
 use crate::render::camera::{Camera, Projection};
+use crate::render::shading::{Isosurface, Lighting, MAX_ISOSURFACES};
 use crate::render::transfer::TransferFunction;
 use std::path::{Path, PathBuf};
 use toml::{Table, Value};
@@ -136,6 +137,8 @@ pub struct Scene {
     pub reconstruction: Reconstruction,
     pub octree: OctreeSettings,
     pub transfer: TransferFunction,
+    pub isosurfaces: Vec<Isosurface>,
+    pub lighting: Lighting,
     pub camera: Camera,
     pub render: RenderSettings,
 }
@@ -154,7 +157,11 @@ const KNOWN: &[(&str, &[&str])] = &[
         ],
     ),
     ("octree", &["leaf_budget", "max_depth", "leaf_size"]),
-    ("transfer", &["points"]),
+    ("transfer", &["points", "isosurfaces"]),
+    (
+        "lighting",
+        &["ambient", "diffuse", "specular", "shininess", "volume"],
+    ),
     (
         "camera",
         &[
@@ -329,6 +336,61 @@ impl<'a> Section<'a> {
         }
         Ok(out)
     }
+}
+
+/// Reads `[{ value, color, opacity }, …]`; the error says what was expected.
+fn parse_isosurfaces(v: &Value) -> Result<Vec<Isosurface>, String> {
+    let expected = format!(
+        "an array of at most {MAX_ISOSURFACES} tables {{ value = s, color = [r, g, b], opacity = a }} with finite numbers, colour >= 0 and opacity in [0, 1]"
+    );
+    let items = v
+        .as_array()
+        .filter(|a| a.len() <= MAX_ISOSURFACES)
+        .ok_or(&expected)?;
+    let num = |t: &Table, k: &str| match t.get(k) {
+        Some(Value::Float(f)) if f.is_finite() => Some(*f),
+        Some(Value::Integer(i)) => Some(*i as f64),
+        _ => None,
+    };
+    items
+        .iter()
+        .enumerate()
+        .map(|(i, item)| {
+            let bad = || format!("{expected} (isosurface {i})");
+            let t = item.as_table().ok_or_else(bad)?;
+            if t.keys()
+                .any(|k| !["value", "color", "opacity"].contains(&k.as_str()))
+            {
+                return Err(bad());
+            }
+            let color = match t.get("color").and_then(Value::as_array) {
+                Some(a) if a.len() == 3 => {
+                    let c: Vec<f64> = a
+                        .iter()
+                        .filter_map(|x| x.as_float().or(x.as_integer().map(|n| n as f64)))
+                        .collect();
+                    if c.len() != 3 || c.iter().any(|x| !x.is_finite() || *x < 0.0) {
+                        return Err(bad());
+                    }
+                    [c[0], c[1], c[2]]
+                }
+                None if t.get("color").is_none() => [1.0, 1.0, 1.0],
+                _ => return Err(bad()),
+            };
+            let value = num(t, "value").ok_or_else(bad)?;
+            let opacity = match t.get("opacity") {
+                None => 1.0,
+                Some(_) => num(t, "opacity")
+                    .filter(|o| (0.0..=1.0).contains(o))
+                    .ok_or_else(bad)?,
+            };
+            Ok(Isosurface {
+                value,
+                color,
+                opacity,
+            })
+        })
+        .collect()
 }
 
 /// Parses a `--set section.key=value` argument into the table.
@@ -528,6 +590,28 @@ impl Scene {
             }
         };
 
+        let isosurfaces = match tf.get("isosurfaces") {
+            None => Vec::new(),
+            Some(v) => {
+                parse_isosurfaces(v).map_err(|expected| tf.err("isosurfaces", &expected, v))?
+            }
+        };
+        let lit = section("lighting");
+        let defaults = Lighting::default();
+        let lighting = Lighting {
+            ambient: lit.float("ambient", defaults.ambient, 0.0, 10.0)?,
+            diffuse: lit.float("diffuse", defaults.diffuse, 0.0, 10.0)?,
+            specular: lit.float("specular", defaults.specular, 0.0, 10.0)?,
+            shininess: lit.float("shininess", defaults.shininess, 0.0, 1e4)?,
+        };
+        if let Some(v) = lit.get("volume").filter(|v| v.as_bool() != Some(false)) {
+            return Err(lit.err(
+                "volume",
+                "false (shading of the volume's emission is not implemented yet)",
+                v,
+            ));
+        }
+
         let cam = section("camera");
         let projection = cam.choice("projection", 0, &[("perspective", 0), ("orthographic", 1)])?;
         let projection = if projection == 0 {
@@ -597,6 +681,8 @@ impl Scene {
             reconstruction,
             octree,
             transfer,
+            isosurfaces,
+            lighting,
             camera,
             render,
         })

@@ -61,6 +61,8 @@ fn glsl_and_rust_layouts_agree() {
         preint_range: v(28.0),
         preint_dims: [29, 30, 31, 32],
         integrator: v(33.0),
+        lighting: v(34.0),
+        iso_count: [35, 36, 37, 38],
     };
     assert_eq!(*p, expected, "RenderParams");
 
@@ -106,6 +108,16 @@ fn glsl_and_rust_layouts_agree() {
         "RayPush"
     );
     let c: &CountPush = take(bytes, &mut at);
+    let i: &IsoSurface = take(bytes, &mut at);
+    assert_eq!(
+        *i,
+        IsoSurface {
+            color_opacity: v(1.0),
+            value: 2.0,
+            _pad: [3.0, 4.0, 5.0]
+        },
+        "IsoSurface"
+    );
     assert_eq!(
         *c,
         CountPush {

@@ -3,6 +3,7 @@ mod common;
 
 use common::*;
 use vmls::data::Volume;
+
 use vmls::gpu_types::MlsOut;
 use vmls::probe::random_points;
 use vmls::recon::mls::{MlsSettings, mls_evaluate};
@@ -10,33 +11,6 @@ use vmls::recon::{Basis, GradientMode, OctreeSettings, Weight};
 use vmls::render::Field;
 use vmls::render::gpu::{GpuField, evaluate};
 use vmls::scene::{NeighbourMode, Reconstruction};
-
-fn volume_from(
-    dims: [usize; 3],
-    spacing: [f64; 3],
-    origin: [f64; 3],
-    f: impl Fn([f64; 3]) -> f64,
-) -> Volume {
-    let mut values = Vec::new();
-    for k in 0..dims[2] {
-        for j in 0..dims[1] {
-            for i in 0..dims[0] {
-                let p = [
-                    origin[0] + i as f64 * spacing[0],
-                    origin[1] + j as f64 * spacing[1],
-                    origin[2] + k as f64 * spacing[2],
-                ];
-                values.push(f(p) as f32);
-            }
-        }
-    }
-    Volume {
-        dims,
-        origin,
-        spacing,
-        values,
-    }
-}
 
 fn field_of(volume: Volume, r: Reconstruction) -> Field {
     Field::new(volume, r, &OctreeSettings::default(), |_| {}).expect("field")

@@ -32,6 +32,16 @@ struct RenderParams {
     vec4 preint_range;
     uvec4 preint_dims;
     vec4 integrator;
+    vec4 lighting;
+    uvec4 iso_count;
+};
+
+struct IsoSurface {
+    vec4 color_opacity;
+    float value;
+    float _pad0;
+    float _pad1;
+    float _pad2;
 };
 
 struct TfPoint {

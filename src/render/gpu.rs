@@ -9,10 +9,12 @@
 
 use super::preintegration::PreintegrationTables;
 use super::raycast::adaptive;
+use super::shading::MAX_ISOSURFACES;
 use super::transfer::TransferFunction;
 use super::{Field, RaySetup};
 use crate::gpu_types::{
-    CountPush, GRID_PAD, MlsOut, RayPush, RenderParams, Sample, binding, binding_defines,
+    CountPush, GRID_PAD, IsoSurface, MlsOut, RayPush, RenderParams, Sample, binding,
+    binding_defines,
 };
 use crate::recon::mls::{Basis, GradientMode, Weight};
 use crate::scene::{Method, NeighbourMode};
@@ -39,6 +41,8 @@ pub struct Variant {
     pub method: Option<Method>,
     /// Adaptive stack entries (levels of subdivision).
     pub adaptive_levels: usize,
+    /// Isosurfaces of the scene (0 compiles no isosurface code).
+    pub isosurfaces: usize,
 }
 
 impl Variant {
@@ -53,6 +57,7 @@ impl Variant {
             neighbours: r.neighbours,
             method: None,
             adaptive_levels: 1,
+            isosurfaces: 0,
         }
     }
 
@@ -61,6 +66,7 @@ impl Variant {
         Self {
             method: Some(setup.method),
             adaptive_levels: adaptive::stack_size(setup.l_max, setup.l_min),
+            isosurfaces: setup.isosurfaces.len(),
             ..Self::of(field)
         }
     }
@@ -101,6 +107,10 @@ impl Variant {
         };
         d.push(("RAY_METHOD".into(), ray_method.to_string()));
         d.push(("ADAPTIVE_LEVELS".into(), self.adaptive_levels.to_string()));
+        d.push((
+            "MAX_ISO".into(),
+            self.isosurfaces.min(MAX_ISOSURFACES).to_string(),
+        ));
         d
     }
 
@@ -128,7 +138,11 @@ impl Variant {
             self.method
                 .map(|m| format!("-{}", m.name()))
                 .unwrap_or_default()
-        )
+        ) + &if self.isosurfaces > 0 {
+            format!("-iso{}", self.isosurfaces)
+        } else {
+            String::new()
+        }
     }
 }
 
@@ -184,6 +198,14 @@ pub fn render_params(field: &Field, setup: Option<&RaySetup>, tf_count: u32) -> 
         p.step = r.step as f32;
         p.min_transmittance = r.min_transmittance as f32;
         p.integrator = [r.epsilon as f32, r.early_termination as f32, 0.0, 0.0];
+        let l = &r.lighting;
+        p.lighting = [
+            l.ambient as f32,
+            l.diffuse as f32,
+            l.specular as f32,
+            l.shininess as f32,
+        ];
+        p.iso_count = [r.isosurfaces.len() as u32, 0, 0, 0];
         p.preint_range[3] = r.l_min as f32;
     }
     p
@@ -304,6 +326,9 @@ pub fn render(
     let data = gpu_field.bindings();
     let mut binding_ids: Vec<u32> = data.iter().map(|(b, _)| *b).collect();
     binding_ids.extend([binding::TRANSFER, binding::IMAGE, binding::COUNTS]);
+    if !setup.isosurfaces.is_empty() {
+        binding_ids.push(binding::ISO);
+    }
     let table_data: Option<Vec<[f32; 4]>> =
         tables.filter(|_| setup.method.preintegrated()).map(|t| {
             t.tables
@@ -337,6 +362,25 @@ pub fn render(
     };
     let params_buf = Buffer::from_slice(ctx, "render params", &[params])?;
     let tf_buf = Buffer::from_slice(ctx, "transfer function", &gpu_tf)?;
+    // Never empty: a zero-sized binding is invalid, and iso_count says how many are real.
+    let mut isos: Vec<IsoSurface> = setup
+        .isosurfaces
+        .iter()
+        .map(|i| IsoSurface {
+            color_opacity: [
+                i.color[0] as f32,
+                i.color[1] as f32,
+                i.color[2] as f32,
+                i.opacity as f32,
+            ],
+            value: i.value as f32,
+            _pad: [0.0; 3],
+        })
+        .collect();
+    if isos.is_empty() {
+        isos.push(IsoSurface::default());
+    }
+    let iso_buf = Buffer::from_slice(ctx, "isosurfaces", &isos)?;
     let image = Buffer::new(ctx, "image", pixels * 16, BufferUsage::Storage)?;
     let counts = Buffer::new(ctx, "evaluation counts", pixels * 4, BufferUsage::Storage)?;
     let mut all = data;
@@ -346,6 +390,9 @@ pub fn render(
         (binding::IMAGE, &image),
         (binding::COUNTS, &counts),
     ]);
+    if !setup.isosurfaces.is_empty() {
+        all.push((binding::ISO, &iso_buf));
+    }
     if let Some(t) = &table_buf {
         all.push((binding::PREINT, t));
     }

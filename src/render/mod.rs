@@ -10,6 +10,7 @@ pub mod gpu;
 pub mod output;
 pub mod preintegration;
 pub mod raycast;
+pub mod shading;
 pub mod transfer;
 
 use crate::data::{DataError, Volume};
@@ -160,7 +161,7 @@ impl Neighbours for &Octree {
 }
 
 /// Everything a ray needs besides the field: camera frame, clip box, integrator and compositing.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct RaySetup {
     pub camera: Camera,
     pub basis: ViewBasis,
@@ -179,6 +180,8 @@ pub struct RaySetup {
     pub background: [f64; 3],
     /// Riemann and reference methods stop below this transmittance.
     pub min_transmittance: f64,
+    pub isosurfaces: Vec<shading::Isosurface>,
+    pub lighting: shading::Lighting,
 }
 
 impl RaySetup {
@@ -210,6 +213,8 @@ impl RaySetup {
             early_termination: scene.render.early_termination,
             background: scene.render.background,
             min_transmittance: scene.render.min_transmittance,
+            isosurfaces: scene.isosurfaces.clone(),
+            lighting: scene.lighting,
         })
     }
 

@@ -11,14 +11,16 @@
 //! so does a preintegrated interval with an undefined end. Pixel = (C + T·background, 1 − T).
 
 pub mod adaptive;
+mod interval;
 
 use super::camera::clip_box;
 use super::preintegration::PreintegrationTables;
 use super::transfer::TransferFunction;
 use super::{Field, RaySetup};
-use crate::recon::mls::{MlsSettings, Neighbours, mls_evaluate};
+use crate::recon::mls::{MlsSettings, Neighbours};
 use crate::scene::Method;
 use glam::DVec3;
+use interval::{Knot, emit_crossings, emit_interval, knot};
 
 /// One pixel of the reference integrator.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -40,12 +42,6 @@ struct Ray<'a> {
 }
 
 impl Ray<'_> {
-    /// f at parameter t (one counted MLS evaluation); `None` where no sample has weight.
-    fn eval(&mut self, t: f64) -> Option<f64> {
-        self.evaluations += 1;
-        mls_evaluate(&self.mls, self.neighbours, (self.o + self.d * t).to_array()).map(|m| m.value)
-    }
-
     /// Composites a premultiplied segment (C, α) behind what is accumulated.
     fn composite(&mut self, c: [f64; 3], alpha: f64) {
         for (acc, ci) in self.color.iter_mut().zip(c) {
@@ -55,16 +51,23 @@ impl Ray<'_> {
     }
 }
 
-/// Midpoint rule (`riemann`, `reference`): n = ⌈L/δ⌉ steps, the last one shortened.
+/// Midpoint rule (`riemann`, `reference`): n = ⌈L/δ⌉ steps, the last one shortened; isosurfaces
+/// crossed between consecutive samples are composited before the later sample's step.
 fn integrate_riemann(ray: &mut Ray<'_>, setup: &RaySetup, tf: &TransferFunction, t0: f64, t1: f64) {
     let steps = ((t1 - t0) / setup.step).ceil() as u64;
+    let mut prev: Option<Knot> = None;
     for i in 0..steps {
         let ta = t0 + i as f64 * setup.step;
         let dt = setup.step.min(t1 - ta);
         if dt <= 0.0 {
             break;
         }
-        let Some(s) = ray.eval(ta + 0.5 * dt) else {
+        let k = knot(ray, ta + 0.5 * dt);
+        if let Some(p) = prev.filter(|_| !setup.isosurfaces.is_empty()) {
+            emit_crossings(ray, setup, &p, &k);
+        }
+        prev = Some(k);
+        let Some(s) = k.s else {
             continue;
         };
         let (c, tau) = tf.lookup(s);
@@ -87,23 +90,16 @@ fn integrate_fixed(
 ) {
     let l = setup.step;
     let steps = ((t1 - t0) / l).ceil() as u64;
-    let mut prev = ray.eval(t0);
+    let mut prev = knot(ray, t0);
     for i in 0..steps {
         let ta = t0 + i as f64 * l;
         let tb = (ta + l).min(t1);
         if tb <= ta {
             break;
         }
-        let next = ray.eval(tb);
-        if let (Some(sa), Some(sb)) = (prev, next) {
-            let (c, a) = if i + 1 < steps {
-                let e = tables.lookup(&tables.tables[0], sa, sb);
-                ([e[0], e[1], e[2]], e[3])
-            } else {
-                tables.segment(sa, sb, tb - ta)
-            };
-            ray.composite(c, a);
-        }
+        let next = knot(ray, tb);
+        let level = (i + 1 < steps).then_some(0);
+        emit_interval(ray, setup, tables, &prev, &next, tb - ta, level);
         prev = next;
         if 1.0 - ray.transmittance > setup.early_termination {
             break;

@@ -27,6 +27,7 @@ static SOURCES: &[(&str, &str)] = embed![
     "include/transfer.glsl",
     "include/camera.glsl",
     "include/preint.glsl",
+    "include/shading.glsl",
     "raycast.comp",
     "mls_eval.comp",
     "probe_fma.comp",

@@ -2,7 +2,7 @@
 //! any validation error or leaked allocation.
 #![allow(dead_code)]
 
-use vmls::data::marschner_lobb;
+use vmls::data::{Volume, marschner_lobb};
 use vmls::recon::{Basis, GradientMode, OctreeSettings, Weight};
 use vmls::render::Field;
 use vmls::scene::{NeighbourMode, Reconstruction};
@@ -55,4 +55,32 @@ pub fn ml_field(n: usize, r: Reconstruction) -> Field {
         |_| {},
     )
     .expect("field")
+}
+
+/// A grid sampling `f` at its points.
+pub fn volume_from(
+    dims: [usize; 3],
+    spacing: [f64; 3],
+    origin: [f64; 3],
+    f: impl Fn([f64; 3]) -> f64,
+) -> Volume {
+    let mut values = Vec::new();
+    for k in 0..dims[2] {
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                let p = [
+                    origin[0] + i as f64 * spacing[0],
+                    origin[1] + j as f64 * spacing[1],
+                    origin[2] + k as f64 * spacing[2],
+                ];
+                values.push(f(p) as f32);
+            }
+        }
+    }
+    Volume {
+        dims,
+        origin,
+        spacing,
+        values,
+    }
 }

@@ -11,16 +11,9 @@
 //! for the two halves of the last split: at most ⌊log2(l_max/l_min)⌋ + 1 entries.
 
 use super::Ray;
+use super::interval::{Knot, emit_interval, knot, table_segment};
 use crate::render::RaySetup;
 use crate::render::preintegration::PreintegrationTables;
-
-/// A point on the ray: parameter, scalar (None = undefined) and directional derivative.
-#[derive(Debug, Clone, Copy)]
-struct Knot {
-    t: f64,
-    s: Option<f64>,
-    g: f64,
-}
 
 /// Stack entries needed for l_max/l_min (the shader's `ADAPTIVE_STACK`).
 pub fn stack_size(l_max: f64, l_min: f64) -> usize {
@@ -33,22 +26,7 @@ pub fn stack_size(l_max: f64, l_min: f64) -> usize {
     levels
 }
 
-fn knot(ray: &mut Ray<'_>, t: f64) -> Knot {
-    ray.evaluations += 1;
-    let x = (ray.o + ray.d * t).to_array();
-    match crate::recon::mls::mls_evaluate(&ray.mls, ray.neighbours, x) {
-        Some(m) => Knot {
-            t,
-            s: Some(m.value),
-            g: m.gradient[0] * ray.d.x + m.gradient[1] * ray.d.y + m.gradient[2] * ray.d.z,
-        },
-        None => Knot { t, s: None, g: 0.0 },
-    }
-}
-
-/// (C, α) of an interval of exactly `len` between two knots: table `level` when the interval
-/// is a full-length one (its length is then `lengths[level]` by construction), else the clipped
-/// composite. Undefined ends contribute nothing.
+/// (C, α) of [a, e] for the acceptance test (isosurfaces are split only when compositing).
 fn segment(
     tables: &PreintegrationTables,
     a: &Knot,
@@ -56,15 +34,9 @@ fn segment(
     len: f64,
     level: Option<usize>,
 ) -> ([f64; 3], f64) {
-    let (Some(sa), Some(se)) = (a.s, e.s) else {
-        return ([0.0; 3], 0.0);
-    };
-    match level {
-        Some(k) => {
-            let v = tables.lookup(&tables.tables[k], sa, se);
-            ([v[0], v[1], v[2]], v[3])
-        }
-        None => tables.segment(sa, se, len),
+    match (a.s, e.s) {
+        (Some(sa), Some(se)) => table_segment(tables, sa, se, len, level),
+        _ => ([0.0; 3], 0.0),
     }
 }
 
@@ -93,17 +65,16 @@ pub(super) fn integrate(
         while let Some(&(e, depth)) = stack.last() {
             let len = top * 0.5f64.powi(depth as i32);
             let level = full.then_some(depth);
-            let (c1, a1) = segment(tables, &a, &e, len, level);
+            let (c1, _) = segment(tables, &a, &e, len, level);
             let can_split = depth + 1 < levels && (full || 0.5 * len >= setup.l_min);
-            let (c, alpha) = if can_split {
+            if can_split {
                 let m = knot(ray, 0.5 * (a.t + e.t));
                 let half = level.map(|k| k + 1);
                 let (cl, al) = segment(tables, &a, &m, 0.5 * len, half);
-                let (cr, ar) = segment(tables, &m, &e, 0.5 * len, half);
+                let (cr, _) = segment(tables, &m, &e, 0.5 * len, half);
                 let c2 = [0, 1, 2].map(|k| cl[k] + (1.0 - al) * cr[k]);
-                let a2 = al + (1.0 - al) * ar;
                 let diff = norm([0, 1, 2].map(|k| c1[k] - c2[k]));
-                let sign_change = a.g * e.g < 0.0;
+                let sign_change = a.slope(ray) * e.slope(ray) < 0.0;
                 if sign_change || ray.transmittance * diff > setup.epsilon * norm(c1) {
                     // Both halves are one level deeper; the left one is processed first.
                     if let Some(top) = stack.last_mut() {
@@ -112,11 +83,12 @@ pub(super) fn integrate(
                     stack.push((m, depth + 1));
                     continue;
                 }
-                (c2, a2)
+                // Accepted: the two halves, each split at any isosurface it crosses.
+                emit_interval(ray, setup, tables, &a, &m, 0.5 * len, half);
+                emit_interval(ray, setup, tables, &m, &e, 0.5 * len, half);
             } else {
-                (c1, a1)
-            };
-            ray.composite(c, alpha);
+                emit_interval(ray, setup, tables, &a, &e, len, level);
+            }
             stack.pop();
             a = e;
             if 1.0 - ray.transmittance > setup.early_termination {

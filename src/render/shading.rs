@@ -1,0 +1,58 @@
+//! Shaded isosurfaces: f64 twin of `shade_surface` in `glsl/include/shading.glsl`.
+//!
+//! An isosurface is a Dirac spike in the transfer function (DESIGN §4): where a ray crosses
+//! f = value it composites `color` with `opacity`, lit by Blinn–Phong with a headlight (light and
+//! viewer along the ray, so the half vector is the light vector) and two-sided normals
+//! n = ∇f/|∇f|: rgb = color·(ambient + diffuse·|n·l|) + specular·|n·l|^shininess.
+
+use glam::DVec3;
+
+/// At most this many isosurfaces per scene (a fixed loop in the kernel).
+pub const MAX_ISOSURFACES: usize = 4;
+
+/// One isosurface of `[transfer] isosurfaces`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Isosurface {
+    pub value: f64,
+    pub color: [f64; 3],
+    pub opacity: f64,
+}
+
+/// `[lighting]`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Lighting {
+    pub ambient: f64,
+    pub diffuse: f64,
+    pub specular: f64,
+    pub shininess: f64,
+}
+
+impl Default for Lighting {
+    fn default() -> Self {
+        Self {
+            ambient: 0.25,
+            diffuse: 0.75,
+            specular: 0.35,
+            shininess: 32.0,
+        }
+    }
+}
+
+/// Premultiplied colour of a surface hit along unit direction `dir` with gradient `gradient`.
+/// A vanishing gradient (a flat critical point) is lit as if facing the viewer.
+pub fn shade_surface(
+    iso: &Isosurface,
+    light: &Lighting,
+    gradient: [f64; 3],
+    dir: DVec3,
+) -> [f64; 3] {
+    let g = DVec3::from(gradient);
+    let cos = if g.length() > 1e-12 {
+        g.normalize().dot(-dir).abs()
+    } else {
+        1.0
+    };
+    let lit = light.ambient + light.diffuse * cos;
+    let spec = light.specular * cos.powf(light.shininess);
+    [0, 1, 2].map(|k| iso.opacity * (iso.color[k] * lit + spec))
+}
