@@ -9,6 +9,7 @@ use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use vmls::probe::{coherent_order, fma_probe, median, mls_probe, random_points};
+use vmls::render::evalmap::write_eval_map;
 use vmls::render::gpu::{GpuField, render};
 use vmls::render::output::{format_of, write_image};
 use vmls::render::{Field, RaySetup, RenderError, build_tables, load_volume};
@@ -48,6 +49,9 @@ enum Command {
         /// Write statistics as JSON.
         #[arg(long)]
         stats: Option<PathBuf>,
+        /// Write the per-pixel count of MLS evaluations as a heat map with a legend (.png).
+        #[arg(long)]
+        eval_map: Option<PathBuf>,
         /// Override a scene key: section.key=value (repeatable).
         #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
         set: Vec<String>,
@@ -115,11 +119,20 @@ fn run_render(
     scene_path: Option<&Path>,
     output: &Path,
     stats: Option<&Path>,
+    eval_map: Option<&Path>,
     set: &[String],
     device: &DeviceArgs,
 ) -> Result<(), RenderError> {
     let start = Instant::now();
     format_of(output)?;
+    if let Some(map) =
+        eval_map.filter(|m| !m.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")))
+    {
+        return Err(RenderError::Output {
+            path: map.display().to_string(),
+            message: "the evaluation map is a PNG: expected a .png file name".into(),
+        });
+    }
     let scene = Scene::load(scene_path, set)?;
     let volume = load_volume(&scene)?;
     let bar = progress_bar("octree");
@@ -169,6 +182,9 @@ fn run_render(
         scene.camera.height,
         &image.pixels,
     )?;
+    if let Some(map) = eval_map {
+        write_eval_map(map, scene.camera.width, scene.camera.height, &image.counts)?;
+    }
     if let Some(stats) = stats {
         let evaluations: u64 = image.counts.iter().map(|&c| u64::from(c)).sum();
         let rays = image.counts.len() as u64;
@@ -332,9 +348,17 @@ fn main() {
             scene,
             output,
             stats,
+            eval_map,
             set,
             device,
-        } => run_render(scene.as_deref(), output, stats.as_deref(), set, device),
+        } => run_render(
+            scene.as_deref(),
+            output,
+            stats.as_deref(),
+            eval_map.as_deref(),
+            set,
+            device,
+        ),
         Command::Compare { image, reference } => compare(image, reference),
         Command::Devices => Context::list_devices()
             .map(|lines| lines.iter().for_each(|l| println!("{l}")))

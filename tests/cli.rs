@@ -330,3 +330,43 @@ fn compare_reports_rmse_and_rejects_size_mismatch() {
     let bad = vmls(&["compare", s(&a), s(&c)]);
     assert_fails(&bad, &["a.exr", "differs"], &d.join("none.png"));
 }
+
+#[test]
+fn eval_map_is_a_heat_map_with_a_legend() {
+    let d = dir("evalmap");
+    let (img, map, st) = (d.join("i.png"), d.join("evals.png"), d.join("s.json"));
+    let out = vmls(&[
+        "render",
+        "-o",
+        s(&img),
+        "--eval-map",
+        s(&map),
+        "--stats",
+        s(&st),
+        "--set",
+        "camera.width=32",
+        "--set",
+        "camera.height=24",
+        "--set",
+        "render.method=\"adaptive\"",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let m = image::open(&map).expect("map").to_rgb8();
+    // The image plus a 22-pixel legend strip.
+    assert_eq!(m.dimensions(), (32, 24 + 22));
+    // Rays that miss the volume cost nothing: the darkest ramp colour in the corner.
+    assert_eq!(m.get_pixel(0, 0).0, [68, 1, 84]);
+    let stats: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&st).expect("stats")).expect("json");
+    assert!(stats["evaluations_per_ray"].as_f64().expect("mean") > 0.0);
+    let bad = d.join("evals.jpg");
+    assert_fails(
+        &vmls(&["render", "-o", s(&img), "--eval-map", s(&bad)]),
+        &["evals.jpg", ".png"],
+        &bad,
+    );
+}

@@ -6,6 +6,7 @@
 //! origin ([MLS] §3's shifted basis does the same inside each evaluation).
 
 pub mod camera;
+pub mod evalmap;
 pub mod gpu;
 pub mod output;
 pub mod preintegration;
