@@ -228,3 +228,59 @@ fn any_length_matches_direct_quadrature_to_table_accuracy() {
         "any-length error {sweep_error:.2e} vs table accuracy {table_error:.2e}"
     );
 }
+
+#[test]
+fn tables_are_rebuilt_only_when_their_inputs_change() {
+    use vmls::render::{Field, RaySetup, TableCache, load_volume};
+    use vmls::scene::Scene;
+    let set = |extra: &[&str]| {
+        let mut o: Vec<String> = [
+            "volume.resolution=9",
+            "render.table_resolution=16",
+            "render.method=\"adaptive\"",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+        o.extend(extra.iter().map(|s| s.to_string()));
+        Scene::load(None, &o).expect("scene")
+    };
+    let s = set(&[]);
+    let field = Field::new(
+        load_volume(&s).expect("volume"),
+        s.reconstruction,
+        &s.octree,
+        |_| {},
+    )
+    .expect("field");
+    let mut cache = TableCache::default();
+    let setup = RaySetup::new(&s, &field).expect("setup");
+    assert!(cache.get(&setup, &field, &s.transfer, 16, |_| {}).is_some());
+    // A new camera does not touch the tables.
+    let moved = set(&["camera.eye=[4.0, 1.0, 1.0]"]);
+    let setup = RaySetup::new(&moved, &field).expect("setup");
+    cache.get(&setup, &field, &moved.transfer, 16, |_| {});
+    assert_eq!(cache.builds(), 1);
+    // A new transfer function, or new lengths, does.
+    let tf = set(&["transfer.points=[[0.0, 1, 1, 1, 0.0], [1.0, 1, 1, 1, 2.0]]"]);
+    cache.get(
+        &RaySetup::new(&tf, &field).expect("setup"),
+        &field,
+        &tf.transfer,
+        16,
+        |_| {},
+    );
+    assert_eq!(cache.builds(), 2);
+    let lengths = set(&[
+        "transfer.points=[[0.0, 1, 1, 1, 0.0], [1.0, 1, 1, 1, 2.0]]",
+        "render.l_max=1.3",
+    ]);
+    cache.get(
+        &RaySetup::new(&lengths, &field).expect("setup"),
+        &field,
+        &lengths.transfer,
+        16,
+        |_| {},
+    );
+    assert_eq!(cache.builds(), 3);
+}

@@ -259,6 +259,64 @@ pub fn build_tables(
     if lengths.is_empty() {
         return None;
     }
+    Some(PreintegrationTables::build(
+        tf,
+        scalar_range(field),
+        &lengths,
+        resolution,
+        progress,
+    ))
+}
+
+/// What tables depend on: control points, lengths, resolution, scalar range.
+type TableKey = (Vec<[f64; 5]>, Vec<f64>, usize, (f64, f64));
+
+/// Keeps the last preintegration tables and rebuilds them only when what they depend on changes:
+/// the transfer function, the lengths, the resolution or the scalar range (for applications
+/// that re-render with a new camera, or edit the transfer function interactively).
+#[derive(Debug, Default)]
+pub struct TableCache {
+    key: Option<TableKey>,
+    tables: Option<PreintegrationTables>,
+    builds: usize,
+}
+
+impl TableCache {
+    /// The tables for this setup (`None` for the direct methods), built if needed.
+    pub fn get(
+        &mut self,
+        setup: &RaySetup,
+        field: &Field,
+        tf: &TransferFunction,
+        resolution: usize,
+        progress: impl Fn(f64) + Sync,
+    ) -> Option<&PreintegrationTables> {
+        let lengths = setup.table_lengths(tf);
+        if lengths.is_empty() {
+            return None;
+        }
+        let key = (
+            tf.points().to_vec(),
+            lengths,
+            resolution,
+            scalar_range(field),
+        );
+        if self.key.as_ref() != Some(&key) {
+            self.tables = build_tables(setup, field, tf, resolution, progress);
+            self.key = Some(key);
+            self.builds += 1;
+        }
+        self.tables.as_ref()
+    }
+
+    /// How many times tables were built.
+    pub fn builds(&self) -> usize {
+        self.builds
+    }
+}
+
+/// The tables' scalar range: the data range with a 5% margin each side.
+fn scalar_range(field: &Field) -> (f64, f64) {
     let (lo, hi) = field
         .values
         .iter()
@@ -266,13 +324,7 @@ pub fn build_tables(
             (l.min(f64::from(v)), h.max(f64::from(v)))
         });
     let margin = 0.05 * (hi - lo).max(1e-6);
-    Some(PreintegrationTables::build(
-        tf,
-        (lo - margin, hi + margin),
-        &lengths,
-        resolution,
-        progress,
-    ))
+    (lo - margin, hi + margin)
 }
 
 /// Loads or generates the scene's volume.
