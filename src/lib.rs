@@ -1,7 +1,7 @@
 //! vmls — volume Moving-Least-Squares ray casting and EWA splatting on Vulkan compute.
 //!
 //! Layers, bottom up:
-//! - [`vk`]: the Vulkan layer (the only module with `unsafe`): context, buffers, pipelines,
+//! - [`vk`]: the Vulkan layer, the only module that calls Vulkan directly: context, buffers, pipelines,
 //!   commands, timestamp queries, run-time GLSL compilation.
 //! - [`data`]: loaders and generators producing a [`data::Volume`].
 //! - [`recon`]: MLS reconstruction (f64 CPU reference) and the redundant octree [OCT].

@@ -81,13 +81,9 @@ fn piece_integral(c0: [f64; 3], c1: [f64; 3], tau0: f64, tau1: f64, len: f64) ->
     }
 }
 
-/// Exact (to quadrature rounding) α and C of a segment of length l with s linear from s_f to
-/// s_b (stage `preintegrate`).
-pub fn segment_integral(tf: &TransferFunction, s_f: f64, s_b: f64, l: f64) -> SegmentResult {
-    if l <= 0.0 {
-        return ([0.0; 3], 0.0);
-    }
-    // Piece boundaries, as fractions u of the segment, where s crosses a control point.
+/// Piece boundaries of a segment, as fractions u ∈ [0, 1], where s (linear from s_f to s_b)
+/// crosses a transfer-function control point; always starts at 0 and ends at 1.
+fn piece_cuts(tf: &TransferFunction, s_f: f64, s_b: f64) -> Vec<f64> {
     let mut cuts = vec![0.0];
     if s_f != s_b {
         let mut inner: Vec<f64> = tf
@@ -100,6 +96,16 @@ pub fn segment_integral(tf: &TransferFunction, s_f: f64, s_b: f64, l: f64) -> Se
         cuts.extend(inner);
     }
     cuts.push(1.0);
+    cuts
+}
+
+/// Exact (to quadrature rounding) α and C of a segment of length l with s linear from s_f to
+/// s_b (stage `preintegrate`).
+pub fn segment_integral(tf: &TransferFunction, s_f: f64, s_b: f64, l: f64) -> SegmentResult {
+    if l <= 0.0 {
+        return ([0.0; 3], 0.0);
+    }
+    let cuts = piece_cuts(tf, s_f, s_b);
     let s_at = |u: f64| s_f + (s_b - s_f) * u;
     let mut color = [0.0; 3];
     let mut depth = 0.0f64;
@@ -128,18 +134,7 @@ pub fn segment_integral(tf: &TransferFunction, s_f: f64, s_b: f64, l: f64) -> Se
 /// length l is exactly 1 − e^{−l τ̄}. Exact per piece: τ is linear and cτ quadratic in u
 /// (Simpson's rule is exact for both).
 pub fn segment_limits(tf: &TransferFunction, s_f: f64, s_b: f64) -> [f64; 4] {
-    let mut cuts = vec![0.0];
-    if s_f != s_b {
-        let mut inner: Vec<f64> = tf
-            .points()
-            .iter()
-            .map(|p| (p[0] - s_f) / (s_b - s_f))
-            .filter(|u| *u > 0.0 && *u < 1.0)
-            .collect();
-        inner.sort_by(f64::total_cmp);
-        cuts.extend(inner);
-    }
-    cuts.push(1.0);
+    let cuts = piece_cuts(tf, s_f, s_b);
     let s_at = |u: f64| s_f + (s_b - s_f) * u;
     let (mut tau_sum, mut ctau) = (0.0, [0.0; 3]);
     for w in cuts.windows(2) {

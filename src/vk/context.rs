@@ -216,10 +216,10 @@ fn create_instance(
         .call("vkCreateInstance", || "the vmls instance".into())?;
     let messenger = if validation {
         let loader = ash::ext::debug_utils::Instance::new(entry, &instance);
-        // SAFETY: the instance was created with VK_EXT_debug_utils enabled; the callback's user
-        // data is the boxed state, which `Shared` keeps alive until after the messenger dies.
         // A fresh create info: the one above is chained into the instance's pNext list.
         let create = messenger_create_info(user_data);
+        // SAFETY: the instance was created with VK_EXT_debug_utils enabled; the callback's user
+        // data is the boxed state, which `Shared` keeps alive until after the messenger dies.
         match unsafe { loader.create_debug_utils_messenger(&create, None) } {
             Ok(m) => Some((loader, m)),
             Err(result) => {

@@ -92,6 +92,26 @@ pub(super) fn locate_crossing(ray: &mut Ray<'_>, a: &Knot, e: &Knot, v: f64) -> 
     best
 }
 
+/// The located crossings of [a, e] (scalars sa, se) with every isosurface, sorted along the ray,
+/// with the index of the isosurface.
+fn crossings(
+    ray: &mut Ray<'_>,
+    setup: &RaySetup,
+    a: &Knot,
+    e: &Knot,
+    sa: f64,
+    se: f64,
+) -> Vec<(Knot, usize)> {
+    let mut hits: Vec<(Knot, usize)> = Vec::new();
+    for (i, iso) in setup.isosurfaces.iter().enumerate() {
+        if crosses(sa, se, iso.value) {
+            hits.push((locate_crossing(ray, a, e, iso.value), i));
+        }
+    }
+    hits.sort_by(|x, y| x.0.t.total_cmp(&y.0.t));
+    hits
+}
+
 /// (C, α) of [a, e] of exactly `len` from the tables (undefined ends contribute nothing).
 pub(super) fn table_segment(
     tables: &PreintegrationTables,
@@ -122,18 +142,12 @@ pub(super) fn emit_interval(
     let (Some(sa), Some(se)) = (a.s, e.s) else {
         return;
     };
-    let mut hits: Vec<(Knot, usize)> = Vec::new();
-    for (i, iso) in setup.isosurfaces.iter().enumerate() {
-        if crosses(sa, se, iso.value) {
-            hits.push((locate_crossing(ray, a, e, iso.value), i));
-        }
-    }
+    let hits = crossings(ray, setup, a, e, sa, se);
     if hits.is_empty() {
         let (c, alpha) = table_segment(tables, sa, se, len, level);
         ray.composite(c, alpha);
         return;
     }
-    hits.sort_by(|x, y| x.0.t.total_cmp(&y.0.t));
     let (mut t, mut s) = (a.t, sa);
     let scale = len / (e.t - a.t);
     for (hit, i) in hits {
@@ -159,14 +173,7 @@ pub(super) fn emit_crossings(ray: &mut Ray<'_>, setup: &RaySetup, a: &Knot, e: &
     let (Some(sa), Some(se)) = (a.s, e.s) else {
         return;
     };
-    let mut hits: Vec<(Knot, usize)> = Vec::new();
-    for (i, iso) in setup.isosurfaces.iter().enumerate() {
-        if crosses(sa, se, iso.value) {
-            hits.push((locate_crossing(ray, a, e, iso.value), i));
-        }
-    }
-    hits.sort_by(|x, y| x.0.t.total_cmp(&y.0.t));
-    for (hit, i) in hits {
+    for (hit, i) in crossings(ray, setup, a, e, sa, se) {
         let iso = &setup.isosurfaces[i];
         let c = shade_surface(iso, &setup.lighting, hit.gradient, ray.d);
         ray.composite(c, iso.opacity);
