@@ -146,9 +146,19 @@ void emit_crossings(vec3 o, vec3 d, vec4 a, vec4 e, inout vec3 color, inout floa
 }
 
 #if RAY_METHOD != 0
-// Composites [a, e] of exactly len (table `level` when full, else the clipped composite), split
-// at isosurface crossings (twin of interval::emit_interval).
-void emit_interval(vec3 o, vec3 d, vec4 a, vec4 e, float len, bool full, uint level,
+// (C, α) of [a, e] of exactly len: table `level` for full-length intervals, else the clipped
+// composite; undefined ends contribute nothing (twin of interval::knot_segment).
+vec4 knot_segment(vec4 a, vec4 e, float len, bool full, uint level) {
+    if (a.w == 0.0 || e.w == 0.0) {
+        return vec4(0.0);
+    }
+    return full ? preint_lookup(level, a.y, e.y) : preint_segment(a.y, e.y, len);
+}
+
+// Composites [a, e] of exactly len, split at isosurface crossings (twin of
+// interval::emit_interval). `plain` is the interval's knot_segment, already looked up by the
+// caller, used as it is when no isosurface is crossed.
+void emit_interval(vec3 o, vec3 d, vec4 a, vec4 e, float len, vec4 plain,
                    inout vec3 color, inout float transmittance, inout uint evaluations) {
     if (a.w == 0.0 || e.w == 0.0) {
         return;
@@ -162,9 +172,8 @@ void emit_interval(vec3 o, vec3 d, vec4 a, vec4 e, float len, bool full, uint le
     uint n = 0u;
 #endif
     if (n == 0u) {
-        vec4 c = full ? preint_lookup(level, a.y, e.y) : preint_segment(a.y, e.y, len);
-        color += transmittance * c.rgb;
-        transmittance *= 1.0 - c.a;
+        color += transmittance * plain.rgb;
+        transmittance *= 1.0 - plain.a;
         return;
     }
 #if MAX_ISO > 0
@@ -239,8 +248,8 @@ void integrate(vec3 o, vec3 d, float t0, float t1, inout vec3 color, inout float
             break;
         }
         vec4 next = knot(o, d, tb, evaluations);
-        emit_interval(o, d, prev, next, tb - ta, i + 1u < steps, 0u, color, transmittance,
-                      evaluations);
+        vec4 plain = knot_segment(prev, next, tb - ta, i + 1u < steps, 0u);
+        emit_interval(o, d, prev, next, tb - ta, plain, color, transmittance, evaluations);
         prev = next;
         if (1.0 - transmittance > params.integrator.y) {
             break;
@@ -248,14 +257,6 @@ void integrate(vec3 o, vec3 d, float t0, float t1, inout vec3 color, inout float
     }
 }
 #else
-// (C, α) of [a, e] of exactly len: table `level` for full-length intervals, else clipped.
-vec4 adaptive_segment(vec4 a, vec4 e, float len, bool full, uint level) {
-    if (a.w == 0.0 || e.w == 0.0) {
-        return vec4(0.0);
-    }
-    return full ? preint_lookup(level, a.y, e.y) : preint_segment(a.y, e.y, len);
-}
-
 // [MLS] §4 adaptive subdivision on a local stack of pending interval ends; twin of
 // src/render/raycast/adaptive.rs. A stack entry is a knot whose w holds ±(depth + 1) of the
 // interval it closes, negative when f is undefined there (one vec4 per entry keeps the
@@ -280,11 +281,11 @@ void integrate(vec3 o, vec3 d, float t0, float t1, inout vec3 color, inout float
             uint depth = uint(abs(packed.w)) - 1u;
             vec4 e = vec4(packed.xyz, packed.w > 0.0 ? 1.0 : 0.0);
             float len = top * exp2(-float(depth));
-            vec4 c = adaptive_segment(a, e, len, full, depth);
+            vec4 c = knot_segment(a, e, len, full, depth);
             if (int(depth) + 1 < ADAPTIVE_LEVELS && (full || 0.5 * len >= l_min)) {
                 vec4 m = knot(o, d, 0.5 * (a.x + e.x), evaluations);
-                vec4 cl = adaptive_segment(a, m, 0.5 * len, full, depth + 1u);
-                vec4 cr = adaptive_segment(m, e, 0.5 * len, full, depth + 1u);
+                vec4 cl = knot_segment(a, m, 0.5 * len, full, depth + 1u);
+                vec4 cr = knot_segment(m, e, 0.5 * len, full, depth + 1u);
                 vec3 c2 = cl.rgb + (1.0 - cl.a) * cr.rgb;
                 bool sign_change = a.z * e.z < 0.0;
                 if (sign_change || transmittance * length(c.rgb - c2) > epsilon * length(c.rgb)) {
@@ -296,12 +297,10 @@ void integrate(vec3 o, vec3 d, float t0, float t1, inout vec3 color, inout float
                     continue;
                 }
                 // Accepted: the two halves, each split at any isosurface it crosses.
-                emit_interval(o, d, a, m, 0.5 * len, full, depth + 1u, color, transmittance,
-                              evaluations);
-                emit_interval(o, d, m, e, 0.5 * len, full, depth + 1u, color, transmittance,
-                              evaluations);
+                emit_interval(o, d, a, m, 0.5 * len, cl, color, transmittance, evaluations);
+                emit_interval(o, d, m, e, 0.5 * len, cr, color, transmittance, evaluations);
             } else {
-                emit_interval(o, d, a, e, len, full, depth, color, transmittance, evaluations);
+                emit_interval(o, d, a, e, len, c, color, transmittance, evaluations);
             }
             sp -= 1;
             a = e;

@@ -9,7 +9,7 @@ use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use vmls::probe::{coherent_order, fma_probe, median, mls_probe, random_points};
-use vmls::render::evalmap::write_eval_map;
+use vmls::render::evalmap::{check_path, write_eval_map};
 use vmls::render::gpu::{GpuField, render};
 use vmls::render::output::{format_of, write_image};
 use vmls::render::{Field, RaySetup, RenderError, build_tables, load_volume};
@@ -125,13 +125,8 @@ fn run_render(
 ) -> Result<(), RenderError> {
     let start = Instant::now();
     format_of(output)?;
-    if let Some(map) =
-        eval_map.filter(|m| !m.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")))
-    {
-        return Err(RenderError::Output {
-            path: map.display().to_string(),
-            message: "the evaluation map is a PNG: expected a .png file name".into(),
-        });
+    if let Some(map) = eval_map {
+        check_path(map)?;
     }
     let scene = Scene::load(scene_path, set)?;
     let volume = load_volume(&scene)?;

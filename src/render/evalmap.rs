@@ -66,6 +66,21 @@ fn draw_number(img: &mut image::RgbImage, value: u32, x0: u32, y0: u32, right_al
     }
 }
 
+/// Checks that `path` names a PNG file (the only format of the map).
+pub fn check_path(path: &Path) -> Result<(), RenderError> {
+    if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+    {
+        Ok(())
+    } else {
+        Err(RenderError::Output {
+            path: path.display().to_string(),
+            message: "the evaluation map is a PNG: expected a .png file name".into(),
+        })
+    }
+}
+
 /// Writes the heat map of `counts` (row 0 at the top) to a PNG file.
 pub fn write_eval_map(
     path: &Path,
@@ -77,14 +92,7 @@ pub fn write_eval_map(
         path: path.display().to_string(),
         message,
     };
-    let is_png = path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("png"));
-    if !is_png {
-        return Err(err(
-            "the evaluation map is a PNG: expected a .png file name".into(),
-        ));
-    }
+    check_path(path)?;
     let max = counts.iter().copied().max().unwrap_or(0).max(1);
     let mut img = image::RgbImage::new(width, height + LEGEND);
     for (i, &c) in counts.iter().enumerate().take((width * height) as usize) {

@@ -20,7 +20,7 @@ use super::{Field, RaySetup};
 use crate::recon::mls::{MlsSettings, Neighbours};
 use crate::scene::Method;
 use glam::DVec3;
-use interval::{Knot, emit_crossings, emit_interval, knot};
+use interval::{Knot, emit_crossings, emit_interval, knot, knot_segment};
 
 /// One pixel of the reference integrator.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -99,7 +99,8 @@ fn integrate_fixed(
         }
         let next = knot(ray, tb);
         let level = (i + 1 < steps).then_some(0);
-        emit_interval(ray, setup, tables, &prev, &next, tb - ta, level);
+        let plain = knot_segment(tables, &prev, &next, tb - ta, level);
+        emit_interval(ray, setup, tables, &prev, &next, tb - ta, plain);
         prev = next;
         if 1.0 - ray.transmittance > setup.early_termination {
             break;

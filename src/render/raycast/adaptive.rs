@@ -11,7 +11,7 @@
 //! for the two halves of the last split: at most ⌊log2(l_max/l_min)⌋ + 1 entries.
 
 use super::Ray;
-use super::interval::{Knot, emit_interval, knot, table_segment};
+use super::interval::{Knot, emit_interval, knot, knot_segment};
 use crate::render::RaySetup;
 use crate::render::preintegration::PreintegrationTables;
 
@@ -24,20 +24,6 @@ pub fn stack_size(l_max: f64, l_min: f64) -> usize {
         levels += 1;
     }
     levels
-}
-
-/// (C, α) of [a, e] for the acceptance test (isosurfaces are split only when compositing).
-fn segment(
-    tables: &PreintegrationTables,
-    a: &Knot,
-    e: &Knot,
-    len: f64,
-    level: Option<usize>,
-) -> ([f64; 3], f64) {
-    match (a.s, e.s) {
-        (Some(sa), Some(se)) => table_segment(tables, sa, se, len, level),
-        _ => ([0.0; 3], 0.0),
-    }
 }
 
 fn norm(c: [f64; 3]) -> f64 {
@@ -65,14 +51,15 @@ pub(super) fn integrate(
         while let Some(&(e, depth)) = stack.last() {
             let len = top * 0.5f64.powi(depth as i32);
             let level = full.then_some(depth);
-            let (c1, _) = segment(tables, &a, &e, len, level);
+            let whole = knot_segment(tables, &a, &e, len, level);
+            let c1 = whole.0;
             let can_split = depth + 1 < levels && (full || 0.5 * len >= setup.l_min);
             if can_split {
                 let m = knot(ray, 0.5 * (a.t + e.t));
                 let half = level.map(|k| k + 1);
-                let (cl, al) = segment(tables, &a, &m, 0.5 * len, half);
-                let (cr, _) = segment(tables, &m, &e, 0.5 * len, half);
-                let c2 = [0, 1, 2].map(|k| cl[k] + (1.0 - al) * cr[k]);
+                let left = knot_segment(tables, &a, &m, 0.5 * len, half);
+                let right = knot_segment(tables, &m, &e, 0.5 * len, half);
+                let c2 = [0, 1, 2].map(|k| left.0[k] + (1.0 - left.1) * right.0[k]);
                 let diff = norm([0, 1, 2].map(|k| c1[k] - c2[k]));
                 let sign_change = a.slope(ray) * e.slope(ray) < 0.0;
                 if sign_change || ray.transmittance * diff > setup.epsilon * norm(c1) {
@@ -84,10 +71,10 @@ pub(super) fn integrate(
                     continue;
                 }
                 // Accepted: the two halves, each split at any isosurface it crosses.
-                emit_interval(ray, setup, tables, &a, &m, 0.5 * len, half);
-                emit_interval(ray, setup, tables, &m, &e, 0.5 * len, half);
+                emit_interval(ray, setup, tables, &a, &m, 0.5 * len, left);
+                emit_interval(ray, setup, tables, &m, &e, 0.5 * len, right);
             } else {
-                emit_interval(ray, setup, tables, &a, &e, len, level);
+                emit_interval(ray, setup, tables, &a, &e, len, whole);
             }
             stack.pop();
             a = e;

@@ -112,14 +112,19 @@ fn crossings(
     hits
 }
 
-/// (C, α) of [a, e] of exactly `len` from the tables (undefined ends contribute nothing).
-pub(super) fn table_segment(
+/// (C, α) of [a, e] of exactly `len` from the tables: table `level` for a full-length interval
+/// (whose length is then `lengths[level]` by construction), else the clipped composite.
+/// Undefined ends contribute nothing.
+pub(super) fn knot_segment(
     tables: &PreintegrationTables,
-    sa: f64,
-    se: f64,
+    a: &Knot,
+    e: &Knot,
     len: f64,
     level: Option<usize>,
 ) -> ([f64; 3], f64) {
+    let (Some(sa), Some(se)) = (a.s, e.s) else {
+        return ([0.0; 3], 0.0);
+    };
     match level {
         Some(k) => {
             let v = tables.lookup(&tables.tables[k], sa, se);
@@ -129,7 +134,9 @@ pub(super) fn table_segment(
     }
 }
 
-/// Composites [a, e] into the ray, split at isosurface crossings.
+/// Composites [a, e] (of exactly `len`) into the ray, split at isosurface crossings. `plain` is
+/// the interval's [`knot_segment`], which the callers have already looked up; it is used as it
+/// is when no isosurface is crossed.
 pub(super) fn emit_interval(
     ray: &mut Ray<'_>,
     setup: &RaySetup,
@@ -137,15 +144,14 @@ pub(super) fn emit_interval(
     a: &Knot,
     e: &Knot,
     len: f64,
-    level: Option<usize>,
+    plain: ([f64; 3], f64),
 ) {
     let (Some(sa), Some(se)) = (a.s, e.s) else {
         return;
     };
     let hits = crossings(ray, setup, a, e, sa, se);
     if hits.is_empty() {
-        let (c, alpha) = table_segment(tables, sa, se, len, level);
-        ray.composite(c, alpha);
+        ray.composite(plain.0, plain.1);
         return;
     }
     let (mut t, mut s) = (a.t, sa);
