@@ -38,9 +38,11 @@ pub mod binding {
     pub const PREINT: u32 = 11;
     /// `IsoSurface` array (read-only).
     pub const ISO: u32 = 12;
+    /// Per-pixel ray state between chunks of raycast.comp: the last knot, `vec4` per pixel.
+    pub const RAY_STATE: u32 = 13;
 
     /// Every binding with its macro name.
-    pub const ALL: [(&str, u32); 13] = [
+    pub const ALL: [(&str, u32); 14] = [
         ("BINDING_PARAMS", PARAMS),
         ("BINDING_GRID", GRID),
         ("BINDING_SAMPLES", SAMPLES),
@@ -54,6 +56,7 @@ pub mod binding {
         ("BINDING_PROBE", PROBE),
         ("BINDING_PREINT", PREINT),
         ("BINDING_ISO", ISO),
+        ("BINDING_RAY_STATE", RAY_STATE),
     ];
 }
 
@@ -62,13 +65,32 @@ pub mod binding {
 /// and must stay inside the buffer.
 pub const GRID_PAD: usize = 8;
 
-/// `#define BINDING_* n` for every binding (and `GRID_PAD`), to pass to the shader compiler.
+/// raycast.comp's per-pixel count word: evaluations in the low bits, and flags.
+pub mod ray_count {
+    /// The ray is complete; its pixel holds the final colour.
+    pub const DONE: u32 = 1 << 31;
+    /// A loop ended before its chunk did (the driver's loop limit): render again in smaller
+    /// chunks.
+    pub const TRUNCATED: u32 = 1 << 30;
+    /// Mask of the evaluation count.
+    pub const EVALUATIONS: u32 = TRUNCATED - 1;
+}
+
+/// `#define BINDING_* n` for every binding (and `GRID_PAD`, the `RAY_*` count flags), to pass
+/// to the shader compiler.
 pub fn binding_defines() -> Vec<(String, String)> {
     let mut d: Vec<(String, String)> = binding::ALL
         .iter()
         .map(|(k, v)| (k.to_string(), v.to_string()))
         .collect();
     d.push(("GRID_PAD".into(), GRID_PAD.to_string()));
+    for (k, v) in [
+        ("RAY_DONE", ray_count::DONE),
+        ("RAY_TRUNCATED", ray_count::TRUNCATED),
+        ("RAY_EVALUATIONS", ray_count::EVALUATIONS),
+    ] {
+        d.push((k.into(), format!("{v}u")));
+    }
     d
 }
 
@@ -193,7 +215,10 @@ pub struct RayPush {
     pub row_offset: u32,
     /// Rows in this band.
     pub rows: u32,
-    pub _pad: [u32; 2],
+    /// First outer step (midpoint step, fixed interval, adaptive top interval) of this chunk.
+    pub first: u32,
+    /// One past the last outer step of this chunk.
+    pub last: u32,
 }
 const _: () = assert!(std::mem::size_of::<RayPush>() == 16);
 

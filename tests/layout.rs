@@ -103,7 +103,8 @@ fn glsl_and_rust_layouts_agree() {
         RayPush {
             row_offset: 1,
             rows: 2,
-            _pad: [3, 4]
+            first: 3,
+            last: 4,
         },
         "RayPush"
     );

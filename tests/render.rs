@@ -307,3 +307,60 @@ fn midpoint_rule_converges_to_the_reference() {
         "RMSE against the reference does not fall with the step: {errors:?}"
     );
 }
+
+#[test]
+fn long_rays_are_integrated_in_chunks_that_the_driver_does_not_cut() {
+    // The reference on ML 41³ takes up to ~1 350 samples per ray, over 30 loop iterations each:
+    // more than llvmpipe's 65 535 loop iterations per invocation and dispatch, after which it
+    // silently ends every loop. Rendered in one chunk, the kernel must notice (RAY_TRUNCATED)
+    // and fall back to smaller chunks; by default it uses safe ones. Either way the image and
+    // the evaluation counts equal the CPU twin's.
+    let s = Scene::load(
+        Some(std::path::Path::new("tests/scenes/ml-iso.toml")),
+        &[
+            "render.method=\"reference\"".to_string(),
+            "camera.width=24".to_string(),
+            "camera.height=24".to_string(),
+        ],
+    )
+    .expect("scene");
+    let f = field(&s);
+    let cpu = cpu_render(&s, &f);
+    let (ctx, compiler) = gpu();
+    let llvmpipe = ctx.info().name.contains("llvmpipe");
+    let gf = GpuField::upload(&ctx, &f).expect("upload");
+    for chunk in [None, Some(u32::MAX / 4)] {
+        let mut setup = RaySetup::new(&s, &f).expect("setup");
+        setup.chunk = chunk;
+        let g =
+            render(&ctx, &compiler, &f, &gf, &s.transfer, None, &setup, |_| {}).expect("render");
+        let max_samples = cpu.iter().map(|p| p.evaluations).max().unwrap_or(0);
+        assert!(
+            max_samples > 1200,
+            "the test needs long rays: {max_samples}"
+        );
+        if chunk.is_some() {
+            // One band: more than one dispatch means the truncation was seen and handled.
+            assert!(
+                !llvmpipe || g.bands > 1,
+                "llvmpipe ran {} dispatches for one chunk",
+                g.bands
+            );
+        }
+        // Root finding in f32 and f64 may take a different number of steps: a few evaluations.
+        let counts_differ = g
+            .counts
+            .iter()
+            .zip(&cpu)
+            .filter(|(a, b)| a.abs_diff(b.evaluations) > 8)
+            .count();
+        let diff = pixel_differences(&g, &cpu);
+        let loose = diff.iter().filter(|d| **d > 1e-3).count();
+        assert!(
+            counts_differ <= 2 && loose <= 2,
+            "chunk {chunk:?}: {counts_differ} counts and {loose} pixels differ from the CPU"
+        );
+    }
+    drop(gf);
+    finish(ctx);
+}

@@ -71,8 +71,8 @@ struct MlsOut {
 struct RayPush {
     uint row_offset;
     uint rows;
-    uint _pad0;
-    uint _pad1;
+    uint first;
+    uint last;
 };
 
 struct CountPush {

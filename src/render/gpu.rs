@@ -14,7 +14,7 @@ use super::transfer::TransferFunction;
 use super::{Field, RaySetup};
 use crate::gpu_types::{
     CountPush, GRID_PAD, IsoSurface, MlsOut, RayPush, RenderParams, Sample, binding,
-    binding_defines,
+    binding_defines, ray_count,
 };
 use crate::recon::mls::{Basis, GradientMode, Weight};
 use crate::scene::{Method, NeighbourMode};
@@ -284,9 +284,52 @@ pub struct GpuImage {
     pub counts: Vec<u32>,
     /// Sum of the bands' GPU times.
     pub gpu_ms: f64,
-    /// Submissions (bands).
+    /// Submissions (bands × chunks).
     pub bands: u32,
     pub variant: String,
+}
+
+/// Outer steps of the longest possible ray: midpoint steps or fixed intervals of `step`, or
+/// adaptive top intervals of l_max, over the box diagonal (plus one for rounding).
+pub fn outer_steps(setup: &RaySetup) -> u32 {
+    let diagonal = (setup.box_hi - setup.box_lo).length();
+    let step = match setup.method {
+        Method::Adaptive => setup.l_max,
+        _ => setup.step,
+    };
+    ((diagonal / step).ceil() + 1.0).min(f64::from(u32::MAX / 2)) as u32
+}
+
+/// Outer steps per dispatch. llvmpipe ends every loop after 65 535 iterations per invocation
+/// and dispatch (LAVAPIPE.md), and one MLS evaluation runs 30–60 of them (neighbour rows,
+/// octree descent): about 256 evaluations per ray and dispatch leaves a margin of 4 or more.
+/// An adaptive top interval costs up to 2^levels evaluations.
+pub fn default_chunk(setup: &RaySetup) -> u32 {
+    const EVALUATIONS_PER_DISPATCH: u32 = 256;
+    match setup.method {
+        Method::Adaptive => {
+            let levels = super::raycast::adaptive::stack_size(setup.l_max, setup.l_min);
+            (EVALUATIONS_PER_DISPATCH >> levels.min(8)).max(1)
+        }
+        _ => EVALUATIONS_PER_DISPATCH,
+    }
+}
+
+/// The count words of image rows row .. row + rows.
+fn read_band(
+    ctx: &Context,
+    counts: &Buffer,
+    row: u32,
+    rows: u32,
+    w: u32,
+) -> Result<Vec<u32>, VkError> {
+    let all: Vec<u32> = counts.read(ctx)?;
+    let begin = (row as usize) * (w as usize);
+    let end = ((row + rows) as usize) * (w as usize);
+    Ok(all
+        .get(begin..end.min(all.len()))
+        .unwrap_or_default()
+        .to_vec())
 }
 
 fn pipeline_for(
@@ -325,7 +368,12 @@ pub fn render(
     }
     let data = gpu_field.bindings();
     let mut binding_ids: Vec<u32> = data.iter().map(|(b, _)| *b).collect();
-    binding_ids.extend([binding::TRANSFER, binding::IMAGE, binding::COUNTS]);
+    binding_ids.extend([
+        binding::TRANSFER,
+        binding::IMAGE,
+        binding::COUNTS,
+        binding::RAY_STATE,
+    ]);
     if !setup.isosurfaces.is_empty() {
         binding_ids.push(binding::ISO);
     }
@@ -383,12 +431,14 @@ pub fn render(
     let iso_buf = Buffer::from_slice(ctx, "isosurfaces", &isos)?;
     let image = Buffer::new(ctx, "image", pixels * 16, BufferUsage::Storage)?;
     let counts = Buffer::new(ctx, "evaluation counts", pixels * 4, BufferUsage::Storage)?;
+    let ray_state = Buffer::new(ctx, "ray state", pixels * 16, BufferUsage::Storage)?;
     let mut all = data;
     all.extend([
         (binding::PARAMS, &params_buf),
         (binding::TRANSFER, &tf_buf),
         (binding::IMAGE, &image),
         (binding::COUNTS, &counts),
+        (binding::RAY_STATE, &ray_state),
     ]);
     if !setup.isosurfaces.is_empty() {
         all.push((binding::ISO, &iso_buf));
@@ -400,27 +450,60 @@ pub fn render(
     let band_rows = (BAND_PIXELS / w.max(1))
         .clamp(8, h.max(8))
         .next_multiple_of(8);
+    let outer = outer_steps(setup);
+    let mut chunk = setup.chunk.unwrap_or_else(|| default_chunk(setup));
     let mut gpu_ms = 0.0;
     let mut bands = 0;
     let mut row = 0;
     while row < h {
         let rows = band_rows.min(h - row);
-        let push = RayPush {
-            row_offset: row,
-            rows,
-            _pad: [0; 2],
-        };
-        let timings = ctx.submit(|rec| {
-            rec.dispatch(
-                &pipeline,
-                &group,
-                bytemuck::bytes_of(&push),
-                [w.div_ceil(8), rows.div_ceil(8), 1],
-                "raycast",
-            )
-        })?;
-        gpu_ms += timings.iter().filter_map(|t| t.gpu_ms).sum::<f64>();
-        bands += 1;
+        let mut first = 0;
+        while first < outer {
+            let push = RayPush {
+                row_offset: row,
+                rows,
+                first,
+                last: first.saturating_add(chunk).min(outer),
+            };
+            let timings = ctx.submit(|rec| {
+                rec.dispatch(
+                    &pipeline,
+                    &group,
+                    bytemuck::bytes_of(&push),
+                    [w.div_ceil(8), rows.div_ceil(8), 1],
+                    "raycast",
+                )
+            })?;
+            gpu_ms += timings.iter().filter_map(|t| t.gpu_ms).sum::<f64>();
+            bands += 1;
+            let band_counts = read_band(ctx, &counts, row, rows, w)?;
+            if band_counts.iter().any(|c| c & ray_count::TRUNCATED != 0) {
+                // The driver cut a loop short: this band again, from its start, in halves.
+                if chunk == 1 {
+                    return Err(VkError::Usage(format!(
+                        "raycast: the device ended a loop early even for one step per dispatch \
+                         (llvmpipe allows 65 535 loop iterations per invocation); rows {row}..{} \
+                         cannot be rendered with these settings",
+                        row + rows
+                    )));
+                }
+                chunk = chunk.div_ceil(2);
+                first = 0;
+                continue;
+            }
+            if band_counts.iter().all(|c| c & ray_count::DONE != 0) {
+                break;
+            }
+            first = push.last;
+        }
+        let band_counts = read_band(ctx, &counts, row, rows, w)?;
+        if let Some(i) = band_counts.iter().position(|c| c & ray_count::DONE == 0) {
+            return Err(VkError::Usage(format!(
+                "raycast: pixel ({}, {}) was not finished after {outer} steps",
+                i as u32 % w,
+                row + i as u32 / w
+            )));
+        }
         row += rows;
         progress(f64::from(row) / f64::from(h));
     }
@@ -428,6 +511,9 @@ pub fn render(
     pixels_out.truncate(pixels as usize);
     let mut counts_out: Vec<u32> = counts.read(ctx)?;
     counts_out.truncate(pixels as usize);
+    for c in &mut counts_out {
+        *c &= ray_count::EVALUATIONS;
+    }
     Ok(GpuImage {
         pixels: pixels_out,
         counts: counts_out,

@@ -183,6 +183,9 @@ pub struct RaySetup {
     pub min_transmittance: f64,
     pub isosurfaces: Vec<shading::Isosurface>,
     pub lighting: shading::Lighting,
+    /// Outer steps per GPU dispatch; None: [`gpu::default_chunk`]. It changes nothing in the
+    /// image, only how the kernel's work is split (tests force large chunks with it).
+    pub chunk: Option<u32>,
 }
 
 impl RaySetup {
@@ -216,6 +219,7 @@ impl RaySetup {
             min_transmittance: scene.render.min_transmittance,
             isosurfaces: scene.isosurfaces.clone(),
             lighting: scene.lighting,
+            chunk: None,
         })
     }
 

@@ -28,6 +28,7 @@ static SOURCES: &[(&str, &str)] = embed![
     "include/camera.glsl",
     "include/preint.glsl",
     "include/shading.glsl",
+    "include/interval.glsl",
     "raycast.comp",
     "mls_eval.comp",
     "probe_fma.comp",

@@ -1,6 +1,6 @@
 //! [MLS] §4 adaptive subdivision, f64 twin of `integrate_adaptive` in `glsl/raycast.comp`.
 //!
-//! The ray is cut into intervals of l_max (the last one clipped at the exit). An interval [a, e]
+//! The ray is cut into top intervals of l_max (the last one clipped at the exit). An interval [a, e]
 //! with scalars s_a, s_e is compared with its two halves: C1 = table(len)(s_a, s_e), C2 = the
 //! halves composited (one new evaluation at the midpoint). It is accepted when
 //! (1 − α_acc)·|C1 − C2| ≤ ε·|C1| (|·| the RGB norm) and the directional derivative does not
@@ -42,12 +42,18 @@ pub(super) fn integrate(
 ) {
     let levels = stack_size(setup.l_max, setup.l_min);
     let mut stack: Vec<(Knot, usize)> = Vec::with_capacity(levels);
+    // Top interval k is [t0 + k·l_max, min(t0 + (k+1)·l_max, t1)]: computed from k, not
+    // accumulated, so that the kernel can start a chunk at any k.
+    let tops = ((t1 - t0) / setup.l_max).ceil() as u64;
     let mut a = knot(ray, t0);
-    while a.t < t1 && 1.0 - ray.transmittance <= setup.early_termination {
-        let full = a.t + setup.l_max <= t1;
+    for k in 0..tops {
+        let end = t0 + (k + 1) as f64 * setup.l_max;
+        let full = end <= t1;
         let top = if full { setup.l_max } else { t1 - a.t };
-        let end = if full { a.t + setup.l_max } else { t1 };
-        stack.push((knot(ray, end), 0));
+        if top <= 0.0 {
+            return;
+        }
+        stack.push((knot(ray, if full { end } else { t1 }), 0));
         while let Some(&(e, depth)) = stack.last() {
             let len = top * 0.5f64.powi(depth as i32);
             let level = full.then_some(depth);

@@ -8,6 +8,16 @@
 //! |f − v| ≤ 1e-6 or the bracket is below 1e-6 of the interval), shaded with the MLS gradient
 //! there, and composited between the two clipped sub-intervals. A crossing counts for the
 //! interval (a, e]: a knot exactly at v belongs to the interval that ends there, never to two.
+//!
+//! Near-tangent rays cross a surface twice between two knots on the same side of it. Where the
+//! directional derivative changes sign across [a, e] and the extremum points towards an
+//! isosurface beyond both ends, the cubic Hermite through the knots' values and directional
+//! derivatives predicts the extremum (`hermite_extremum`); f is evaluated there (at most
+//! `EXTREMUM_ITERATIONS` times, keeping the half where the derivative still changes sign) until
+//! it reaches the isosurface. The interval is then split at that knot into two monotone pieces,
+//! each composited as above. The search gives up when the predicted excursion beyond the ends is
+//! less than half the distance to the surface: the Hermite is exact for quadratics, so a miss
+//! needs a large fourth-derivative term.
 
 use super::Ray;
 use crate::render::RaySetup;
@@ -16,6 +26,12 @@ use crate::render::shading::shade_surface;
 
 /// Evaluations spent locating one crossing, at most.
 pub(super) const LOCATE_ITERATIONS: u32 = 12;
+
+/// Evaluations spent searching for the extremum between two knots, at most.
+pub(super) const EXTREMUM_ITERATIONS: u32 = 3;
+
+/// Bisection steps on the Hermite's derivative (no evaluations of f).
+const HERMITE_BISECTIONS: u32 = 24;
 
 /// A point on the ray: parameter, scalar (None where f is undefined) and gradient.
 #[derive(Debug, Clone, Copy)]
@@ -92,6 +108,74 @@ pub(super) fn locate_crossing(ray: &mut Ray<'_>, a: &Knot, e: &Knot, v: f64) -> 
     best
 }
 
+/// The extremum of the cubic Hermite on u ∈ [0, 1] with end values p0, p1 and end derivatives
+/// m0, m1 (per unit u), which must have opposite signs: (u, p(u)) where p'(u) = 0. p' is the
+/// quadratic m0 + 2(3Δ − 2m0 − m1)u + 3(m0 + m1 − 2Δ)u², Δ = p1 − p0, with exactly one root in
+/// (0, 1); it is bisected so that the f32 twin takes the same path.
+pub fn hermite_extremum(p0: f64, p1: f64, m0: f64, m1: f64) -> (f64, f64) {
+    let delta = p1 - p0;
+    let b = 3.0 * delta - 2.0 * m0 - m1;
+    let c = m0 + m1 - 2.0 * delta;
+    let (mut lo, mut hi) = (0.0f64, 1.0f64);
+    for _ in 0..HERMITE_BISECTIONS {
+        let u = 0.5 * (lo + hi);
+        let slope = m0 + u * (2.0 * b + 3.0 * c * u);
+        if (slope > 0.0) == (m0 > 0.0) {
+            lo = u;
+        } else {
+            hi = u;
+        }
+    }
+    let u = 0.5 * (lo + hi);
+    (u, p0 + u * (m0 + u * (b + c * u)))
+}
+
+/// For [a, e] whose directional derivative changes sign: the knot at the extremum between them
+/// once f there reaches the nearest isosurface beyond both ends on the extremum's side, or None.
+fn split_at_extremum(ray: &mut Ray<'_>, setup: &RaySetup, a: &Knot, e: &Knot) -> Option<Knot> {
+    let (sa, se) = (a.s?, e.s?);
+    let (ga, ge) = (a.slope(ray), e.slope(ray));
+    if ga * ge >= 0.0 {
+        return None;
+    }
+    // Work in the extremum's orientation: a maximum of sign·f.
+    let sign = if ga > 0.0 { 1.0 } else { -1.0 };
+    let top = (sign * sa).max(sign * se);
+    let v = setup
+        .isosurfaces
+        .iter()
+        .map(|iso| sign * iso.value)
+        .filter(|&v| v > top)
+        .min_by(f64::total_cmp)?;
+    let (mut lo, mut hi) = ((a.t, sign * sa, sign * ga), (e.t, sign * se, sign * ge));
+    for _ in 0..EXTREMUM_ITERATIONS {
+        let w = hi.0 - lo.0;
+        let (u, peak) = hermite_extremum(lo.1, hi.1, lo.2 * w, hi.2 * w);
+        if v - peak > peak - lo.1.max(hi.1) {
+            return None;
+        }
+        let k = knot(ray, lo.0 + u * w);
+        eprintln!(
+            "DBG try a {} {:?} e {} {:?} u {u} peak {peak} v {v} got {:?}",
+            lo.0, lo.1, hi.0, hi.1, k.s
+        );
+        let s = sign * k.s?;
+        if s >= v {
+            eprintln!("DBG split a {:?} e {:?} m {:?}", a.t, e.t, k.t);
+            return Some(k);
+        }
+        let g = sign * k.slope(ray);
+        if g > 0.0 {
+            lo = (k.t, s, g);
+        } else if g < 0.0 {
+            hi = (k.t, s, g);
+        } else {
+            return None;
+        }
+    }
+    None
+}
+
 /// The located crossings of [a, e] (scalars sa, se) with every isosurface, sorted along the ray,
 /// with the index of the isosurface.
 fn crossings(
@@ -134,9 +218,10 @@ pub(super) fn knot_segment(
     }
 }
 
-/// Composites [a, e] (of exactly `len`) into the ray, split at isosurface crossings. `plain` is
-/// the interval's [`knot_segment`], which the callers have already looked up; it is used as it
-/// is when no isosurface is crossed.
+/// Composites [a, e] (of exactly `len`) into the ray, split at isosurface crossings and, for a
+/// near-tangent double crossing, at the extremum between them. `plain` is the interval's
+/// [`knot_segment`], which the callers have already looked up; it is used as it is when no
+/// isosurface is crossed.
 pub(super) fn emit_interval(
     ray: &mut Ray<'_>,
     setup: &RaySetup,
@@ -146,12 +231,38 @@ pub(super) fn emit_interval(
     len: f64,
     plain: ([f64; 3], f64),
 ) {
+    if setup.isosurfaces.is_empty() {
+        ray.composite(plain.0, plain.1);
+        return;
+    }
+    match split_at_extremum(ray, setup, a, e) {
+        Some(m) => {
+            let scale = len / (e.t - a.t);
+            emit_monotone(ray, setup, tables, a, &m, (m.t - a.t) * scale, None);
+            emit_monotone(ray, setup, tables, &m, e, (e.t - m.t) * scale, None);
+        }
+        None => emit_monotone(ray, setup, tables, a, e, len, Some(plain)),
+    }
+}
+
+/// Composites [a, e] (of exactly `len`), split at the isosurfaces it crosses; `plain`, when
+/// given, is its table segment, else the clipped composite is looked up.
+fn emit_monotone(
+    ray: &mut Ray<'_>,
+    setup: &RaySetup,
+    tables: &PreintegrationTables,
+    a: &Knot,
+    e: &Knot,
+    len: f64,
+    plain: Option<([f64; 3], f64)>,
+) {
     let (Some(sa), Some(se)) = (a.s, e.s) else {
         return;
     };
     let hits = crossings(ray, setup, a, e, sa, se);
     if hits.is_empty() {
-        ray.composite(plain.0, plain.1);
+        let (c, alpha) = plain.unwrap_or_else(|| tables.segment(sa, se, len));
+        ray.composite(c, alpha);
         return;
     }
     let (mut t, mut s) = (a.t, sa);
@@ -174,14 +285,55 @@ pub(super) fn emit_interval(
     }
 }
 
-/// Composites the isosurfaces crossed between two midpoint samples (riemann, reference).
+/// Composites the isosurfaces crossed between two midpoint samples (riemann, reference),
+/// including near-tangent double crossings.
 pub(super) fn emit_crossings(ray: &mut Ray<'_>, setup: &RaySetup, a: &Knot, e: &Knot) {
+    match split_at_extremum(ray, setup, a, e) {
+        Some(m) => {
+            emit_surfaces(ray, setup, a, &m);
+            emit_surfaces(ray, setup, &m, e);
+        }
+        None => emit_surfaces(ray, setup, a, e),
+    }
+}
+
+/// Composites the shaded isosurfaces crossed in (a, e].
+fn emit_surfaces(ray: &mut Ray<'_>, setup: &RaySetup, a: &Knot, e: &Knot) {
     let (Some(sa), Some(se)) = (a.s, e.s) else {
         return;
     };
+    if (sa - 0.5).abs() < 0.02 {
+        eprintln!("DBG near t {} s {sa} {se}", a.t);
+    }
     for (hit, i) in crossings(ray, setup, a, e, sa, se) {
+        eprintln!(
+            "DBG hit {} in ({} {}] s {sa} {se} T {}",
+            hit.t, a.t, e.t, ray.transmittance
+        );
         let iso = &setup.isosurfaces[i];
         let c = shade_surface(iso, &setup.lighting, hit.gradient, ray.d);
         ray.composite(c, iso.opacity);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::hermite_extremum;
+
+    #[test]
+    fn hermite_extremum_is_exact_for_cubics() {
+        // p(u) = 1 − 4(u − 0.3)²: maximum 1 at 0.3 (the Hermite reproduces quadratics).
+        let (u, p) = hermite_extremum(1.0 - 4.0 * 0.09, 1.0 - 4.0 * 0.49, 2.4, -5.6);
+        assert!((u - 0.3).abs() < 1e-6 && (p - 1.0).abs() < 1e-10, "{u} {p}");
+        // p(u) = u³ − 1.5u² + 0.5u + 2 has its minimum at (3 + √3)/6 ≈ 0.7887. On [0.3, 1],
+        // p' goes from −0.13 to +0.5, and the Hermite there is the cubic itself.
+        let p3 = |u: f64| u * u * u - 1.5 * u * u + 0.5 * u + 2.0;
+        let d3 = |u: f64| 3.0 * u * u - 3.0 * u + 0.5;
+        let (a, b) = (0.3, 1.0);
+        let w = b - a;
+        let (u, p) = hermite_extremum(p3(a), p3(b), d3(a) * w, d3(b) * w);
+        let want = (3.0 + 3f64.sqrt()) / 6.0;
+        assert!((a + u * w - want).abs() < 1e-6, "{}", a + u * w);
+        assert!((p - p3(want)).abs() < 1e-10, "{p}");
     }
 }
