@@ -45,17 +45,25 @@ const uint CHUNK_TRUNCATED = 2u; // a loop ended early: the driver's loop limit
 #if RAY_METHOD == 0
 // Midpoint rule (riemann, reference): steps band.first .. band.last of n = ⌈L/δ⌉; isosurfaces
 // crossed between consecutive samples are composited before the later sample's step. `prev`
-// is the previous sample (w = 0 before the first).
+// is the previous sample (w = 0 before the first). With isosurfaces, f is also evaluated at the
+// entry and the exit, so that a surface in the half step before the first sample or after the
+// last is not missed.
 uint integrate(vec3 o, vec3 d, float t0, float t1, inout vec4 prev, inout vec3 color,
                inout float transmittance, inout uint evaluations) {
     uint steps = uint(ceil((t1 - t0) / params.step));
+    bool isos = params.iso_count.x > 0u;
+    if (band.first == 0u && isos) {
+        prev = knot(o, d, t0, evaluations);
+    }
     uint last = min(band.last, steps);
     uint i = band.first;
+    bool exited = false;
     for (; i < last; ++i) {
         float ta = t0 + float(i) * params.step;
         float dt = min(params.step, t1 - ta);
         if (dt <= 0.0) {
-            return CHUNK_FINISHED;
+            exited = true;
+            break;
         }
         vec4 k = knot(o, d, ta + 0.5 * dt, evaluations);
         emit_crossings(o, d, prev, k, color, transmittance, evaluations);
@@ -71,7 +79,14 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, inout vec4 prev, inout vec3 c
             return CHUNK_FINISHED;
         }
     }
-    return i >= steps ? CHUNK_FINISHED : (i == band.last ? CHUNK_DONE : CHUNK_TRUNCATED);
+    if (!exited && i < steps) {
+        return i == band.last ? CHUNK_DONE : CHUNK_TRUNCATED;
+    }
+    if (isos) {
+        emit_crossings(o, d, prev, knot(o, d, t1, evaluations), color, transmittance,
+                       evaluations);
+    }
+    return CHUNK_FINISHED;
 }
 #elif RAY_METHOD == 1
 // Preintegration with a constant step: intervals band.first .. band.last, one lookup of

@@ -60,12 +60,17 @@ enum Command {
     },
     /// List Vulkan devices (* marks the default choice).
     Devices,
-    /// RMSE and largest difference of the RGB channels of two images of the same size.
+    /// RMSE and largest difference of the RGB channels of two images of the same size, and
+    /// the pixel where the largest one is.
     Compare {
         /// Image under test (.png or .exr).
         image: PathBuf,
         /// Reference image (.png or .exr).
         reference: PathBuf,
+        /// Write the per-pixel largest |difference| as a heat map (.png or .exr), scaled so
+        /// that the largest difference is white.
+        #[arg(long)]
+        diff: Option<PathBuf>,
     },
     /// Measure the FMA ceiling and MLS evaluation throughput side by side.
     Probe {
@@ -298,7 +303,10 @@ fn read_rgb(path: &Path) -> Result<image::Rgb32FImage, RenderError> {
         })
 }
 
-fn compare(image: &Path, reference: &Path) -> Result<(), RenderError> {
+fn compare(image: &Path, reference: &Path, diff: Option<&Path>) -> Result<(), RenderError> {
+    if let Some(d) = diff {
+        vmls::render::output::format_of(d)?;
+    }
     let (a, b) = (read_rgb(image)?, read_rgb(reference)?);
     if a.dimensions() != b.dimensions() {
         return Err(RenderError::Output {
@@ -317,8 +325,29 @@ fn compare(image: &Path, reference: &Path) -> Result<(), RenderError> {
         .map(|(x, y)| f64::from(x - y))
         .collect();
     let rmse = (diffs.iter().map(|d| d * d).sum::<f64>() / diffs.len().max(1) as f64).sqrt();
-    let max = diffs.iter().map(|d| d.abs()).fold(0.0, f64::max);
-    println!("rmse {rmse:.6} max {max:.6}");
+    let per_pixel: Vec<f64> = diffs
+        .chunks(3)
+        .map(|c| c.iter().map(|d| d.abs()).fold(0.0, f64::max))
+        .collect();
+    let (at, max) =
+        per_pixel.iter().enumerate().fold(
+            (0, 0.0),
+            |(i, m), (j, &d)| if d > m { (j, d) } else { (i, m) },
+        );
+    let w = a.width().max(1) as usize;
+    println!("rmse {rmse:.6} max {max:.6} at ({}, {})", at % w, at / w);
+    if let Some(path) = diff {
+        let scale = if max > 0.0 { 1.0 / max } else { 0.0 };
+        let heat: Vec<[f32; 4]> = per_pixel
+            .iter()
+            .map(|&d| {
+                let [r, g, b] =
+                    vmls::render::evalmap::ramp(d * scale).map(|v| f32::from(v) / 255.0);
+                [r, g, b, 1.0]
+            })
+            .collect();
+        vmls::render::output::write_image(path, a.width(), a.height(), &heat)?;
+    }
     Ok(())
 }
 
@@ -354,7 +383,11 @@ fn main() {
             set,
             device,
         ),
-        Command::Compare { image, reference } => compare(image, reference),
+        Command::Compare {
+            image,
+            reference,
+            diff,
+        } => compare(image, reference, diff.as_deref()),
         Command::Devices => Context::list_devices()
             .map(|lines| lines.iter().for_each(|l| println!("{l}")))
             .map_err(RenderError::from),

@@ -303,10 +303,13 @@ fn compare_reports_rmse_and_rejects_size_mismatch() {
     let same = vmls(&["compare", s(&a), s(&a)]);
     assert_eq!(
         String::from_utf8_lossy(&same.stdout).trim(),
-        "rmse 0.000000 max 0.000000"
+        "rmse 0.000000 max 0.000000 at (0, 0)"
     );
     // The red background shows through transmittance T in the red channel only.
-    let out = vmls(&["compare", s(&a), s(&b)]);
+    let heat = d.join("diff.png");
+    let out = vmls(&["compare", s(&a), s(&b), "--diff", s(&heat)]);
+    let img = image::open(&heat).expect("diff heat map");
+    assert_eq!((img.width(), img.height()), (12, 10));
     let text = String::from_utf8_lossy(&out.stdout);
     let max: f64 = text
         .split_whitespace()

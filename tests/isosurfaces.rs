@@ -200,6 +200,37 @@ fn near_tangent_double_crossings_between_two_knots_are_found() {
 }
 
 #[test]
+fn midpoint_rule_sees_surfaces_in_the_half_steps_at_entry_and_exit() {
+    // f = x on [-1, 1], step 2 spacings = 0.5: samples at -0.75, -0.25, …, 0.75. Surfaces at
+    // x = -0.9 and 0.9 lie between the box faces and the first/last sample; a transparent
+    // medium leaves α = 1 − (1 − op)² once both are seen.
+    for method in ["riemann", "reference"] {
+        let o = along_x(&[
+            &format!("render.method=\"{method}\""),
+            "render.step=2.0",
+            "render.reference_step=2.0",
+            "transfer.points=[[-2.0, 0.0, 0.0, 0.0, 0.0], [2.0, 0.0, 0.0, 0.0, 0.0]]",
+            "transfer.isosurfaces=[{ value = -0.9, color = [1.0, 1.0, 1.0], opacity = 0.4 }, \
+             { value = 0.9, color = [1.0, 1.0, 1.0], opacity = 0.4 }]",
+        ]);
+        let (g, c) = both(&scene(&o), ramp());
+        let want = 1.0 - 0.6 * 0.6;
+        for (p, q) in g.pixels.iter().zip(&c) {
+            assert!(
+                (q.rgba[3] - want).abs() < 1e-9,
+                "{method}: CPU α {}",
+                q.rgba[3]
+            );
+            assert!(
+                (f64::from(p[3]) - want).abs() < 1e-6,
+                "{method}: GPU α {}",
+                p[3]
+            );
+        }
+    }
+}
+
+#[test]
 fn hard_rays_agree_with_the_reference_twin_and_stay_finite() {
     // A sphere-like field (f = |x|²) with an isosurface the rays graze; rays along a face,
     // through a corner, starting inside; an opaque first interval.

@@ -52,10 +52,13 @@ impl Ray<'_> {
 }
 
 /// Midpoint rule (`riemann`, `reference`): n = ⌈L/δ⌉ steps, the last one shortened; isosurfaces
-/// crossed between consecutive samples are composited before the later sample's step.
+/// crossed between consecutive samples are composited before the later sample's step. With
+/// isosurfaces, f is also evaluated at the entry and the exit, so that a surface in the half
+/// step before the first sample or after the last is not missed.
 fn integrate_riemann(ray: &mut Ray<'_>, setup: &RaySetup, tf: &TransferFunction, t0: f64, t1: f64) {
     let steps = ((t1 - t0) / setup.step).ceil() as u64;
-    let mut prev: Option<Knot> = None;
+    let isos = !setup.isosurfaces.is_empty();
+    let mut prev: Option<Knot> = isos.then(|| knot(ray, t0));
     for i in 0..steps {
         let ta = t0 + i as f64 * setup.step;
         let dt = setup.step.min(t1 - ta);
@@ -63,7 +66,7 @@ fn integrate_riemann(ray: &mut Ray<'_>, setup: &RaySetup, tf: &TransferFunction,
             break;
         }
         let k = knot(ray, ta + 0.5 * dt);
-        if let Some(p) = prev.filter(|_| !setup.isosurfaces.is_empty()) {
+        if let Some(p) = prev.filter(|_| isos) {
             emit_crossings(ray, setup, &p, &k);
         }
         prev = Some(k);
@@ -74,8 +77,12 @@ fn integrate_riemann(ray: &mut Ray<'_>, setup: &RaySetup, tf: &TransferFunction,
         let a = 1.0 - (-tau * dt).exp();
         ray.composite(c.map(|x| x * a), a);
         if ray.transmittance < setup.min_transmittance {
-            break;
+            return;
         }
+    }
+    if let Some(p) = prev.filter(|_| isos) {
+        let k = knot(ray, t1);
+        emit_crossings(ray, setup, &p, &k);
     }
 }
 

@@ -155,13 +155,8 @@ fn split_at_extremum(ray: &mut Ray<'_>, setup: &RaySetup, a: &Knot, e: &Knot) ->
             return None;
         }
         let k = knot(ray, lo.0 + u * w);
-        eprintln!(
-            "DBG try a {} {:?} e {} {:?} u {u} peak {peak} v {v} got {:?}",
-            lo.0, lo.1, hi.0, hi.1, k.s
-        );
         let s = sign * k.s?;
         if s >= v {
-            eprintln!("DBG split a {:?} e {:?} m {:?}", a.t, e.t, k.t);
             return Some(k);
         }
         let g = sign * k.slope(ray);
@@ -302,14 +297,7 @@ fn emit_surfaces(ray: &mut Ray<'_>, setup: &RaySetup, a: &Knot, e: &Knot) {
     let (Some(sa), Some(se)) = (a.s, e.s) else {
         return;
     };
-    if (sa - 0.5).abs() < 0.02 {
-        eprintln!("DBG near t {} s {sa} {se}", a.t);
-    }
     for (hit, i) in crossings(ray, setup, a, e, sa, se) {
-        eprintln!(
-            "DBG hit {} in ({} {}] s {sa} {se} T {}",
-            hit.t, a.t, e.t, ray.transmittance
-        );
         let iso = &setup.isosurfaces[i];
         let c = shade_surface(iso, &setup.lighting, hit.gradient, ray.d);
         ray.composite(c, iso.opacity);
