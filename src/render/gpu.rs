@@ -315,23 +315,6 @@ pub fn default_chunk(setup: &RaySetup) -> u32 {
     }
 }
 
-/// The count words of image rows row .. row + rows.
-fn read_band(
-    ctx: &Context,
-    counts: &Buffer,
-    row: u32,
-    rows: u32,
-    w: u32,
-) -> Result<Vec<u32>, VkError> {
-    let all: Vec<u32> = counts.read(ctx)?;
-    let begin = (row as usize) * (w as usize);
-    let end = ((row + rows) as usize) * (w as usize);
-    Ok(all
-        .get(begin..end.min(all.len()))
-        .unwrap_or_default()
-        .to_vec())
-}
-
 fn pipeline_for(
     ctx: &Context,
     compiler: &ShaderCompiler,
@@ -458,6 +441,7 @@ pub fn render(
     while row < h {
         let rows = band_rows.min(h - row);
         let mut first = 0;
+        let mut band_counts: Vec<u32> = Vec::new();
         while first < outer {
             let push = RayPush {
                 row_offset: row,
@@ -476,7 +460,7 @@ pub fn render(
             })?;
             gpu_ms += timings.iter().filter_map(|t| t.gpu_ms).sum::<f64>();
             bands += 1;
-            let band_counts = read_band(ctx, &counts, row, rows, w)?;
+            band_counts = counts.read_range(ctx, (row * w) as usize, (rows * w) as usize)?;
             if band_counts.iter().any(|c| c & ray_count::TRUNCATED != 0) {
                 // The driver cut a loop short: this band again, from its start, in halves.
                 if chunk == 1 {
@@ -496,7 +480,6 @@ pub fn render(
             }
             first = push.last;
         }
-        let band_counts = read_band(ctx, &counts, row, rows, w)?;
         if let Some(i) = band_counts.iter().position(|c| c & ray_count::DONE == 0) {
             return Err(VkError::Usage(format!(
                 "raycast: pixel ({}, {}) was not finished after {outer} steps",

@@ -184,27 +184,46 @@ impl Buffer {
 
     /// Reads the whole buffer back as `T`s.
     pub fn read<T: bytemuck::Pod>(&self, ctx: &Context) -> Result<Vec<T>, VkError> {
-        let n = self.size as usize / std::mem::size_of::<T>().max(1);
+        self.read_range(ctx, 0, self.size as usize / std::mem::size_of::<T>().max(1))
+    }
+
+    /// Reads `count` `T`s starting at element `first` (clamped to the buffer), copying only
+    /// that range through staging where the buffer is not host-visible.
+    pub fn read_range<T: bytemuck::Pod>(
+        &self,
+        ctx: &Context,
+        first: usize,
+        count: usize,
+    ) -> Result<Vec<T>, VkError> {
+        let size_of = std::mem::size_of::<T>().max(1);
+        let total = self.size as usize / size_of;
+        let first = first.min(total);
+        let n = count.min(total - first);
+        let offset = first * size_of;
         let mut out = vec![T::zeroed(); n];
         let dst: &mut [u8] = bytemuck::cast_slice_mut(&mut out);
+        if dst.is_empty() {
+            return Ok(out);
+        }
         if self.mapped() {
             let ptr = self.mapped_ptr()?;
-            // SAFETY: the mapping covers `size` bytes ≥ dst.len(); all GPU work has completed.
-            unsafe { std::ptr::copy_nonoverlapping(ptr, dst.as_mut_ptr(), dst.len()) };
+            // SAFETY: offset + dst.len() ≤ size, which the mapping covers; all GPU work has
+            // completed.
+            unsafe { std::ptr::copy_nonoverlapping(ptr.add(offset), dst.as_mut_ptr(), dst.len()) };
             return Ok(out);
         }
         let staging = Buffer::new(
             ctx,
             &format!("{} (readback)", self.name),
-            self.size,
+            dst.len() as u64,
             BufferUsage::Staging,
         )?;
         ctx.submit(|rec| {
-            rec.copy_buffer(self, &staging, self.size);
+            rec.copy_buffer_from(self, offset as u64, &staging, dst.len() as u64);
             Ok(())
         })?;
         let ptr = staging.mapped_ptr()?;
-        // SAFETY: as above, for the staging buffer.
+        // SAFETY: the staging mapping holds dst.len() bytes and the copy has completed.
         unsafe { std::ptr::copy_nonoverlapping(ptr, dst.as_mut_ptr(), dst.len()) };
         Ok(out)
     }

@@ -134,8 +134,16 @@ impl Recorder<'_> {
 
     /// Copies `size` bytes from the start of `src` to the start of `dst`.
     pub fn copy_buffer(&mut self, src: &Buffer, dst: &Buffer, size: u64) {
+        self.copy_buffer_from(src, 0, dst, size);
+    }
+
+    /// Copies `size` bytes from `src` at byte `src_offset` to the start of `dst` (clamped to
+    /// both buffers).
+    pub fn copy_buffer_from(&mut self, src: &Buffer, src_offset: u64, dst: &Buffer, size: u64) {
         self.barrier();
-        let region = [vk::BufferCopy::default().size(size.min(src.size()).min(dst.size()))];
+        let src_offset = src_offset.min(src.size());
+        let size = size.min(src.size() - src_offset).min(dst.size());
+        let region = [vk::BufferCopy::default().src_offset(src_offset).size(size)];
         // SAFETY: `cmd` is recording; both buffers are live with TRANSFER usage.
         unsafe {
             self.shared

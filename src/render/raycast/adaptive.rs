@@ -1,8 +1,9 @@
-//! [MLS] §4 adaptive subdivision, f64 twin of `integrate_adaptive` in `glsl/raycast.comp`.
+//! [MLS] §4 adaptive subdivision, f64 twin of `integrate` (RAY_METHOD 2) in
+//! `glsl/raycast.comp`.
 //!
-//! The ray is cut into top intervals of l_max (the last one clipped at the exit). An interval [a, e]
-//! with scalars s_a, s_e is compared with its two halves: C1 = table(len)(s_a, s_e), C2 = the
-//! halves composited (one new evaluation at the midpoint). It is accepted when
+//! The ray is cut into top intervals of l_max (the last one clipped at the exit). An interval
+//! [a, e] with scalars s_a, s_e is compared with its two halves: C1 = table(len)(s_a, s_e),
+//! C2 = the halves composited (one new evaluation at the midpoint). It is accepted when
 //! (1 − α_acc)·|C1 − C2| ≤ ε·|C1| (|·| the RGB norm) and the directional derivative does not
 //! change sign (∇f(a)·v · ∇f(e)·v ≥ 0, which could hide an isosurface), or when its half would
 //! be shorter than l_min; accepted intervals composite C2. Otherwise the midpoint is pushed

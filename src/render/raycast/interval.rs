@@ -112,7 +112,7 @@ pub(super) fn locate_crossing(ray: &mut Ray<'_>, a: &Knot, e: &Knot, v: f64) -> 
 /// m0, m1 (per unit u), which must have opposite signs: (u, p(u)) where p'(u) = 0. p' is the
 /// quadratic m0 + 2(3Δ − 2m0 − m1)u + 3(m0 + m1 − 2Δ)u², Δ = p1 − p0, with exactly one root in
 /// (0, 1); it is bisected so that the f32 twin takes the same path.
-pub fn hermite_extremum(p0: f64, p1: f64, m0: f64, m1: f64) -> (f64, f64) {
+fn hermite_extremum(p0: f64, p1: f64, m0: f64, m1: f64) -> (f64, f64) {
     let delta = p1 - p0;
     let b = 3.0 * delta - 2.0 * m0 - m1;
     let c = m0 + m1 - 2.0 * delta;
