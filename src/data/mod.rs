@@ -11,6 +11,7 @@
 //!   allocation, so an absurd header cannot exhaust memory;
 //! - every error names the file and the line or byte offset where the input stopped making sense.
 
+pub mod dataset;
 pub mod marschner_lobb;
 pub mod nifti;
 pub mod nrrd;
@@ -126,8 +127,41 @@ pub enum DataError {
         dims: [u64; 3],
         reason: String,
     },
-    #[error("{path}: unknown volume format (expected .vtk, .nrrd, .nii or .nii.gz)")]
+    #[error(
+        "{path}: unknown volume format (expected .vtk, .vti, .vtr, .vts, .vtu, .vtp, .csv, .ply, .nrrd, .nii or .nii.gz)"
+    )]
     UnknownFormat { path: PathBuf },
+    #[error("{path}: point {index} has a non-finite coordinate {point:?}")]
+    NonFiniteCoordinate {
+        path: PathBuf,
+        index: usize,
+        point: [f64; 3],
+    },
+    #[error(
+        "{path}: array '{array}' element {index} is {value}: NaN and infinite values are rejected"
+    )]
+    NonFiniteValue {
+        path: PathBuf,
+        array: String,
+        index: usize,
+        value: f32,
+    },
+    #[error("{path}: cell {cell} refers to point {index}, but there are only {points} points")]
+    IndexOutOfRange {
+        path: PathBuf,
+        cell: usize,
+        index: u64,
+        points: usize,
+    },
+    #[error(
+        "{path}: {location}: cell type {id} ({name}) is not supported (vmls reads tetrahedra, hexahedra, voxels, wedges and pyramids)"
+    )]
+    UnsupportedCell {
+        path: PathBuf,
+        location: String,
+        id: u32,
+        name: &'static str,
+    },
     #[error("{path}: no array named '{name}' (arrays in the file: {available})")]
     NoSuchArray {
         path: PathBuf,
@@ -203,4 +237,25 @@ pub fn load(path: &Path, array: Option<&str>) -> Result<Volume, DataError> {
             path: path.to_path_buf(),
         })
     }
+}
+
+/// Loads any supported file as a [`Dataset`] (geometry and every scalar array), validated by
+/// [`Dataset::validate`]. Regular-grid formats (NRRD, NIfTI) give an image with one point array
+/// named "scalars".
+pub fn load_dataset(path: &Path) -> Result<dataset::Dataset, DataError> {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    let dataset = if name.ends_with(".vtk") {
+        dataset::Dataset::from_volume(vtk::load(path, None)?, "scalars")
+    } else if name.ends_with(".nrrd") || name.ends_with(".nii") || name.ends_with(".nii.gz") {
+        dataset::Dataset::from_volume(load(path, None)?, "scalars")
+    } else {
+        return Err(DataError::UnknownFormat {
+            path: path.to_path_buf(),
+        });
+    };
+    dataset.validate(path)?;
+    Ok(dataset)
 }
