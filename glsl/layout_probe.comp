@@ -63,7 +63,8 @@ void main() {
     tf_point._pad2 = 5.0;
 
     sample_.pos_value = v(1.0);
-    sample_.inv_support = v(2.0);
+    sample_.metric = v(2.0);
+    sample_.metric_off = v(3.0);
 
     mls_out.value = 1.0;
     mls_out.gradient_x = 2.0;

@@ -187,10 +187,12 @@ const _: () = assert!(std::mem::size_of::<TfPoint>() == 32);
 pub struct Sample {
     /// Position xyz and value w.
     pub pos_value: [f32; 4],
-    /// 1 / support radius per axis (xyz), w unused.
-    pub inv_support: [f32; 4],
+    /// The support's metric M (ρ² = dᵀMd): xx, yy, zz, xy.
+    pub metric: [f32; 4],
+    /// The rest of the metric: xz, yz; zw unused. Read only by the full-metric variant.
+    pub metric_off: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<Sample>() == 32);
+const _: () = assert!(std::mem::size_of::<Sample>() == 48);
 
 /// Result of one MLS evaluation (mls_eval). GLSL twin: `MlsOut`.
 #[repr(C)]

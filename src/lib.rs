@@ -4,6 +4,7 @@
 //! - [`vk`]: the Vulkan layer, the only module that calls Vulkan directly: context, buffers, pipelines,
 //!   commands, timestamp queries, run-time GLSL compilation.
 //! - [`data`]: loaders and generators producing a [`data::Volume`].
+//! - [`samples`]: the sample set every input becomes (positions, values, supports, domain).
 //! - [`recon`]: MLS reconstruction (f64 CPU reference) and the redundant octree [OCT].
 //! - [`render`]: cameras, transfer functions, the ray-casting integrator (CPU reference) and the
 //!   GPU renderer that drives the kernels in `glsl/`.
@@ -11,8 +12,10 @@
 
 pub mod data;
 pub mod gpu_types;
+pub mod info;
 pub mod probe;
 pub mod recon;
 pub mod render;
+pub mod samples;
 pub mod scene;
 pub mod vk;

@@ -1,4 +1,4 @@
-//! The `vmls` command line: `render`, `devices`, `probe`.
+//! The `vmls` command line: `render`, `info`, `devices`, `probe`, `compare`.
 //!
 //! Errors print one line (`vmls: error: …`, with the cause chain) and exit with status 1; usage
 //! errors exit with clap's status 2. Progress bars appear only when stderr is a terminal.
@@ -8,6 +8,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+use vmls::data::dataset::Location;
 use vmls::probe::{coherent_order, fma_probe, median, mls_probe, random_points};
 use vmls::render::evalmap::{check_path, write_eval_map};
 use vmls::render::gpu::{GpuField, render};
@@ -60,6 +61,18 @@ enum Command {
     },
     /// List Vulkan devices (* marks the default choice).
     Devices,
+    /// Describe a data file: kind, counts, bounds, arrays and their ranges, and the supports
+    /// and octree vmls would derive.
+    Info {
+        /// Data file (.vtk, .vti, .vtr, .vts, .vtu, .vtp, .csv, .ply, .nrrd, .nii, .nii.gz).
+        file: PathBuf,
+        /// Array to sample (default: the first point array).
+        #[arg(long)]
+        array: Option<String>,
+        /// Override a scene key (reconstruction.support, .knn, .anisotropic, octree.*).
+        #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
+        set: Vec<String>,
+    },
     /// RMSE and largest difference of the RGB channels of two images of the same size, and
     /// the pixel where the largest one is.
     Compare {
@@ -134,11 +147,8 @@ fn run_render(
         check_path(map)?;
     }
     let scene = Scene::load(scene_path, set)?;
-    let volume = load_volume(&scene)?;
     let bar = progress_bar("octree");
-    let field = Field::new(volume, scene.reconstruction, &scene.octree, |f| {
-        bar.set_position((f * 1000.0) as u64)
-    })?;
+    let field = scene.field(|f| bar.set_position((f * 1000.0) as u64))?;
     bar.finish_and_clear();
     let ctx = context(device)?;
     let compiler = ShaderCompiler::new()?;
@@ -209,10 +219,35 @@ fn run_render(
             "table_resolution": tables.as_ref().map(|t| t.resolution),
             "octree_nodes": field.octree.as_ref().map(|o| o.nodes.len()),
             "octree_references": field.octree.as_ref().map(|o| o.indices.len()),
+            "octree": field.octree.as_ref().map(|o| octree_json(&o.stats(std::mem::size_of::<vmls::gpu_types::Sample>() as u64))),
+            "data": {
+                "kind": field.samples.provenance.kind,
+                "array": field.samples.provenance.array,
+                "sampled_at": match field.samples.provenance.location {
+                    Location::Point => "points",
+                    Location::Cell => "cell centroids",
+                },
+                "samples": field.samples.len(),
+                "merged_duplicates": field.samples.provenance.merged,
+                "inverted_cells": field.samples.provenance.inverted_cells,
+                "supports": field.samples.provenance.support_kind,
+            },
         });
         write_json(stats, &value)?;
     }
     Ok(())
+}
+
+fn octree_json(s: &vmls::recon::OctreeStats) -> serde_json::Value {
+    serde_json::json!({
+        "nodes": s.nodes,
+        "leaves": s.leaves,
+        "references": s.references,
+        "redundancy": s.redundancy,
+        "depth": s.depth,
+        "bytes": s.bytes,
+        "build_ms": s.build_ms,
+    })
 }
 
 fn run_probe(
@@ -388,6 +423,12 @@ fn main() {
             reference,
             diff,
         } => compare(image, reference, diff.as_deref()),
+        Command::Info { file, array, set } => Scene::load(None, set)
+            .map_err(RenderError::from)
+            .and_then(|scene| {
+                vmls::info::describe(file, array.as_deref(), &scene.samples, &scene.octree)
+            })
+            .map(|text| print!("{text}")),
         Command::Devices => Context::list_devices()
             .map(|lines| lines.iter().for_each(|l| println!("{l}")))
             .map_err(RenderError::from),

@@ -130,18 +130,34 @@ pub struct MlsProbe {
     pub gflops: f64,
 }
 
+/// A deterministic 64-bit linear congruential generator (Knuth's MMIX constants): reproducible
+/// point sets for probes, tests and benchmarks.
+#[derive(Debug, Clone)]
+pub struct Lcg(u64);
+
+impl Lcg {
+    pub fn new(seed: u64) -> Self {
+        Self(
+            seed.wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407),
+        )
+    }
+
+    /// Uniform in [0, 1).
+    pub fn next_f64(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
 /// Deterministic pseudo-random points inside the field's box (shrunk by `margin` per side).
 pub fn random_points(field: &Field, n: usize, margin: f64, seed: u64) -> Vec<[f64; 3]> {
     let (lo, hi) = field.bounds();
-    let mut state = seed
-        .wrapping_mul(6364136223846793005)
-        .wrapping_add(1442695040888963407);
-    let mut next = || {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rng = Lcg::new(seed);
+    let mut next = || rng.next_f64();
     (0..n)
         .map(|_| {
             let mut p = [0.0; 3];

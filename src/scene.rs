@@ -16,6 +16,8 @@ use crate::recon::{Basis, GradientMode, OctreeSettings, Weight};
 use crate::render::camera::{Camera, Projection};
 use crate::render::shading::{Isosurface, Lighting, MAX_ISOSURFACES};
 use crate::render::transfer::TransferFunction;
+use crate::render::{Field, RenderError};
+use crate::samples::{SampleSet, SampleSettings};
 use std::path::{Path, PathBuf};
 use toml::{Table, Value};
 
@@ -136,6 +138,9 @@ pub struct Scene {
     pub volume: VolumeSource,
     pub reconstruction: Reconstruction,
     pub octree: OctreeSettings,
+    /// How supports of irregular data are derived (`reconstruction.support`, `knn`,
+    /// `anisotropic`).
+    pub samples: SampleSettings,
     pub transfer: TransferFunction,
     pub isosurfaces: Vec<Isosurface>,
     pub lighting: Lighting,
@@ -154,6 +159,8 @@ const KNOWN: &[(&str, &[&str])] = &[
             "support",
             "gradient",
             "neighbours",
+            "knn",
+            "anisotropic",
         ],
     ),
     ("octree", &["leaf_budget", "max_depth", "leaf_size"]),
@@ -571,6 +578,16 @@ impl Scene {
             )?,
         };
 
+        let samples = SampleSettings {
+            support: reconstruction.support,
+            knn: rec.int("knn", 8, 1, 64)? as usize,
+            anisotropic: match rec.get("anisotropic") {
+                None => None,
+                Some(Value::Boolean(b)) => Some(*b),
+                Some(v) => return Err(rec.err("anisotropic", "true or false", v)),
+            },
+        };
+
         let oct = section("octree");
         let defaults = OctreeSettings::default();
         let octree = OctreeSettings {
@@ -680,11 +697,39 @@ impl Scene {
             volume,
             reconstruction,
             octree,
+            samples,
             transfer,
             isosurfaces,
             lighting,
             camera,
             render,
         })
+    }
+
+    /// The scene's field: the generator's grid, or any supported file through its sample set
+    /// (regular grids keep the implicit-grid path; everything else gets the octree).
+    pub fn field(&self, progress: impl FnMut(f64)) -> Result<Field, RenderError> {
+        match &self.volume {
+            VolumeSource::MarschnerLobb { resolution } => Ok(Field::new(
+                crate::data::marschner_lobb::generate(*resolution),
+                self.reconstruction,
+                &self.octree,
+                progress,
+            )?),
+            VolumeSource::File { path, array } => {
+                let dataset = crate::data::load_dataset(path)?;
+                let set = SampleSet::from_dataset(&dataset, path, array.as_deref(), &self.samples)
+                    .map_err(|e| match e {
+                        crate::samples::SampleError::Data(d) => RenderError::Data(d),
+                        other => RenderError::Samples(other),
+                    })?;
+                Ok(Field::from_samples(
+                    set,
+                    self.reconstruction,
+                    &self.octree,
+                    progress,
+                )?)
+            }
+        }
     }
 }

@@ -82,7 +82,8 @@ fn glsl_and_rust_layouts_agree() {
         *s,
         Sample {
             pos_value: v(1.0),
-            inv_support: v(2.0)
+            metric: v(2.0),
+            metric_off: v(3.0),
         },
         "Sample"
     );

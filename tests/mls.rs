@@ -32,6 +32,7 @@ fn compare(field: &Field, points: &[[f64; 3]]) -> Comparison {
     drop(gpu_field);
     finish(ctx);
     let (lo, hi) = field
+        .samples
         .values
         .iter()
         .fold((f64::MAX, f64::MIN), |(l, h), &v| {

@@ -20,6 +20,7 @@ struct MlsSystem {
     uint neighbours;
     bool exact;
     float exact_value;
+    // Scale of the shifted basis, one per evaluation (y = (x_i − x) ⊙ inv_h).
     vec3 inv_h;
 };
 
@@ -69,7 +70,7 @@ void mls_basis(vec3 y, out float b[MLS_TERMS]) {
 #endif
 }
 
-void mls_accumulate(inout MlsSystem s, vec3 y, float rho2, float f, vec3 inv_h) {
+void mls_accumulate(inout MlsSystem s, vec3 y, float rho2, float f) {
     float w = mls_weight(rho2).x;
     if (w <= 0.0) {
         return;
@@ -80,9 +81,6 @@ void mls_accumulate(inout MlsSystem s, vec3 y, float rho2, float f, vec3 inv_h) 
         s.exact_value = f;
     }
 #endif
-    if (s.neighbours == 0u) {
-        s.inv_h = inv_h;
-    }
     s.neighbours += 1u;
     float b[MLS_TERMS];
     mls_basis(y, b);

@@ -17,14 +17,15 @@ layout(std430, binding = BINDING_NODES) readonly buffer NodesBuf { uvec4 nodes[]
 layout(std430, binding = BINDING_INDICES) readonly buffer IndicesBuf { uint indices[]; };
 #endif
 
-// Gradient correction of the analytic gradient: q_k = Σ ∂w_i/∂x_k (f_i − b_iᵀc) b_i.
+// Gradient correction of the analytic gradient: q_k = Σ ∂w_i/∂x_k (f_i − b_iᵀc) b_i, with
+// ∂w_i/∂x = −θ'(ρ)/ρ · M_i d (d = x_i − x; `md` = M_i d).
 struct MlsGradient {
     float qx[MLS_TERMS];
     float qy[MLS_TERMS];
     float qz[MLS_TERMS];
 };
 
-void mls_visit_gradient(inout MlsGradient g, vec3 y, float rho2, float f, vec3 inv_h,
+void mls_visit_gradient(inout MlsGradient g, vec3 y, float rho2, float f, vec3 md,
                         float c[MLS_TERMS]) {
     vec2 w = mls_weight(rho2);
     if (w.x <= 0.0) {
@@ -36,7 +37,7 @@ void mls_visit_gradient(inout MlsGradient g, vec3 y, float rho2, float f, vec3 i
     [[unroll]] for (int t = 0; t < MLS_TERMS; ++t) {
         fit += b[t] * c[t];
     }
-    vec3 dw = -w.y * y * inv_h * (f - fit);
+    vec3 dw = -w.y * md * (f - fit);
     [[unroll]] for (int t = 0; t < MLS_TERMS; ++t) {
         g.qx[t] += dw.x * b[t];
         g.qy[t] += dw.y * b[t];
@@ -146,6 +147,7 @@ void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float
     ivec3 lo = max(ivec3(ceil(gp - sc)), ivec3(0));
     ivec3 hi = min(ivec3(floor(gp + sc)), params.grid_dims.xyz - 1);
     vec3 inv_h = params.inv_support.xyz;
+    s.inv_h = inv_h;
     for (int k = lo.z; k <= hi.z; ++k) {
         float yz = (float(k) - gp.z) * inv_sc;
         for (int j = lo.y; j <= hi.y; ++j) {
@@ -157,9 +159,9 @@ void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float
                 if (rho2 < 1.0) {
                     float f = grid[GRID_PAD + row + i];
                     if (pass == 0u) {
-                        mls_accumulate(s, y, rho2, f, inv_h);
+                        mls_accumulate(s, y, rho2, f);
                     } else {
-                        mls_visit_gradient(g, y, rho2, f, inv_h, c);
+                        mls_visit_gradient(g, y, rho2, f, y * inv_h, c);
                     }
                 }
             }
@@ -167,39 +169,53 @@ void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float
     }
 }
 #else
-// Descends to the leaf containing x; returns (begin, count) of its reference list.
-uvec2 octree_leaf(vec3 x) {
+// Descends to the leaf containing x; returns (begin, count, basis-scale bits) of its reference
+// list (the scale: 1 / the leaf's mean support radius).
+uvec3 octree_leaf(vec3 x) {
     vec3 center = params.octree_root.xyz;
     float half_side = params.octree_root.w;
     if (any(greaterThan(abs(x - center), vec3(half_side)))) {
-        return uvec2(0u);
+        return uvec3(0u);
     }
     uint node = 0u;
     for (int depth = 0; depth < 64; ++depth) {
         uvec4 n = nodes[node];
         if (n.x == 0u) {
-            return n.yz;
+            return n.yzw;
         }
         half_side *= 0.5;
         bvec3 upper = greaterThanEqual(x, center);
         center += mix(vec3(-half_side), vec3(half_side), upper);
         node = n.x + (upper.x ? 1u : 0u) + (upper.y ? 2u : 0u) + (upper.z ? 4u : 0u);
     }
-    return uvec2(0u);
+    return uvec3(0u);
+}
+
+// M d for a sample's support metric (MLS_FULL_METRIC 0: diagonal metrics only).
+vec3 metric_apply(Sample p, vec3 d) {
+    vec3 md = p.metric.xyz * d;
+#if MLS_FULL_METRIC == 1
+    md += vec3(p.metric.w * d.y + p.metric_off.x * d.z,
+               p.metric.w * d.x + p.metric_off.y * d.z,
+               p.metric_off.x * d.x + p.metric_off.y * d.y);
+#endif
+    return md;
 }
 
 void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float c[MLS_TERMS]) {
-    uvec2 leaf = octree_leaf(x);
+    uvec3 leaf = octree_leaf(x);
+    vec3 scale = vec3(uintBitsToFloat(leaf.z));
+    s.inv_h = scale;
     for (uint r = leaf.x; r < leaf.x + leaf.y; ++r) {
         Sample p = samples[indices[r]];
-        vec3 inv_h = p.inv_support.xyz;
-        vec3 y = (p.pos_value.xyz - x) * inv_h;
-        float rho2 = dot(y, y);
+        vec3 d = p.pos_value.xyz - x;
+        vec3 md = metric_apply(p, d);
+        float rho2 = dot(d, md);
         if (rho2 < 1.0) {
             if (pass == 0u) {
-                mls_accumulate(s, y, rho2, p.pos_value.w, inv_h);
+                mls_accumulate(s, d * scale, rho2, p.pos_value.w);
             } else {
-                mls_visit_gradient(g, y, rho2, p.pos_value.w, inv_h, c);
+                mls_visit_gradient(g, d * scale, rho2, p.pos_value.w, md, c);
             }
         }
     }

@@ -54,7 +54,8 @@ struct TfPoint {
 
 struct Sample {
     vec4 pos_value;
-    vec4 inv_support;
+    vec4 metric;
+    vec4 metric_off;
 };
 
 struct MlsOut {

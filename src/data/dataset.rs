@@ -189,10 +189,7 @@ pub enum Geometry {
         points: Vec<[f64; 3]>,
     },
     /// Points joined by volumetric cells.
-    Unstructured {
-        points: Vec<[f64; 3]>,
-        cells: Cells,
-    },
+    Unstructured { points: Vec<[f64; 3]>, cells: Cells },
     /// Scattered points, no connectivity (VTK `POLYDATA` vertices, CSV, PLY).
     Points { points: Vec<[f64; 3]> },
 }
@@ -241,7 +238,11 @@ impl Geometry {
                 origin,
                 spacing,
             } => {
-                let (x, y, z) = (i % dims[0], (i / dims[0]) % dims[1], i / (dims[0] * dims[1]));
+                let (x, y, z) = (
+                    i % dims[0],
+                    (i / dims[0]) % dims[1],
+                    i / (dims[0] * dims[1]),
+                );
                 [
                     origin[0] + x as f64 * spacing[0],
                     origin[1] + y as f64 * spacing[1],

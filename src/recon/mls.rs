@@ -4,9 +4,11 @@
 //! `mls_solve`, `mls_evaluate`.
 //!
 //! Contract of [`mls_evaluate`] at a point x:
-//! - local weighted least squares with the shifted, support-scaled basis
-//!   `y_i = (x_i − x) ⊙ h⁻¹` (constant: 1 term, linear: 4, quadratic: 10), so f(x) = c₀ and the
-//!   local gradient is `(c₁, c₂, c₃) ⊙ h⁻¹`;
+//! - each sample has its own support, an ellipsoid with metric M_i: w_i = θ(ρ_i),
+//!   ρ_i² = (x_i − x)ᵀ M_i (x_i − x) (isotropic: M_i = h_i⁻² I);
+//! - local weighted least squares with the shifted basis `y_i = (x_i − x) ⊙ s`, scaled by one
+//!   `s` per evaluation point ([`Neighbours::basis_scale`]) (constant: 1 term, linear: 4,
+//!   quadratic: 10), so f(x) = c₀ and the local gradient is `(c₁, c₂, c₃) ⊙ s`;
 //! - normal equations solved by LDLᵀ without square roots; a pivot `d_k ≤ PIVOT_TOLERANCE·A_kk`
 //!   (`QUADRATIC_PIVOT_TOLERANCE` for second-order terms) means the samples do not determine that
 //!   many terms, and the solve falls back to the largest
@@ -21,6 +23,8 @@
 
 // Index loops mirror the shader's packed-matrix code line for line; iterators would hide that.
 #![allow(clippy::needless_range_loop)]
+
+use crate::samples::{Metric, metric_apply, metric_rho2};
 
 /// Largest number of basis terms (quadratic).
 pub const MAX_TERMS: usize = 10;
@@ -89,10 +93,17 @@ pub struct MlsValue {
     pub terms: u32,
 }
 
-/// Anything that can list the samples whose support may contain x: `visit(position, value,
-/// inverse support per axis)`. Samples with zero weight may be listed; they are skipped.
+/// Anything that can list the samples whose support may contain x. Samples with zero weight
+/// may be listed; they are skipped.
 pub trait Neighbours {
-    fn for_each(&self, x: [f64; 3], visit: &mut dyn FnMut([f64; 3], f64, [f64; 3]));
+    /// Inverse scale per axis of the shifted basis at x: one for every sample of the
+    /// evaluation ([MLS] §3 with per-sample supports), so the local gradient is exact whatever
+    /// the samples' own supports. Any positive scale gives the same f in exact arithmetic; a
+    /// scale near the supports keeps the system well conditioned in f32.
+    fn basis_scale(&self, x: [f64; 3]) -> [f64; 3];
+    /// `visit(position, value, metric)`: the sample's weight is θ(ρ) with
+    /// ρ² = (x_i − x)ᵀ M_i (x_i − x).
+    fn for_each(&self, x: [f64; 3], visit: &mut dyn FnMut([f64; 3], f64, &Metric));
 }
 
 /// θ(ρ) and θ'(ρ)/ρ (the factor that turns ∂ρ into ∂w), for ρ < 1; zero outside.
@@ -163,14 +174,11 @@ impl MlsSystem {
     }
 }
 
-/// Scaled offset y = (x_i − x) ⊙ h⁻¹ and its length ρ.
-fn offset(x: [f64; 3], p: [f64; 3], inv_h: [f64; 3]) -> ([f64; 3], f64) {
-    let y = [
-        (p[0] - x[0]) * inv_h[0],
-        (p[1] - x[1]) * inv_h[1],
-        (p[2] - x[2]) * inv_h[2],
-    ];
-    (y, (y[0] * y[0] + y[1] * y[1] + y[2] * y[2]).sqrt())
+/// Offset d = x_i − x, the basis argument y = d ⊙ s and ρ = √(dᵀ M d).
+fn offset(x: [f64; 3], p: [f64; 3], scale: [f64; 3], m: &Metric) -> ([f64; 3], [f64; 3], f64) {
+    let d = [p[0] - x[0], p[1] - x[1], p[2] - x[2]];
+    let y = [d[0] * scale[0], d[1] * scale[1], d[2] * scale[2]];
+    (d, y, metric_rho2(m, d).max(0.0).sqrt())
 }
 
 /// Adds one sample to the normal equations (lower triangle only, as in the shader).
@@ -265,12 +273,9 @@ pub fn mls_evaluate(
     x: [f64; 3],
 ) -> Option<MlsValue> {
     let mut sys = MlsSystem::new(settings.basis.terms());
-    let mut first_inv_h = [0.0; 3];
-    neighbours.for_each(x, &mut |p, f, inv_h| {
-        let (y, rho) = offset(x, p, inv_h);
-        if sys.neighbours == 0 {
-            first_inv_h = inv_h;
-        }
+    let scale = neighbours.basis_scale(x);
+    neighbours.for_each(x, &mut |p, f, m| {
+        let (_, y, rho) = offset(x, p, scale, m);
         mls_accumulate(&mut sys, settings.weight, y, rho, f);
     });
     if sys.neighbours == 0 {
@@ -282,28 +287,26 @@ pub fn mls_evaluate(
         return None;
     }
     let c = mls_solve(&l, n, sys.r);
-    // The local gradient needs one support scale: samples of one scene share it ([MLS] §3 with
-    // a single H), and the octree path stores it per sample for later anisotropic data.
-    let inv_h = first_inv_h;
     let mut gradient = if n >= 4 {
-        [c[1] * inv_h[0], c[2] * inv_h[1], c[3] * inv_h[2]]
+        [c[1] * scale[0], c[2] * scale[1], c[3] * scale[2]]
     } else {
         [0.0; 3]
     };
     if settings.gradient == GradientMode::Analytic {
-        // q_k = Σ ∂w_i/∂x_k (f_i − b_iᵀc) b_i, with ∂ρ/∂x_k = −y_k h⁻¹_k / ρ.
+        // q_k = Σ ∂w_i/∂x_k (f_i − b_iᵀc) b_i, with ∂ρ/∂x = −M_i d / ρ.
         let mut q = [[0.0; MAX_TERMS]; 3];
-        neighbours.for_each(x, &mut |p, f, inv_h| {
-            let (y, rho) = offset(x, p, inv_h);
+        neighbours.for_each(x, &mut |p, f, m| {
+            let (d, y, rho) = offset(x, p, scale, m);
             let (w, dw_over_rho) = mls_weight(settings.weight, rho);
             if w <= 0.0 {
                 return;
             }
+            let md = metric_apply(m, d);
             let b = mls_basis(y, n);
             let fit: f64 = (0..n).map(|t| b[t] * c[t]).sum();
             let residual = f - fit;
             for k in 0..3 {
-                let dw = -dw_over_rho * y[k] * inv_h[k];
+                let dw = -dw_over_rho * md[k];
                 for t in 0..n {
                     q[k][t] += dw * residual * b[t];
                 }

@@ -7,7 +7,9 @@ pub mod mls;
 pub mod octree;
 
 pub use mls::{Basis, GradientMode, MlsSettings, MlsValue, Neighbours, Weight, mls_evaluate};
-pub use octree::{Octree, OctreeSettings, SamplePoint};
+pub use octree::{Octree, OctreeSettings, OctreeStats, SamplePoint};
+
+use crate::samples::Metric;
 
 /// Errors of the reconstruction layer.
 #[derive(Debug, thiserror::Error)]
@@ -52,8 +54,20 @@ impl GridNeighbours<'_> {
 }
 
 impl Neighbours for GridNeighbours<'_> {
-    fn for_each(&self, x: [f64; 3], visit: &mut dyn FnMut([f64; 3], f64, [f64; 3])) {
+    fn basis_scale(&self, _x: [f64; 3]) -> [f64; 3] {
+        self.inv_support()
+    }
+
+    fn for_each(&self, x: [f64; 3], visit: &mut dyn FnMut([f64; 3], f64, &Metric)) {
         let inv_h = self.inv_support();
+        let metric = [
+            inv_h[0] * inv_h[0],
+            inv_h[1] * inv_h[1],
+            inv_h[2] * inv_h[2],
+            0.0,
+            0.0,
+            0.0,
+        ];
         let mut lo = [0usize; 3];
         let mut hi = [0usize; 3];
         for a in 0..3 {
@@ -75,7 +89,7 @@ impl Neighbours for GridNeighbours<'_> {
                         self.origin[2] + k as f64 * self.spacing[2],
                     ];
                     let f = self.values[i + self.dims[0] * (j + self.dims[1] * k)];
-                    visit(p, f64::from(f), inv_h);
+                    visit(p, f64::from(f), &metric);
                 }
             }
         }

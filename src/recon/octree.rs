@@ -1,26 +1,39 @@
 //! The redundant octree of [OCT] as used by [MLS] §5.2: a leaf lists every sample whose support
-//! box intersects the leaf's cell, so a query descends to the leaf containing x and loops over
-//! that list — no neighbour search, no backtracking.
+//! ellipsoid intersects the leaf's cell, so a query descends to the leaf containing x and loops
+//! over that list — no neighbour search, no backtracking.
 //!
 //! GPU layout (twin: `octree_leaf` in `glsl/include/neighbours.glsl`): `nodes[i] =
-//! (child, begin, count, 0)`; `child = 0` marks a leaf (the root is node 0 and never a child),
-//! otherwise the node's 8 children are `child..child+8` in octant order `x | y<<1 | z<<2`
-//! (bit set = upper half). A leaf's samples are `indices[begin..begin+count]`.
+//! (child, begin, count, scale)`; `child = 0` marks a leaf (the root is node 0 and never a
+//! child), otherwise the node's 8 children are `child..child+8` in octant order
+//! `x | y<<1 | z<<2` (bit set = upper half). A leaf's samples are
+//! `indices[begin..begin+count]`; `scale` holds the f32 bits of 1 / the leaf's mean support
+//! radius, the basis scale of every evaluation inside the leaf ([`Neighbours::basis_scale`]).
 //!
 //! Subdivision ([OCT]): a node is split while it holds more than `leaf_budget` references, its
 //! side exceeds `leaf_size` × the mean support radius of its samples, and it is shallower than
-//! `max_depth`. Memory is bounded: the build fails with a clear error past `max_references`.
+//! `max_depth`. Subtrees are built in parallel (rayon) and flattened in octant order, so the
+//! result does not depend on the thread count. Memory is bounded: the build fails with a clear
+//! error past `max_references`.
+//!
+//! Overlap test (conservative and tight): a sample is referenced by a cell unless a separating
+//! plane exists between its ellipsoid and the cell. Candidate planes are the three axis planes
+//! (the ellipsoid's exact bounding box) and the plane normal to M(b − x_i) at b, the cell point
+//! nearest to x_i in the metric, found by projected coordinate descent. Only a proven separation
+//! drops a sample, so the test never loses a neighbour; the last plane makes it tight (for a
+//! sphere it is the exact sphere–box test).
 
 use super::ReconError;
 use super::mls::Neighbours;
+use crate::samples::{Metric, metric_apply, metric_rho2, supports};
+use rayon::prelude::*;
 
-/// A scattered sample with an axis-aligned ellipsoidal support.
+/// A scattered sample with an ellipsoidal support.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SamplePoint {
     pub position: [f64; 3],
     pub value: f64,
-    /// 1 / support radius per axis.
-    pub inv_support: [f64; 3],
+    /// The support's metric: ρ² = (x − x_i)ᵀ M (x − x_i).
+    pub metric: Metric,
 }
 
 /// Build parameters (scene keys `[octree]`).
@@ -48,6 +61,20 @@ impl Default for OctreeSettings {
     }
 }
 
+/// What `--stats` and `vmls info` report about an octree.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OctreeStats {
+    pub nodes: usize,
+    pub leaves: usize,
+    pub references: usize,
+    /// References per sample.
+    pub redundancy: f64,
+    pub depth: u32,
+    /// Bytes of nodes + indices + samples as uploaded.
+    pub bytes: u64,
+    pub build_ms: f64,
+}
+
 /// The flattened octree plus its samples.
 #[derive(Debug, Clone)]
 pub struct Octree {
@@ -56,23 +83,118 @@ pub struct Octree {
     pub nodes: Vec<[u32; 4]>,
     pub indices: Vec<u32>,
     pub samples: Vec<SamplePoint>,
+    pub build_ms: f64,
 }
 
-struct Pending {
-    node: usize,
-    center: [f64; 3],
-    half: f64,
-    depth: u32,
-    members: Vec<u32>,
+/// A subtree before flattening.
+enum Built {
+    Leaf { members: Vec<u32>, scale: f32 },
+    Inner(Box<[Built; 8]>),
+}
+
+/// Per-sample data the build reads.
+struct Prepared<'a> {
+    samples: &'a [SamplePoint],
+    /// Half extents of each support's bounding box.
+    extent: Vec<[f64; 3]>,
+    /// Geometric-mean radius of each support.
+    radius: Vec<f64>,
+    slack: f64,
+    settings: OctreeSettings,
+}
+
+impl Prepared<'_> {
+    fn overlaps(&self, i: u32, center: [f64; 3], half: f64) -> bool {
+        let s = &self.samples[i as usize];
+        let e = self.extent[i as usize];
+        let h = half + self.slack;
+        let lo = center.map(|c| c - h);
+        let hi = center.map(|c| c + h);
+        // Axis planes: the ellipsoid's bounding box against the cell.
+        if (0..3).any(|a| s.position[a] - e[a] > hi[a] || s.position[a] + e[a] < lo[a]) {
+            return false;
+        }
+        if (0..3).all(|a| s.position[a] >= lo[a] && s.position[a] <= hi[a]) {
+            return true;
+        }
+        // b: the cell point nearest to x_i in the metric (coordinate descent on the convex
+        // quadratic (b − x)ᵀM(b − x) over the box).
+        let m = &s.metric;
+        let mut b = [0, 1, 2].map(|a| s.position[a].clamp(lo[a], hi[a]));
+        let diag = [m[0], m[1], m[2]];
+        for _ in 0..8 {
+            for a in 0..3 {
+                let d = [0, 1, 2].map(|k| b[k] - s.position[k]);
+                let g = metric_apply(m, d)[a];
+                b[a] = (b[a] - g / diag[a]).clamp(lo[a], hi[a]);
+            }
+        }
+        let d = [0, 1, 2].map(|k| b[k] - s.position[k]);
+        if metric_rho2(m, d) <= 1.0 {
+            return true;
+        }
+        // Plane through the ellipsoid's support point along n = M d: separated when the whole
+        // cell lies beyond the ellipsoid's extent √(nᵀM⁻¹n) = √(dᵀMd) along n.
+        let n = metric_apply(m, d);
+        let reach = metric_rho2(m, d).sqrt();
+        let nearest_corner: f64 = (0..3)
+            .map(|a| n[a] * if n[a] >= 0.0 { lo[a] } else { hi[a] } - n[a] * s.position[a])
+            .sum();
+        nearest_corner <= reach
+    }
+
+    fn build(&self, members: Vec<u32>, center: [f64; 3], half: f64, depth: u32) -> Built {
+        let mean_radius = members
+            .iter()
+            .map(|&i| self.radius[i as usize])
+            .sum::<f64>()
+            / members.len().max(1) as f64;
+        let split = members.len() > self.settings.leaf_budget
+            && 2.0 * half > self.settings.leaf_size * mean_radius
+            && depth < self.settings.max_depth;
+        if !split {
+            let scale = if members.is_empty() {
+                0.0
+            } else {
+                (1.0 / mean_radius) as f32
+            };
+            return Built::Leaf { members, scale };
+        }
+        let child = |octant: usize| {
+            let h = 0.5 * half;
+            let c = [0, 1, 2].map(|a| center[a] + if octant >> a & 1 == 1 { h } else { -h });
+            let inside: Vec<u32> = members
+                .iter()
+                .copied()
+                .filter(|&i| self.overlaps(i, c, h))
+                .collect();
+            self.build(inside, c, h, depth + 1)
+        };
+        let parallel = members.len() > 4096;
+        let children: Vec<Built> = if parallel {
+            (0..8).into_par_iter().map(child).collect()
+        } else {
+            (0..8).map(child).collect()
+        };
+        match <[Built; 8]>::try_from(children) {
+            Ok(c) => Built::Inner(Box::new(c)),
+            // Unreachable (8 octants in, 8 out); a leaf keeps the tree valid regardless.
+            Err(_) => Built::Leaf {
+                members,
+                scale: (1.0 / mean_radius) as f32,
+            },
+        }
+    }
 }
 
 impl Octree {
-    /// Builds the octree; `progress` is called with the fraction of the root volume finished.
+    /// Builds the octree; `progress` is called with the fraction of the work finished.
     pub fn build(
         samples: Vec<SamplePoint>,
         settings: &OctreeSettings,
         mut progress: impl FnMut(f64),
     ) -> Result<Self, ReconError> {
+        let start = std::time::Instant::now();
         if samples.is_empty() {
             return Err(ReconError::Empty);
         }
@@ -90,116 +212,72 @@ impl Octree {
                 expected: "a positive number",
             });
         }
-        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-        for s in &samples {
-            for a in 0..3 {
-                let h = 1.0 / s.inv_support[a];
-                lo[a] = lo[a].min(s.position[a] - h);
-                hi[a] = hi[a].max(s.position[a] + h);
-            }
-        }
-        let root_center = [
-            0.5 * (lo[0] + hi[0]),
-            0.5 * (lo[1] + hi[1]),
-            0.5 * (lo[2] + hi[2]),
-        ];
-        let root_half = 0.5 * (0..3).map(|a| hi[a] - lo[a]).fold(0.0, f64::max) * (1.0 + 1e-6);
-        // Cells are widened by this much in the overlap test so that an f32 descent that lands
-        // in a neighbouring leaf (x within rounding of a face) still finds every sample.
-        let slack = root_half * 1e-6;
-        let mut tree = Self {
-            root_center,
-            root_half,
-            nodes: vec![[0; 4]],
-            indices: Vec::new(),
-            samples,
-        };
-        let n = u32::try_from(tree.samples.len()).map_err(|_| ReconError::TooManyReferences {
-            refs: tree.samples.len() as u64,
+        let n = u32::try_from(samples.len()).map_err(|_| ReconError::TooManyReferences {
+            refs: samples.len() as u64,
             limit: u64::from(u32::MAX),
         })?;
-        let mut stack = vec![Pending {
-            node: 0,
-            center: root_center,
-            half: root_half,
-            depth: 0,
-            members: (0..n).collect(),
-        }];
-        let mut done = 0.0;
-        while let Some(p) = stack.pop() {
-            let mean_radius = p
-                .members
-                .iter()
-                .map(|&i| {
-                    let s = &tree.samples[i as usize];
-                    (1.0 / s.inv_support[0] + 1.0 / s.inv_support[1] + 1.0 / s.inv_support[2]) / 3.0
-                })
-                .sum::<f64>()
-                / p.members.len().max(1) as f64;
-            let split = p.members.len() > settings.leaf_budget
-                && 2.0 * p.half > settings.leaf_size * mean_radius
-                && p.depth < settings.max_depth;
-            if !split {
-                let begin = tree.indices.len();
-                let refs = (begin + p.members.len()) as u64;
-                if refs > settings.max_references {
-                    return Err(ReconError::TooManyReferences {
-                        refs,
-                        limit: settings.max_references,
-                    });
-                }
-                tree.nodes[p.node] = [0, begin as u32, p.members.len() as u32, 0];
-                tree.indices.extend_from_slice(&p.members);
-                done += (p.half / root_half).powi(3);
-                progress(done);
-                continue;
-            }
-            let child = tree.nodes.len();
-            tree.nodes[p.node] = [child as u32, 0, 0, 0];
-            tree.nodes.extend(std::iter::repeat_n([0u32; 4], 8));
-            let half = 0.5 * p.half;
-            for octant in 0..8usize {
-                let mut center = p.center;
-                for (a, c) in center.iter_mut().enumerate() {
-                    *c += if octant >> a & 1 == 1 { half } else { -half };
-                }
-                let members = p
-                    .members
-                    .iter()
-                    .copied()
-                    .filter(|&i| {
-                        let s = &tree.samples[i as usize];
-                        (0..3).all(|a| {
-                            let h = 1.0 / s.inv_support[a];
-                            s.position[a] - h <= center[a] + half + slack
-                                && s.position[a] + h >= center[a] - half - slack
-                        })
-                    })
-                    .collect();
-                stack.push(Pending {
-                    node: child + octant,
-                    center,
-                    half,
-                    depth: p.depth + 1,
-                    members,
-                });
+        let extent: Vec<[f64; 3]> = samples
+            .par_iter()
+            .map(|s| supports::extent(&s.metric))
+            .collect();
+        let radius: Vec<f64> = samples
+            .par_iter()
+            .map(|s| supports::mean_radius(&s.metric))
+            .collect();
+        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        for (s, e) in samples.iter().zip(&extent) {
+            for a in 0..3 {
+                lo[a] = lo[a].min(s.position[a] - e[a]);
+                hi[a] = hi[a].max(s.position[a] + e[a]);
             }
         }
-        Ok(tree)
+        let root_center = [0, 1, 2].map(|a| 0.5 * (lo[a] + hi[a]));
+        let root_half = 0.5 * (0..3).map(|a| hi[a] - lo[a]).fold(0.0, f64::max) * (1.0 + 1e-6);
+        if !root_half.is_finite() || root_half <= 0.0 {
+            return Err(ReconError::Setting {
+                key: "samples",
+                value: format!("bounds {lo:?}..{hi:?}"),
+                expected: "finite positions and supports",
+            });
+        }
+        // Cells are widened by this much in the overlap test so that an f32 descent that lands
+        // in a neighbouring leaf (x within rounding of a face) still finds every sample.
+        let prepared = Prepared {
+            samples: &samples,
+            extent,
+            radius,
+            slack: root_half * 1e-6,
+            settings: *settings,
+        };
+        let built = prepared.build((0..n).collect(), root_center, root_half, 0);
+        progress(0.9);
+        let mut nodes = vec![[0u32; 4]];
+        let mut indices = Vec::new();
+        flatten(&built, 0, &mut nodes, &mut indices, settings.max_references)?;
+        progress(1.0);
+        Ok(Self {
+            root_center,
+            root_half,
+            nodes,
+            indices,
+            samples,
+            build_ms: start.elapsed().as_secs_f64() * 1e3,
+        })
     }
 
-    /// The reference list of the leaf containing x (empty outside the root cube).
-    pub fn leaf(&self, x: [f64; 3]) -> &[u32] {
+    /// The leaf containing x: (reference list, basis scale); empty outside the root cube.
+    pub fn leaf(&self, x: [f64; 3]) -> (&[u32], f64) {
         let mut center = self.root_center;
         let mut half = self.root_half;
         if (0..3).any(|a| (x[a] - center[a]).abs() > half) {
-            return &[];
+            return (&[], 0.0);
         }
         let mut node = 0usize;
         loop {
-            let [child, begin, count, _] = self.nodes[node];
+            let [child, begin, count, scale] = self.nodes[node];
             if child == 0 {
-                return &self.indices[begin as usize..(begin + count) as usize];
+                let list = &self.indices[begin as usize..(begin + count) as usize];
+                return (list, f64::from(f32::from_bits(scale)));
             }
             half *= 0.5;
             let mut octant = 0;
@@ -227,13 +305,66 @@ impl Octree {
         }
         walk(&self.nodes, 0)
     }
+
+    /// Size, redundancy, depth, memory and build time. `sample_bytes` is the GPU size of one
+    /// sample.
+    pub fn stats(&self, sample_bytes: u64) -> OctreeStats {
+        OctreeStats {
+            nodes: self.nodes.len(),
+            leaves: self.nodes.iter().filter(|n| n[0] == 0).count(),
+            references: self.indices.len(),
+            redundancy: self.indices.len() as f64 / self.samples.len().max(1) as f64,
+            depth: self.depth(),
+            bytes: self.nodes.len() as u64 * 16
+                + self.indices.len() as u64 * 4
+                + self.samples.len() as u64 * sample_bytes,
+            build_ms: self.build_ms,
+        }
+    }
+}
+
+/// Appends `built` as node `at` (already allocated) in octant order.
+fn flatten(
+    built: &Built,
+    at: usize,
+    nodes: &mut Vec<[u32; 4]>,
+    indices: &mut Vec<u32>,
+    max_references: u64,
+) -> Result<(), ReconError> {
+    match built {
+        Built::Leaf { members, scale } => {
+            let begin = indices.len();
+            let refs = (begin + members.len()) as u64;
+            if refs > max_references {
+                return Err(ReconError::TooManyReferences {
+                    refs,
+                    limit: max_references,
+                });
+            }
+            nodes[at] = [0, begin as u32, members.len() as u32, scale.to_bits()];
+            indices.extend_from_slice(members);
+        }
+        Built::Inner(children) => {
+            let child = nodes.len();
+            nodes[at] = [child as u32, 0, 0, 0];
+            nodes.extend(std::iter::repeat_n([0u32; 4], 8));
+            for (o, c) in children.iter().enumerate() {
+                flatten(c, child + o, nodes, indices, max_references)?;
+            }
+        }
+    }
+    Ok(())
 }
 
 impl Neighbours for Octree {
-    fn for_each(&self, x: [f64; 3], visit: &mut dyn FnMut([f64; 3], f64, [f64; 3])) {
-        for &i in self.leaf(x) {
+    fn basis_scale(&self, x: [f64; 3]) -> [f64; 3] {
+        [self.leaf(x).1; 3]
+    }
+
+    fn for_each(&self, x: [f64; 3], visit: &mut dyn FnMut([f64; 3], f64, &Metric)) {
+        for &i in self.leaf(x).0 {
             let s = &self.samples[i as usize];
-            visit(s.position, s.value, s.inv_support);
+            visit(s.position, s.value, &s.metric);
         }
     }
 }

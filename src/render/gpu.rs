@@ -37,6 +37,8 @@ pub struct Variant {
     pub weight: Weight,
     pub gradient: GradientMode,
     pub neighbours: NeighbourMode,
+    /// Per-sample supports: diagonal metrics only, or full ones (octree path).
+    pub full_metric: bool,
     /// The ray caster's integrator (`None` for kernels that do not integrate).
     pub method: Option<Method>,
     /// Adaptive stack entries (levels of subdivision).
@@ -54,7 +56,12 @@ impl Variant {
             support: r.support,
             weight: r.weight,
             gradient: r.gradient,
-            neighbours: r.neighbours,
+            neighbours: if field.uses_octree() {
+                NeighbourMode::Octree
+            } else {
+                NeighbourMode::Grid
+            },
+            full_metric: field.samples.has_full_metric(),
             method: None,
             adaptive_levels: 1,
             isosurfaces: 0,
@@ -100,6 +107,7 @@ impl Variant {
             "MLS_NEIGHBOURS".into(),
             flag(self.neighbours == NeighbourMode::Octree),
         ));
+        d.push(("MLS_FULL_METRIC".into(), flag(self.full_metric)));
         let ray_method = match self.method {
             Some(Method::Fixed) => 1,
             Some(Method::Adaptive) => 2,
@@ -133,6 +141,7 @@ impl Variant {
             },
             match self.neighbours {
                 NeighbourMode::Grid => "grid",
+                NeighbourMode::Octree if self.full_metric => "octree-ellipsoid",
                 NeighbourMode::Octree => "octree",
             },
             self.method
@@ -152,27 +161,23 @@ fn v4(v: glam::DVec3, w: f64) -> [f32; 4] {
 
 /// Kernel constants for a field (and a ray setup, when rendering).
 pub fn render_params(field: &Field, setup: Option<&RaySetup>, tf_count: u32) -> RenderParams {
-    let s = field.reconstruction.support;
-    let inv_h = field.grid().inv_support();
     let mut p = RenderParams {
-        grid_origin: v4(field.origin.into(), 0.0),
-        grid_inv_spacing: [
-            (1.0 / field.spacing[0]) as f32,
-            (1.0 / field.spacing[1]) as f32,
-            (1.0 / field.spacing[2]) as f32,
-            0.0,
-        ],
-        inv_support: [inv_h[0] as f32, inv_h[1] as f32, inv_h[2] as f32, 0.0],
-        grid_dims: [
-            field.dims[0] as i32,
-            field.dims[1] as i32,
-            field.dims[2] as i32,
-            0,
-        ],
-        support_cells: s as f32,
         tf_count,
         ..Default::default()
     };
+    if let Some(g) = field.grid() {
+        let inv_h = g.inv_support();
+        p.grid_origin = v4(g.origin.into(), 0.0);
+        p.grid_inv_spacing = [
+            (1.0 / g.spacing[0]) as f32,
+            (1.0 / g.spacing[1]) as f32,
+            (1.0 / g.spacing[2]) as f32,
+            0.0,
+        ];
+        p.inv_support = [inv_h[0] as f32, inv_h[1] as f32, inv_h[2] as f32, 0.0];
+        p.grid_dims = [g.dims[0] as i32, g.dims[1] as i32, g.dims[2] as i32, 0];
+        p.support_cells = g.support as f32;
+    }
     if let Some(o) = &field.octree {
         p.octree_root = v4(o.root_center.into(), o.root_half);
     }
@@ -232,7 +237,7 @@ impl GpuField {
             None => {
                 // Padded front and back (GRID_PAD) and to a whole number of vec4s.
                 let mut padded = vec![0.0f32; GRID_PAD];
-                padded.extend_from_slice(&field.values);
+                padded.extend_from_slice(&field.samples.values);
                 padded.resize((padded.len() + 2 * GRID_PAD).next_multiple_of(4), 0.0);
                 Ok(Self {
                     grid: Some(Buffer::from_slice(ctx, "grid", &padded)?),
@@ -243,9 +248,13 @@ impl GpuField {
                 let samples: Vec<Sample> = o
                     .samples
                     .iter()
-                    .map(|s| Sample {
-                        pos_value: v4(s.position.into(), s.value),
-                        inv_support: v4(s.inv_support.into(), 0.0),
+                    .map(|s| {
+                        let m = s.metric.map(|v| v as f32);
+                        Sample {
+                            pos_value: v4(s.position.into(), s.value),
+                            metric: [m[0], m[1], m[2], m[3]],
+                            metric_off: [m[4], m[5], 0.0, 0.0],
+                        }
                     })
                     .collect();
                 Ok(Self {

@@ -17,6 +17,7 @@ pub mod transfer;
 use crate::data::{DataError, Volume};
 use crate::recon::mls::{MlsSettings, Neighbours};
 use crate::recon::{GridNeighbours, Octree, OctreeSettings, ReconError, SamplePoint};
+use crate::samples::{Domain, Metric, Positions, Provenance, SampleSet, Supports};
 use crate::scene::{Method, NeighbourMode, Reconstruction, Scene, SceneError};
 use crate::vk::VkError;
 use camera::{Camera, ViewBasis};
@@ -35,6 +36,8 @@ pub enum RenderError {
     Data(#[from] DataError),
     #[error(transparent)]
     Scene(#[from] SceneError),
+    #[error(transparent)]
+    Samples(#[from] crate::samples::SampleError),
     #[error("{path}: {message}")]
     Output { path: String, message: String },
     #[error(
@@ -43,23 +46,20 @@ pub enum RenderError {
     NonFinite { count: usize, first: usize },
 }
 
-/// The scalar field of a scene: a regular grid in frame-relative coordinates, its MLS settings,
-/// and (for `neighbours = "octree"`) the redundant octree over its samples.
+/// The scalar field of a scene: its sample set in frame-relative coordinates, its MLS settings,
+/// and the redundant octree over its samples (irregular data always; regular grids with
+/// `neighbours = "octree"`).
 #[derive(Debug, Clone)]
 pub struct Field {
-    /// World position subtracted from everything (the volume centre).
+    /// World position subtracted from everything (the centre of the domain's box).
     pub frame_origin: DVec3,
-    pub dims: [usize; 3],
-    /// Frame-relative position of grid point (0,0,0).
-    pub origin: [f64; 3],
-    pub spacing: [f64; 3],
-    pub values: Vec<f32>,
+    pub samples: SampleSet,
     pub reconstruction: Reconstruction,
     pub octree: Option<Octree>,
 }
 
 impl Field {
-    /// Moves the volume into its frame and builds the octree when the scene asks for one.
+    /// A regular grid with one support h = support × spacing (see [`Field::from_samples`]).
     pub fn new(
         volume: Volume,
         reconstruction: Reconstruction,
@@ -67,66 +67,93 @@ impl Field {
         progress: impl FnMut(f64),
     ) -> Result<Self, ReconError> {
         let (lo, hi) = volume.bounds();
+        let samples = SampleSet {
+            positions: Positions::Grid {
+                dims: volume.dims,
+                origin: volume.origin,
+                spacing: volume.spacing,
+            },
+            values: volume.values,
+            supports: Supports::Uniform(volume.spacing.map(|s| s * reconstruction.support)),
+            domain: Domain::Box { lo, hi },
+            provenance: Provenance {
+                kind: "regular grid",
+                array: "scalars".into(),
+                location: crate::data::dataset::Location::Point,
+                merged: 0,
+                inverted_cells: 0,
+                support_kind: "uniform",
+            },
+        };
+        Self::from_samples(samples, reconstruction, octree, progress)
+    }
+
+    /// Moves the samples into a frame centred on their domain and builds the octree unless the
+    /// implicit grid neighbours serve (a regular grid with `neighbours = "grid"`).
+    pub fn from_samples(
+        mut samples: SampleSet,
+        reconstruction: Reconstruction,
+        octree: &OctreeSettings,
+        progress: impl FnMut(f64),
+    ) -> Result<Self, ReconError> {
+        let (lo, hi) = samples.domain_box();
         let centre = (DVec3::from(lo) + DVec3::from(hi)) * 0.5;
-        let origin = (DVec3::from(volume.origin) - centre).to_array();
+        samples.translate(centre.to_array());
+        let grid = matches!(samples.positions, Positions::Grid { .. })
+            && matches!(samples.supports, Supports::Uniform(_));
         let mut field = Self {
             frame_origin: centre,
-            dims: volume.dims,
-            origin,
-            spacing: volume.spacing,
-            values: volume.values,
+            samples,
             reconstruction,
             octree: None,
         };
-        if reconstruction.neighbours == NeighbourMode::Octree {
-            let inv_h = field.grid().inv_support();
-            let mut samples = Vec::with_capacity(field.values.len());
-            for k in 0..field.dims[2] {
-                for j in 0..field.dims[1] {
-                    for i in 0..field.dims[0] {
-                        samples.push(SamplePoint {
-                            position: field.position(i, j, k),
-                            value: f64::from(field.values[field.index(i, j, k)]),
-                            inv_support: inv_h,
-                        });
-                    }
-                }
-            }
-            field.octree = Some(Octree::build(samples, octree, progress)?);
+        if !grid || reconstruction.neighbours == NeighbourMode::Octree {
+            let points: Vec<SamplePoint> = (0..field.samples.len())
+                .map(|i| SamplePoint {
+                    position: field.samples.position(i),
+                    value: f64::from(field.samples.values[i]),
+                    metric: field.samples.metric(i),
+                })
+                .collect();
+            field.octree = Some(Octree::build(points, octree, progress)?);
         }
         Ok(field)
     }
 
-    fn index(&self, i: usize, j: usize, k: usize) -> usize {
-        i + self.dims[0] * (j + self.dims[1] * k)
-    }
-
-    /// Frame-relative position of grid point (i, j, k).
-    pub fn position(&self, i: usize, j: usize, k: usize) -> [f64; 3] {
-        [
-            self.origin[0] + i as f64 * self.spacing[0],
-            self.origin[1] + j as f64 * self.spacing[1],
-            self.origin[2] + k as f64 * self.spacing[2],
-        ]
-    }
-
-    /// Implicit grid neighbours.
-    pub fn grid(&self) -> GridNeighbours<'_> {
-        GridNeighbours {
-            dims: self.dims,
-            origin: self.origin,
-            spacing: self.spacing,
-            values: &self.values,
-            support: self.reconstruction.support,
+    /// Implicit grid neighbours, for a regular grid with one support.
+    pub fn grid(&self) -> Option<GridNeighbours<'_>> {
+        match (&self.samples.positions, &self.samples.supports) {
+            (
+                Positions::Grid {
+                    dims,
+                    origin,
+                    spacing,
+                },
+                Supports::Uniform(h),
+            ) => Some(GridNeighbours {
+                dims: *dims,
+                origin: *origin,
+                spacing: *spacing,
+                values: &self.samples.values,
+                support: h[0] / spacing[0],
+            }),
+            _ => None,
         }
     }
 
-    /// The neighbour structure the scene chose.
+    /// The neighbour structure in use: the octree when there is one, else the grid.
     pub fn neighbours(&self) -> Box<dyn Neighbours + '_> {
-        match &self.octree {
-            Some(o) => Box::new(o),
-            None => Box::new(self.grid()),
+        match (&self.octree, self.grid()) {
+            (Some(o), _) => Box::new(o),
+            (None, Some(g)) => Box::new(g),
+            // from_samples builds an octree for everything that is not a uniform grid.
+            (None, None) => Box::new(NoNeighbours),
         }
+    }
+
+    /// Whether kernels read the octree (else the implicit grid).
+    pub fn uses_octree(&self) -> bool {
+        self.octree.is_some()
     }
 
     /// Compile-time MLS choices.
@@ -138,25 +165,51 @@ impl Field {
         }
     }
 
-    /// Frame-relative bounding box of the samples (the domain rays are clipped to).
+    /// Frame-relative bounding box of the domain (rays are clipped to it).
     pub fn bounds(&self) -> (DVec3, DVec3) {
-        let lo = DVec3::from(self.origin);
-        let n = DVec3::new(
-            self.dims[0] as f64 - 1.0,
-            self.dims[1] as f64 - 1.0,
-            self.dims[2] as f64 - 1.0,
-        );
-        (lo, lo + n * DVec3::from(self.spacing))
+        let (lo, hi) = self.samples.domain_box();
+        (DVec3::from(lo), DVec3::from(hi))
     }
 
-    /// Smallest sample spacing: the unit of `render.step`.
+    /// The unit of `render.step`: the smallest grid spacing, or for other data the mean support
+    /// radius divided by the support factor (the typical sample spacing).
     pub fn min_spacing(&self) -> f64 {
-        self.spacing.iter().copied().fold(f64::INFINITY, f64::min)
+        match &self.samples.positions {
+            Positions::Grid { spacing, .. } => {
+                spacing.iter().copied().fold(f64::INFINITY, f64::min)
+            }
+            Positions::Scattered(_) => self.samples.mean_radius() / self.reconstruction.support,
+        }
+    }
+
+    /// Smallest and largest sample value.
+    pub fn value_range(&self) -> (f64, f64) {
+        self.samples
+            .values
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(l, h), &v| {
+                (l.min(f64::from(v)), h.max(f64::from(v)))
+            })
     }
 }
 
+/// No samples anywhere (never used in practice; keeps `neighbours` total).
+struct NoNeighbours;
+
+impl Neighbours for NoNeighbours {
+    fn basis_scale(&self, _x: [f64; 3]) -> [f64; 3] {
+        [1.0; 3]
+    }
+
+    fn for_each(&self, _x: [f64; 3], _visit: &mut dyn FnMut([f64; 3], f64, &Metric)) {}
+}
+
 impl Neighbours for &Octree {
-    fn for_each(&self, x: [f64; 3], visit: &mut dyn FnMut([f64; 3], f64, [f64; 3])) {
+    fn basis_scale(&self, x: [f64; 3]) -> [f64; 3] {
+        (*self).basis_scale(x)
+    }
+
+    fn for_each(&self, x: [f64; 3], visit: &mut dyn FnMut([f64; 3], f64, &Metric)) {
         (*self).for_each(x, visit)
     }
 }
@@ -321,12 +374,7 @@ impl TableCache {
 
 /// The tables' scalar range: the data range with a 5% margin each side.
 fn scalar_range(field: &Field) -> (f64, f64) {
-    let (lo, hi) = field
-        .values
-        .iter()
-        .fold((f64::MAX, f64::MIN), |(l, h), &v| {
-            (l.min(f64::from(v)), h.max(f64::from(v)))
-        });
+    let (lo, hi) = field.value_range();
     let margin = 0.05 * (hi - lo).max(1e-6);
     (lo - margin, hi + margin)
 }

@@ -1,0 +1,350 @@
+//! Per-sample supports ([MLS] §3 "Support"; DESIGN §1–2): the metric `M_i` of each sample's
+//! ellipsoid `{x : (x − x_i)ᵀ M_i (x − x_i) < 1}`.
+//!
+//! - Isotropic: `h_i = support × d_k(i)`, the distance to the k-th nearest other sample
+//!   (k-d tree, `kiddo`), so `M_i = I / h_i²`.
+//! - Anisotropic, scattered samples: the shape comes from the second moment of the k nearest
+//!   neighbours about x_i, `C = Σ_j (x_j − x_i)(x_j − x_i)ᵀ / k`; its eigenvectors are the
+//!   ellipsoid's axes and `√λ` their relative lengths. The shape is then scaled so that the
+//!   farthest of those k neighbours lies at ρ = 1/support, which makes the isotropic case
+//!   coincide with the rule above.
+//! - Anisotropic, curvilinear grids: the columns of `E = [e_i e_j e_k]` are the local
+//!   index-direction edges (of the two one-sided edges per direction, the longer one, so that
+//!   graded grids leave no holes); the ellipsoid is `support × E` applied to the unit ball,
+//!   `M = (support² E Eᵀ)⁻¹`, which on a regular grid is the grid's own `h = support × Δ`.
+//! - Rectilinear grids: diagonal, `h_a = support × the larger neighbouring gap` on each axis.
+//!
+//! Regularisation: every ellipsoid's axis lengths are clamped to at least `1/MAX_ASPECT` of its
+//! longest axis, so flat or collinear neighbourhoods (points on a plane, a single grid layer)
+//! never give a singular metric. MAX_ASPECT = 16 admits the 10:1 spacings of real
+//! rectilinear and curvilinear grids unchanged.
+
+use super::Metric;
+use kiddo::SquaredEuclidean;
+use kiddo::immutable::float::kdtree::ImmutableKdTree;
+use rayon::prelude::*;
+use std::num::NonZero;
+
+/// Largest ratio of an ellipsoid's longest to shortest axis.
+pub const MAX_ASPECT: f64 = 16.0;
+
+type Tree = ImmutableKdTree<f64, u32, 3, 32>;
+
+/// Symmetric 3×3 as a full matrix.
+fn full(m: &Metric) -> [[f64; 3]; 3] {
+    [[m[0], m[3], m[4]], [m[3], m[1], m[5]], [m[4], m[5], m[2]]]
+}
+
+fn packed(a: &[[f64; 3]; 3]) -> Metric {
+    [a[0][0], a[1][1], a[2][2], a[0][1], a[0][2], a[1][2]]
+}
+
+/// Eigen-decomposition of a symmetric 3×3 matrix by cyclic Jacobi rotations: (eigenvalues,
+/// eigenvectors as columns of the returned matrix).
+pub fn eigen_symmetric(m: &Metric) -> ([f64; 3], [[f64; 3]; 3]) {
+    let mut a = full(m);
+    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    for _ in 0..32 {
+        let off = a[0][1].abs() + a[0][2].abs() + a[1][2].abs();
+        let scale = a[0][0].abs() + a[1][1].abs() + a[2][2].abs();
+        if off <= 1e-15 * scale || off == 0.0 {
+            break;
+        }
+        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
+            if a[p][q] == 0.0 {
+                continue;
+            }
+            let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+            let t = if theta == 0.0 { 1.0 } else { t };
+            let c = 1.0 / (t * t + 1.0).sqrt();
+            let s = t * c;
+            for row in &mut a {
+                let (akp, akq) = (row[p], row[q]);
+                row[p] = c * akp - s * akq;
+                row[q] = s * akp + c * akq;
+            }
+            let (rp, rq) = (a[p], a[q]);
+            for k in 0..3 {
+                a[p][k] = c * rp[k] - s * rq[k];
+                a[q][k] = s * rp[k] + c * rq[k];
+            }
+            for row in &mut v {
+                let (vp, vq) = (row[p], row[q]);
+                row[p] = c * vp - s * vq;
+                row[q] = s * vp + c * vq;
+            }
+        }
+    }
+    ([a[0][0], a[1][1], a[2][2]], v)
+}
+
+/// Σ_a w_a v_a v_aᵀ for eigenvectors v (columns) and weights w.
+fn compose(v: &[[f64; 3]; 3], w: [f64; 3]) -> Metric {
+    let mut out = [[0.0; 3]; 3];
+    for (r, row) in out.iter_mut().enumerate() {
+        for (c, cell) in row.iter_mut().enumerate() {
+            *cell = (0..3).map(|a| w[a] * v[r][a] * v[c][a]).sum();
+        }
+    }
+    packed(&out)
+}
+
+/// The metric of the ellipsoid whose squared axis lengths are the eigenvalues of `cov`
+/// (regularised to [`MAX_ASPECT`]), i.e. `cov⁻¹` with clamped eigenvalues.
+pub fn metric_from_covariance(cov: &Metric) -> Metric {
+    let (lambda, v) = eigen_symmetric(cov);
+    let top = lambda.iter().copied().fold(0.0, f64::max);
+    let floor = top / (MAX_ASPECT * MAX_ASPECT);
+    compose(&v, lambda.map(|l| 1.0 / l.max(floor)))
+}
+
+/// Inverse of a symmetric positive-definite metric.
+pub fn inverse(m: &Metric) -> Metric {
+    let a = full(m);
+    let det = a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
+        - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
+        + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]);
+    let inv = 1.0 / det;
+    [
+        (a[1][1] * a[2][2] - a[1][2] * a[1][2]) * inv,
+        (a[0][0] * a[2][2] - a[0][2] * a[0][2]) * inv,
+        (a[0][0] * a[1][1] - a[0][1] * a[0][1]) * inv,
+        (a[0][2] * a[1][2] - a[0][1] * a[2][2]) * inv,
+        (a[0][1] * a[1][2] - a[0][2] * a[1][1]) * inv,
+        (a[0][1] * a[0][2] - a[0][0] * a[1][2]) * inv,
+    ]
+}
+
+/// Half extents of the ellipsoid along the axes: √((M⁻¹)_aa).
+pub fn extent(m: &Metric) -> [f64; 3] {
+    let inv = inverse(m);
+    [inv[0].sqrt(), inv[1].sqrt(), inv[2].sqrt()]
+}
+
+/// Geometric mean of the half axes: det(M)^(−1/6).
+pub fn mean_radius(m: &Metric) -> f64 {
+    let a = full(m);
+    let det = a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
+        - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
+        + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]);
+    det.powf(-1.0 / 6.0)
+}
+
+/// The k nearest other samples of every sample (fewer when there are fewer samples).
+fn knn(positions: &[[f64; 3]], k: usize) -> Vec<Vec<u32>> {
+    let tree = Tree::new_from_slice(positions);
+    let want = NonZero::new((k + 1).min(positions.len())).unwrap_or(NonZero::<usize>::MIN);
+    positions
+        .par_iter()
+        .enumerate()
+        .map(|(i, p)| {
+            tree.nearest_n::<SquaredEuclidean>(p, want)
+                .into_iter()
+                .map(|n| n.item)
+                .filter(|&j| j as usize != i)
+                .take(k)
+                .collect()
+        })
+        .collect()
+}
+
+fn offset(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [b[0] - a[0], b[1] - a[1], b[2] - a[2]]
+}
+
+fn isotropic(h: f64) -> Metric {
+    let m = 1.0 / (h * h);
+    [m, m, m, 0.0, 0.0, 0.0]
+}
+
+/// h_i = support × distance to the k-th nearest other sample.
+pub fn isotropic_knn(positions: &[[f64; 3]], support: f64, k: usize) -> Vec<Metric> {
+    let neighbours = knn(positions, k);
+    positions
+        .par_iter()
+        .zip(&neighbours)
+        .map(|(p, n)| {
+            let d = n
+                .iter()
+                .map(|&j| {
+                    let y = offset(*p, positions[j as usize]);
+                    (y[0] * y[0] + y[1] * y[1] + y[2] * y[2]).sqrt()
+                })
+                .fold(0.0, f64::max);
+            isotropic(support * d.max(f64::MIN_POSITIVE))
+        })
+        .collect()
+}
+
+/// Ellipsoids from the second moment of the k nearest neighbours (module docs).
+pub fn anisotropic_knn(positions: &[[f64; 3]], support: f64, k: usize) -> Vec<Metric> {
+    let neighbours = knn(positions, k);
+    positions
+        .par_iter()
+        .zip(&neighbours)
+        .map(|(p, n)| {
+            let ys: Vec<[f64; 3]> = n
+                .iter()
+                .map(|&j| offset(*p, positions[j as usize]))
+                .collect();
+            let mut cov = [0.0; 6];
+            for y in &ys {
+                cov[0] += y[0] * y[0];
+                cov[1] += y[1] * y[1];
+                cov[2] += y[2] * y[2];
+                cov[3] += y[0] * y[1];
+                cov[4] += y[0] * y[2];
+                cov[5] += y[1] * y[2];
+            }
+            let shape = metric_from_covariance(&cov.map(|c| c / ys.len().max(1) as f64));
+            let far = ys
+                .iter()
+                .map(|y| super::metric_rho2(&shape, *y))
+                .fold(0.0, f64::max);
+            let scale = 1.0 / (support * support * far.max(f64::MIN_POSITIVE));
+            shape.map(|m| m * scale)
+        })
+        .collect()
+}
+
+/// Diagonal supports of a rectilinear grid (module docs). A single-coordinate axis takes the
+/// largest gap of the other axes.
+pub fn rectilinear(coords: &[Vec<f64>; 3], support: f64) -> Vec<Metric> {
+    let gaps: [Vec<f64>; 3] = coords.clone().map(|c| {
+        (0..c.len())
+            .map(|i| {
+                let left = if i > 0 { c[i] - c[i - 1] } else { 0.0 };
+                let right = if i + 1 < c.len() {
+                    c[i + 1] - c[i]
+                } else {
+                    0.0
+                };
+                left.max(right)
+            })
+            .collect()
+    });
+    let widest = gaps
+        .iter()
+        .flatten()
+        .copied()
+        .fold(f64::MIN_POSITIVE, f64::max);
+    let dims = coords.each_ref().map(Vec::len);
+    (0..dims[0] * dims[1] * dims[2])
+        .map(|i| {
+            let idx = [
+                i % dims[0],
+                (i / dims[0]) % dims[1],
+                i / (dims[0] * dims[1]),
+            ];
+            let h = [0, 1, 2].map(|a| {
+                let g = gaps[a][idx[a]];
+                support * if g > 0.0 { g } else { widest }
+            });
+            [
+                1.0 / (h[0] * h[0]),
+                1.0 / (h[1] * h[1]),
+                1.0 / (h[2] * h[2]),
+                0.0,
+                0.0,
+                0.0,
+            ]
+        })
+        .collect()
+}
+
+/// Ellipsoids spanned by the local index-direction edges of a curvilinear grid.
+pub fn structured(dims: [usize; 3], points: &[[f64; 3]], support: f64) -> Vec<Metric> {
+    let index = |i: usize, j: usize, k: usize| i + dims[0] * (j + dims[1] * k);
+    (0..points.len())
+        .into_par_iter()
+        .map(|n| {
+            let idx = [
+                n % dims[0],
+                (n / dims[0]) % dims[1],
+                n / (dims[0] * dims[1]),
+            ];
+            let mut cov = [0.0; 6];
+            for a in 0..3 {
+                if dims[a] < 2 {
+                    continue;
+                }
+                let step = |d: isize| -> Option<[f64; 3]> {
+                    let mut q = idx;
+                    let v = q[a] as isize + d;
+                    if v < 0 || v >= dims[a] as isize {
+                        return None;
+                    }
+                    q[a] = v as usize;
+                    Some(offset(points[n], points[index(q[0], q[1], q[2])]))
+                };
+                let len2 = |e: &[f64; 3]| e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
+                let e = match (step(-1), step(1)) {
+                    (Some(l), Some(r)) => {
+                        if len2(&l) > len2(&r) {
+                            l
+                        } else {
+                            r
+                        }
+                    }
+                    (Some(e), None) | (None, Some(e)) => e,
+                    (None, None) => continue,
+                };
+                cov[0] += e[0] * e[0];
+                cov[1] += e[1] * e[1];
+                cov[2] += e[2] * e[2];
+                cov[3] += e[0] * e[1];
+                cov[4] += e[0] * e[2];
+                cov[5] += e[1] * e[2];
+            }
+            let s2 = support * support;
+            metric_from_covariance(&cov.map(|c| c * s2))
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn jacobi_reconstructs_a_rotated_metric() {
+        let m: Metric = [4.0, 2.0, 1.0, 0.5, -0.3, 0.2];
+        let (l, v) = eigen_symmetric(&m);
+        let back = compose(&v, l);
+        for (a, b) in m.iter().zip(&back) {
+            assert!((a - b).abs() < 1e-12, "{m:?} vs {back:?}");
+        }
+        let inv = inverse(&m);
+        let (li, _) = eigen_symmetric(&inv);
+        let mut p: Vec<f64> = l.iter().map(|x| 1.0 / x).collect();
+        let mut q = li.to_vec();
+        p.sort_by(f64::total_cmp);
+        q.sort_by(f64::total_cmp);
+        for (a, b) in p.iter().zip(&q) {
+            assert!((a - b).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn flat_neighbourhood_is_regularised() {
+        // Points on the plane z = 0: the covariance is singular, the metric must not be.
+        let mut pts = Vec::new();
+        for j in 0..5 {
+            for i in 0..5 {
+                pts.push([i as f64, j as f64, 0.0]);
+            }
+        }
+        for m in anisotropic_knn(&pts, 1.5, 8) {
+            let (l, _) = eigen_symmetric(&m);
+            let (lo, hi) = (
+                l.iter().copied().fold(f64::MAX, f64::min),
+                l.iter().copied().fold(0.0, f64::max),
+            );
+            assert!(
+                lo > 0.0 && hi / lo <= MAX_ASPECT * MAX_ASPECT * (1.0 + 1e-9),
+                "{l:?}"
+            );
+        }
+    }
+}
