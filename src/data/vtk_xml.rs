@@ -12,8 +12,12 @@
 //! - `.vtr`: `<Coordinates>` holds the x, y and z coordinate arrays in that order, one value per
 //!   point along each axis of the piece's extent;
 //! - `.vts`: `<Points>` holds one 3-component point per grid point;
-//! - `.vtu`: `<Points>` and `<Cells>` (`connectivity`, `offsets` = end of each cell, `types`);
-//!   types 10–14 are read, any other is [`DataError::UnsupportedCell`] naming the cell;
+//! - `.vtu`: `<Points>` and `<Cells>` (`connectivity`, `offsets`, `types`, found by `Name`).
+//!   `offsets` holds the end of each cell, `NumberOfCells` values as VTK writes them (a leading
+//!   0 makes one value too many and is rejected); they must increase and end at the
+//!   connectivity's length. Types 10–14 are read, any other is [`DataError::UnsupportedCell`]
+//!   naming the cell (before its points are checked); indices must be whole, >= 0 and below the
+//!   piece's `NumberOfPoints` ([`DataError::IndexOutOfRange`] names the piece's count);
 //! - `.vtp`: only the `<Points>` are kept ([`Geometry::Points`]); `<Verts>` is checked when
 //!   present (offsets increasing, indices in range), `<Lines>`, `<Strips>` and `<Polys>` are not
 //!   read, and neither is `<CellData>`, since its values belong to those cells;
@@ -26,8 +30,12 @@
 //! - types Int8 ... UInt64, Float32, Float64 everywhere; coordinates are kept in f64, array
 //!   values become f32 (precision past f32's mantissa is lost, a value beyond its range becomes
 //!   infinite and is rejected like NaN);
-//! - encodings, compression and the safety checks on sizes are those of
-//!   [`super::vtk_xml_decode`]; `byte_order` defaults to LittleEndian and `header_type` to UInt32
+//! - sizes: `NumberOfPoints`, `NumberOfCells` (and their sums over pieces) and the extents'
+//!   point counts are checked against [`MAX_SAMPLES`] before any array is read; every array must
+//!   hold exactly the tuples its place implies (an optional `NumberOfTuples` must agree), except
+//!   `connectivity`, whose length comes from the data;
+//! - encodings, compression and the safety checks on byte counts are those of
+//!   `vtk_xml_decode.rs`; `byte_order` defaults to LittleEndian and `header_type` to UInt32
 //!   (file version 0.1); compressors other than `vtkZLibDataCompressor` are unsupported.
 //!
 //! The raw `<AppendedData>` block is not XML: the file is cut at the first `<AppendedData`, only

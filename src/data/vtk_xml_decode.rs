@@ -15,6 +15,14 @@
 //! there before anything is allocated for it; a compressed block may not claim more than
 //! deflate's maximum expansion (1032:1) of its compressed size, and inflating stops one byte past
 //! the declared size, so a block larger than its header says is an error, never a large buffer.
+//! Output buffers grow with the data really decoded, never with a header's claim.
+//!
+//! Errors: a byte count that disagrees with the tuples the array must hold is a format error
+//! naming the array; data that ends before its header's count (cut base64 text, a cut appended
+//! block, an `offset` past its end) is [`DataError::Truncated`]; surplus base64 after an inline
+//! array is a format error. Text values are whitespace-separated: integers must be whole and in
+//! their type's range, floats use Rust's parser (`nan`/`inf` parse and are rejected later, by
+//! `Dataset::validate`, naming the element); errors give the byte offset of the bad token.
 
 use super::DataError;
 use super::nrrd::{Scalar, shown};
