@@ -288,7 +288,9 @@ fn fails(name: &str, bytes: &[u8]) -> DataError {
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join(name);
     std::fs::write(&path, bytes).unwrap();
-    let err = match vtk_xml::load(&path) {
+    let result = vtk_xml::load(&path);
+    let _ = std::fs::remove_file(&path);
+    let err = match result {
         Ok(d) => panic!("{name} loaded: {:?}", d.geometry.kind()),
         Err(e) => e,
     };
