@@ -16,6 +16,9 @@ pub mod marschner_lobb;
 pub mod nifti;
 pub mod nrrd;
 pub mod vtk;
+pub mod vtk_xml;
+mod vtk_xml_decode;
+mod vtk_xml_tree;
 
 use std::path::{Path, PathBuf};
 
@@ -251,6 +254,11 @@ pub fn load_dataset(path: &Path) -> Result<dataset::Dataset, DataError> {
         dataset::Dataset::from_volume(vtk::load(path, None)?, "scalars")
     } else if name.ends_with(".nrrd") || name.ends_with(".nii") || name.ends_with(".nii.gz") {
         dataset::Dataset::from_volume(load(path, None)?, "scalars")
+    } else if [".vti", ".vtr", ".vts", ".vtu", ".vtp"]
+        .iter()
+        .any(|e| name.ends_with(e))
+    {
+        vtk_xml::load(path)?
     } else {
         return Err(DataError::UnknownFormat {
             path: path.to_path_buf(),
