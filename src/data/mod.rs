@@ -16,6 +16,7 @@ pub mod marschner_lobb;
 pub mod nifti;
 pub mod nrrd;
 pub mod vtk;
+pub mod vtk_legacy;
 
 use std::path::{Path, PathBuf};
 
@@ -240,7 +241,7 @@ pub fn load(path: &Path, array: Option<&str>) -> Result<Volume, DataError> {
 }
 
 /// Loads any supported file as a [`Dataset`] (geometry and every scalar array), validated by
-/// [`Dataset::validate`]. Regular-grid formats (NRRD, NIfTI) give an image with one point array
+/// [`Dataset::validate`]: legacy VTK (every dataset type, arrays named as in the file). Regular-grid formats (NRRD, NIfTI) give an image with one point array
 /// named "scalars".
 pub fn load_dataset(path: &Path) -> Result<dataset::Dataset, DataError> {
     let name = path
@@ -248,7 +249,7 @@ pub fn load_dataset(path: &Path) -> Result<dataset::Dataset, DataError> {
         .map(|n| n.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default();
     let dataset = if name.ends_with(".vtk") {
-        dataset::Dataset::from_volume(vtk::load(path, None)?, "scalars")
+        vtk::load_dataset(path)?
     } else if name.ends_with(".nrrd") || name.ends_with(".nii") || name.ends_with(".nii.gz") {
         dataset::Dataset::from_volume(load(path, None)?, "scalars")
     } else {
