@@ -612,3 +612,238 @@ fn vtk_polydata_vertices_checked_other_sections_and_keywords() {
         "expected POINTS before the point and cell data",
     );
 }
+
+// ---------------------------------------------------------------- CSV
+
+fn points(d: &Dataset) -> &[[f64; 3]] {
+    match &d.geometry {
+        Geometry::Points { points } => points,
+        g => panic!("{}", g.kind()),
+    }
+}
+
+#[test]
+fn csv_paraview_and_plain_headers() {
+    // As ParaView's "Save Data" writes it: quoted names, Points:0..2 last, vector components.
+    let pv = "\"temp\",\"label\",\"v:0\",\"v:1\",\"Points:0\",\"Points:1\",\"Points:2\"\n\
+              1.5,a,0,1,0.25,-1,2\n\
+              -2,b c,3,4,1e3,0,0.5\n";
+    let d = load("pv.csv", pv.as_bytes());
+    assert_eq!(points(&d), [[0.25, -1.0, 2.0], [1000.0, 0.0, 0.5]]);
+    assert_eq!(d.arrays.len(), 3, "{:?}", names(&d));
+    assert_eq!(array(&d, "temp").values, [1.5, -2.0]);
+    assert_eq!(array(&d, "v:1").values, [1.0, 4.0]);
+    assert!(d.arrays.iter().all(|a| a.location == Location::Point));
+
+    let plain = "\u{feff}X, y ,Z,density\r\n0,0,0, 7\r\n\r\n1,2,3,8\r\n";
+    let d = load("plain.csv", plain.as_bytes());
+    assert_eq!(points(&d), [[0.0; 3], [1.0, 2.0, 3.0]]);
+    assert_eq!(array(&d, "density").values, [7.0, 8.0]);
+}
+
+#[test]
+fn csv_malformed() {
+    let e = fails(
+        "nonnum.csv",
+        b"x,y,z,s\n0,0,0,1\n1,1,oops,2\n",
+        "Format",
+        "line 3",
+    );
+    assert!(e.to_string().contains("column 3 ('z')"), "{e}");
+    assert!(e.to_string().contains("found 'oops'"), "{e}");
+    fails(
+        "nonnum2.csv",
+        b"x,y,z,s\n0,0,0,1\n1,1,1,-\n",
+        "Format",
+        "line 3, column 4 ('s')",
+    );
+    fails(
+        "nox.csv",
+        b"a,y,z\n1,2,3\n",
+        "Format",
+        "expected an x (or Points:0) column",
+    );
+    fails(
+        "noz.csv",
+        b"x,y\n1,2\n",
+        "Format",
+        "expected a z (or Points:2) column",
+    );
+    fails(
+        "twice.csv",
+        b"x,Points:0,y,z\n1,1,2,3\n",
+        "Format",
+        "one column per axis",
+    );
+    fails("ragged.csv", b"x,y,z\n1,2,3\n4,5\n", "Format", "line 3");
+    fails(
+        "ragged.csv",
+        b"x,y,z\n1,2,3\n4,5\n",
+        "Format",
+        "2 fields (the header has 3)",
+    );
+    fails(
+        "empty.csv",
+        b"",
+        "Format",
+        "line 1: expected a header row, found an empty file",
+    );
+    fails(
+        "header.csv",
+        b"x,y,z\n",
+        "Format",
+        "expected at least one point",
+    );
+    fails(
+        "nan.csv",
+        b"x,y,z\n1,2,3\n1,nan,3\n",
+        "NonFiniteCoordinate",
+        "point 1",
+    );
+    fails(
+        "inf.csv",
+        b"x,y,z,s\n1,2,3,1e300\n",
+        "NonFiniteValue",
+        "'s' element 0",
+    );
+}
+
+// ---------------------------------------------------------------- PLY
+
+/// A PLY file with an element before the vertices, vertices (x y z float, intensity uchar,
+/// a list, q double) and faces after them.
+fn ply(format: &str, vertices: &[(f32, f32, f32, u8, f64)]) -> Vec<u8> {
+    let mut b = format!(
+        "ply\nformat {format} 1.0\ncomment made by hand\nelement camera 1\nproperty float k\n\
+         element vertex {}\nproperty float x\nproperty float y\nproperty float z\n\
+         property uchar intensity\nproperty list uchar int tags\nproperty double q\n\
+         element face 1\nproperty list uchar int vertex_indices\nend_header\n",
+        vertices.len()
+    )
+    .into_bytes();
+    let big = format.contains("big");
+    let le = format.contains("little");
+    macro_rules! put {
+        ($v:expr) => {
+            if big {
+                b.extend($v.to_be_bytes())
+            } else {
+                b.extend($v.to_le_bytes())
+            }
+        };
+    }
+    if big || le {
+        put!(0.5f32);
+        for &(x, y, z, i, q) in vertices {
+            put!(x);
+            put!(y);
+            put!(z);
+            b.push(i);
+            b.push(2);
+            put!(7i32);
+            put!(8i32);
+            put!(q);
+        }
+        b.push(3);
+        for i in 0..3i32 {
+            put!(i);
+        }
+    } else {
+        b.extend(b"0.5\n");
+        for &(x, y, z, i, q) in vertices {
+            b.extend(format!("{x} {y} {z} {i} 2 7 8 {q}\n").bytes());
+        }
+        b.extend(b"3 0 1 2\n");
+    }
+    b
+}
+
+const VERTS: [(f32, f32, f32, u8, f64); 3] = [
+    (0.0, 0.5, -1.0, 0, 0.1),
+    (1.25, 2.0, 3.0, 200, -2.5),
+    (-4.0, 0.0, 1e-3, 255, 1e10),
+];
+
+#[test]
+fn ply_all_three_encodings() {
+    for format in ["ascii", "binary_little_endian", "binary_big_endian"] {
+        let d = load(&format!("{format}.ply"), &ply(format, &VERTS));
+        let want: Vec<[f64; 3]> = VERTS
+            .iter()
+            .map(|v| [v.0 as f64, v.1 as f64, v.2 as f64])
+            .collect();
+        assert_eq!(points(&d), want, "{format}");
+        assert_eq!(
+            names(&d),
+            [("intensity", Location::Point), ("q", Location::Point)]
+        );
+        assert_eq!(array(&d, "intensity").values, [0.0, 200.0, 255.0]);
+        assert_eq!(array(&d, "q").values, [0.1f64 as f32, -2.5, 1e10]);
+    }
+}
+
+#[test]
+fn ply_malformed() {
+    let no_vertex = b"ply\nformat ascii 1.0\nelement point 1\nproperty float x\nend_header\n1\n";
+    fails(
+        "nov.ply",
+        no_vertex,
+        "Format",
+        "expected a 'vertex' element, found elements [point]",
+    );
+    let no_z = b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n\
+                 end_header\n1 2\n";
+    fails("noz.ply", no_z, "Format", "a scalar vertex property 'z'");
+    let b = ply("binary_little_endian", &VERTS);
+    let cut = b.len() - 30;
+    fails(
+        "trunc.ply",
+        &b[..cut],
+        "Format",
+        "(start of the 'vertex' data)",
+    );
+    let mut simple = b"ply\nformat binary_big_endian 1.0\nelement vertex 2\nproperty double x\n\
+                       property double y\nproperty double z\nend_header\n"
+        .to_vec();
+    simple.extend([0u8; 40]);
+    fails(
+        "short.ply",
+        &simple,
+        "Truncated",
+        "expected 48 bytes/values, found 40",
+    );
+    let bad = String::from_utf8(ply("ascii", &VERTS))
+        .unwrap()
+        .replace("1.25", "one");
+    let e = fails(
+        "text.ply",
+        bad.as_bytes(),
+        "Format",
+        "line 18: expected 3 'vertex' elements",
+    );
+    assert!(
+        e.to_string().contains("found 'one 2 3 200 2 7 8 -2.5'"),
+        "{e}"
+    );
+    let short = String::from_utf8(ply("ascii", &VERTS))
+        .unwrap()
+        .replace("3 0 1 2\n", "");
+    let short = short.replace("-4 0 0.001 255 2 7 8 10000000000\n", "");
+    fails(
+        "eof.ply",
+        short.as_bytes(),
+        "Format",
+        "line 19: expected 3 'vertex' elements",
+    );
+    let nan = [(0.0, f32::NAN, 0.0, 1, 1.0)];
+    fails(
+        "nan.ply",
+        &ply("binary_big_endian", &nan),
+        "NonFiniteCoordinate",
+        "point 0",
+    );
+    fails("garbage.ply", b"\x89PNG\r\n", "Format", "header");
+    let huge = b"ply\nformat ascii 1.0\nelement vertex 99999999999\nproperty float x\n\
+                 property float y\nproperty float z\nend_header\n";
+    fails("huge.ply", huge, "TooLarge", "exceed the limit");
+}

@@ -15,6 +15,7 @@ pub mod dataset;
 pub mod marschner_lobb;
 pub mod nifti;
 pub mod nrrd;
+pub mod points;
 pub mod vtk;
 pub mod vtk_legacy;
 
@@ -241,7 +242,8 @@ pub fn load(path: &Path, array: Option<&str>) -> Result<Volume, DataError> {
 }
 
 /// Loads any supported file as a [`Dataset`] (geometry and every scalar array), validated by
-/// [`Dataset::validate`]: legacy VTK (every dataset type, arrays named as in the file). Regular-grid formats (NRRD, NIfTI) give an image with one point array
+/// [`Dataset::validate`]: legacy VTK (every dataset type, arrays named as in the file), CSV
+/// and PLY points. Regular-grid formats (NRRD, NIfTI) give an image with one point array
 /// named "scalars".
 pub fn load_dataset(path: &Path) -> Result<dataset::Dataset, DataError> {
     let name = path
@@ -250,6 +252,8 @@ pub fn load_dataset(path: &Path) -> Result<dataset::Dataset, DataError> {
         .unwrap_or_default();
     let dataset = if name.ends_with(".vtk") {
         vtk::load_dataset(path)?
+    } else if name.ends_with(".csv") || name.ends_with(".ply") {
+        points::load(path)?
     } else if name.ends_with(".nrrd") || name.ends_with(".nii") || name.ends_with(".nii.gz") {
         dataset::Dataset::from_volume(load(path, None)?, "scalars")
     } else {
