@@ -15,7 +15,9 @@ pub mod dataset;
 pub mod marschner_lobb;
 pub mod nifti;
 pub mod nrrd;
+pub mod points;
 pub mod vtk;
+pub mod vtk_legacy;
 pub mod vtk_xml;
 mod vtk_xml_decode;
 mod vtk_xml_tree;
@@ -243,7 +245,8 @@ pub fn load(path: &Path, array: Option<&str>) -> Result<Volume, DataError> {
 }
 
 /// Loads any supported file as a [`Dataset`] (geometry and every scalar array), validated by
-/// [`Dataset::validate`]. Regular-grid formats (NRRD, NIfTI) give an image with one point array
+/// [`Dataset::validate`]: legacy VTK (every dataset type, arrays named as in the file), CSV
+/// and PLY points. Regular-grid formats (NRRD, NIfTI) give an image with one point array
 /// named "scalars".
 pub fn load_dataset(path: &Path) -> Result<dataset::Dataset, DataError> {
     let name = path
@@ -251,7 +254,9 @@ pub fn load_dataset(path: &Path) -> Result<dataset::Dataset, DataError> {
         .map(|n| n.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default();
     let dataset = if name.ends_with(".vtk") {
-        dataset::Dataset::from_volume(vtk::load(path, None)?, "scalars")
+        vtk::load_dataset(path)?
+    } else if name.ends_with(".csv") || name.ends_with(".ply") {
+        points::load(path)?
     } else if name.ends_with(".nrrd") || name.ends_with(".nii") || name.ends_with(".nii.gz") {
         dataset::Dataset::from_volume(load(path, None)?, "scalars")
     } else if [".vti", ".vtr", ".vts", ".vtu", ".vtp"]

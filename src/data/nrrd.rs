@@ -88,13 +88,46 @@ impl Scalar {
     }
 }
 
-/// Converts packed binary samples to f32, keeping component 0 of each `ncomp`-component tuple.
+/// What [`decode`] and [`parse_text`] produce: f32 samples, or f64 where a loader needs
+/// coordinates and cell indices without f32 rounding. Integers arrive as i64/u64 so that each
+/// conversion rounds once, exactly as a direct cast would.
+pub(crate) trait Sample: Copy {
+    fn from_i64(v: i64) -> Self;
+    fn from_u64(v: u64) -> Self;
+    fn from_f64(v: f64) -> Self;
+}
+
+impl Sample for f32 {
+    fn from_i64(v: i64) -> Self {
+        v as f32
+    }
+    fn from_u64(v: u64) -> Self {
+        v as f32
+    }
+    fn from_f64(v: f64) -> Self {
+        v as f32
+    }
+}
+
+impl Sample for f64 {
+    fn from_i64(v: i64) -> Self {
+        v as f64
+    }
+    fn from_u64(v: u64) -> Self {
+        v as f64
+    }
+    fn from_f64(v: f64) -> Self {
+        v
+    }
+}
+
+/// Converts packed binary samples, keeping component 0 of each `ncomp`-component tuple.
 /// A partial tuple at the end is ignored: callers size `data` from the header first.
 /// int32/int64/double lose precision in f32; that is accepted, the renderer works in f32.
-pub(crate) fn decode(data: &[u8], ty: Scalar, big_endian: bool, ncomp: usize) -> Vec<f32> {
+pub(crate) fn decode<T: Sample>(data: &[u8], ty: Scalar, big_endian: bool, ncomp: usize) -> Vec<T> {
     let stride = ty.size().saturating_mul(ncomp.max(1));
     macro_rules! convert {
-        ($t:ty) => {{
+        ($t:ty, $via:ident, $wide:ty) => {{
             const N: usize = std::mem::size_of::<$t>();
             data.chunks_exact(stride)
                 .map(|tuple| {
@@ -105,36 +138,41 @@ pub(crate) fn decode(data: &[u8], ty: Scalar, big_endian: bool, ncomp: usize) ->
                     } else {
                         <$t>::from_le_bytes(raw)
                     };
-                    v as f32
+                    T::$via(<$wide>::from(v))
                 })
                 .collect()
         }};
     }
     match ty {
-        Scalar::I8 => convert!(i8),
-        Scalar::U8 => convert!(u8),
-        Scalar::I16 => convert!(i16),
-        Scalar::U16 => convert!(u16),
-        Scalar::I32 => convert!(i32),
-        Scalar::U32 => convert!(u32),
-        Scalar::I64 => convert!(i64),
-        Scalar::U64 => convert!(u64),
-        Scalar::F32 => convert!(f32),
-        Scalar::F64 => convert!(f64),
+        Scalar::I8 => convert!(i8, from_i64, i64),
+        Scalar::U8 => convert!(u8, from_i64, i64),
+        Scalar::I16 => convert!(i16, from_i64, i64),
+        Scalar::U16 => convert!(u16, from_i64, i64),
+        Scalar::I32 => convert!(i32, from_i64, i64),
+        Scalar::U32 => convert!(u32, from_i64, i64),
+        Scalar::I64 => convert!(i64, from_i64, i64),
+        Scalar::U64 => convert!(u64, from_u64, u64),
+        Scalar::F32 => convert!(f32, from_f64, f64),
+        Scalar::F64 => convert!(f64, from_f64, f64),
     }
 }
 
 /// Parses one text sample of type `ty`; integers must be integral and within the type's range.
 /// `nan`/`inf` parse for float types and are rejected later by `check_finite`, which names them.
-pub(crate) fn parse_text(token: &str, ty: Scalar) -> Option<f32> {
+pub(crate) fn parse_text<T: Sample>(token: &str, ty: Scalar) -> Option<T> {
     match ty.int_range() {
-        Some((lo, hi)) => token
-            .parse::<i128>()
-            .ok()
-            .filter(|v| (lo..=hi).contains(v))
-            .map(|v| v as f32),
-        None if ty == Scalar::F32 => token.parse::<f32>().ok(),
-        None => token.parse::<f64>().ok().map(|v| v as f32),
+        Some((lo, hi)) => {
+            let v = token
+                .parse::<i128>()
+                .ok()
+                .filter(|v| (lo..=hi).contains(v))?;
+            match i64::try_from(v) {
+                Ok(v) => Some(T::from_i64(v)),
+                Err(_) => u64::try_from(v).ok().map(T::from_u64),
+            }
+        }
+        None if ty == Scalar::F32 => token.parse::<f32>().ok().map(|v| T::from_f64(v.into())),
+        None => token.parse::<f64>().ok().map(T::from_f64),
     }
 }
 

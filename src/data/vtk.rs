@@ -1,12 +1,15 @@
 //! VTK legacy reader (`.vtk`, file versions up to 5.1 as written by VTK 9 and ParaView; like VTK,
-//! the version number is not enforced): `DATASET STRUCTURED_POINTS`, ASCII or BINARY
-//! (big-endian).
+//! the version number is not enforced), ASCII or BINARY (big-endian). This module holds the
+//! volume API ([`load`], [`parse`]: `DATASET STRUCTURED_POINTS` as a [`Volume`]) and the
+//! tokenizer, number decoding and attribute parsing shared with `vtk_legacy.rs`, whose
+//! [`load_dataset`] reads every dataset type vmls renders as a `Dataset`.
 //!
-//! Contract and choices:
+//! Contract and choices of the volume API:
 //! - geometry: `DIMENSIONS`, `SPACING` (or its old name `ASPECT_RATIO`, each > 0, default 1),
 //!   `ORIGIN` (default 0); a dataset-level `FIELD` block (e.g. `TIME`) is skipped;
 //! - other dataset types (`STRUCTURED_GRID`, `RECTILINEAR_GRID`, `UNSTRUCTURED_GRID`,
-//!   `POLYDATA`, ...) and data-object files (no `DATASET`) are unsupported;
+//!   `POLYDATA`, ...) are not volumes: [`load`] reports them as unsupported (use
+//!   [`load_dataset`]); data-object files (no `DATASET`) are unsupported by both;
 //! - selectable point-data arrays are `SCALARS` (the `LOOKUP_TABLE` line may be absent),
 //!   `COLOR_SCALARS` and the arrays of a `FIELD` block. `array = None` takes the first of them,
 //!   a name takes the array of that name (`%XX` escapes in names are decoded, as VTK does);
@@ -35,7 +38,10 @@
 //! Errors name "line N"; in BINARY files they also give the byte offset, since binary data makes
 //! line numbers hard to follow.
 
-use super::nrrd::{Scalar, decode, parse_text, shown};
+pub use super::vtk_legacy::{load_dataset, parse_dataset};
+
+use super::dataset::{DataArray, Location};
+use super::nrrd::{Sample, Scalar, decode, parse_text, shown};
 use super::{DataError, Volume, check_finite, checked_sample_count};
 use std::path::Path;
 
@@ -54,19 +60,19 @@ const KEYWORDS: &str = "POINT_DATA CELL_DATA SCALARS COLOR_SCALARS LOOKUP_TABLE 
                         FIELD METADATA";
 
 #[derive(Clone, Copy)]
-enum Elem {
+pub(super) enum Elem {
     Num(Scalar),
     Bit,
 }
 
 /// A non-blank line split into whitespace-separated tokens.
-struct Line {
-    start: usize,
-    tokens: Vec<String>,
+pub(super) struct Line {
+    pub(super) start: usize,
+    pub(super) tokens: Vec<String>,
 }
 
 impl Line {
-    fn keyword(&self) -> String {
+    pub(super) fn keyword(&self) -> String {
         self.tokens
             .first()
             .map(|t| t.to_ascii_uppercase())
@@ -82,15 +88,15 @@ enum Section {
     Cell(u64),
 }
 
-struct Reader<'a> {
-    path: &'a Path,
-    bytes: &'a [u8],
-    pos: usize,
-    binary: bool,
+pub(super) struct Reader<'a> {
+    pub(super) path: &'a Path,
+    pub(super) bytes: &'a [u8],
+    pub(super) pos: usize,
+    pub(super) binary: bool,
 }
 
 impl<'a> Reader<'a> {
-    fn location(&self, at: usize) -> String {
+    pub(super) fn location(&self, at: usize) -> String {
         let at = at.min(self.bytes.len());
         let line = 1 + self.bytes[..at].iter().filter(|&&b| b == b'\n').count();
         if self.binary {
@@ -100,7 +106,7 @@ impl<'a> Reader<'a> {
         }
     }
 
-    fn format(
+    pub(super) fn format(
         &self,
         at: usize,
         expected: impl Into<String>,
@@ -115,14 +121,14 @@ impl<'a> Reader<'a> {
     }
 
     /// A format error at `line` (or at the end of the input), quoting what was found.
-    fn unexpected(&self, line: Option<&Line>, expected: impl Into<String>) -> DataError {
+    pub(super) fn unexpected(&self, line: Option<&Line>, expected: impl Into<String>) -> DataError {
         match line {
             Some(l) => self.format(l.start, expected, format!("'{}'", l.tokens.join(" "))),
             None => self.format(self.bytes.len(), expected, "end of file"),
         }
     }
 
-    fn unsupported(&self, at: usize, what: impl Into<String>) -> DataError {
+    pub(super) fn unsupported(&self, at: usize, what: impl Into<String>) -> DataError {
         DataError::Unsupported {
             path: self.path.to_path_buf(),
             location: self.location(at),
@@ -141,7 +147,7 @@ impl<'a> Reader<'a> {
     }
 
     /// The next line that is not blank.
-    fn line(&mut self) -> Option<Line> {
+    pub(super) fn line(&mut self) -> Option<Line> {
         while let Some((start, raw)) = self.raw_line() {
             let tokens: Vec<String> = String::from_utf8_lossy(raw)
                 .split_ascii_whitespace()
@@ -154,7 +160,7 @@ impl<'a> Reader<'a> {
         None
     }
 
-    fn peek_line(&mut self) -> Option<Line> {
+    pub(super) fn peek_line(&mut self) -> Option<Line> {
         let saved = self.pos;
         let line = self.line();
         self.pos = saved;
@@ -175,7 +181,7 @@ impl<'a> Reader<'a> {
     }
 
     /// Checks that `line` has exactly `n` tokens.
-    fn expect_tokens(&self, line: &Line, n: usize, form: &str) -> Result<(), DataError> {
+    pub(super) fn expect_tokens(&self, line: &Line, n: usize, form: &str) -> Result<(), DataError> {
         if line.tokens.len() == n {
             Ok(())
         } else {
@@ -183,7 +189,7 @@ impl<'a> Reader<'a> {
         }
     }
 
-    fn number<T: std::str::FromStr>(
+    pub(super) fn number<T: std::str::FromStr>(
         &self,
         line: &Line,
         i: usize,
@@ -195,7 +201,7 @@ impl<'a> Reader<'a> {
             .map_err(|_| self.format(line.start, what, format!("'{token}'")))
     }
 
-    fn vec3(
+    pub(super) fn vec3(
         &self,
         line: &Line,
         what: &str,
@@ -212,7 +218,7 @@ impl<'a> Reader<'a> {
         Ok(v)
     }
 
-    fn elem(&self, line: &Line, name: &str) -> Result<Elem, DataError> {
+    pub(super) fn elem(&self, line: &Line, name: &str) -> Result<Elem, DataError> {
         let ty = match name.to_ascii_lowercase().as_str() {
             "bit" => return Ok(Elem::Bit),
             "char" | "signed_char" | "vtktypeint8" => Scalar::I8,
@@ -239,13 +245,13 @@ impl<'a> Reader<'a> {
     }
 
     /// Reads `ntuples` tuples of `ncomp` values; with `keep`, returns component 0 of each.
-    fn array(
+    pub(super) fn array<T: Sample>(
         &mut self,
         elem: Elem,
         ncomp: u64,
         ntuples: u64,
         keep: bool,
-    ) -> Result<Vec<f32>, DataError> {
+    ) -> Result<Vec<T>, DataError> {
         let total = ncomp.checked_mul(ntuples).ok_or_else(|| {
             self.format(
                 self.pos,
@@ -282,7 +288,7 @@ impl<'a> Reader<'a> {
                     .map(|i| {
                         let bit = i * ncomp;
                         let byte = data.get((bit / 8) as usize).copied().unwrap_or(0);
-                        f32::from((byte >> (7 - bit % 8)) & 1)
+                        T::from_i64(i64::from((byte >> (7 - bit % 8)) & 1))
                     })
                     .collect(),
             });
@@ -305,11 +311,11 @@ impl<'a> Reader<'a> {
             let value = match elem {
                 Elem::Num(t) if keep && i % ncomp == 0 => parse_text(text, t),
                 Elem::Bit if keep && i % ncomp == 0 => match text {
-                    "0" => Some(0.0),
-                    "1" => Some(1.0),
+                    "0" => Some(T::from_i64(0)),
+                    "1" => Some(T::from_i64(1)),
                     _ => None,
                 },
-                _ => text.parse::<f64>().ok().map(|_| 0.0),
+                _ => text.parse::<f64>().ok().map(T::from_f64),
             };
             match value {
                 Some(v) if keep && i % ncomp == 0 => out.push(v),
@@ -328,7 +334,7 @@ impl<'a> Reader<'a> {
     }
 
     /// Skips a VTK 5.1 `METADATA` block (ended by an empty line) if one follows.
-    fn skip_metadata(&mut self) {
+    pub(super) fn skip_metadata(&mut self) {
         if self.peek_line().is_some_and(|l| l.keyword() == "METADATA") {
             self.line();
             while let Some((_, raw)) = self.raw_line() {
@@ -390,7 +396,7 @@ fn decode_name(name: &str) -> String {
     String::from_utf8_lossy(&out).into_owned()
 }
 
-/// One array about to be read: what it is and whether it may be chosen.
+/// One array about to be read.
 struct Candidate {
     name: String,
     elem: Elem,
@@ -398,11 +404,45 @@ struct Candidate {
     ntuples: u64,
     /// COLOR_SCALARS in a BINARY file: bytes to scale by 1/255.
     scale_bytes: bool,
-    selectable: bool,
+    /// A scalar array (SCALARS, COLOR_SCALARS or a FIELD array) rather than vectors, normals,
+    /// lookup tables and the like.
+    scalar: bool,
 }
 
-/// Parses legacy VTK bytes; `path` only names the file in errors.
-pub fn parse(path: &Path, bytes: &[u8], array: Option<&str>) -> Result<Volume, DataError> {
+/// Which arrays the attribute parser keeps.
+#[derive(Clone, Copy)]
+pub(super) enum Pick<'w> {
+    /// The volume API: the first scalar point array (or the one of that name); parsing stops
+    /// there.
+    One(Option<&'w str>),
+    /// Every scalar array of the point data, and of the cell data when `cells`.
+    All { cells: bool },
+}
+
+/// The arrays kept so far.
+pub(super) struct Sink<'w> {
+    pub(super) pick: Pick<'w>,
+    /// Names of the scalar point arrays passed, for [`DataError::NoSuchArray`].
+    pub(super) seen: Vec<String>,
+    pub(super) kept: Vec<DataArray>,
+}
+
+impl<'w> Sink<'w> {
+    pub(super) fn new(pick: Pick<'w>) -> Self {
+        Self {
+            pick,
+            seen: Vec::new(),
+            kept: Vec::new(),
+        }
+    }
+}
+
+/// Reads the four header lines (magic, title, ASCII/BINARY, `DATASET type`) and returns the
+/// reader positioned after them, with the dataset type in upper case and its line's offset.
+pub(super) fn open<'a>(
+    path: &'a Path,
+    bytes: &'a [u8],
+) -> Result<(Reader<'a>, String, usize), DataError> {
     let mut r = Reader {
         path,
         bytes,
@@ -428,18 +468,25 @@ pub fn parse(path: &Path, bytes: &[u8], array: Option<&str>) -> Result<Volume, D
         _ => return Err(r.unexpected(form.as_ref(), "ASCII or BINARY")),
     }
     let dataset = r.line();
+    let at = dataset.as_ref().map_or(r.bytes.len(), |l| l.start);
     match dataset.as_ref().map(|l| (l.keyword(), l.tokens.get(1))) {
-        Some((k, Some(t))) if k == "DATASET" && t.eq_ignore_ascii_case("STRUCTURED_POINTS") => {}
         Some((k, Some(t))) if k == "DATASET" => {
-            let at = dataset.as_ref().map_or(0, |l| l.start);
-            let what = format!("DATASET {t} (only STRUCTURED_POINTS is read)");
-            return Err(r.unsupported(at, what));
+            let kind = t.to_ascii_uppercase();
+            Ok((r, kind, at))
         }
         Some((k, _)) if k == "FIELD" => {
-            let at = dataset.as_ref().map_or(0, |l| l.start);
-            return Err(r.unsupported(at, "data-object file (FIELD without DATASET)"));
+            Err(r.unsupported(at, "data-object file (FIELD without DATASET)"))
         }
-        _ => return Err(r.unexpected(dataset.as_ref(), "'DATASET STRUCTURED_POINTS'")),
+        _ => Err(r.unexpected(dataset.as_ref(), "'DATASET type'")),
+    }
+}
+
+/// Parses legacy VTK bytes; `path` only names the file in errors.
+pub fn parse(path: &Path, bytes: &[u8], array: Option<&str>) -> Result<Volume, DataError> {
+    let (mut r, kind, at) = open(path, bytes)?;
+    if kind != "STRUCTURED_POINTS" {
+        let what = format!("DATASET {kind} (only STRUCTURED_POINTS is read as a volume)");
+        return Err(r.unsupported(at, what));
     }
 
     let mut dims: Option<[u64; 3]> = None;
@@ -447,7 +494,7 @@ pub fn parse(path: &Path, bytes: &[u8], array: Option<&str>) -> Result<Volume, D
     let mut origin = [0.0; 3];
     let mut count = 0usize;
     let mut section = Section::Geometry;
-    let mut seen: Vec<String> = Vec::new();
+    let mut sink = Sink::new(Pick::One(array));
     while let Some(line) = r.line() {
         let kw = line.keyword();
         match (section, kw.as_str()) {
@@ -490,12 +537,12 @@ pub fn parse(path: &Path, bytes: &[u8], array: Option<&str>) -> Result<Volume, D
                 };
             }
             (Section::Geometry, "FIELD") | (Section::Point(_) | Section::Cell(_), _) => {
-                let n = match section {
-                    Section::Point(n) | Section::Cell(n) => Some(n),
+                let within = match section {
+                    Section::Point(n) => Some((Location::Point, n)),
+                    Section::Cell(n) => Some((Location::Cell, n)),
                     Section::Geometry => None,
                 };
-                let point = matches!(section, Section::Point(_));
-                let found = attribute(&mut r, &line, n, point, array, &mut seen)?;
+                let found = attribute(&mut r, &line, within, &mut sink)?;
                 if let Some(values) = found {
                     let d = dims.unwrap_or([1; 3]).map(|v| v as usize);
                     check_finite(path, d, &values)?;
@@ -518,10 +565,10 @@ pub fn parse(path: &Path, bytes: &[u8], array: Option<&str>) -> Result<Volume, D
         Some(name) => Err(DataError::NoSuchArray {
             path: path.to_path_buf(),
             name: name.to_string(),
-            available: if seen.is_empty() {
+            available: if sink.seen.is_empty() {
                 "none".into()
             } else {
-                seen.join(", ")
+                sink.seen.join(", ")
             },
         }),
         None if dims.is_none() => Err(r.format(end, "DIMENSIONS", "end of file")),
@@ -533,19 +580,17 @@ pub fn parse(path: &Path, bytes: &[u8], array: Option<&str>) -> Result<Volume, D
     }
 }
 
-/// Parses one attribute (`line` is its keyword line) and its data. `n` is the tuple count of
-/// the section (`None` for dataset-level field data). Returns the chosen array when this
-/// attribute holds it.
-fn attribute(
+/// Parses one attribute (`line` is its keyword line) and its data. `within` is the section's
+/// location and tuple count (`None` for dataset-level field data). With [`Pick::One`], returns
+/// the chosen array when this attribute holds it; with [`Pick::All`], arrays go to the sink.
+pub(super) fn attribute(
     r: &mut Reader,
     line: &Line,
-    n: Option<u64>,
-    point: bool,
-    want: Option<&str>,
-    seen: &mut Vec<String>,
+    within: Option<(Location, u64)>,
+    sink: &mut Sink,
 ) -> Result<Option<Vec<f32>>, DataError> {
     let kw = line.keyword();
-    let tuples = n.unwrap_or(0);
+    let tuples = within.map_or(0, |(_, n)| n);
     let t = &line.tokens;
     let name = || decode_name(t.get(1).map_or("", String::as_str));
     let mut candidates = Vec::new();
@@ -557,7 +602,7 @@ fn attribute(
             ncomp,
             ntuples: tuples,
             scale_bytes: false,
-            selectable: false,
+            scalar: false,
         })
     };
     match kw.as_str() {
@@ -586,7 +631,7 @@ fn attribute(
                 ncomp,
                 ntuples: tuples,
                 scale_bytes: false,
-                selectable: point,
+                scalar: true,
             });
         }
         "COLOR_SCALARS" => {
@@ -598,7 +643,7 @@ fn attribute(
                 ncomp: r.number(line, 2, "a component count >= 1")?,
                 ntuples: tuples,
                 scale_bytes: r.binary,
-                selectable: point,
+                scalar: true,
             });
         }
         "LOOKUP_TABLE" => {
@@ -609,7 +654,7 @@ fn attribute(
                 ncomp: 4,
                 ntuples: r.number(line, 2, "a table size")?,
                 scale_bytes: false,
-                selectable: false,
+                scalar: false,
             });
         }
         "VECTORS" | "NORMALS" => candidates.push(fixed(3)?),
@@ -624,7 +669,7 @@ fn attribute(
                 ncomp: r.number(line, 2, "a dimension of 1 to 3")?,
                 ntuples: tuples,
                 scale_bytes: false,
-                selectable: false,
+                scalar: false,
             });
         }
         "FIELD" => {
@@ -645,9 +690,9 @@ fn attribute(
                     ncomp: r.number(&header, 1, "a component count >= 1")?,
                     ntuples: r.number(&header, 2, "a tuple count")?,
                     scale_bytes: false,
-                    selectable: point,
+                    scalar: true,
                 };
-                if let Some(found) = read_candidate(r, &header, c, n, want, seen, left)? {
+                if let Some(found) = read_candidate(r, &header, c, within, sink, left)? {
                     return Ok(Some(found));
                 }
             }
@@ -660,42 +705,67 @@ fn attribute(
         }
     }
     for c in candidates {
-        if let Some(found) = read_candidate(r, line, c, n, want, seen, 0)? {
+        if let Some(found) = read_candidate(r, line, c, within, sink, 0)? {
             return Ok(Some(found));
         }
     }
     Ok(None)
 }
 
-/// Reads or skips one array; returns it when it is the chosen one.
+/// Reads or skips one array; returns it when it is the array [`Pick::One`] chose.
 fn read_candidate(
     r: &mut Reader,
     header: &Line,
     c: Candidate,
-    n: Option<u64>,
-    want: Option<&str>,
-    seen: &mut Vec<String>,
+    within: Option<(Location, u64)>,
+    sink: &mut Sink,
     field_arrays_left: u64,
 ) -> Result<Option<Vec<f32>>, DataError> {
     if c.ncomp == 0 {
         return Err(r.format(header.start, "a component count >= 1", "0"));
     }
-    let chosen = c.selectable && want.is_none_or(|w| w == c.name);
-    if c.selectable {
-        seen.push(c.name.clone());
-    }
-    if chosen && Some(c.ntuples) != n {
-        let expected = format!("{} tuples (one per point)", n.unwrap_or(0));
+    let location = within.map(|(l, _)| l);
+    let (keep, chosen) = match sink.pick {
+        Pick::One(want) => {
+            let selectable = c.scalar && location == Some(Location::Point);
+            if selectable {
+                sink.seen.push(c.name.clone());
+            }
+            let chosen = selectable && want.is_none_or(|w| w == c.name);
+            (chosen, chosen)
+        }
+        Pick::All { cells } => {
+            let wanted = match location {
+                Some(Location::Point) => true,
+                Some(Location::Cell) => cells,
+                None => false,
+            };
+            (c.scalar && wanted, false)
+        }
+    };
+    if let (true, Some((location, n))) = (keep, within)
+        && c.ntuples != n
+    {
+        let expected = format!("{n} tuples (one per {})", location.name());
         return Err(r.format(header.start, expected, c.ntuples.to_string()));
     }
-    let mut values = r.array(c.elem, c.ncomp, c.ntuples, chosen)?;
+    let mut values = r.array::<f32>(c.elem, c.ncomp, c.ntuples, keep)?;
     r.skip_metadata();
-    if !chosen {
+    if !keep {
         return Ok(None);
     }
-    r.check_follows(field_arrays_left, c.ntuples * c.ncomp)?;
     if c.scale_bytes {
         values.iter_mut().for_each(|v| *v /= 255.0);
     }
-    Ok(Some(values))
+    if chosen {
+        r.check_follows(field_arrays_left, c.ntuples * c.ncomp)?;
+        return Ok(Some(values));
+    }
+    sink.kept.push(DataArray {
+        name: c.name,
+        location: location.unwrap_or(Location::Point),
+        components: usize::try_from(c.ncomp).unwrap_or(usize::MAX),
+        values,
+    });
+    Ok(None)
 }
