@@ -5,7 +5,8 @@
 // (ADAPTIVE_LEVELS = stack entries = ⌊log2(l_max/l_min)⌋ + 1).
 //
 // Rays are integrated in chunks, one dispatch per chunk: outer steps (midpoint steps, fixed
-// intervals or adaptive top intervals) band.first .. band.last. llvmpipe silently ends every
+// intervals or adaptive top intervals) band.first .. band.last, numbered across the ray's inside
+// segments (one for a box domain; a mesh hull may give several). llvmpipe silently ends every
 // loop once an invocation has run 65 535 loop iterations in one dispatch (nested ones
 // included); chunks keep each dispatch far below that. Between chunks a ray's state lives in
 // the image ((C, T) while running), the counts (evaluations | RAY_DONE) and the ray-state
@@ -37,26 +38,30 @@ layout(push_constant) uniform Push { RayPush band; };
 
 #include "interval.glsl"
 
+#if HULL == 1
+#include "hull.glsl"
+#endif
+
 // Outcome of integrating one chunk of a ray.
-const uint CHUNK_DONE = 0u;      // reached band.last, more to do
-const uint CHUNK_FINISHED = 1u;  // the ray is complete (exit or termination)
+const uint CHUNK_DONE = 0u;      // reached last_step, more to do in this segment
+const uint CHUNK_FINISHED = 1u;  // the segment is complete (exit or termination)
 const uint CHUNK_TRUNCATED = 2u; // a loop ended early: the driver's loop limit
 
 #if RAY_METHOD == 0
-// Midpoint rule (riemann, reference): steps band.first .. band.last of n = ⌈L/δ⌉; isosurfaces
+// Midpoint rule (riemann, reference): steps first .. last_step of n = ⌈L/δ⌉; isosurfaces
 // crossed between consecutive samples are composited before the later sample's step. `prev`
 // is the previous sample (w = 0 before the first). With isosurfaces, f is also evaluated at the
 // entry and the exit, so that a surface in the half step before the first sample or after the
 // last is not missed.
-uint integrate(vec3 o, vec3 d, float t0, float t1, inout vec4 prev, inout vec3 color,
-               inout float transmittance, inout uint evaluations) {
+uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, inout vec4 prev,
+               inout vec3 color, inout float transmittance, inout uint evaluations) {
     uint steps = uint(ceil((t1 - t0) / params.step));
     bool isos = params.iso_count.x > 0u;
-    if (band.first == 0u && isos) {
+    if (first == 0u && isos) {
         prev = knot(o, d, t0, evaluations);
     }
-    uint last = min(band.last, steps);
-    uint i = band.first;
+    uint last = min(last_step, steps);
+    uint i = first;
     bool exited = false;
     for (; i < last; ++i) {
         float ta = t0 + float(i) * params.step;
@@ -80,7 +85,7 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, inout vec4 prev, inout vec3 c
         }
     }
     if (!exited && i < steps) {
-        return i == band.last ? CHUNK_DONE : CHUNK_TRUNCATED;
+        return i == last_step ? CHUNK_DONE : CHUNK_TRUNCATED;
     }
     if (isos) {
         emit_crossings(o, d, prev, knot(o, d, t1, evaluations), color, transmittance,
@@ -89,18 +94,18 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, inout vec4 prev, inout vec3 c
     return CHUNK_FINISHED;
 }
 #elif RAY_METHOD == 1
-// Preintegration with a constant step: intervals band.first .. band.last, one lookup of
+// Preintegration with a constant step: intervals first .. last_step, one lookup of
 // table 0 per interval, the clipped composite for the last one. `prev` is the knot at the
 // chunk's start (evaluated here for the first chunk).
-uint integrate(vec3 o, vec3 d, float t0, float t1, inout vec4 prev, inout vec3 color,
-               inout float transmittance, inout uint evaluations) {
+uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, inout vec4 prev,
+               inout vec3 color, inout float transmittance, inout uint evaluations) {
     float l = params.step;
     uint steps = uint(ceil((t1 - t0) / l));
-    if (band.first == 0u) {
+    if (first == 0u) {
         prev = knot(o, d, t0, evaluations);
     }
-    uint last = min(band.last, steps);
-    uint i = band.first;
+    uint last = min(last_step, steps);
+    uint i = first;
     for (; i < last; ++i) {
         float ta = t0 + float(i) * l;
         float tb = min(ta + l, t1);
@@ -115,28 +120,28 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, inout vec4 prev, inout vec3 c
             return CHUNK_FINISHED;
         }
     }
-    return i >= steps ? CHUNK_FINISHED : (i == band.last ? CHUNK_DONE : CHUNK_TRUNCATED);
+    return i >= steps ? CHUNK_FINISHED : (i == last_step ? CHUNK_DONE : CHUNK_TRUNCATED);
 }
 #else
-// [MLS] §4 adaptive subdivision of top intervals band.first .. band.last (top interval k is
+// [MLS] §4 adaptive subdivision of top intervals first .. last_step (top interval k is
 // [t0 + k·l_max, min(t0 + (k+1)·l_max, t1)]) on a local stack of pending interval ends; twin
 // of src/render/raycast/adaptive.rs. A stack entry is a knot whose w holds ±(depth + 1) of the
 // interval it closes, negative when f is undefined there (one vec4 per entry keeps the
 // dynamically indexed stack small, which matters on lavapipe). `a` is the knot at the chunk's
 // start (evaluated here for the first chunk).
-uint integrate(vec3 o, vec3 d, float t0, float t1, inout vec4 a, inout vec3 color,
-               inout float transmittance, inout uint evaluations) {
+uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, inout vec4 a,
+               inout vec3 color, inout float transmittance, inout uint evaluations) {
     float l_max = params.preint_range.z;
     float l_min = params.preint_range.w;
     float epsilon = params.integrator.x;
     float termination = params.integrator.y;
     uint tops = uint(ceil((t1 - t0) / l_max));
-    if (band.first == 0u) {
+    if (first == 0u) {
         a = knot(o, d, t0, evaluations);
     }
     vec4 stack[ADAPTIVE_LEVELS];
-    uint last = min(band.last, tops);
-    uint k = band.first;
+    uint last = min(last_step, tops);
+    uint k = first;
     for (; k < last; ++k) {
         float end = t0 + float(k + 1u) * l_max;
         bool full = end <= t1;
@@ -144,8 +149,8 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, inout vec4 a, inout vec3 colo
         if (top <= 0.0) {
             return CHUNK_FINISHED;
         }
-        vec4 first = knot(o, d, full ? end : t1, evaluations);
-        stack[0] = vec4(first.xyz, first.w > 0.0 ? 1.0 : -1.0);
+        vec4 top_end = knot(o, d, full ? end : t1, evaluations);
+        stack[0] = vec4(top_end.xyz, top_end.w > 0.0 ? 1.0 : -1.0);
         int sp = 1;
         while (sp > 0) {
             vec4 packed = stack[sp - 1];
@@ -177,9 +182,9 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, inout vec4 a, inout vec3 colo
             // at any isosurface it crosses. One call site: GLSL inlines every call, and
             // lavapipe's compile time grows with the inlined copies of the root finders.
             for (uint piece = 0u; piece < (halves ? 2u : 1u); ++piece) {
-                bool first = piece == 0u;
-                emit_interval(o, d, first ? a : m, halves && first ? m : e,
-                              halves ? 0.5 * len : len, first ? cl : cr, color, transmittance,
+                bool left = piece == 0u;
+                emit_interval(o, d, left ? a : m, halves && left ? m : e,
+                              halves ? 0.5 * len : len, left ? cl : cr, color, transmittance,
                               evaluations);
             }
             sp -= 1;
@@ -192,9 +197,29 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, inout vec4 a, inout vec3 colo
             return CHUNK_TRUNCATED;
         }
     }
-    return k >= tops ? CHUNK_FINISHED : (k == band.last ? CHUNK_DONE : CHUNK_TRUNCATED);
+    return k >= tops ? CHUNK_FINISHED : (k == last_step ? CHUNK_DONE : CHUNK_TRUNCATED);
 }
 #endif
+
+// Outer steps of a segment [t0, t1]: midpoint steps, fixed intervals or adaptive top intervals,
+// exactly as integrate() counts them.
+uint segment_steps(float t0, float t1) {
+#if RAY_METHOD == 2
+    return uint(ceil((t1 - t0) / params.preint_range.z));
+#else
+    return uint(ceil((t1 - t0) / params.step));
+#endif
+}
+
+// Whether the ray has stopped: opacity for the preintegrated methods, transmittance for the
+// midpoint rule.
+bool terminated(float transmittance) {
+#if RAY_METHOD == 0
+    return transmittance < params.min_transmittance;
+#else
+    return 1.0 - transmittance > params.integrator.y;
+#endif
+}
 
 void main() {
     uvec2 pixel = uvec2(gl_GlobalInvocationID.x, gl_GlobalInvocationID.y + band.row_offset);
@@ -218,10 +243,42 @@ void main() {
     }
     vec3 o, d;
     camera_ray(pixel, o, d);
-    float t0, t1;
+#if HULL == 1
+    vec2 segs[HULL_SEGMENTS];
+    int segments = hull_segments(o, d, segs);
+    if (segments < 0) {
+        image[index] = vec4(0.0);
+        counts[index] = RAY_DONE | RAY_HULL_OVERFLOW;
+        return;
+    }
+#else
+    vec2 segs[1];
+    int segments = 0;
+    float b0, b1;
+    if (clip_box(o, d, params.box_min.xyz, params.box_max.xyz, b0, b1)) {
+        segs[0] = vec2(b0, b1);
+        segments = 1;
+    }
+#endif
+    // Outer steps are numbered across segments: segment s owns [base, base + its steps).
     uint outcome = CHUNK_FINISHED;
-    if (clip_box(o, d, params.box_min.xyz, params.box_max.xyz, t0, t1)) {
-        outcome = integrate(o, d, t0, t1, state, color, transmittance, evaluations);
+    uint base = 0u;
+    for (int s = 0; s < segments; ++s) {
+        uint n = segment_steps(segs[s].x, segs[s].y);
+        if (band.first < base + n && band.last > base) {
+            uint first = band.first > base ? band.first - base : 0u;
+            outcome = integrate(o, d, segs[s].x, segs[s].y, first, min(band.last - base, n),
+                                state, color, transmittance, evaluations);
+            if (outcome != CHUNK_FINISHED || terminated(transmittance)) {
+                break;
+            }
+        }
+        base += n;
+        if (base >= band.last) {
+            // The chunk ends at this segment's end; later segments belong to later chunks.
+            outcome = s + 1 < segments ? CHUNK_DONE : CHUNK_FINISHED;
+            break;
+        }
     }
     if (outcome == CHUNK_FINISHED) {
         image[index] = vec4(color + transmittance * params.background.rgb, 1.0 - transmittance);

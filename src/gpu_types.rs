@@ -40,9 +40,13 @@ pub mod binding {
     pub const ISO: u32 = 12;
     /// Per-pixel ray state between chunks of raycast.comp: the last knot, `vec4` per pixel.
     pub const RAY_STATE: u32 = 13;
+    /// Hull BVH nodes, two `vec4` each (read-only).
+    pub const HULL_NODES: u32 = 14;
+    /// Hull triangles, three `vec4` vertices each, in BVH leaf order (read-only).
+    pub const HULL_TRIS: u32 = 15;
 
     /// Every binding with its macro name.
-    pub const ALL: [(&str, u32); 14] = [
+    pub const ALL: [(&str, u32); 16] = [
         ("BINDING_PARAMS", PARAMS),
         ("BINDING_GRID", GRID),
         ("BINDING_SAMPLES", SAMPLES),
@@ -57,6 +61,8 @@ pub mod binding {
         ("BINDING_PREINT", PREINT),
         ("BINDING_ISO", ISO),
         ("BINDING_RAY_STATE", RAY_STATE),
+        ("BINDING_HULL_NODES", HULL_NODES),
+        ("BINDING_HULL_TRIS", HULL_TRIS),
     ];
 }
 
@@ -72,8 +78,10 @@ pub mod ray_count {
     /// A loop ended before its chunk did (the driver's loop limit): render again in smaller
     /// chunks.
     pub const TRUNCATED: u32 = 1 << 30;
+    /// The ray crosses the domain's hull more often than the kernel can hold.
+    pub const HULL_OVERFLOW: u32 = 1 << 29;
     /// Mask of the evaluation count.
-    pub const EVALUATIONS: u32 = TRUNCATED - 1;
+    pub const EVALUATIONS: u32 = HULL_OVERFLOW - 1;
 }
 
 /// `#define BINDING_* n` for every binding (and `GRID_PAD`, the `RAY_*` count flags), to pass
@@ -84,9 +92,18 @@ pub fn binding_defines() -> Vec<(String, String)> {
         .map(|(k, v)| (k.to_string(), v.to_string()))
         .collect();
     d.push(("GRID_PAD".into(), GRID_PAD.to_string()));
+    d.push((
+        "HULL_MAX_HITS".into(),
+        crate::samples::bvh::MAX_HITS.to_string(),
+    ));
+    d.push((
+        "HULL_STACK".into(),
+        crate::samples::bvh::MAX_DEPTH.to_string(),
+    ));
     for (k, v) in [
         ("RAY_DONE", ray_count::DONE),
         ("RAY_TRUNCATED", ray_count::TRUNCATED),
+        ("RAY_HULL_OVERFLOW", ray_count::HULL_OVERFLOW),
         ("RAY_EVALUATIONS", ray_count::EVALUATIONS),
     ] {
         d.push((k.into(), format!("{v}u")));

@@ -11,7 +11,7 @@ use vmls::recon::mls::{MlsSettings, mls_evaluate};
 use vmls::recon::{Basis, GradientMode, OctreeSettings, Weight};
 use vmls::render::Field;
 use vmls::render::gpu::{GpuField, evaluate};
-use vmls::samples::{Domain, SampleError, SampleSet, SampleSettings};
+use vmls::samples::{Domain, SampleError, SampleSet, SampleSettings, mesh};
 use vmls::scene::NeighbourMode;
 
 const LINEAR: [f64; 4] = [0.3, 1.5, -2.0, 0.75];
@@ -217,48 +217,6 @@ fn linear_mls_reproduces_linear_fields_on_a_warped_curvilinear_grid() {
     }
 }
 
-/// A torus of square cross-section (major radius 1, tube half-width 0.35) split into hexahedra,
-/// each hexahedron into 6 tetrahedra (Kuhn subdivision, consistent across shared faces).
-fn tet_torus(around: usize, across: usize) -> Geometry {
-    let mut points = Vec::new();
-    let n = across + 1;
-    let id = |a: usize, i: usize, j: usize| ((a % around) * n * n + j * n + i) as u32;
-    for a in 0..around {
-        let phi = 2.0 * std::f64::consts::PI * a as f64 / around as f64;
-        for j in 0..n {
-            for i in 0..n {
-                let r = 1.0 + 0.7 * (i as f64 / across as f64 - 0.5);
-                let z = 0.7 * (j as f64 / across as f64 - 0.5);
-                points.push([r * phi.cos(), r * phi.sin(), z]);
-            }
-        }
-    }
-    let mut cells = Cells::default();
-    for a in 0..around {
-        for j in 0..across {
-            for i in 0..across {
-                // Corner c = bit0: +i, bit1: +j, bit2: +a.
-                let c = |b: usize| id(a + (b >> 2 & 1), i + (b & 1), j + (b >> 1 & 1));
-                for path in [[1, 3], [1, 5], [2, 3], [2, 6], [4, 5], [4, 6]] {
-                    let mut tet = [c(0), c(path[0]), c(path[1]), c(7)];
-                    // Half of the Kuhn tetrahedra are mirrored: swap two points to give every
-                    // one VTK's positive orientation.
-                    let p = tet.map(|i| points[i as usize]);
-                    let e = [1, 2, 3].map(|k| [0, 1, 2].map(|a| p[k][a] - p[0][a]));
-                    let det = e[0][0] * (e[1][1] * e[2][2] - e[1][2] * e[2][1])
-                        - e[0][1] * (e[1][0] * e[2][2] - e[1][2] * e[2][0])
-                        + e[0][2] * (e[1][0] * e[2][1] - e[1][1] * e[2][0]);
-                    if det < 0.0 {
-                        tet.swap(1, 2);
-                    }
-                    cells.push(CellType::Tetra, &tet);
-                }
-            }
-        }
-    }
-    Geometry::Unstructured { points, cells }
-}
-
 #[test]
 fn tetrahedral_torus_hull_is_closed_and_linear_fields_are_reproduced() {
     let d = point_data(tet_torus(24, 3), linear);
@@ -277,6 +235,21 @@ fn tetrahedral_torus_hull_is_closed_and_linear_fields_are_reproduced() {
         }
     }
     assert!(edges.values().all(|&c| c == 2), "hull is not closed");
+    // Facing out: the volume it encloses is the sum of the cells' volumes.
+    let Geometry::Unstructured { points, cells } = &d.geometry else {
+        unreachable!()
+    };
+    let cells_volume: f64 = (0..cells.len())
+        .map(|c| {
+            let p: Vec<[f64; 3]> = cells.cell(c).iter().map(|&i| points[i as usize]).collect();
+            mesh::cell_volume(cells.types[c], &p)
+        })
+        .sum();
+    let enclosed = mesh::enclosed_volume(hull);
+    assert!(
+        (enclosed - cells_volume).abs() < 1e-9 * cells_volume,
+        "hull encloses {enclosed}, cells fill {cells_volume}"
+    );
     assert_eq!(set.provenance.inverted_cells, 0);
     let f = field(set, Basis::Linear);
     // Queries inside the tube: radius 0.8–1.2, |z| < 0.15.

@@ -45,6 +45,8 @@ pub struct Variant {
     pub adaptive_levels: usize,
     /// Isosurfaces of the scene (0 compiles no isosurface code).
     pub isosurfaces: usize,
+    /// Rays are clipped to a boundary hull (else to the domain's box).
+    pub hull: bool,
 }
 
 impl Variant {
@@ -62,6 +64,7 @@ impl Variant {
                 NeighbourMode::Grid
             },
             full_metric: field.samples.has_full_metric(),
+            hull: field.hull.is_some(),
             method: None,
             adaptive_levels: 1,
             isosurfaces: 0,
@@ -108,6 +111,7 @@ impl Variant {
             flag(self.neighbours == NeighbourMode::Octree),
         ));
         d.push(("MLS_FULL_METRIC".into(), flag(self.full_metric)));
+        d.push(("HULL".into(), flag(self.hull)));
         let ray_method = match self.method {
             Some(Method::Fixed) => 1,
             Some(Method::Adaptive) => 2,
@@ -147,11 +151,12 @@ impl Variant {
             self.method
                 .map(|m| format!("-{}", m.name()))
                 .unwrap_or_default()
-        ) + &if self.isosurfaces > 0 {
-            format!("-iso{}", self.isosurfaces)
-        } else {
-            String::new()
-        }
+        ) + if self.hull { "-hull" } else { "" }
+            + &if self.isosurfaces > 0 {
+                format!("-iso{}", self.isosurfaces)
+            } else {
+                String::new()
+            }
     }
 }
 
@@ -228,11 +233,45 @@ fn table_params(p: &mut RenderParams, tables: &PreintegrationTables) {
 pub struct GpuField {
     grid: Option<Buffer>,
     octree: Option<[Buffer; 3]>,
+    hull: Option<[Buffer; 2]>,
 }
 
 impl GpuField {
     /// Uploads what the field's variant reads and nothing else.
     pub fn upload(ctx: &Context, field: &Field) -> Result<Self, VkError> {
+        let hull = match &field.hull {
+            None => None,
+            Some(bvh) => {
+                let nodes: Vec<[f32; 4]> = bvh
+                    .nodes
+                    .iter()
+                    .flat_map(|n| {
+                        let [lx, ly, lz] = n.lo.map(|c| c as f32);
+                        let [hx, hy, hz] = n.hi.map(|c| c as f32);
+                        // Integers travel as float bits (floatBitsToUint in the kernel).
+                        [
+                            [lx, ly, lz, f32::from_bits(n.first)],
+                            [hx, hy, hz, f32::from_bits(n.count)],
+                        ]
+                    })
+                    .collect();
+                let tris: Vec<[f32; 4]> = bvh
+                    .triangles
+                    .iter()
+                    .flat_map(|t| t.map(|v| v4(v.into(), 0.0)))
+                    .collect();
+                Some([
+                    Buffer::from_slice(ctx, "hull nodes", &nodes)?,
+                    Buffer::from_slice(ctx, "hull triangles", &tris)?,
+                ])
+            }
+        };
+        let mut gpu = Self::upload_samples(ctx, field)?;
+        gpu.hull = hull;
+        Ok(gpu)
+    }
+
+    fn upload_samples(ctx: &Context, field: &Field) -> Result<Self, VkError> {
         match &field.octree {
             None => {
                 // Padded front and back (GRID_PAD) and to a whole number of vec4s.
@@ -242,6 +281,7 @@ impl GpuField {
                 Ok(Self {
                     grid: Some(Buffer::from_slice(ctx, "grid", &padded)?),
                     octree: None,
+                    hull: None,
                 })
             }
             Some(o) => {
@@ -264,6 +304,7 @@ impl GpuField {
                         Buffer::from_slice(ctx, "octree nodes", &o.nodes)?,
                         Buffer::from_slice(ctx, "octree indices", &o.indices)?,
                     ]),
+                    hull: None,
                 })
             }
         }
@@ -281,6 +322,14 @@ impl GpuField {
             b.push((binding::INDICES, i));
         }
         b
+    }
+
+    /// (binding, buffer) pairs of the hull (empty for a box domain).
+    fn hull_bindings(&self) -> Vec<(u32, &Buffer)> {
+        match &self.hull {
+            Some([n, t]) => vec![(binding::HULL_NODES, n), (binding::HULL_TRIS, t)],
+            None => Vec::new(),
+        }
     }
 }
 
@@ -306,7 +355,9 @@ pub fn outer_steps(setup: &RaySetup) -> u32 {
         Method::Adaptive => setup.l_max,
         _ => setup.step,
     };
-    ((diagonal / step).ceil() + 1.0).min(f64::from(u32::MAX / 2)) as u32
+    // Each inside segment rounds its own step count up.
+    let segments = (crate::samples::bvh::MAX_HITS / 2 + 1) as f64;
+    ((diagonal / step).ceil() + segments).min(f64::from(u32::MAX / 2)) as u32
 }
 
 /// Outer steps per dispatch. llvmpipe ends every loop after 65 535 iterations per invocation
@@ -358,7 +409,8 @@ pub fn render(
             setup.method.name()
         )));
     }
-    let data = gpu_field.bindings();
+    let mut data = gpu_field.bindings();
+    data.extend(gpu_field.hull_bindings());
     let mut binding_ids: Vec<u32> = data.iter().map(|(b, _)| *b).collect();
     binding_ids.extend([
         binding::TRANSFER,
@@ -488,6 +540,18 @@ pub fn render(
                 break;
             }
             first = push.last;
+        }
+        if let Some(i) = band_counts
+            .iter()
+            .position(|c| c & ray_count::HULL_OVERFLOW != 0)
+        {
+            return Err(VkError::Usage(format!(
+                "raycast: the ray through pixel ({}, {}) crosses the domain's boundary more than \
+                 {} times; the mesh is too convoluted for the hull clipper",
+                i as u32 % w,
+                row + i as u32 / w,
+                crate::samples::bvh::MAX_HITS
+            )));
         }
         if let Some(i) = band_counts.iter().position(|c| c & ray_count::DONE == 0) {
             return Err(VkError::Usage(format!(

@@ -17,6 +17,7 @@ pub mod transfer;
 use crate::data::{DataError, Volume};
 use crate::recon::mls::{MlsSettings, Neighbours};
 use crate::recon::{GridNeighbours, Octree, OctreeSettings, ReconError, SamplePoint};
+use crate::samples::bvh::HullBvh;
 use crate::samples::{Domain, Metric, Positions, Provenance, SampleSet, Supports};
 use crate::scene::{Method, NeighbourMode, Reconstruction, Scene, SceneError};
 use crate::vk::VkError;
@@ -56,6 +57,8 @@ pub struct Field {
     pub samples: SampleSet,
     pub reconstruction: Reconstruction,
     pub octree: Option<Octree>,
+    /// Ray-clipping hierarchy over the boundary, for a hull domain.
+    pub hull: Option<HullBvh>,
 }
 
 impl Field {
@@ -106,7 +109,11 @@ impl Field {
             samples,
             reconstruction,
             octree: None,
+            hull: None,
         };
+        if let Domain::Hull(h) = &field.samples.domain {
+            field.hull = Some(HullBvh::build(h));
+        }
         if !grid || reconstruction.neighbours == NeighbourMode::Octree {
             let points: Vec<SamplePoint> = (0..field.samples.len())
                 .map(|i| SamplePoint {

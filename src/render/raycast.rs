@@ -18,6 +18,7 @@ use super::preintegration::PreintegrationTables;
 use super::transfer::TransferFunction;
 use super::{Field, RaySetup};
 use crate::recon::mls::{MlsSettings, Neighbours};
+use crate::samples::bvh::Segments;
 use crate::scene::Method;
 use glam::DVec3;
 use interval::{Knot, emit_crossings, emit_interval, knot, knot_segment};
@@ -28,6 +29,9 @@ pub struct PixelResult {
     pub rgba: [f64; 4],
     /// MLS evaluations spent on this ray.
     pub evaluations: u32,
+    /// The ray crossed the hull more often than `bvh::MAX_HITS`: nothing was integrated (the
+    /// GPU renderer fails with an error for such a ray).
+    pub hull_overflow: bool,
 }
 
 /// Front-to-back accumulation along one ray.
@@ -136,11 +140,32 @@ pub fn raycast(
         transmittance: 1.0,
         evaluations: 0,
     };
-    if let Some((t0, t1)) = clip_box(o, d, setup.box_lo, setup.box_hi) {
+    let (segments, hull_overflow) = match &field.hull {
+        None => (
+            clip_box(o, d, setup.box_lo, setup.box_hi)
+                .into_iter()
+                .collect(),
+            false,
+        ),
+        Some(bvh) => match bvh.segments(o.to_array(), d.to_array()) {
+            Segments::List(s) => (s, false),
+            Segments::Overflow => (Vec::new(), true),
+        },
+    };
+    // Each inside segment is integrated on its own, with clipped intervals at its ends
+    // ([MLS] §4); the ray stops at the method's termination.
+    for (t0, t1) in segments {
         match (setup.method, tables) {
             (Method::Fixed, Some(t)) => integrate_fixed(&mut ray, setup, t, t0, t1),
             (Method::Adaptive, Some(t)) => adaptive::integrate(&mut ray, setup, t, t0, t1),
             _ => integrate_riemann(&mut ray, setup, tf, t0, t1),
+        }
+        let done = match setup.method {
+            Method::Fixed | Method::Adaptive => 1.0 - ray.transmittance > setup.early_termination,
+            Method::Riemann | Method::Reference => ray.transmittance < setup.min_transmittance,
+        };
+        if done {
+            break;
         }
     }
     let (bg, tr) = (setup.background, ray.transmittance);
@@ -152,6 +177,7 @@ pub fn raycast(
             1.0 - tr,
         ],
         evaluations: ray.evaluations,
+        hull_overflow,
     }
 }
 
@@ -167,7 +193,8 @@ pub fn raycast_image(
     let mut out = vec![
         PixelResult {
             rgba: [0.0; 4],
-            evaluations: 0
+            evaluations: 0,
+            hull_overflow: false,
         };
         w * h
     ];

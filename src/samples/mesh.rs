@@ -177,11 +177,21 @@ pub fn unstructured_hull(
     let remap = &merged.remap;
     // key: sorted point indices (u32::MAX pads triangles) → (uses, the face as written).
     let mut faces: HashMap<[u32; 4], (u32, [u32; 4], usize)> = HashMap::new();
+    let mut corners = Vec::with_capacity(8);
     for c in 0..cells.len() {
         let ids = cells.cell(c);
+        corners.clear();
+        corners.extend(ids.iter().map(|&i| points[i as usize]));
+        // Faces of an inverted cell are listed inside out: reverse them so the hull faces out.
+        let inverted = cell_volume(cells.types[c], &corners) < 0.0;
         for face in cell_faces(cells.types[c]) {
             let mut written = [u32::MAX; 4];
             for (k, &f) in face.iter().enumerate() {
+                let f = if inverted {
+                    face[face.len() - 1 - k]
+                } else {
+                    f
+                };
                 written[k] = remap[ids[f] as usize];
             }
             let mut key = written;
@@ -222,6 +232,17 @@ pub fn unstructured_hull(
         }
     }
     Ok(hull)
+}
+
+/// Signed volume enclosed by a closed triangle surface (positive when it faces out).
+pub fn enclosed_volume(hull: &Hull) -> f64 {
+    hull.triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|i| hull.vertices[i as usize]);
+            dot(a, cross(b, c)) / 6.0
+        })
+        .sum()
 }
 
 /// Centroids of the hexahedral cells of a curvilinear grid, as a grid of dims − 1.
@@ -285,10 +306,22 @@ pub fn structured_hull(
                         index(q)
                     };
                     let (p0, p1, p2, p3) = (corner(0, 0), corner(1, 0), corner(1, 1), corner(0, 1));
-                    hull.triangles.push([p0, p1, p2]);
-                    hull.triangles.push([p0, p2, p3]);
+                    // Opposite sides wind oppositely, so both face the same way (out or in).
+                    if side == 0 {
+                        hull.triangles.push([p0, p2, p1]);
+                        hull.triangles.push([p0, p3, p2]);
+                    } else {
+                        hull.triangles.push([p0, p1, p2]);
+                        hull.triangles.push([p0, p2, p3]);
+                    }
                 }
             }
+        }
+    }
+    // A left-handed index frame turns every side inwards.
+    if enclosed_volume(&hull) < 0.0 {
+        for t in &mut hull.triangles {
+            t.swap(1, 2);
         }
     }
     Ok(super::Domain::Hull(hull))

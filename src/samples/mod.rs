@@ -18,6 +18,7 @@
 //! The layer reads `data::Dataset` and never the scene: [`SampleSettings`] is its own
 //! configuration type.
 
+pub mod bvh;
 pub mod mesh;
 pub mod supports;
 

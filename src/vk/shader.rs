@@ -29,6 +29,7 @@ static SOURCES: &[(&str, &str)] = embed![
     "include/preint.glsl",
     "include/shading.glsl",
     "include/interval.glsl",
+    "include/hull.glsl",
     "raycast.comp",
     "mls_eval.comp",
     "probe_fma.comp",

@@ -2,6 +2,7 @@
 //! any validation error or leaked allocation.
 #![allow(dead_code)]
 
+use vmls::data::dataset::{CellType, Cells, Geometry};
 use vmls::data::{Volume, marschner_lobb};
 use vmls::recon::{Basis, GradientMode, OctreeSettings, Weight};
 use vmls::render::Field;
@@ -83,4 +84,46 @@ pub fn volume_from(
         spacing,
         values,
     }
+}
+
+/// A torus of square cross-section (major radius 1, tube half-width 0.35) split into hexahedra,
+/// each hexahedron into 6 tetrahedra (Kuhn subdivision, consistent across shared faces).
+pub fn tet_torus(around: usize, across: usize) -> Geometry {
+    let mut points = Vec::new();
+    let n = across + 1;
+    let id = |a: usize, i: usize, j: usize| ((a % around) * n * n + j * n + i) as u32;
+    for a in 0..around {
+        let phi = 2.0 * std::f64::consts::PI * a as f64 / around as f64;
+        for j in 0..n {
+            for i in 0..n {
+                let r = 1.0 + 0.7 * (i as f64 / across as f64 - 0.5);
+                let z = 0.7 * (j as f64 / across as f64 - 0.5);
+                points.push([r * phi.cos(), r * phi.sin(), z]);
+            }
+        }
+    }
+    let mut cells = Cells::default();
+    for a in 0..around {
+        for j in 0..across {
+            for i in 0..across {
+                // Corner c = bit0: +i, bit1: +j, bit2: +a.
+                let c = |b: usize| id(a + (b >> 2 & 1), i + (b & 1), j + (b >> 1 & 1));
+                for path in [[1, 3], [1, 5], [2, 3], [2, 6], [4, 5], [4, 6]] {
+                    let mut tet = [c(0), c(path[0]), c(path[1]), c(7)];
+                    // Half of the Kuhn tetrahedra are mirrored: swap two points to give every
+                    // one VTK's positive orientation.
+                    let p = tet.map(|i| points[i as usize]);
+                    let e = [1, 2, 3].map(|k| [0, 1, 2].map(|a| p[k][a] - p[0][a]));
+                    let det = e[0][0] * (e[1][1] * e[2][2] - e[1][2] * e[2][1])
+                        - e[0][1] * (e[1][0] * e[2][2] - e[1][2] * e[2][0])
+                        + e[0][2] * (e[1][0] * e[2][1] - e[1][1] * e[2][0]);
+                    if det < 0.0 {
+                        tet.swap(1, 2);
+                    }
+                    cells.push(CellType::Tetra, &tet);
+                }
+            }
+        }
+    }
+    Geometry::Unstructured { points, cells }
 }

@@ -1,0 +1,307 @@
+//! Ray–hull clipping: a bounding-volume hierarchy over a domain's boundary triangles and the
+//! inside segments of a ray, f64 twin of `glsl/include/hull.glsl` (stage `hull_segments`).
+//!
+//! Contract:
+//! - the hull's triangles face outwards ([`super::mesh`] orients them); a ray crossing one
+//!   against its normal enters, along it leaves;
+//! - hits use the watertight ray–triangle test of Woop, Benthin and Wald (JCGT 2013): a ray
+//!   through an edge or vertex shared by several triangles is never missed. It may be counted
+//!   by more than one of them, so inside-ness is a winding number, not a parity: w(∞) = 0,
+//!   walking forward an entering hit raises w by one and a leaving hit lowers it, so the
+//!   winding at the eye is minus the sum of all steps ahead; the ray is inside where w > 0.
+//!   Double hits then only move w between 1 and 2, and an eye inside the mesh works;
+//! - at most [`MAX_HITS`] crossings per ray ahead of the eye; a ray with more gets
+//!   [`Segments::Overflow`] and the render fails clearly.
+//!
+//! Layout on the GPU: `nodes[2i] = (lo.xyz, bits(first))`, `nodes[2i+1] = (hi.xyz,
+//! bits(count))`; an inner node has count 0 and its children at `first` and `first + 1`; a
+//! leaf's triangles are `first .. first + count`, three vec4 vertices each.
+
+use super::mesh::Hull;
+
+/// Crossings a ray may have with a hull.
+pub const MAX_HITS: usize = 32;
+/// Triangles per leaf, at most.
+pub const LEAF_TRIANGLES: usize = 4;
+/// Depth of the traversal stack on the GPU; the build never exceeds it.
+pub const MAX_DEPTH: usize = 40;
+
+/// One node: bounds and either two children (`count == 0`) or a triangle range.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BvhNode {
+    pub lo: [f64; 3],
+    pub hi: [f64; 3],
+    pub first: u32,
+    pub count: u32,
+}
+
+/// A flattened BVH with its triangles in leaf order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HullBvh {
+    pub nodes: Vec<BvhNode>,
+    pub triangles: Vec<[[f64; 3]; 3]>,
+}
+
+/// The inside parts of a ray, front to back.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Segments {
+    List(Vec<(f64, f64)>),
+    /// More than [`MAX_HITS`] crossings.
+    Overflow,
+}
+
+fn bounds_of(tris: &[[[f64; 3]; 3]]) -> ([f64; 3], [f64; 3]) {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for t in tris {
+        for v in t {
+            for a in 0..3 {
+                lo[a] = lo[a].min(v[a]);
+                hi[a] = hi[a].max(v[a]);
+            }
+        }
+    }
+    (lo, hi)
+}
+
+impl HullBvh {
+    /// Median-split BVH (longest axis of the centroids' bounds).
+    pub fn build(hull: &Hull) -> Self {
+        let mut triangles: Vec<[[f64; 3]; 3]> = hull
+            .triangles
+            .iter()
+            .map(|t| t.map(|i| hull.vertices[i as usize]))
+            .collect();
+        let mut nodes = vec![BvhNode {
+            lo: [0.0; 3],
+            hi: [0.0; 3],
+            first: 0,
+            count: 0,
+        }];
+        let n = triangles.len();
+        build_node(&mut nodes, 0, &mut triangles, 0, n, 0);
+        Self { nodes, triangles }
+    }
+
+    /// Inside segments of the ray o + t·d (t > 0).
+    pub fn segments(&self, o: [f64; 3], d: [f64; 3]) -> Segments {
+        let mut hits: Vec<(f64, i32)> = Vec::new();
+        if self.triangles.is_empty() {
+            return Segments::List(Vec::new());
+        }
+        let inv = d.map(|c| if c != 0.0 { 1.0 / c } else { f64::INFINITY });
+        let mut stack = vec![0usize];
+        while let Some(i) = stack.pop() {
+            let node = &self.nodes[i];
+            if !slab(o, inv, node.lo, node.hi) {
+                continue;
+            }
+            if node.count == 0 {
+                stack.push(node.first as usize);
+                stack.push(node.first as usize + 1);
+                continue;
+            }
+            for t in &self.triangles[node.first as usize..(node.first + node.count) as usize] {
+                if let Some((t_hit, leaving)) = intersect(o, d, t)
+                    && t_hit > 0.0
+                {
+                    hits.push((t_hit, if leaving { -1 } else { 1 }));
+                }
+            }
+        }
+        if hits.len() > MAX_HITS {
+            return Segments::Overflow;
+        }
+        hits.sort_by(|a, b| a.0.total_cmp(&b.0));
+        Segments::List(walk(&hits))
+    }
+}
+
+/// Turns sorted hits (t, +1 entering / −1 leaving) into inside segments.
+fn walk(hits: &[(f64, i32)]) -> Vec<(f64, f64)> {
+    // w just after the eye: w(∞) = 0 minus the steps crossed on the way out.
+    let mut w: i32 = -hits.iter().map(|h| h.1).sum::<i32>();
+    let mut out = Vec::new();
+    let mut start = if w > 0 { Some(0.0) } else { None };
+    for &(t, step) in hits {
+        w += step;
+        match (start, w > 0) {
+            (None, true) => start = Some(t),
+            (Some(s), false) => {
+                if t > s {
+                    out.push((s, t));
+                }
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    out
+}
+
+fn build_node(
+    nodes: &mut Vec<BvhNode>,
+    at: usize,
+    tris: &mut [[[f64; 3]; 3]],
+    first: usize,
+    end: usize,
+    depth: usize,
+) {
+    let (lo, hi) = bounds_of(&tris[first..end]);
+    let count = end - first;
+    if count <= LEAF_TRIANGLES || depth + 1 >= MAX_DEPTH {
+        nodes[at] = BvhNode {
+            lo,
+            hi,
+            first: first as u32,
+            count: count as u32,
+        };
+        return;
+    }
+    let centroid = |t: &[[f64; 3]; 3], a: usize| t[0][a] + t[1][a] + t[2][a];
+    let (clo, chi) = tris[first..end].iter().fold(
+        ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]),
+        |(mut l, mut h), t| {
+            for a in 0..3 {
+                l[a] = l[a].min(centroid(t, a));
+                h[a] = h[a].max(centroid(t, a));
+            }
+            (l, h)
+        },
+    );
+    let axis = (0..3)
+        .max_by(|&a, &b| (chi[a] - clo[a]).total_cmp(&(chi[b] - clo[b])))
+        .unwrap_or(0);
+    let mid = count / 2;
+    tris[first..end]
+        .select_nth_unstable_by(mid, |a, b| centroid(a, axis).total_cmp(&centroid(b, axis)));
+    let child = nodes.len();
+    let blank = BvhNode {
+        lo: [0.0; 3],
+        hi: [0.0; 3],
+        first: 0,
+        count: 0,
+    };
+    nodes.push(blank);
+    nodes.push(blank);
+    nodes[at] = BvhNode {
+        lo,
+        hi,
+        first: child as u32,
+        count: 0,
+    };
+    build_node(nodes, child, tris, first, first + mid, depth + 1);
+    build_node(nodes, child + 1, tris, first + mid, end, depth + 1);
+}
+
+/// Slab test of the ray (t ≥ 0) against a box.
+fn slab(o: [f64; 3], inv: [f64; 3], lo: [f64; 3], hi: [f64; 3]) -> bool {
+    let mut t0: f64 = 0.0;
+    let mut t1 = f64::INFINITY;
+    for a in 0..3 {
+        if inv[a].is_infinite() {
+            if o[a] < lo[a] || o[a] > hi[a] {
+                return false;
+            }
+            continue;
+        }
+        let ta = (lo[a] - o[a]) * inv[a];
+        let tb = (hi[a] - o[a]) * inv[a];
+        t0 = t0.max(ta.min(tb));
+        t1 = t1.min(ta.max(tb));
+    }
+    t0 <= t1
+}
+
+/// Watertight ray–triangle intersection (Woop et al. 2013): (t, leaving) or None.
+pub fn intersect(o: [f64; 3], d: [f64; 3], tri: &[[f64; 3]; 3]) -> Option<(f64, bool)> {
+    let kz = (0..3)
+        .max_by(|&a, &b| d[a].abs().total_cmp(&d[b].abs()))
+        .unwrap_or(2);
+    let mut kx = (kz + 1) % 3;
+    let mut ky = (kx + 1) % 3;
+    if d[kz] < 0.0 {
+        std::mem::swap(&mut kx, &mut ky);
+    }
+    let sx = d[kx] / d[kz];
+    let sy = d[ky] / d[kz];
+    let sz = 1.0 / d[kz];
+    let rel = |v: [f64; 3]| [v[0] - o[0], v[1] - o[1], v[2] - o[2]];
+    let (a, b, c) = (rel(tri[0]), rel(tri[1]), rel(tri[2]));
+    let (ax, ay) = (a[kx] - sx * a[kz], a[ky] - sy * a[kz]);
+    let (bx, by) = (b[kx] - sx * b[kz], b[ky] - sy * b[kz]);
+    let (cx, cy) = (c[kx] - sx * c[kz], c[ky] - sy * c[kz]);
+    let u = cx * by - cy * bx;
+    let v = ax * cy - ay * cx;
+    let w = bx * ay - by * ax;
+    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        return None;
+    }
+    let det = u + v + w;
+    if det == 0.0 {
+        return None;
+    }
+    let t = (u * sz * a[kz] + v * sz * b[kz] + w * sz * c[kz]) / det;
+    // The swap of kx and ky for d[kz] < 0 keeps the projected frame right-handed, so the sign
+    // of det says which side the ray sees (the unit tests fix the convention).
+    Some((t, det < 0.0))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cube() -> Hull {
+        // Unit cube, outward counter-clockwise quads split in two.
+        let v: Vec<[f64; 3]> = (0..8)
+            .map(|i| [(i & 1) as f64, (i >> 1 & 1) as f64, (i >> 2 & 1) as f64])
+            .collect();
+        let quads = [
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+        ];
+        let mut triangles = Vec::new();
+        for q in quads {
+            triangles.push([q[0], q[1], q[2]]);
+            triangles.push([q[0], q[2], q[3]]);
+        }
+        Hull {
+            vertices: v,
+            triangles,
+        }
+    }
+
+    #[test]
+    fn rays_through_a_cube_and_its_edges_and_corners() {
+        let bvh = HullBvh::build(&cube());
+        // Straight through the middle.
+        assert_eq!(
+            bvh.segments([0.5, 0.5, -1.0], [0.0, 0.0, 1.0]),
+            Segments::List(vec![(1.0, 2.0)])
+        );
+        // Through the diagonal of a face (the edge shared by its two triangles).
+        let s = bvh.segments([0.25, 0.25, -1.0], [0.0, 0.0, 1.0]);
+        assert_eq!(s, Segments::List(vec![(1.0, 2.0)]));
+        // Through a corner and the opposite corner.
+        let d = 1.0 / 3f64.sqrt();
+        let Segments::List(s) = bvh.segments([-1.0, -1.0, -1.0], [d, d, d]) else {
+            panic!("overflow")
+        };
+        assert_eq!(s.len(), 1);
+        assert!((s[0].0 - 3f64.sqrt()).abs() < 1e-12 && (s[0].1 - 2.0 * 3f64.sqrt()).abs() < 1e-12);
+        // From inside.
+        let Segments::List(s) = bvh.segments([0.5, 0.5, 0.5], [1.0, 0.0, 0.0]) else {
+            panic!("overflow")
+        };
+        assert_eq!(s, vec![(0.0, 0.5)]);
+        // Missing it.
+        assert_eq!(
+            bvh.segments([2.0, 2.0, -1.0], [0.0, 0.0, 1.0]),
+            Segments::List(vec![])
+        );
+    }
+}
