@@ -136,13 +136,17 @@ fn describe_samples(
             "h = {} × the larger neighbouring gap per axis",
             settings.support
         ),
+        "anisotropic-edges" => format!(
+            "ellipsoids spanned by {} × the local index-direction edges",
+            settings.support
+        ),
         "anisotropic" => format!(
             "ellipsoids from the neighbourhood's covariance, scaled to {} × the {}-th neighbour",
-            settings.support, settings.knn
+            settings.knn_support, settings.knn
         ),
         _ => format!(
             "h = {} × distance to the {}-th nearest sample",
-            settings.support, settings.knn
+            settings.knn_support, settings.knn
         ),
     };
     let _ = writeln!(out, "supports: {} ({rule})", p.support_kind);

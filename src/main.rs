@@ -13,8 +13,9 @@ use vmls::probe::{coherent_order, fma_probe, median, mls_probe, random_points};
 use vmls::render::evalmap::{check_path, write_eval_map};
 use vmls::render::gpu::{GpuField, render};
 use vmls::render::output::{format_of, write_image};
-use vmls::render::{Field, RaySetup, RenderError, build_tables, load_volume};
-use vmls::scene::{NeighbourMode, Scene};
+use vmls::render::{Field, RenderError, build_tables};
+use vmls::scene::load_volume;
+use vmls::scene::{NeighbourMode, Scene, SceneError};
 use vmls::vk::{Context, ContextOptions, ShaderCompiler};
 
 #[derive(Parser)]
@@ -104,6 +105,33 @@ enum Command {
     },
 }
 
+/// Everything a command can fail with: the scene file, or anything below it.
+#[derive(Debug, thiserror::Error)]
+enum CliError {
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error(transparent)]
+    Render(#[from] RenderError),
+}
+
+impl From<vmls::vk::VkError> for CliError {
+    fn from(e: vmls::vk::VkError) -> Self {
+        CliError::Render(e.into())
+    }
+}
+
+impl From<vmls::data::DataError> for CliError {
+    fn from(e: vmls::data::DataError) -> Self {
+        CliError::Render(e.into())
+    }
+}
+
+impl From<vmls::recon::ReconError> for CliError {
+    fn from(e: vmls::recon::ReconError) -> Self {
+        CliError::Render(e.into())
+    }
+}
+
 fn context(args: &DeviceArgs) -> Result<Context, RenderError> {
     Ok(Context::new(&ContextOptions {
         validation: args.validation.then_some(true),
@@ -140,7 +168,7 @@ fn run_render(
     eval_map: Option<&Path>,
     set: &[String],
     device: &DeviceArgs,
-) -> Result<(), RenderError> {
+) -> Result<(), CliError> {
     let start = Instant::now();
     format_of(output)?;
     if let Some(map) = eval_map {
@@ -153,7 +181,7 @@ fn run_render(
     let ctx = context(device)?;
     let compiler = ShaderCompiler::new()?;
     let gpu_field = GpuField::upload(&ctx, &field)?;
-    let setup = RaySetup::new(&scene, &field)?;
+    let setup = scene.ray_setup(&field)?;
     let bar = progress_bar("tables");
     let table_start = Instant::now();
     let tables = build_tables(
@@ -184,7 +212,8 @@ fn run_render(
             message: format!(
                 "{errors} Vulkan validation error(s) during the render; no image written"
             ),
-        });
+        }
+        .into());
     }
     write_image(
         output,
@@ -256,7 +285,7 @@ fn run_probe(
     repeats: u32,
     json: Option<&Path>,
     device: &DeviceArgs,
-) -> Result<(), RenderError> {
+) -> Result<(), CliError> {
     let ctx = context(device)?;
     let compiler = ShaderCompiler::new()?;
     println!("device: {} ({})", ctx.info().name, ctx.info().driver);
@@ -338,7 +367,7 @@ fn read_rgb(path: &Path) -> Result<image::Rgb32FImage, RenderError> {
         })
 }
 
-fn compare(image: &Path, reference: &Path, diff: Option<&Path>) -> Result<(), RenderError> {
+fn compare(image: &Path, reference: &Path, diff: Option<&Path>) -> Result<(), CliError> {
     if let Some(d) = diff {
         vmls::render::output::format_of(d)?;
     }
@@ -351,7 +380,8 @@ fn compare(image: &Path, reference: &Path, diff: Option<&Path>) -> Result<(), Re
                 a.dimensions(),
                 b.dimensions()
             ),
-        });
+        }
+        .into());
     }
     let diffs: Vec<f64> = a
         .as_raw()
@@ -424,14 +454,19 @@ fn main() {
             diff,
         } => compare(image, reference, diff.as_deref()),
         Command::Info { file, array, set } => Scene::load(None, set)
-            .map_err(RenderError::from)
+            .map_err(CliError::from)
             .and_then(|scene| {
-                vmls::info::describe(file, array.as_deref(), &scene.samples, &scene.octree)
+                Ok(vmls::info::describe(
+                    file,
+                    array.as_deref(),
+                    &scene.samples,
+                    &scene.octree,
+                )?)
             })
             .map(|text| print!("{text}")),
         Command::Devices => Context::list_devices()
             .map(|lines| lines.iter().for_each(|l| println!("{l}")))
-            .map_err(RenderError::from),
+            .map_err(|e| CliError::from(RenderError::from(e))),
         Command::Probe {
             resolution,
             points,

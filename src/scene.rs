@@ -16,7 +16,12 @@ use crate::recon::{Basis, GradientMode, OctreeSettings, Weight};
 use crate::render::camera::{Camera, Projection};
 use crate::render::shading::{Isosurface, Lighting, MAX_ISOSURFACES};
 use crate::render::transfer::TransferFunction;
-use crate::render::{Field, RenderError};
+use crate::render::{Field, RaySetup, RenderError};
+
+// The configuration types live with the layers that use them; the scene re-exports them so
+// that a scene file's vocabulary is in one place.
+pub use crate::recon::{NeighbourMode, Reconstruction};
+pub use crate::render::{Method, RenderSettings};
 use crate::samples::{SampleSet, SampleSettings};
 use std::path::{Path, PathBuf};
 use toml::{Table, Value};
@@ -60,76 +65,6 @@ pub enum VolumeSource {
         path: PathBuf,
         array: Option<String>,
     },
-}
-
-/// How neighbours are found.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum NeighbourMode {
-    Grid,
-    Octree,
-}
-
-/// The integrator.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Method {
-    /// Preintegration with a constant step `render.step`: one table lookup per interval.
-    Fixed,
-    /// Midpoint rule with `render.step`, transfer function applied directly (for comparison).
-    Riemann,
-    /// Midpoint rule with `render.reference_step`: ground truth.
-    Reference,
-    /// [MLS] adaptive subdivision between `render.l_max` and `render.l_min`.
-    Adaptive,
-}
-
-impl Method {
-    /// The scene-file spelling.
-    pub fn name(self) -> &'static str {
-        match self {
-            Method::Fixed => "fixed",
-            Method::Riemann => "riemann",
-            Method::Reference => "reference",
-            Method::Adaptive => "adaptive",
-        }
-    }
-
-    /// Whether the method reads preintegration tables.
-    pub fn preintegrated(self) -> bool {
-        matches!(self, Method::Fixed | Method::Adaptive)
-    }
-}
-
-/// `[reconstruction]`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Reconstruction {
-    pub basis: Basis,
-    pub weight: Weight,
-    pub gradient: GradientMode,
-    /// h = support × sample spacing, per axis.
-    pub support: f64,
-    pub neighbours: NeighbourMode,
-}
-
-/// `[render]`.
-#[derive(Debug, Clone, PartialEq)]
-pub struct RenderSettings {
-    pub method: Method,
-    /// Step in sample spacings (the smallest spacing of the grid).
-    pub step: f64,
-    /// Step of the reference method, in sample spacings.
-    pub reference_step: f64,
-    pub background: [f64; 3],
-    /// Rays stop when the transmittance falls below this (riemann and reference methods).
-    pub min_transmittance: f64,
-    /// Adaptive: shortest and longest interval, in sample spacings ([MLS]: 0.16 and 2.6).
-    pub l_min: f64,
-    pub l_max: f64,
-    /// Adaptive: subdivision tolerance ε of (1 − α)·|C1 − C2| / |C1| < ε ([MLS]: 0.03).
-    pub epsilon: f64,
-    /// Preintegrated methods stop a ray once its opacity exceeds this ([MLS]: 0.99).
-    pub early_termination: f64,
-    /// Preintegration table resolution per scalar axis.
-    pub table_resolution: usize,
 }
 
 /// A validated scene.
@@ -208,7 +143,7 @@ resolution = 41
 method = "mls"
 basis = "linear"
 weight = "wendland"
-support = 2.4
+# support: 2.4 (× spacing on grids; 1.5 × the 8th-neighbour distance for irregular data)
 gradient = "local"
 neighbours = "grid"
 [transfer]
@@ -578,8 +513,14 @@ impl Scene {
             )?,
         };
 
+        let explicit_support = rec.get("support").is_some();
         let samples = SampleSettings {
             support: reconstruction.support,
+            knn_support: if explicit_support {
+                reconstruction.support
+            } else {
+                crate::samples::KNN_SUPPORT
+            },
             knn: rec.int("knn", 8, 1, 64)? as usize,
             anisotropic: match rec.get("anisotropic") {
                 None => None,
@@ -731,5 +672,26 @@ impl Scene {
                 )?)
             }
         }
+    }
+
+    /// The ray setup of this scene's camera, integrator, isosurfaces and lighting for a field.
+    pub fn ray_setup(&self, field: &Field) -> Result<RaySetup, RenderError> {
+        RaySetup::new(
+            &self.camera,
+            &self.render,
+            &self.isosurfaces,
+            &self.lighting,
+            field,
+        )
+    }
+}
+
+/// Loads or generates the scene's volume.
+pub fn load_volume(scene: &Scene) -> Result<crate::data::Volume, crate::data::DataError> {
+    match &scene.volume {
+        VolumeSource::MarschnerLobb { resolution } => {
+            Ok(crate::data::marschner_lobb::generate(*resolution))
+        }
+        VolumeSource::File { path, array } => crate::data::load(path, array.as_deref()),
     }
 }

@@ -9,7 +9,7 @@ use vmls::data::dataset::{DataArray, Dataset, Location};
 use vmls::recon::{Basis, GradientMode, OctreeSettings, Weight};
 use vmls::render::gpu::{GpuField, render};
 use vmls::render::raycast::raycast_image;
-use vmls::render::{Field, RaySetup, build_tables};
+use vmls::render::{Field, build_tables};
 use vmls::samples::{SampleSet, SampleSettings};
 use vmls::scene::{NeighbourMode, Scene};
 
@@ -36,6 +36,7 @@ fn torus_field() -> Field {
         None,
         &SampleSettings {
             support: 2.0,
+            knn_support: 2.0,
             knn: 8,
             anisotropic: None,
         },
@@ -85,7 +86,7 @@ fn rays_through_the_hole_see_only_the_background_and_gpu_matches_cpu() {
     assert!(field.hull.is_some());
     for method in ["fixed", "riemann"] {
         let scene = scene(&[&format!("render.method=\"{method}\""), ORTHO, ORTHO_HEIGHT]);
-        let setup = RaySetup::new(&scene, &field).expect("setup");
+        let setup = scene.ray_setup(&field).expect("setup");
         let tables = build_tables(&setup, &field, &scene.transfer, 128, |_| {});
         let cpu = raycast_image(&setup, &field, &scene.transfer, tables.as_ref());
         let (ctx, compiler) = gpu();
@@ -141,7 +142,7 @@ fn rays_through_the_hole_see_only_the_background_and_gpu_matches_cpu() {
     let mut boxed = field.clone();
     boxed.hull = None;
     let scene = scene(&[ORTHO, ORTHO_HEIGHT]);
-    let setup = RaySetup::new(&scene, &boxed).expect("setup");
+    let setup = scene.ray_setup(&boxed).expect("setup");
     let tables = build_tables(&setup, &boxed, &scene.transfer, 128, |_| {});
     let cpu = raycast_image(&setup, &boxed, &scene.transfer, tables.as_ref());
     assert!(
@@ -161,7 +162,7 @@ fn an_eye_inside_the_mesh_integrates_from_the_eye() {
         "camera.width=12",
         "camera.height=12",
     ]);
-    let setup = RaySetup::new(&scene, &field).expect("setup");
+    let setup = scene.ray_setup(&field).expect("setup");
     let tables = build_tables(&setup, &field, &scene.transfer, 128, |_| {});
     let cpu = raycast_image(&setup, &field, &scene.transfer, tables.as_ref());
     let (ctx, compiler) = gpu();

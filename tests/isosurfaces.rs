@@ -6,7 +6,7 @@ use common::*;
 use vmls::data::Volume;
 use vmls::render::gpu::{GpuField, GpuImage, render};
 use vmls::render::raycast::{PixelResult, raycast_image};
-use vmls::render::{Field, RaySetup, build_tables};
+use vmls::render::{Field, build_tables};
 use vmls::scene::Scene;
 
 const METHODS: [&str; 4] = ["riemann", "fixed", "adaptive", "reference"];
@@ -18,7 +18,7 @@ fn scene(overrides: &[String]) -> Scene {
 /// GPU and CPU images of a scene over a given volume.
 fn both(s: &Scene, volume: Volume) -> (GpuImage, Vec<PixelResult>) {
     let field = Field::new(volume, s.reconstruction, &s.octree, |_| {}).expect("field");
-    let setup = RaySetup::new(s, &field).expect("setup");
+    let setup = s.ray_setup(&field).expect("setup");
     let tables = build_tables(
         &setup,
         &field,

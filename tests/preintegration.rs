@@ -231,8 +231,9 @@ fn any_length_matches_direct_quadrature_to_table_accuracy() {
 
 #[test]
 fn tables_are_rebuilt_only_when_their_inputs_change() {
-    use vmls::render::{Field, RaySetup, TableCache, load_volume};
+    use vmls::render::{Field, TableCache};
     use vmls::scene::Scene;
+    use vmls::scene::load_volume;
     let set = |extra: &[&str]| {
         let mut o: Vec<String> = [
             "volume.resolution=9",
@@ -254,17 +255,17 @@ fn tables_are_rebuilt_only_when_their_inputs_change() {
     )
     .expect("field");
     let mut cache = TableCache::default();
-    let setup = RaySetup::new(&s, &field).expect("setup");
+    let setup = s.ray_setup(&field).expect("setup");
     assert!(cache.get(&setup, &field, &s.transfer, 16, |_| {}).is_some());
     // A new camera does not touch the tables.
     let moved = set(&["camera.eye=[4.0, 1.0, 1.0]"]);
-    let setup = RaySetup::new(&moved, &field).expect("setup");
+    let setup = moved.ray_setup(&field).expect("setup");
     cache.get(&setup, &field, &moved.transfer, 16, |_| {});
     assert_eq!(cache.builds(), 1);
     // A new transfer function, or new lengths, does.
     let tf = set(&["transfer.points=[[0.0, 1, 1, 1, 0.0], [1.0, 1, 1, 1, 2.0]]"]);
     cache.get(
-        &RaySetup::new(&tf, &field).expect("setup"),
+        &tf.ray_setup(&field).expect("setup"),
         &field,
         &tf.transfer,
         16,
@@ -276,7 +277,7 @@ fn tables_are_rebuilt_only_when_their_inputs_change() {
         "render.l_max=1.3",
     ]);
     cache.get(
-        &RaySetup::new(&lengths, &field).expect("setup"),
+        &lengths.ray_setup(&field).expect("setup"),
         &field,
         &lengths.transfer,
         16,

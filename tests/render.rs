@@ -6,8 +6,9 @@ use common::*;
 use vmls::render::gpu::{GpuField, GpuImage, render};
 use vmls::render::preintegration::PreintegrationTables;
 use vmls::render::raycast::{PixelResult, raycast_image};
-use vmls::render::{Field, RaySetup, build_tables, load_volume};
+use vmls::render::{Field, build_tables};
 use vmls::scene::Scene;
+use vmls::scene::load_volume;
 use vmls::vk::Context;
 
 fn scene(overrides: &[&str]) -> Scene {
@@ -26,7 +27,7 @@ fn field(scene: &Scene) -> Field {
 }
 
 fn tables(scene: &Scene, field: &Field) -> Option<PreintegrationTables> {
-    let setup = RaySetup::new(scene, field).expect("setup");
+    let setup = scene.ray_setup(field).expect("setup");
     build_tables(
         &setup,
         field,
@@ -42,7 +43,7 @@ fn gpu_render(
     scene: &Scene,
     field: &Field,
 ) -> GpuImage {
-    let setup = RaySetup::new(scene, field).expect("setup");
+    let setup = scene.ray_setup(field).expect("setup");
     let gf = GpuField::upload(ctx, field).expect("upload");
     let t = tables(scene, field);
     render(
@@ -61,7 +62,7 @@ fn gpu_render(
 fn cpu_render(scene: &Scene, field: &Field) -> Vec<PixelResult> {
     let t = tables(scene, field);
     raycast_image(
-        &RaySetup::new(scene, field).expect("setup"),
+        &scene.ray_setup(field).expect("setup"),
         field,
         &scene.transfer,
         t.as_ref(),
@@ -330,7 +331,7 @@ fn long_rays_are_integrated_in_chunks_that_the_driver_does_not_cut() {
     let llvmpipe = ctx.info().name.contains("llvmpipe");
     let gf = GpuField::upload(&ctx, &f).expect("upload");
     for chunk in [None, Some(u32::MAX / 4)] {
-        let mut setup = RaySetup::new(&s, &f).expect("setup");
+        let mut setup = s.ray_setup(&f).expect("setup");
         setup.chunk = chunk;
         let g =
             render(&ctx, &compiler, &f, &gf, &s.transfer, None, &setup, |_| {}).expect("render");

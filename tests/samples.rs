@@ -47,6 +47,7 @@ fn samples(d: &Dataset, support: f64, knn: usize, anisotropic: Option<bool>) -> 
         None,
         &SampleSettings {
             support,
+            knn_support: support,
             knn,
             anisotropic,
         },

@@ -11,6 +11,25 @@ pub use octree::{Octree, OctreeSettings, OctreeStats, SamplePoint};
 
 use crate::samples::Metric;
 
+/// How neighbours are found (scene key `reconstruction.neighbours`). Only a regular grid has
+/// implicit neighbours; every other sample set always uses the octree.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NeighbourMode {
+    Grid,
+    Octree,
+}
+
+/// MLS settings (scene section `[reconstruction]`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reconstruction {
+    pub basis: Basis,
+    pub weight: Weight,
+    pub gradient: GradientMode,
+    /// h = support × sample spacing, per axis.
+    pub support: f64,
+    pub neighbours: NeighbourMode,
+}
+
 /// Errors of the reconstruction layer.
 #[derive(Debug, thiserror::Error)]
 pub enum ReconError {

@@ -16,8 +16,9 @@ use crate::gpu_types::{
     CountPush, GRID_PAD, IsoSurface, MlsOut, RayPush, RenderParams, Sample, binding,
     binding_defines, ray_count,
 };
+use crate::recon::NeighbourMode;
 use crate::recon::mls::{Basis, GradientMode, Weight};
-use crate::scene::{Method, NeighbourMode};
+use crate::render::Method;
 use crate::vk::{
     BindGroup, Buffer, BufferUsage, ComputePipeline, Context, ShaderCompiler, ShaderSource, VkError,
 };

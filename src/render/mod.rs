@@ -11,19 +11,21 @@ pub mod gpu;
 pub mod output;
 pub mod preintegration;
 pub mod raycast;
+pub mod settings;
 pub mod shading;
 pub mod transfer;
 
 use crate::data::{DataError, Volume};
 use crate::recon::mls::{MlsSettings, Neighbours};
 use crate::recon::{GridNeighbours, Octree, OctreeSettings, ReconError, SamplePoint};
+use crate::recon::{NeighbourMode, Reconstruction};
 use crate::samples::bvh::HullBvh;
 use crate::samples::{Domain, Metric, Positions, Provenance, SampleSet, Supports};
-use crate::scene::{Method, NeighbourMode, Reconstruction, Scene, SceneError};
 use crate::vk::VkError;
 use camera::{Camera, ViewBasis};
 use glam::DVec3;
 use preintegration::PreintegrationTables;
+pub use settings::{Method, RenderSettings};
 use transfer::TransferFunction;
 
 /// Errors of the render layer (and everything below it).
@@ -35,8 +37,8 @@ pub enum RenderError {
     Recon(#[from] ReconError),
     #[error(transparent)]
     Data(#[from] DataError),
-    #[error(transparent)]
-    Scene(#[from] SceneError),
+    #[error("camera: expected a valid view frame, found {0}")]
+    Camera(String),
     #[error(transparent)]
     Samples(#[from] crate::samples::SampleError),
     #[error("{path}: {message}")]
@@ -79,6 +81,7 @@ impl Field {
             values: volume.values,
             supports: Supports::Uniform(volume.spacing.map(|s| s * reconstruction.support)),
             domain: Domain::Box { lo, hi },
+            spacing: volume.spacing.iter().copied().fold(f64::INFINITY, f64::min),
             provenance: Provenance {
                 kind: "regular grid",
                 array: "scalars".into(),
@@ -178,15 +181,9 @@ impl Field {
         (DVec3::from(lo), DVec3::from(hi))
     }
 
-    /// The unit of `render.step`: the smallest grid spacing, or for other data the mean support
-    /// radius divided by the support factor (the typical sample spacing).
+    /// The unit of `render.step` ([`SampleSet::spacing`]).
     pub fn min_spacing(&self) -> f64 {
-        match &self.samples.positions {
-            Positions::Grid { spacing, .. } => {
-                spacing.iter().copied().fold(f64::INFINITY, f64::min)
-            }
-            Positions::Scattered(_) => self.samples.mean_radius() / self.reconstruction.support,
-        }
+        self.samples.spacing
     }
 
     /// Smallest and largest sample value.
@@ -249,36 +246,37 @@ pub struct RaySetup {
 }
 
 impl RaySetup {
-    /// Derives the ray setup of a scene for a field.
-    pub fn new(scene: &Scene, field: &Field) -> Result<Self, SceneError> {
-        let basis = scene.camera.basis().map_err(|found| SceneError::Key {
-            origin: "scene".into(),
-            key: "camera".into(),
-            expected: "a valid view frame".into(),
-            found,
-        })?;
+    /// The ray setup of a camera, integrator settings, isosurfaces and lighting for a field.
+    pub fn new(
+        camera: &Camera,
+        render: &RenderSettings,
+        isosurfaces: &[shading::Isosurface],
+        lighting: &shading::Lighting,
+        field: &Field,
+    ) -> Result<Self, RenderError> {
+        let basis = camera.basis().map_err(RenderError::Camera)?;
         let (box_lo, box_hi) = field.bounds();
-        let spacings = match scene.render.method {
-            Method::Reference => scene.render.reference_step,
-            _ => scene.render.step,
+        let spacings = match render.method {
+            Method::Reference => render.reference_step,
+            _ => render.step,
         };
         let unit = field.min_spacing();
         Ok(Self {
-            camera: scene.camera,
+            camera: *camera,
             basis,
             frame_origin: field.frame_origin,
             box_lo,
             box_hi,
-            method: scene.render.method,
+            method: render.method,
             step: spacings * unit,
-            l_min: scene.render.l_min * unit,
-            l_max: scene.render.l_max * unit,
-            epsilon: scene.render.epsilon,
-            early_termination: scene.render.early_termination,
-            background: scene.render.background,
-            min_transmittance: scene.render.min_transmittance,
-            isosurfaces: scene.isosurfaces.clone(),
-            lighting: scene.lighting,
+            l_min: render.l_min * unit,
+            l_max: render.l_max * unit,
+            epsilon: render.epsilon,
+            early_termination: render.early_termination,
+            background: render.background,
+            min_transmittance: render.min_transmittance,
+            isosurfaces: isosurfaces.to_vec(),
+            lighting: *lighting,
             chunk: None,
         })
     }
@@ -384,16 +382,4 @@ fn scalar_range(field: &Field) -> (f64, f64) {
     let (lo, hi) = field.value_range();
     let margin = 0.05 * (hi - lo).max(1e-6);
     (lo - margin, hi + margin)
-}
-
-/// Loads or generates the scene's volume.
-pub fn load_volume(scene: &Scene) -> Result<Volume, DataError> {
-    match &scene.volume {
-        crate::scene::VolumeSource::MarschnerLobb { resolution } => {
-            Ok(crate::data::marschner_lobb::generate(*resolution))
-        }
-        crate::scene::VolumeSource::File { path, array } => {
-            crate::data::load(path, array.as_deref())
-        }
-    }
 }

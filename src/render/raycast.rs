@@ -18,8 +18,8 @@ use super::preintegration::PreintegrationTables;
 use super::transfer::TransferFunction;
 use super::{Field, RaySetup};
 use crate::recon::mls::{MlsSettings, Neighbours};
+use crate::render::Method;
 use crate::samples::bvh::Segments;
-use crate::scene::Method;
 use glam::DVec3;
 use interval::{Knot, emit_crossings, emit_interval, knot, knot_segment};
 

@@ -26,6 +26,9 @@ use crate::data::DataError;
 use crate::data::dataset::{Dataset, Geometry, Location};
 use std::path::Path;
 
+/// Default support factor of kNN-derived supports.
+pub const KNN_SUPPORT: f64 = 1.5;
+
 /// Relative distance (of the bounding-box diagonal) under which two samples are one.
 pub const DUPLICATE_TOLERANCE: f64 = 1e-9;
 
@@ -50,9 +53,14 @@ pub enum SampleError {
 /// How supports are derived (scene keys `[reconstruction]`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SampleSettings {
-    /// Grids: h = support × spacing. Scattered samples and meshes: h_i = support × the
-    /// distance to the `knn`-th nearest neighbour (or the anisotropic equivalent).
+    /// Grids (regular, rectilinear, curvilinear with anisotropic supports): h = support ×
+    /// spacing.
     pub support: f64,
+    /// Scattered samples and meshes: h_i = knn_support × the distance to the `knn`-th nearest
+    /// neighbour (or the anisotropic equivalent). The scene's `reconstruction.support` sets
+    /// both; left out, this one defaults to [`KNN_SUPPORT`] (about 27 samples in a support in
+    /// a uniform cloud, against ~100 with the grid default 2.4).
+    pub knn_support: f64,
     /// Neighbour count of the support radius.
     pub knn: usize,
     /// Ellipsoidal supports: `None` = the data kind's default (diagonal for rectilinear grids,
@@ -64,6 +72,7 @@ impl Default for SampleSettings {
     fn default() -> Self {
         Self {
             support: 2.4,
+            knn_support: KNN_SUPPORT,
             knn: 8,
             anisotropic: None,
         }
@@ -133,7 +142,9 @@ pub struct Provenance {
     pub merged: usize,
     /// Cells whose orientation is inverted (accepted: the hull does not use orientation).
     pub inverted_cells: usize,
-    /// "uniform", "isotropic", "diagonal" or "anisotropic".
+    /// "uniform" (regular grid), "diagonal" (rectilinear spacings), "anisotropic-edges"
+    /// (curvilinear index-direction edges), "isotropic" or "anisotropic" (from the k nearest
+    /// neighbours).
     pub support_kind: &'static str,
 }
 
@@ -144,6 +155,9 @@ pub struct SampleSet {
     pub values: Vec<f32>,
     pub supports: Supports,
     pub domain: Domain,
+    /// Typical distance between samples, the unit of `render.step`: a grid's smallest spacing,
+    /// else the median distance to the nearest other sample.
+    pub spacing: f64,
     pub provenance: Provenance,
 }
 
@@ -259,6 +273,22 @@ impl SampleSet {
         array: Option<&str>,
         settings: &SampleSettings,
     ) -> Result<Self, SampleError> {
+        let mut set = Self::build(dataset, path, array, settings)?;
+        set.spacing = match &set.positions {
+            Positions::Grid { spacing, .. } => {
+                spacing.iter().copied().fold(f64::INFINITY, f64::min)
+            }
+            Positions::Scattered(p) => supports::nearest_spacing(p),
+        };
+        Ok(set)
+    }
+
+    fn build(
+        dataset: &Dataset,
+        path: &Path,
+        array: Option<&str>,
+        settings: &SampleSettings,
+    ) -> Result<Self, SampleError> {
         check_settings(settings)?;
         let source_name = path.display().to_string();
         let data = dataset.array(path, array)?;
@@ -299,6 +329,7 @@ impl SampleSet {
                     values: data.values.clone(),
                     supports: Supports::Uniform(h),
                     domain: Domain::Box { lo: origin, hi },
+                    spacing: 0.0,
                     provenance,
                 })
             }
@@ -325,13 +356,14 @@ impl SampleSet {
                     provenance.support_kind = "diagonal";
                     supports::rectilinear(&coords, settings.support)
                 } else {
-                    supports::isotropic_knn(&positions, settings.support, settings.knn)
+                    supports::isotropic_knn(&positions, settings.knn_support, settings.knn)
                 };
                 Ok(Self {
                     positions: Positions::Scattered(positions),
                     values: data.values.clone(),
                     supports: Supports::PerSample(metrics),
                     domain: Domain::Box { lo, hi },
+                    spacing: 0.0,
                     provenance,
                 })
             }
@@ -343,16 +375,17 @@ impl SampleSet {
                 };
                 let hull = mesh::structured_hull(dims, &points, &source_name)?;
                 let metrics = if settings.anisotropic.unwrap_or(false) {
-                    provenance.support_kind = "anisotropic";
+                    provenance.support_kind = "anisotropic-edges";
                     supports::structured(dims, &points, settings.support)
                 } else {
-                    supports::isotropic_knn(&points, settings.support, settings.knn)
+                    supports::isotropic_knn(&points, settings.knn_support, settings.knn)
                 };
                 Ok(Self {
                     positions: Positions::Scattered(points),
                     values: data.values.clone(),
                     supports: Supports::PerSample(metrics),
                     domain: hull,
+                    spacing: 0.0,
                     provenance,
                 })
             }
@@ -373,6 +406,7 @@ impl SampleSet {
                     values: merged.values,
                     supports: Supports::PerSample(metrics),
                     domain: Domain::Hull(hull),
+                    spacing: 0.0,
                     provenance,
                 })
             }
@@ -397,6 +431,7 @@ impl SampleSet {
                         lo: [0.0; 3],
                         hi: [0.0; 3],
                     },
+                    spacing: 0.0,
                     provenance,
                 };
                 let (lo, hi) = set.support_box();
@@ -422,12 +457,14 @@ impl SampleSet {
 }
 
 fn check_settings(s: &SampleSettings) -> Result<(), SampleError> {
-    if !(s.support > 0.0 && s.support.is_finite()) {
-        return Err(SampleError::Setting {
-            key: "reconstruction.support",
-            value: s.support.to_string(),
-            expected: "a positive number",
-        });
+    for v in [s.support, s.knn_support] {
+        if !(v > 0.0 && v.is_finite()) {
+            return Err(SampleError::Setting {
+                key: "reconstruction.support",
+                value: v.to_string(),
+                expected: "a positive number",
+            });
+        }
     }
     if !(1..=64).contains(&s.knn) {
         return Err(SampleError::Setting {
@@ -446,9 +483,9 @@ fn derive_scattered(
 ) -> Vec<Metric> {
     if settings.anisotropic.unwrap_or(false) {
         provenance.support_kind = "anisotropic";
-        supports::anisotropic_knn(positions, settings.support, settings.knn)
+        supports::anisotropic_knn(positions, settings.knn_support, settings.knn)
     } else {
-        supports::isotropic_knn(positions, settings.support, settings.knn)
+        supports::isotropic_knn(positions, settings.knn_support, settings.knn)
     }
 }
 

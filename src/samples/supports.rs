@@ -149,6 +149,25 @@ fn knn(positions: &[[f64; 3]], k: usize) -> Vec<Vec<u32>> {
         .collect()
 }
 
+/// Median distance from a sample to its nearest other sample.
+pub fn nearest_spacing(positions: &[[f64; 3]]) -> f64 {
+    if positions.len() < 2 {
+        return 1.0;
+    }
+    let mut d: Vec<f64> = knn(positions, 1)
+        .iter()
+        .zip(positions)
+        .map(|(n, p)| {
+            n.first().map_or(0.0, |&j| {
+                let y = offset(*p, positions[j as usize]);
+                (y[0] * y[0] + y[1] * y[1] + y[2] * y[2]).sqrt()
+            })
+        })
+        .collect();
+    d.sort_by(f64::total_cmp);
+    d[d.len() / 2]
+}
+
 fn offset(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [b[0] - a[0], b[1] - a[1], b[2] - a[2]]
 }

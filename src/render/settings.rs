@@ -1,0 +1,54 @@
+//! The ray caster's configuration (scene section `[render]`): owned by this layer, read from
+//! the scene file by `scene`.
+
+/// The integrator.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Method {
+    /// Preintegration with a constant step `render.step`: one table lookup per interval.
+    Fixed,
+    /// Midpoint rule with `render.step`, transfer function applied directly (for comparison).
+    Riemann,
+    /// Midpoint rule with `render.reference_step`: ground truth.
+    Reference,
+    /// [MLS] adaptive subdivision between `render.l_max` and `render.l_min`.
+    Adaptive,
+}
+
+impl Method {
+    /// The scene-file spelling.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Fixed => "fixed",
+            Method::Riemann => "riemann",
+            Method::Reference => "reference",
+            Method::Adaptive => "adaptive",
+        }
+    }
+
+    /// Whether the method reads preintegration tables.
+    pub fn preintegrated(self) -> bool {
+        matches!(self, Method::Fixed | Method::Adaptive)
+    }
+}
+
+/// Integrator settings (scene section `[render]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RenderSettings {
+    pub method: Method,
+    /// Step in sample spacings (the smallest spacing of the grid).
+    pub step: f64,
+    /// Step of the reference method, in sample spacings.
+    pub reference_step: f64,
+    pub background: [f64; 3],
+    /// Rays stop when the transmittance falls below this (riemann and reference methods).
+    pub min_transmittance: f64,
+    /// Adaptive: shortest and longest interval, in sample spacings ([MLS]: 0.16 and 2.6).
+    pub l_min: f64,
+    pub l_max: f64,
+    /// Adaptive: subdivision tolerance ε of (1 − α)·|C1 − C2| / |C1| < ε ([MLS]: 0.03).
+    pub epsilon: f64,
+    /// Preintegrated methods stop a ray once its opacity exceeds this ([MLS]: 0.99).
+    pub early_termination: f64,
+    /// Preintegration table resolution per scalar axis.
+    pub table_resolution: usize,
+}
