@@ -11,9 +11,9 @@ use std::time::Instant;
 use vmls::data::dataset::Location;
 use vmls::probe::{coherent_order, fma_probe, median, mls_probe, random_points};
 use vmls::render::evalmap::{check_path, write_eval_map};
-use vmls::render::gpu::{GpuField, render};
 use vmls::render::output::{format_of, write_image};
-use vmls::render::{Field, RenderError, build_tables};
+use vmls::render::renderer::{Renderer, View};
+use vmls::render::{Field, RenderError};
 use vmls::scene::load_volume;
 use vmls::scene::{NeighbourMode, Scene, SceneError};
 use vmls::vk::{Context, ContextOptions, ShaderCompiler};
@@ -57,6 +57,10 @@ enum Command {
         /// Override a scene key: section.key=value (repeatable).
         #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
         set: Vec<String>,
+        /// Render this many frames with one persistent renderer, turning the camera 10° about
+        /// its up axis each frame; the last is written, `--stats` lists every frame's cost.
+        #[arg(long, default_value_t = 1)]
+        frames: u32,
         #[command(flatten)]
         device: DeviceArgs,
     },
@@ -100,6 +104,13 @@ enum Command {
         /// Write the results as JSON.
         #[arg(long)]
         json: Option<PathBuf>,
+        /// Probe this data file's octree path instead of Marschner–Lobb's grid and octree:
+        /// octree statistics, then evaluations at random points of the domain's box.
+        #[arg(long)]
+        file: Option<PathBuf>,
+        /// With --file: override a scene key (reconstruction.*, octree.*, volume.scalars).
+        #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
+        set: Vec<String>,
         #[command(flatten)]
         device: DeviceArgs,
     },
@@ -167,6 +178,7 @@ fn run_render(
     stats: Option<&Path>,
     eval_map: Option<&Path>,
     set: &[String],
+    frames_wanted: u32,
     device: &DeviceArgs,
 ) -> Result<(), CliError> {
     let start = Instant::now();
@@ -179,32 +191,39 @@ fn run_render(
     let field = scene.field(|f| bar.set_position((f * 1000.0) as u64))?;
     bar.finish_and_clear();
     let ctx = context(device)?;
-    let compiler = ShaderCompiler::new()?;
-    let gpu_field = GpuField::upload(&ctx, &field)?;
     let setup = scene.ray_setup(&field)?;
-    let bar = progress_bar("tables");
-    let table_start = Instant::now();
-    let tables = build_tables(
-        &setup,
-        &field,
-        &scene.transfer,
-        scene.render.table_resolution,
-        |f| bar.set_position((f * 1000.0) as u64),
-    );
-    let table_ms = table_start.elapsed().as_secs_f64() * 1e3;
-    bar.finish_and_clear();
-    let bar = progress_bar("render");
-    let image = render(
-        &ctx,
-        &compiler,
-        &field,
-        &gpu_field,
-        &scene.transfer,
-        tables.as_ref(),
-        &setup,
-        |f| bar.set_position((f * 1000.0) as u64),
-    )?;
-    bar.finish_and_clear();
+    let upload_start = Instant::now();
+    let mut renderer = Renderer::new(&ctx, field)?;
+    let upload_ms = upload_start.elapsed().as_secs_f64() * 1e3;
+    // Frame k turns the camera by 10°·k about its up axis through the target: later frames
+    // show what a new camera costs with everything else kept on the GPU.
+    let mut frames = Vec::new();
+    let mut image = None;
+    for k in 0..frames_wanted.max(1) {
+        let camera = scene.camera.orbited((10.0 * k as f64).to_radians());
+        let view = View {
+            camera: &camera,
+            settings: &scene.render,
+            transfer: &scene.transfer,
+            isosurfaces: &scene.isosurfaces,
+            lighting: &scene.lighting,
+        };
+        let bar = progress_bar("render");
+        let (img, frame) = renderer.render(&view, |f| bar.set_position((f * 1000.0) as u64))?;
+        bar.finish_and_clear();
+        frames.push(frame);
+        image = Some(img);
+    }
+    let (Some(image), Some(first)) = (image, frames.first().cloned()) else {
+        return Err(RenderError::Output {
+            path: output.display().to_string(),
+            message: "no frame rendered".into(),
+        }
+        .into());
+    };
+    let field = renderer.field();
+    let tables = renderer.tables();
+    let table_ms = first.table_ms;
     let errors = ctx.validation_errors();
     if errors > 0 {
         return Err(RenderError::Output {
@@ -236,16 +255,25 @@ fn run_render(
             "height": scene.camera.height,
             "method": scene.render.method.name(),
             "step_world": setup.step,
-            "neighbours": match scene.reconstruction.neighbours { NeighbourMode::Grid => "grid", NeighbourMode::Octree => "octree" },
-            "gpu_ms": { "raycast": image.gpu_ms },
+            "neighbours": if field.uses_octree() { "octree" } else { "grid" },
+            "gpu_ms": { "raycast": first.gpu_ms },
+            "upload_ms": upload_ms,
+            "frames": frames.iter().map(|f| serde_json::json!({
+                "gpu_ms": f.gpu_ms,
+                "wall_ms": f.wall_ms,
+                "tables_built": f.tables_built,
+                "table_ms": f.table_ms,
+                "pipeline_built": f.pipeline_built,
+                "buffers_allocated": f.targets_allocated,
+            })).collect::<Vec<_>>(),
             "bands": image.bands,
             "wall_ms": start.elapsed().as_secs_f64() * 1e3,
             "function_evaluations": evaluations,
             "rays": rays,
             "evaluations_per_ray": evaluations as f64 / rays.max(1) as f64,
-            "table_build_ms_cpu": tables.as_ref().map(|_| table_ms),
-            "table_lengths_world": tables.as_ref().map(|t| t.lengths.clone()),
-            "table_resolution": tables.as_ref().map(|t| t.resolution),
+            "table_build_ms_cpu": tables.map(|_| table_ms),
+            "table_lengths_world": tables.map(|t| t.lengths.clone()),
+            "table_resolution": tables.map(|t| t.resolution),
             "octree_nodes": field.octree.as_ref().map(|o| o.nodes.len()),
             "octree_references": field.octree.as_ref().map(|o| o.indices.len()),
             "octree": field.octree.as_ref().map(|o| octree_json(&o.stats(std::mem::size_of::<vmls::gpu_types::Sample>() as u64))),
@@ -277,6 +305,79 @@ fn octree_json(s: &vmls::recon::OctreeStats) -> serde_json::Value {
         "bytes": s.bytes,
         "build_ms": s.build_ms,
     })
+}
+
+fn run_file_probe(
+    file: &Path,
+    set: &[String],
+    points: usize,
+    repeats: u32,
+    json: Option<&Path>,
+    device: &DeviceArgs,
+) -> Result<(), CliError> {
+    let mut overrides = vec![format!(
+        "volume.file={}",
+        toml::Value::String(file.display().to_string())
+    )];
+    overrides.extend(set.iter().cloned());
+    let scene = Scene::load(None, &overrides)?;
+    let field = scene.field(|_| {})?;
+    let stats = field
+        .octree
+        .as_ref()
+        .map(|o| o.stats(std::mem::size_of::<vmls::gpu_types::Sample>() as u64));
+    let ctx = context(device)?;
+    let compiler = ShaderCompiler::new()?;
+    println!("device: {} ({})", ctx.info().name, ctx.info().driver);
+    println!(
+        "{}: {} samples ({})",
+        file.display(),
+        field.samples.len(),
+        field.samples.provenance.kind
+    );
+    if let Some(s) = &stats {
+        println!(
+            "octree: {} nodes, {} references ({:.2} per sample), depth {}, {:.1} MiB, built in {:.0} ms",
+            s.nodes,
+            s.references,
+            s.redundancy,
+            s.depth,
+            s.bytes as f64 / (1 << 20) as f64,
+            s.build_ms
+        );
+    }
+    let random = random_points(&field, points, 0.0, 7);
+    let coherent = coherent_order(&field, random.clone());
+    let mut rows = Vec::new();
+    for (order, pts) in [("random", random), ("coherent", coherent)] {
+        let m = mls_probe(&ctx, &compiler, &field, &pts, repeats)?;
+        println!(
+            "{} ({order} points): {:.3} M evaluations/s median, {:.1} neighbours/evaluation",
+            m.variant,
+            m.evaluations_per_s * 1e-6,
+            m.mean_neighbours
+        );
+        rows.push(serde_json::json!({
+            "variant": m.variant,
+            "order": order,
+            "gpu_ms": m.gpu_ms,
+            "evaluations_per_s": m.evaluations_per_s,
+            "mean_neighbours": m.mean_neighbours,
+        }));
+    }
+    if let Some(path) = json {
+        write_json(
+            path,
+            &serde_json::json!({
+                "device": ctx.info().name,
+                "file": file.display().to_string(),
+                "samples": field.samples.len(),
+                "octree": stats.as_ref().map(octree_json),
+                "mls": rows,
+            }),
+        )?;
+    }
+    Ok(())
 }
 
 fn run_probe(
@@ -439,6 +540,7 @@ fn main() {
             stats,
             eval_map,
             set,
+            frames,
             device,
         } => run_render(
             scene.as_deref(),
@@ -446,6 +548,7 @@ fn main() {
             stats.as_deref(),
             eval_map.as_deref(),
             set,
+            *frames,
             device,
         ),
         Command::Compare {
@@ -472,8 +575,13 @@ fn main() {
             points,
             repeats,
             json,
+            file,
+            set,
             device,
-        } => run_probe(*resolution, *points, *repeats, json.as_deref(), device),
+        } => match file {
+            Some(f) => run_file_probe(f, set, *points, *repeats, json.as_deref(), device),
+            None => run_probe(*resolution, *points, *repeats, json.as_deref(), device),
+        },
     };
     if let Err(e) = result {
         eprintln!("vmls: error: {}", report(&e));

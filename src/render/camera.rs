@@ -37,6 +37,20 @@ pub struct ViewBasis {
 }
 
 impl Camera {
+    /// The camera with its eye turned by `angle` radians about the up axis through the target.
+    pub fn orbited(&self, angle: f64) -> Self {
+        if angle == 0.0 {
+            return *self;
+        }
+        let up = DVec3::from(self.up).normalize_or_zero();
+        let target = DVec3::from(self.target);
+        let offset = glam::DQuat::from_axis_angle(up, angle) * (DVec3::from(self.eye) - target);
+        Self {
+            eye: (target + offset).to_array(),
+            ..*self
+        }
+    }
+
     /// The view frame, or why it does not exist.
     pub fn basis(&self) -> Result<ViewBasis, String> {
         let eye = DVec3::from(self.eye);

@@ -9,12 +9,11 @@
 
 use super::preintegration::PreintegrationTables;
 use super::raycast::adaptive;
+pub use super::renderer::{GpuImage, default_chunk, outer_steps, render};
 use super::shading::MAX_ISOSURFACES;
-use super::transfer::TransferFunction;
 use super::{Field, RaySetup};
 use crate::gpu_types::{
-    CountPush, GRID_PAD, IsoSurface, MlsOut, RayPush, RenderParams, Sample, binding,
-    binding_defines, ray_count,
+    CountPush, GRID_PAD, MlsOut, RenderParams, Sample, binding, binding_defines,
 };
 use crate::recon::NeighbourMode;
 use crate::recon::mls::{Basis, GradientMode, Weight};
@@ -25,9 +24,6 @@ use crate::vk::{
 
 /// `RenderParams::projection` of an orthographic camera (0 is perspective).
 const PROJECTION_ORTHOGRAPHIC: u32 = 1;
-
-/// Pixels per band (one submission each).
-const BAND_PIXELS: u32 = 16 * 1024;
 
 /// The compile-time choices of a kernel.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -161,7 +157,7 @@ impl Variant {
     }
 }
 
-fn v4(v: glam::DVec3, w: f64) -> [f32; 4] {
+pub(super) fn v4(v: glam::DVec3, w: f64) -> [f32; 4] {
     [v.x as f32, v.y as f32, v.z as f32, w as f32]
 }
 
@@ -223,7 +219,7 @@ pub fn render_params(field: &Field, setup: Option<&RaySetup>, tf_count: u32) -> 
 }
 
 /// Adds the tables' description to the kernel constants.
-fn table_params(p: &mut RenderParams, tables: &PreintegrationTables) {
+pub(super) fn table_params(p: &mut RenderParams, tables: &PreintegrationTables) {
     p.preint_range[0] = tables.s_min as f32;
     p.preint_range[1] = tables.s_max as f32;
     p.preint_range[2] = tables.lengths[0] as f32;
@@ -312,7 +308,7 @@ impl GpuField {
     }
 
     /// (binding, buffer) pairs of the neighbour data.
-    fn bindings(&self) -> Vec<(u32, &Buffer)> {
+    pub(super) fn bindings(&self) -> Vec<(u32, &Buffer)> {
         let mut b = Vec::new();
         if let Some(g) = &self.grid {
             b.push((binding::GRID, g));
@@ -326,7 +322,7 @@ impl GpuField {
     }
 
     /// (binding, buffer) pairs of the hull (empty for a box domain).
-    fn hull_bindings(&self) -> Vec<(u32, &Buffer)> {
+    pub(super) fn hull_bindings(&self) -> Vec<(u32, &Buffer)> {
         match &self.hull {
             Some([n, t]) => vec![(binding::HULL_NODES, n), (binding::HULL_TRIS, t)],
             None => Vec::new(),
@@ -334,49 +330,7 @@ impl GpuField {
     }
 }
 
-/// A rendered image as the GPU produced it.
-#[derive(Debug, Clone)]
-pub struct GpuImage {
-    /// RGBA per pixel, row 0 at the top: (C + T·background, 1 − T).
-    pub pixels: Vec<[f32; 4]>,
-    /// MLS evaluations per pixel.
-    pub counts: Vec<u32>,
-    /// Sum of the bands' GPU times.
-    pub gpu_ms: f64,
-    /// Submissions (bands × chunks).
-    pub bands: u32,
-    pub variant: String,
-}
-
-/// Outer steps of the longest possible ray: midpoint steps or fixed intervals of `step`, or
-/// adaptive top intervals of l_max, over the box diagonal (plus one for rounding).
-pub fn outer_steps(setup: &RaySetup) -> u32 {
-    let diagonal = (setup.box_hi - setup.box_lo).length();
-    let step = match setup.method {
-        Method::Adaptive => setup.l_max,
-        _ => setup.step,
-    };
-    // Each inside segment rounds its own step count up.
-    let segments = (crate::samples::bvh::MAX_HITS / 2 + 1) as f64;
-    ((diagonal / step).ceil() + segments).min(f64::from(u32::MAX / 2)) as u32
-}
-
-/// Outer steps per dispatch. llvmpipe ends every loop after 65 535 iterations per invocation
-/// and dispatch (LAVAPIPE.md), and one MLS evaluation runs 30–60 of them (neighbour rows,
-/// octree descent): about 256 evaluations per ray and dispatch leaves a margin of 4 or more.
-/// An adaptive top interval costs up to 2^levels evaluations.
-pub fn default_chunk(setup: &RaySetup) -> u32 {
-    const EVALUATIONS_PER_DISPATCH: u32 = 256;
-    match setup.method {
-        Method::Adaptive => {
-            let levels = super::raycast::adaptive::stack_size(setup.l_max, setup.l_min);
-            (EVALUATIONS_PER_DISPATCH >> levels.min(8)).max(1)
-        }
-        _ => EVALUATIONS_PER_DISPATCH,
-    }
-}
-
-fn pipeline_for(
+pub(super) fn pipeline_for(
     ctx: &Context,
     compiler: &ShaderCompiler,
     kernel: &str,
@@ -388,196 +342,6 @@ fn pipeline_for(
     let mut bindings = data.to_vec();
     bindings.push(binding::PARAMS);
     ComputePipeline::new(ctx, &variant.name(kernel), &spirv, &bindings, push)
-}
-
-/// Ray casts the field with the setup's method; `tables` must be the setup's preintegration
-/// tables for the preintegrated methods. `progress` gets the fraction of rows done.
-#[allow(clippy::too_many_arguments)]
-pub fn render(
-    ctx: &Context,
-    compiler: &ShaderCompiler,
-    field: &Field,
-    gpu_field: &GpuField,
-    tf: &TransferFunction,
-    tables: Option<&PreintegrationTables>,
-    setup: &RaySetup,
-    mut progress: impl FnMut(f64),
-) -> Result<GpuImage, VkError> {
-    let variant = Variant::for_render(field, setup);
-    if setup.method.preintegrated() && tables.is_none() {
-        return Err(VkError::Usage(format!(
-            "method '{}' needs preintegration tables",
-            setup.method.name()
-        )));
-    }
-    let mut data = gpu_field.bindings();
-    data.extend(gpu_field.hull_bindings());
-    let mut binding_ids: Vec<u32> = data.iter().map(|(b, _)| *b).collect();
-    binding_ids.extend([
-        binding::TRANSFER,
-        binding::IMAGE,
-        binding::COUNTS,
-        binding::RAY_STATE,
-    ]);
-    if !setup.isosurfaces.is_empty() {
-        binding_ids.push(binding::ISO);
-    }
-    let table_data: Option<Vec<[f32; 4]>> =
-        tables.filter(|_| setup.method.preintegrated()).map(|t| {
-            t.tables
-                .iter()
-                .flatten()
-                .chain(&t.limits)
-                .copied()
-                .collect()
-        });
-    if table_data.is_some() {
-        binding_ids.push(binding::PREINT);
-    }
-    let pipeline = pipeline_for(
-        ctx,
-        compiler,
-        "raycast.comp",
-        &variant,
-        &binding_ids,
-        std::mem::size_of::<RayPush>() as u32,
-    )?;
-    let (w, h) = (setup.camera.width, setup.camera.height);
-    let pixels = u64::from(w) * u64::from(h);
-    let gpu_tf = tf.to_gpu();
-    let mut params = render_params(field, Some(setup), gpu_tf.len() as u32);
-    if let Some(t) = tables {
-        table_params(&mut params, t);
-    }
-    let table_buf = match &table_data {
-        Some(d) => Some(Buffer::from_slice(ctx, "preintegration tables", d)?),
-        None => None,
-    };
-    let params_buf = Buffer::from_slice(ctx, "render params", &[params])?;
-    let tf_buf = Buffer::from_slice(ctx, "transfer function", &gpu_tf)?;
-    // Never empty: a zero-sized binding is invalid, and iso_count says how many are real.
-    let mut isos: Vec<IsoSurface> = setup
-        .isosurfaces
-        .iter()
-        .map(|i| IsoSurface {
-            color_opacity: [
-                i.color[0] as f32,
-                i.color[1] as f32,
-                i.color[2] as f32,
-                i.opacity as f32,
-            ],
-            value: i.value as f32,
-            _pad: [0.0; 3],
-        })
-        .collect();
-    if isos.is_empty() {
-        isos.push(IsoSurface::default());
-    }
-    let iso_buf = Buffer::from_slice(ctx, "isosurfaces", &isos)?;
-    let image = Buffer::new(ctx, "image", pixels * 16, BufferUsage::Storage)?;
-    let counts = Buffer::new(ctx, "evaluation counts", pixels * 4, BufferUsage::Storage)?;
-    let ray_state = Buffer::new(ctx, "ray state", pixels * 16, BufferUsage::Storage)?;
-    let mut all = data;
-    all.extend([
-        (binding::PARAMS, &params_buf),
-        (binding::TRANSFER, &tf_buf),
-        (binding::IMAGE, &image),
-        (binding::COUNTS, &counts),
-        (binding::RAY_STATE, &ray_state),
-    ]);
-    if !setup.isosurfaces.is_empty() {
-        all.push((binding::ISO, &iso_buf));
-    }
-    if let Some(t) = &table_buf {
-        all.push((binding::PREINT, t));
-    }
-    let group = BindGroup::new(ctx, &pipeline, &all)?;
-    let band_rows = (BAND_PIXELS / w.max(1))
-        .clamp(8, h.max(8))
-        .next_multiple_of(8);
-    let outer = outer_steps(setup);
-    let mut chunk = setup.chunk.unwrap_or_else(|| default_chunk(setup));
-    let mut gpu_ms = 0.0;
-    let mut bands = 0;
-    let mut row = 0;
-    while row < h {
-        let rows = band_rows.min(h - row);
-        let mut first = 0;
-        let mut band_counts: Vec<u32> = Vec::new();
-        while first < outer {
-            let push = RayPush {
-                row_offset: row,
-                rows,
-                first,
-                last: first.saturating_add(chunk).min(outer),
-            };
-            let timings = ctx.submit(|rec| {
-                rec.dispatch(
-                    &pipeline,
-                    &group,
-                    bytemuck::bytes_of(&push),
-                    [w.div_ceil(8), rows.div_ceil(8), 1],
-                    "raycast",
-                )
-            })?;
-            gpu_ms += timings.iter().filter_map(|t| t.gpu_ms).sum::<f64>();
-            bands += 1;
-            band_counts = counts.read_range(ctx, (row * w) as usize, (rows * w) as usize)?;
-            if band_counts.iter().any(|c| c & ray_count::TRUNCATED != 0) {
-                // The driver cut a loop short: this band again, from its start, in halves.
-                if chunk == 1 {
-                    return Err(VkError::Usage(format!(
-                        "raycast: the device ended a loop early even for one step per dispatch \
-                         (llvmpipe allows 65 535 loop iterations per invocation); rows {row}..{} \
-                         cannot be rendered with these settings",
-                        row + rows
-                    )));
-                }
-                chunk = chunk.div_ceil(2);
-                first = 0;
-                continue;
-            }
-            if band_counts.iter().all(|c| c & ray_count::DONE != 0) {
-                break;
-            }
-            first = push.last;
-        }
-        if let Some(i) = band_counts
-            .iter()
-            .position(|c| c & ray_count::HULL_OVERFLOW != 0)
-        {
-            return Err(VkError::Usage(format!(
-                "raycast: the ray through pixel ({}, {}) crosses the domain's boundary more than \
-                 {} times; the mesh is too convoluted for the hull clipper",
-                i as u32 % w,
-                row + i as u32 / w,
-                crate::samples::bvh::MAX_HITS
-            )));
-        }
-        if let Some(i) = band_counts.iter().position(|c| c & ray_count::DONE == 0) {
-            return Err(VkError::Usage(format!(
-                "raycast: pixel ({}, {}) was not finished after {outer} steps",
-                i as u32 % w,
-                row + i as u32 / w
-            )));
-        }
-        row += rows;
-        progress(f64::from(row) / f64::from(h));
-    }
-    let mut pixels_out: Vec<[f32; 4]> = image.read(ctx)?;
-    pixels_out.truncate(pixels as usize);
-    let mut counts_out: Vec<u32> = counts.read(ctx)?;
-    counts_out.truncate(pixels as usize);
-    for c in &mut counts_out {
-        *c &= ray_count::EVALUATIONS;
-    }
-    Ok(GpuImage {
-        pixels: pixels_out,
-        counts: counts_out,
-        gpu_ms,
-        bands,
-        variant: variant.name("raycast"),
-    })
 }
 
 /// Evaluates the field at `points` (frame-relative) with `mls_eval.comp`. Returns the results

@@ -11,6 +11,7 @@ pub mod gpu;
 pub mod output;
 pub mod preintegration;
 pub mod raycast;
+pub mod renderer;
 pub mod settings;
 pub mod shading;
 pub mod transfer;
@@ -368,6 +369,11 @@ impl TableCache {
             self.key = Some(key);
             self.builds += 1;
         }
+        self.tables.as_ref()
+    }
+
+    /// The tables of the last `get` that needed any.
+    pub fn current(&self) -> Option<&PreintegrationTables> {
         self.tables.as_ref()
     }
 
