@@ -320,7 +320,8 @@ fn run_file_probe(
         toml::Value::String(file.display().to_string())
     )];
     overrides.extend(set.iter().cloned());
-    let scene = Scene::load(None, &overrides)?;
+    // An empty scene, not the built-in one: its generator would conflict with volume.file.
+    let scene = Scene::parse("", "vmls probe --file", Path::new("."), &overrides)?;
     let field = scene.field(|_| {})?;
     let stats = field
         .octree

@@ -373,3 +373,63 @@ fn eval_map_is_a_heat_map_with_a_legend() {
         &bad,
     );
 }
+
+#[test]
+fn irregular_files_render_and_info_describes_them() {
+    let fixture = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/xml/vtu_binary_zlib.vtu");
+    let out = vmls(&["info", fixture]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    for needle in [
+        "kind: unstructured mesh",
+        "points: 21",
+        "cells: 5 (hexahedron: 1, pyramid: 1, tetra: 1, voxel: 1, wedge: 1)",
+        "cell_id (cell data",
+        "boundary: ",
+        "supports: isotropic",
+        "octree: ",
+    ] {
+        assert!(text.contains(needle), "info lacks '{needle}':\n{text}");
+    }
+    // Cell data is sampled at the centroids, and says so.
+    let out = vmls(&["info", fixture, "--array", "cell_id"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("samples: 5 (array 'cell_id' sampled at cell centroids)"), "{text}");
+
+    let d = dir("irregular");
+    let png = d.join("mesh.png");
+    let stats = d.join("stats.json");
+    let file_key = format!("volume.file=\"{fixture}\"");
+    let out = vmls(&[
+        "render", "-o", s(&png), "--stats", s(&stats), "--set", &file_key, "--set",
+        "camera.width=32", "--set", "camera.height=24", "--frames", "2",
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(png.exists());
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats")).expect("json");
+    assert_eq!(json["data"]["kind"], "unstructured mesh");
+    assert_eq!(json["data"]["sampled_at"], "points");
+    assert_eq!(json["neighbours"], "octree");
+    assert!(json["variant"].as_str().is_some_and(|v| v.ends_with("-hull")), "{json}");
+    let frames = json["frames"].as_array().expect("frames");
+    assert_eq!(frames.len(), 2);
+    assert_eq!(frames[1]["tables_built"], false);
+    assert_eq!(frames[1]["pipeline_built"], false);
+    assert!(json["octree"]["references"].as_u64().is_some_and(|r| r > 0));
+
+    // A malformed mesh: one clear line naming the file, no image.
+    let bad = d.join("bad.vtk");
+    std::fs::write(
+        &bad,
+        "# vtk DataFile Version 4.2\nbad\nASCII\nDATASET UNSTRUCTURED_GRID\nPOINTS 4 float\n\
+         0 0 0 1 0 0 0 1 0 0 0 1\nCELLS 1 5\n4 0 1 2 7\nCELL_TYPES 1\n10\n",
+    )
+    .expect("write");
+    let png = d.join("bad.png");
+    let bad_key = format!("volume.file=\"{}\"", s(&bad));
+    let out = vmls(&["render", "-o", s(&png), "--set", &bad_key]);
+    assert_fails(&out, &["bad.vtk", "cell 0", "point 7"], &png);
+    let out = vmls(&["info", s(&bad)]);
+    assert_eq!(out.status.code(), Some(1));
+}

@@ -7,8 +7,8 @@ use common::*;
 use std::path::Path;
 use vmls::data::dataset::{DataArray, Dataset, Location};
 use vmls::recon::{Basis, GradientMode, OctreeSettings, Weight};
-use vmls::render::gpu::{GpuField, render};
-use vmls::render::raycast::raycast_image;
+use vmls::render::gpu::{GpuField, GpuImage, render};
+use vmls::render::raycast::{PixelResult, raycast_image};
 use vmls::render::{Field, build_tables};
 use vmls::samples::{SampleSet, SampleSettings};
 use vmls::scene::{NeighbourMode, Scene};
@@ -80,30 +80,36 @@ fn scene(extra: &[&str]) -> Scene {
     Scene::load(None, &o).expect("scene")
 }
 
+/// The GPU image and the f64 reference of a scene's view of the field.
+fn both(field: &Field, scene: &Scene) -> (GpuImage, Vec<PixelResult>) {
+    let setup = scene.ray_setup(field).expect("setup");
+    let tables = build_tables(&setup, field, &scene.transfer, 128, |_| {});
+    let cpu = raycast_image(&setup, field, &scene.transfer, tables.as_ref());
+    let (ctx, compiler) = gpu();
+    let gf = GpuField::upload(&ctx, field).expect("upload");
+    let img = render(
+        &ctx,
+        &compiler,
+        field,
+        &gf,
+        &scene.transfer,
+        tables.as_ref(),
+        &setup,
+        |_| {},
+    )
+    .expect("render");
+    drop(gf);
+    finish(ctx);
+    (img, cpu)
+}
+
 #[test]
 fn rays_through_the_hole_see_only_the_background_and_gpu_matches_cpu() {
     let field = torus_field();
     assert!(field.hull.is_some());
     for method in ["fixed", "riemann"] {
         let scene = scene(&[&format!("render.method=\"{method}\""), ORTHO, ORTHO_HEIGHT]);
-        let setup = scene.ray_setup(&field).expect("setup");
-        let tables = build_tables(&setup, &field, &scene.transfer, 128, |_| {});
-        let cpu = raycast_image(&setup, &field, &scene.transfer, tables.as_ref());
-        let (ctx, compiler) = gpu();
-        let gf = GpuField::upload(&ctx, &field).expect("upload");
-        let img = render(
-            &ctx,
-            &compiler,
-            &field,
-            &gf,
-            &scene.transfer,
-            tables.as_ref(),
-            &setup,
-            |_| {},
-        )
-        .expect("render");
-        drop(gf);
-        finish(ctx);
+        let (img, cpu) = both(&field, &scene);
         assert!(img.variant.contains("-hull"), "{}", img.variant);
         let w = 30usize;
         // Pixel (18, 15) looks down at x = 0.35, y = 0.05: inside the hole (radius 0.65), but
@@ -162,24 +168,7 @@ fn an_eye_inside_the_mesh_integrates_from_the_eye() {
         "camera.width=12",
         "camera.height=12",
     ]);
-    let setup = scene.ray_setup(&field).expect("setup");
-    let tables = build_tables(&setup, &field, &scene.transfer, 128, |_| {});
-    let cpu = raycast_image(&setup, &field, &scene.transfer, tables.as_ref());
-    let (ctx, compiler) = gpu();
-    let gf = GpuField::upload(&ctx, &field).expect("upload");
-    let img = render(
-        &ctx,
-        &compiler,
-        &field,
-        &gf,
-        &scene.transfer,
-        tables.as_ref(),
-        &setup,
-        |_| {},
-    )
-    .expect("render");
-    drop(gf);
-    finish(ctx);
+    let (img, cpu) = both(&field, &scene);
     let centre = 6 * 12 + 6;
     assert!(cpu[centre].rgba[3] > 0.5, "alpha {}", cpu[centre].rgba[3]);
     for (g, c) in img.pixels.iter().zip(&cpu) {
@@ -191,4 +180,29 @@ fn an_eye_inside_the_mesh_integrates_from_the_eye() {
             );
         }
     }
+}
+
+#[test]
+fn isosurfaces_on_a_mesh_match_the_reference() {
+    let field = torus_field();
+    // f = 0.5 + 0.4z + 0.2x crosses 0.55 inside the tube.
+    let scene = scene(&[
+        ORTHO,
+        ORTHO_HEIGHT,
+        "camera.eye=[0.0, -4.0, 1.5]",
+        "camera.up=[0.0, 0.0, 1.0]",
+        "transfer.isosurfaces=[{ value = 0.55, color = [1.0, 0.9, 0.7], opacity = 1.0 }]",
+    ]);
+    let (img, cpu) = both(&field, &scene);
+    assert!(img.variant.contains("-iso1"), "{}", img.variant);
+    let opaque = cpu.iter().filter(|p| p.rgba[3] > 0.999).count();
+    assert!(opaque > 50, "the isosurface covers {opaque} pixels");
+    // Pixels may differ where f32 and f64 disagree on a grazing crossing: bound their number.
+    let differing = img
+        .pixels
+        .iter()
+        .zip(&cpu)
+        .filter(|(g, c)| (0..4).any(|k| (f64::from(g[k]) - c.rgba[k]).abs() > 2e-3))
+        .count();
+    assert!(differing <= 2, "{differing} pixels differ by more than 2e-3");
 }

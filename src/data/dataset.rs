@@ -237,18 +237,7 @@ impl Geometry {
                 dims,
                 origin,
                 spacing,
-            } => {
-                let (x, y, z) = (
-                    i % dims[0],
-                    (i / dims[0]) % dims[1],
-                    i / (dims[0] * dims[1]),
-                );
-                [
-                    origin[0] + x as f64 * spacing[0],
-                    origin[1] + y as f64 * spacing[1],
-                    origin[2] + z as f64 * spacing[2],
-                ]
-            }
+            } => grid_point(*dims, *origin, *spacing, i),
             Geometry::Rectilinear { coords } => {
                 let (nx, ny) = (coords[0].len(), coords[1].len());
                 [
@@ -276,6 +265,12 @@ impl Geometry {
         }
         (lo, hi)
     }
+}
+
+/// Position of point i of a regular grid stored x fastest.
+pub fn grid_point(dims: [usize; 3], origin: [f64; 3], spacing: [f64; 3], i: usize) -> [f64; 3] {
+    let index = [i % dims[0], (i / dims[0]) % dims[1], i / (dims[0] * dims[1])];
+    [0, 1, 2].map(|a| origin[a] + index[a] as f64 * spacing[a])
 }
 
 /// A loaded file: geometry and its scalar arrays (point and cell data).

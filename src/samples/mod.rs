@@ -23,7 +23,7 @@ pub mod mesh;
 pub mod supports;
 
 use crate::data::DataError;
-use crate::data::dataset::{Dataset, Geometry, Location};
+use crate::data::dataset::{Dataset, Geometry, Location, grid_point};
 use std::path::Path;
 
 /// Default support factor of kNN-derived supports.
@@ -179,18 +179,7 @@ impl SampleSet {
                 dims,
                 origin,
                 spacing,
-            } => {
-                let (x, y, z) = (
-                    i % dims[0],
-                    (i / dims[0]) % dims[1],
-                    i / (dims[0] * dims[1]),
-                );
-                [
-                    origin[0] + x as f64 * spacing[0],
-                    origin[1] + y as f64 * spacing[1],
-                    origin[2] + z as f64 * spacing[2],
-                ]
-            }
+            } => grid_point(*dims, *origin, *spacing, i),
             Positions::Scattered(p) => p[i],
         }
     }
