@@ -45,6 +45,19 @@ pub mod binding {
     /// Hull triangles, three `vec4` vertices each, in BVH leaf order (read-only).
     pub const HULL_TRIS: u32 = 15;
 
+    /// How kernels read a binding: the octree's samples, nodes and references through
+    /// texel-buffer views (one AVX2 gather per 8 lanes on llvmpipe instead of a per-lane loop;
+    /// LAVAPIPE.md "Read paths"), everything else as storage buffers.
+    pub fn kind(b: u32) -> crate::vk::BindingKind {
+        use crate::vk::BindingKind;
+        match b {
+            SAMPLES => BindingKind::TexelRgba32Float,
+            NODES => BindingKind::TexelRgba32Uint,
+            INDICES => BindingKind::TexelR32Uint,
+            _ => BindingKind::Storage,
+        }
+    }
+
     /// Every binding with its macro name.
     pub const ALL: [(&str, u32); 16] = [
         ("BINDING_PARAMS", PARAMS),

@@ -359,6 +359,21 @@ fn apply_set(table: &mut Table, arg: &str) -> Result<(), SceneError> {
     let Value::Table(t) = entry else {
         return Err(set_err(format!("'{section}' is not a section")));
     };
+    // A new data source replaces the other kind: `--set volume.file=…` on the built-in scene
+    // must not clash with its generator.
+    if section.trim() == "volume" {
+        match key.trim() {
+            "file" => {
+                t.remove("generator");
+                t.remove("resolution");
+            }
+            "generator" => {
+                t.remove("file");
+                t.remove("scalars");
+            }
+            _ => {}
+        }
+    }
     t.insert(key.to_string(), value);
     Ok(())
 }

@@ -376,10 +376,17 @@ fn eval_map_is_a_heat_map_with_a_legend() {
 
 #[test]
 fn irregular_files_render_and_info_describes_them() {
-    let fixture = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/xml/vtu_binary_zlib.vtu");
+    let fixture = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/xml/vtu_binary_zlib.vtu"
+    );
     let out = vmls(&["info", fixture]);
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     for needle in [
         "kind: unstructured mesh",
         "points: 21",
@@ -394,24 +401,47 @@ fn irregular_files_render_and_info_describes_them() {
     // Cell data is sampled at the centroids, and says so.
     let out = vmls(&["info", fixture, "--array", "cell_id"]);
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.contains("samples: 5 (array 'cell_id' sampled at cell centroids)"), "{text}");
+    assert!(
+        text.contains("samples: 5 (array 'cell_id' sampled at cell centroids)"),
+        "{text}"
+    );
 
     let d = dir("irregular");
     let png = d.join("mesh.png");
     let stats = d.join("stats.json");
     let file_key = format!("volume.file=\"{fixture}\"");
     let out = vmls(&[
-        "render", "-o", s(&png), "--stats", s(&stats), "--set", &file_key, "--set",
-        "camera.width=32", "--set", "camera.height=24", "--frames", "2",
+        "render",
+        "-o",
+        s(&png),
+        "--stats",
+        s(&stats),
+        "--set",
+        &file_key,
+        "--set",
+        "camera.width=32",
+        "--set",
+        "camera.height=24",
+        "--frames",
+        "2",
     ]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert!(png.exists());
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats")).expect("json");
     assert_eq!(json["data"]["kind"], "unstructured mesh");
     assert_eq!(json["data"]["sampled_at"], "points");
     assert_eq!(json["neighbours"], "octree");
-    assert!(json["variant"].as_str().is_some_and(|v| v.ends_with("-hull")), "{json}");
+    assert!(
+        json["variant"]
+            .as_str()
+            .is_some_and(|v| v.ends_with("-hull")),
+        "{json}"
+    );
     let frames = json["frames"].as_array().expect("frames");
     assert_eq!(frames.len(), 2);
     assert_eq!(frames[1]["tables_built"], false);

@@ -197,12 +197,17 @@ fn isosurfaces_on_a_mesh_match_the_reference() {
     assert!(img.variant.contains("-iso1"), "{}", img.variant);
     let opaque = cpu.iter().filter(|p| p.rgba[3] > 0.999).count();
     assert!(opaque > 50, "the isosurface covers {opaque} pixels");
-    // Pixels may differ where f32 and f64 disagree on a grazing crossing: bound their number.
+    // Pixels may differ where f32 and f64 disagree on a grazing crossing (the isosurface tests'
+    // policy): at most 1% of them.
     let differing = img
         .pixels
         .iter()
         .zip(&cpu)
         .filter(|(g, c)| (0..4).any(|k| (f64::from(g[k]) - c.rgba[k]).abs() > 2e-3))
         .count();
-    assert!(differing <= 2, "{differing} pixels differ by more than 2e-3");
+    assert!(
+        differing * 100 <= img.pixels.len(),
+        "{differing} of {} pixels differ by more than 2e-3",
+        img.pixels.len()
+    );
 }

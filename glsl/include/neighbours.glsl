@@ -12,9 +12,12 @@
 layout(std430, binding = BINDING_GRID) readonly buffer GridBuf { float grid[]; };
 layout(std430, binding = BINDING_GRID) readonly buffer GridVec4Buf { vec4 grid4[]; };
 #else
-layout(std430, binding = BINDING_SAMPLES) readonly buffer SamplesBuf { Sample samples[]; };
-layout(std430, binding = BINDING_NODES) readonly buffer NodesBuf { uvec4 nodes[]; };
-layout(std430, binding = BINDING_INDICES) readonly buffer IndicesBuf { uint indices[]; };
+// Texel-buffer views (binding::kind): imageLoad compiles to one gather per 8 lanes on llvmpipe,
+// where a storage-buffer load with a per-lane index is a loop over the lanes. `Sample` i is the
+// three texels 3i, 3i + 1, 3i + 2.
+layout(binding = BINDING_SAMPLES, rgba32f) uniform readonly imageBuffer samples;
+layout(binding = BINDING_NODES, rgba32ui) uniform readonly uimageBuffer nodes;
+layout(binding = BINDING_INDICES, r32ui) uniform readonly uimageBuffer indices;
 #endif
 
 // Gradient correction of the analytic gradient: q_k = Σ ∂w_i/∂x_k (f_i − b_iᵀc) b_i, with
@@ -179,7 +182,7 @@ uvec3 octree_leaf(vec3 x) {
     }
     uint node = 0u;
     for (int depth = 0; depth < 64; ++depth) {
-        uvec4 n = nodes[node];
+        uvec4 n = imageLoad(nodes, int(node));
         if (n.x == 0u) {
             return n.yzw;
         }
@@ -191,13 +194,14 @@ uvec3 octree_leaf(vec3 x) {
     return uvec3(0u);
 }
 
-// M d for a sample's support metric (MLS_FULL_METRIC 0: diagonal metrics only).
-vec3 metric_apply(Sample p, vec3 d) {
-    vec3 md = p.metric.xyz * d;
+// M d for sample i's support metric (MLS_FULL_METRIC 0: diagonal metrics only, and the third
+// texel is never read).
+vec3 metric_apply(int i, vec3 d) {
+    vec4 m = imageLoad(samples, 3 * i + 1);
+    vec3 md = m.xyz * d;
 #if MLS_FULL_METRIC == 1
-    md += vec3(p.metric.w * d.y + p.metric_off.x * d.z,
-               p.metric.w * d.x + p.metric_off.y * d.z,
-               p.metric_off.x * d.x + p.metric_off.y * d.y);
+    vec4 off = imageLoad(samples, 3 * i + 2);
+    md += vec3(m.w * d.y + off.x * d.z, m.w * d.x + off.y * d.z, off.x * d.x + off.y * d.y);
 #endif
     return md;
 }
@@ -207,15 +211,16 @@ void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float
     vec3 scale = vec3(uintBitsToFloat(leaf.z));
     s.inv_h = scale;
     for (uint r = leaf.x; r < leaf.x + leaf.y; ++r) {
-        Sample p = samples[indices[r]];
-        vec3 d = p.pos_value.xyz - x;
-        vec3 md = metric_apply(p, d);
+        int i = int(imageLoad(indices, int(r)).x);
+        vec4 pos_value = imageLoad(samples, 3 * i);
+        vec3 d = pos_value.xyz - x;
+        vec3 md = metric_apply(i, d);
         float rho2 = dot(d, md);
         if (rho2 < 1.0) {
             if (pass == 0u) {
-                mls_accumulate(s, d * scale, rho2, p.pos_value.w);
+                mls_accumulate(s, d * scale, rho2, pos_value.w);
             } else {
-                mls_visit_gradient(g, d * scale, rho2, p.pos_value.w, md, c);
+                mls_visit_gradient(g, d * scale, rho2, pos_value.w, md, c);
             }
         }
     }

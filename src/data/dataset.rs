@@ -269,7 +269,11 @@ impl Geometry {
 
 /// Position of point i of a regular grid stored x fastest.
 pub fn grid_point(dims: [usize; 3], origin: [f64; 3], spacing: [f64; 3], i: usize) -> [f64; 3] {
-    let index = [i % dims[0], (i / dims[0]) % dims[1], i / (dims[0] * dims[1])];
+    let index = [
+        i % dims[0],
+        (i / dims[0]) % dims[1],
+        i / (dims[0] * dims[1]),
+    ];
     [0, 1, 2].map(|a| origin[a] + index[a] as f64 * spacing[a])
 }
 

@@ -61,7 +61,7 @@ impl Variant {
                 NeighbourMode::Grid
             },
             full_metric: field.samples.has_full_metric(),
-            hull: field.hull.is_some(),
+            hull: false,
             method: None,
             adaptive_levels: 1,
             isosurfaces: 0,
@@ -74,6 +74,7 @@ impl Variant {
             method: Some(setup.method),
             adaptive_levels: adaptive::stack_size(setup.l_max, setup.l_min),
             isosurfaces: setup.isosurfaces.len(),
+            hull: field.hull.is_some(),
             ..Self::of(field)
         }
     }
@@ -339,9 +340,12 @@ pub(super) fn pipeline_for(
     push: u32,
 ) -> Result<ComputePipeline, VkError> {
     let spirv = compiler.compile(ShaderSource::File(kernel), &variant.defines())?;
-    let mut bindings = data.to_vec();
-    bindings.push(binding::PARAMS);
-    ComputePipeline::new(ctx, &variant.name(kernel), &spirv, &bindings, push)
+    let kinds: Vec<(u32, crate::vk::BindingKind)> = data
+        .iter()
+        .chain(&[binding::PARAMS])
+        .map(|&b| (b, binding::kind(b)))
+        .collect();
+    ComputePipeline::with_kinds(ctx, &variant.name(kernel), &spirv, &kinds, push)
 }
 
 /// Evaluates the field at `points` (frame-relative) with `mls_eval.comp`. Returns the results

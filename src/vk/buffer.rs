@@ -41,8 +41,10 @@ impl Buffer {
             });
         }
         let vk_usage = match usage {
+            // Every storage buffer may also be read through a texel-buffer view (BindingKind).
             BufferUsage::Storage => {
                 vk::BufferUsageFlags::STORAGE_BUFFER
+                    | vk::BufferUsageFlags::STORAGE_TEXEL_BUFFER
                     | vk::BufferUsageFlags::TRANSFER_DST
                     | vk::BufferUsageFlags::TRANSFER_SRC
             }

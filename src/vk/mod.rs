@@ -20,7 +20,7 @@ mod shader;
 pub use buffer::{Buffer, BufferUsage};
 pub use commands::{DispatchTiming, Recorder};
 pub use context::{Context, ContextOptions, DeviceInfo, RawContext};
-pub use pipeline::{BindGroup, ComputePipeline};
+pub use pipeline::{BindGroup, BindingKind, ComputePipeline};
 pub use shader::{ShaderCompiler, ShaderSource, shader_names};
 
 use ash::vk;

@@ -12,12 +12,46 @@ use std::sync::Arc;
 pub const MAX_PUSH_CONSTANTS: u32 = 128;
 
 /// A compute pipeline with its descriptor-set and pipeline layouts.
+/// How a kernel reads a binding. Texel-buffer views compile to gathers on llvmpipe, where a
+/// storage-buffer load with a per-lane index is a loop over the lanes (LAVAPIPE.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BindingKind {
+    /// A storage buffer (`buffer` block).
+    Storage,
+    /// A storage texel buffer of `uint`s (`r32ui uimageBuffer`).
+    TexelR32Uint,
+    /// A storage texel buffer of `vec4`s (`rgba32f imageBuffer`).
+    TexelRgba32Float,
+    /// A storage texel buffer of `uvec4`s (`rgba32ui uimageBuffer`).
+    TexelRgba32Uint,
+}
+
+impl BindingKind {
+    fn descriptor_type(self) -> vk::DescriptorType {
+        match self {
+            BindingKind::Storage => vk::DescriptorType::STORAGE_BUFFER,
+            _ => vk::DescriptorType::STORAGE_TEXEL_BUFFER,
+        }
+    }
+
+    /// The view's format and its element size in bytes.
+    fn texel(self) -> Option<(vk::Format, u64)> {
+        match self {
+            BindingKind::Storage => None,
+            BindingKind::TexelR32Uint => Some((vk::Format::R32_UINT, 4)),
+            BindingKind::TexelRgba32Float => Some((vk::Format::R32G32B32A32_SFLOAT, 16)),
+            BindingKind::TexelRgba32Uint => Some((vk::Format::R32G32B32A32_UINT, 16)),
+        }
+    }
+}
+
 pub struct ComputePipeline {
     shared: Arc<Shared>,
     pub(crate) pipeline: vk::Pipeline,
     pub(crate) layout: vk::PipelineLayout,
     set_layout: vk::DescriptorSetLayout,
     bindings: Vec<u32>,
+    kinds: Vec<BindingKind>,
     pub(crate) push_size: u32,
     name: String,
 }
@@ -32,6 +66,22 @@ impl ComputePipeline {
         bindings: &[u32],
         push_size: u32,
     ) -> Result<Self, VkError> {
+        let kinds: Vec<(u32, BindingKind)> = bindings
+            .iter()
+            .map(|&b| (b, BindingKind::Storage))
+            .collect();
+        Self::with_kinds(ctx, name, spirv, &kinds, push_size)
+    }
+
+    /// As [`ComputePipeline::new`], with the kind of each binding.
+    pub fn with_kinds(
+        ctx: &Context,
+        name: &str,
+        spirv: &[u32],
+        kinds: &[(u32, BindingKind)],
+        push_size: u32,
+    ) -> Result<Self, VkError> {
+        let bindings: Vec<u32> = kinds.iter().map(|(b, _)| *b).collect();
         if push_size > MAX_PUSH_CONSTANTS || !push_size.is_multiple_of(4) {
             return Err(VkError::Usage(format!(
                 "pipeline '{name}': push constants of {push_size} bytes (must be a multiple of 4, at most {MAX_PUSH_CONSTANTS})"
@@ -40,12 +90,12 @@ impl ComputePipeline {
         let shared = ctx.shared.clone();
         let device = &shared.device;
         let what = || format!("pipeline '{name}'");
-        let layout_bindings: Vec<_> = bindings
+        let layout_bindings: Vec<_> = kinds
             .iter()
-            .map(|&b| {
+            .map(|&(b, kind)| {
                 vk::DescriptorSetLayoutBinding::default()
                     .binding(b)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .descriptor_type(kind.descriptor_type())
                     .descriptor_count(1)
                     .stage_flags(vk::ShaderStageFlags::COMPUTE)
             })
@@ -137,7 +187,8 @@ impl ComputePipeline {
             pipeline,
             layout,
             set_layout,
-            bindings: bindings.to_vec(),
+            bindings,
+            kinds: kinds.iter().map(|(_, k)| *k).collect(),
             push_size,
             name: name.to_string(),
         })
@@ -170,12 +221,14 @@ pub struct BindGroup<'a> {
     shared: Arc<Shared>,
     pool: vk::DescriptorPool,
     pub(crate) set: vk::DescriptorSet,
+    /// Texel-buffer views of this group's texel bindings.
+    views: Vec<vk::BufferView>,
     _buffers: PhantomData<&'a Buffer>,
 }
 
 impl<'a> BindGroup<'a> {
     /// Binds `buffers[i]` at `(binding, buffer)` pairs; every binding of the pipeline must be
-    /// given exactly once.
+    /// given exactly once. Texel bindings get a view over the whole buffer, owned by the group.
     pub fn new(
         ctx: &Context,
         pipeline: &ComputePipeline,
@@ -192,40 +245,96 @@ impl<'a> BindGroup<'a> {
             )));
         }
         let shared = ctx.shared.clone();
+        let kind_of = |binding: u32| {
+            pipeline
+                .bindings
+                .iter()
+                .position(|&b| b == binding)
+                .map_or(BindingKind::Storage, |i| pipeline.kinds[i])
+        };
+        let mut group = Self {
+            shared: shared.clone(),
+            pool: vk::DescriptorPool::null(),
+            set: vk::DescriptorSet::null(),
+            views: Vec::new(),
+            _buffers: PhantomData,
+        };
         let device = &shared.device;
         let what = || format!("descriptors of pipeline '{}'", pipeline.name);
-        let count = u32::try_from(buffers.len().max(1)).unwrap_or(u32::MAX);
-        let sizes = [vk::DescriptorPoolSize::default()
-            .ty(vk::DescriptorType::STORAGE_BUFFER)
-            .descriptor_count(count)];
+        // One view per texel binding (None for storage buffers), made before anything that
+        // needs them; `group` destroys whatever was made if a later step fails.
+        let mut views = Vec::with_capacity(buffers.len());
+        for (binding, buffer) in buffers {
+            let Some((format, texel_bytes)) = kind_of(*binding).texel() else {
+                views.push(None);
+                continue;
+            };
+            let elements = buffer.size() / texel_bytes;
+            if elements > shared.info.max_texel_buffer_elements {
+                return Err(VkError::Limit {
+                    resource: format!("texel view of buffer '{}'", buffer.name()),
+                    bytes: buffer.size(),
+                    limit: shared.info.max_texel_buffer_elements * texel_bytes,
+                    limit_name: "maxTexelBufferElements",
+                });
+            }
+            let info = vk::BufferViewCreateInfo::default()
+                .buffer(buffer.handle)
+                .format(format)
+                .offset(0)
+                .range(vk::WHOLE_SIZE);
+            // SAFETY: the buffer is live and was created with STORAGE_TEXEL_BUFFER usage; its
+            // size in texels was checked against maxTexelBufferElements above.
+            let view = unsafe { device.create_buffer_view(&info, None) }
+                .call("vkCreateBufferView", || {
+                    format!("texel view of buffer '{}'", buffer.name())
+                })?;
+            group.views.push(view);
+            views.push(Some(view));
+        }
+        let mut sizes: Vec<vk::DescriptorPoolSize> = Vec::new();
+        for ty in [
+            vk::DescriptorType::STORAGE_BUFFER,
+            vk::DescriptorType::STORAGE_TEXEL_BUFFER,
+        ] {
+            let n = buffers
+                .iter()
+                .filter(|(b, _)| kind_of(*b).descriptor_type() == ty)
+                .count();
+            if n > 0 {
+                sizes.push(
+                    vk::DescriptorPoolSize::default()
+                        .ty(ty)
+                        .descriptor_count(u32::try_from(n).unwrap_or(u32::MAX)),
+                );
+            }
+        }
+        if sizes.is_empty() {
+            sizes.push(
+                vk::DescriptorPoolSize::default()
+                    .ty(vk::DescriptorType::STORAGE_BUFFER)
+                    .descriptor_count(1),
+            );
+        }
         let pool_info = vk::DescriptorPoolCreateInfo::default()
             .max_sets(1)
             .pool_sizes(&sizes);
         // SAFETY: valid create info on a live device.
-        let pool = unsafe { device.create_descriptor_pool(&pool_info, None) }
+        group.pool = unsafe { device.create_descriptor_pool(&pool_info, None) }
             .call("vkCreateDescriptorPool", what)?;
         let layouts = [pipeline.set_layout];
         let alloc = vk::DescriptorSetAllocateInfo::default()
-            .descriptor_pool(pool)
+            .descriptor_pool(group.pool)
             .set_layouts(&layouts);
         // SAFETY: the pool has room for exactly this set.
-        let set = match unsafe { device.allocate_descriptor_sets(&alloc) } {
-            Ok(s) => s.into_iter().next(),
-            Err(result) => {
-                // SAFETY: the pool is unused.
-                unsafe { device.destroy_descriptor_pool(pool, None) };
-                return Err(VkError::Call {
-                    call: "vkAllocateDescriptorSets",
-                    what: what(),
-                    result,
-                });
-            }
-        };
+        let set = unsafe { device.allocate_descriptor_sets(&alloc) }
+            .call("vkAllocateDescriptorSets", what)?
+            .into_iter()
+            .next();
         let Some(set) = set else {
-            // SAFETY: the pool is unused.
-            unsafe { device.destroy_descriptor_pool(pool, None) };
             return Err(VkError::Usage(format!("{}: no set allocated", what())));
         };
+        group.set = set;
         let infos: Vec<[vk::DescriptorBufferInfo; 1]> = buffers
             .iter()
             .map(|(_, b)| {
@@ -235,31 +344,41 @@ impl<'a> BindGroup<'a> {
                     .range(vk::WHOLE_SIZE)]
             })
             .collect();
+        let view_lists: Vec<[vk::BufferView; 1]> = views
+            .iter()
+            .map(|v| [v.unwrap_or(vk::BufferView::null())])
+            .collect();
         let writes: Vec<_> = buffers
             .iter()
-            .zip(&infos)
-            .map(|((binding, _), info)| {
-                vk::WriteDescriptorSet::default()
+            .zip(infos.iter().zip(&view_lists))
+            .zip(&views)
+            .map(|(((binding, _), (info, view)), made)| {
+                let write = vk::WriteDescriptorSet::default()
                     .dst_set(set)
                     .dst_binding(*binding)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                    .buffer_info(info)
+                    .descriptor_type(kind_of(*binding).descriptor_type());
+                if made.is_some() {
+                    write.texel_buffer_view(view)
+                } else {
+                    write.buffer_info(info)
+                }
             })
             .collect();
-        // SAFETY: the set and buffers are live; the infos outlive the call.
+        // SAFETY: the set, buffers and views are live; the infos outlive the call.
         unsafe { device.update_descriptor_sets(&writes, &[]) };
-        Ok(Self {
-            shared,
-            pool,
-            set,
-            _buffers: PhantomData,
-        })
+        Ok(group)
     }
 }
 
 impl Drop for BindGroup<'_> {
     fn drop(&mut self) {
-        // SAFETY: submissions are synchronous; no pending command buffer uses the set.
-        unsafe { self.shared.device.destroy_descriptor_pool(self.pool, None) };
+        // SAFETY: submissions are synchronous; no pending command buffer uses the set or the
+        // views. Destroying a null pool is a no-op (a group that failed before creating it).
+        unsafe {
+            self.shared.device.destroy_descriptor_pool(self.pool, None);
+            for &view in &self.views {
+                self.shared.device.destroy_buffer_view(view, None);
+            }
+        }
     }
 }
