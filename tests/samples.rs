@@ -498,3 +498,38 @@ fn non_manifold_meshes_are_rejected() {
     let text = sample_error(&d);
     assert!(text.contains("non-manifold"), "{text}");
 }
+
+#[test]
+fn cell_data_of_grids_keeps_the_grids_domain() {
+    // An image of 5³ points has 4³ cells; their centres form a grid offset by half a cell, but
+    // the domain stays the points' box.
+    let image = Geometry::Image {
+        dims: [5; 3],
+        origin: [0.0; 3],
+        spacing: [1.0; 3],
+    };
+    let d = Dataset {
+        geometry: image,
+        arrays: vec![DataArray {
+            name: "c".into(),
+            location: Location::Cell,
+            components: 1,
+            values: vec![1.0; 64],
+        }],
+    };
+    let set = samples(&d, 2.0, 8, None);
+    assert_eq!(set.len(), 64);
+    assert_eq!(set.position(0), [0.5; 3]);
+    assert_eq!(set.domain_box(), ([0.0; 3], [4.0; 3]));
+    // A curvilinear grid's hull is its own boundary, not that of its cell centres.
+    let mut d = point_data(warped_grid(6), linear);
+    d.arrays[0] = DataArray {
+        name: "c".into(),
+        location: Location::Cell,
+        components: 1,
+        values: vec![1.0; 125],
+    };
+    let set = samples(&d, 2.0, 8, None);
+    assert_eq!(set.len(), 125);
+    assert_eq!(set.domain_box(), d.geometry.bounds());
+}

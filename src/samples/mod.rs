@@ -296,6 +296,9 @@ impl SampleSet {
                 origin,
                 spacing,
             } => {
+                // The domain is the grid's box whatever the data's location.
+                let lo = *origin;
+                let hi = [0, 1, 2].map(|a| origin[a] + (dims[a] - 1) as f64 * spacing[a]);
                 // Cell data of an image is an image of the cell centres.
                 let (dims, origin) = if cell_data {
                     (
@@ -307,7 +310,6 @@ impl SampleSet {
                     (*dims, *origin)
                 };
                 let h = spacing.map(|s| settings.support * s);
-                let hi = [0, 1, 2].map(|a| origin[a] + (dims[a] - 1) as f64 * spacing[a]);
                 provenance.support_kind = "uniform";
                 Ok(Self {
                     positions: Positions::Grid {
@@ -317,12 +319,14 @@ impl SampleSet {
                     },
                     values: data.values.clone(),
                     supports: Supports::Uniform(h),
-                    domain: Domain::Box { lo: origin, hi },
+                    domain: Domain::Box { lo, hi },
                     spacing: 0.0,
                     provenance,
                 })
             }
             Geometry::Rectilinear { coords } => {
+                let lo = coords.each_ref().map(|c| c[0]);
+                let hi = coords.each_ref().map(|c| c[c.len() - 1]);
                 let coords = if cell_data {
                     [0, 1, 2].map(|a| centres(&coords[a]))
                 } else {
@@ -339,8 +343,6 @@ impl SampleSet {
                         [coords[0][x], coords[1][y], coords[2][z]]
                     })
                     .collect();
-                let lo = coords.each_ref().map(|c| c[0]);
-                let hi = coords.each_ref().map(|c| c[c.len() - 1]);
                 let metrics = if settings.anisotropic.unwrap_or(true) {
                     provenance.support_kind = "diagonal";
                     supports::rectilinear(&coords, settings.support)
@@ -357,12 +359,13 @@ impl SampleSet {
                 })
             }
             Geometry::Structured { dims, points } => {
+                // The grid's own boundary, also for cell data sampled at the centroids.
+                let hull = mesh::structured_hull(*dims, points, &source_name)?;
                 let (dims, points) = if cell_data {
                     mesh::structured_centroids(*dims, points)
                 } else {
                     (*dims, points.clone())
                 };
-                let hull = mesh::structured_hull(dims, &points, &source_name)?;
                 let metrics = if settings.anisotropic.unwrap_or(false) {
                     provenance.support_kind = "anisotropic-edges";
                     supports::structured(dims, &points, settings.support)
