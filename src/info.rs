@@ -140,6 +140,10 @@ fn describe_samples(
             "ellipsoids spanned by {} × the local index-direction edges",
             settings.support
         ),
+        "anisotropic-one-ring" => format!(
+            "ellipsoids from each point's one-ring covariance, scaled to {} × its farthest point",
+            settings.knn_support
+        ),
         "anisotropic" => format!(
             "ellipsoids from the neighbourhood's covariance, scaled to {} × the {}-th neighbour",
             settings.knn_support, settings.knn

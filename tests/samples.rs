@@ -252,23 +252,30 @@ fn tetrahedral_torus_hull_is_closed_and_linear_fields_are_reproduced() {
         "hull encloses {enclosed}, cells fill {cells_volume}"
     );
     assert_eq!(set.provenance.inverted_cells, 0);
-    let f = field(set, Basis::Linear);
-    // Queries inside the tube: radius 0.8–1.2, |z| < 0.15.
-    let mut rng = Lcg::new(3);
-    let o = f.frame_origin.to_array();
-    let pts: Vec<[f64; 3]> = (0..1500)
-        .map(|_| {
-            let phi = 2.0 * std::f64::consts::PI * rng.next_f64();
-            let r = 0.8 + 0.4 * rng.next_f64();
-            let z = 0.3 * (rng.next_f64() - 0.5);
-            [r * phi.cos() - o[0], r * phi.sin() - o[1], z - o[2]]
-        })
-        .collect();
-    let (err, solved) = cpu_linear_error(&f, &pts);
-    assert!(err < CPU_TOLERANCE, "CPU error {err}");
-    assert!(solved > 0.99, "linear solved at {solved}");
-    let gpu_err = gpu_linear_error(&f, &pts);
-    assert!(gpu_err < 2e-4, "GPU error {gpu_err}");
+    // Isotropic kNN supports, then ellipsoids from each point's one-ring.
+    let one_ring = samples(&d, 2.0, 8, Some(true));
+    assert_eq!(one_ring.provenance.support_kind, "anisotropic-one-ring");
+    assert!(one_ring.has_full_metric());
+    for set in [set, one_ring] {
+        let kind = set.provenance.support_kind;
+        let f = field(set, Basis::Linear);
+        // Queries inside the tube: radius 0.8–1.2, |z| < 0.15.
+        let mut rng = Lcg::new(3);
+        let o = f.frame_origin.to_array();
+        let pts: Vec<[f64; 3]> = (0..1500)
+            .map(|_| {
+                let phi = 2.0 * std::f64::consts::PI * rng.next_f64();
+                let r = 0.8 + 0.4 * rng.next_f64();
+                let z = 0.3 * (rng.next_f64() - 0.5);
+                [r * phi.cos() - o[0], r * phi.sin() - o[1], z - o[2]]
+            })
+            .collect();
+        let (err, solved) = cpu_linear_error(&f, &pts);
+        assert!(err < CPU_TOLERANCE, "{kind}: CPU error {err}");
+        assert!(solved > 0.99, "{kind}: linear solved at {solved}");
+        let gpu_err = gpu_linear_error(&f, &pts);
+        assert!(gpu_err < 2e-4, "{kind}: GPU error {gpu_err}");
+    }
 }
 
 #[test]

@@ -143,8 +143,8 @@ pub struct Provenance {
     /// Cells whose orientation is inverted (accepted: the hull does not use orientation).
     pub inverted_cells: usize,
     /// "uniform" (regular grid), "diagonal" (rectilinear spacings), "anisotropic-edges"
-    /// (curvilinear index-direction edges), "isotropic" or "anisotropic" (from the k nearest
-    /// neighbours).
+    /// (curvilinear index-direction edges), "anisotropic-one-ring" (mesh point neighbourhoods),
+    /// "isotropic" or "anisotropic" (from the k nearest neighbours).
     pub support_kind: &'static str,
 }
 
@@ -392,7 +392,17 @@ impl SampleSet {
                 let merged = merge_duplicates(positions, values);
                 provenance.merged = merged.merged;
                 let hull = mesh::unstructured_hull(points, cells, &source_name)?;
-                let metrics = derive_scattered(&merged.positions, settings, &mut provenance);
+                let metrics = if settings.anisotropic.unwrap_or(false) && !cell_data {
+                    provenance.support_kind = "anisotropic-one-ring";
+                    let rings = supports::one_rings(cells, &merged.remap, merged.positions.len());
+                    supports::anisotropic_neighbourhoods(
+                        &merged.positions,
+                        &rings,
+                        settings.knn_support,
+                    )
+                } else {
+                    derive_scattered(&merged.positions, settings, &mut provenance)
+                };
                 Ok(Self {
                     positions: Positions::Scattered(merged.positions),
                     values: merged.values,

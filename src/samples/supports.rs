@@ -8,6 +8,10 @@
 //!   ellipsoid's axes and `√λ` their relative lengths. The shape is then scaled so that the
 //!   farthest of those k neighbours lies at ρ = 1/support, which makes the isotropic case
 //!   coincide with the rule above.
+//! - Anisotropic, unstructured meshes (point data): the same second moment over the point's
+//!   one-ring (every point sharing a cell with it) instead of its k nearest neighbours, scaled
+//!   so that the farthest one-ring point lies at ρ = 1/support. Cell data, sampled at
+//!   centroids, uses the k nearest centroids.
 //! - Anisotropic, curvilinear grids: the columns of `E = [e_i e_j e_k]` are the local
 //!   index-direction edges (of the two one-sided edges per direction, the longer one, so that
 //!   graded grids leave no holes); the ellipsoid is `support × E` applied to the unit ball,
@@ -198,10 +202,19 @@ pub fn isotropic_knn(positions: &[[f64; 3]], support: f64, k: usize) -> Vec<Metr
 
 /// Ellipsoids from the second moment of the k nearest neighbours (module docs).
 pub fn anisotropic_knn(positions: &[[f64; 3]], support: f64, k: usize) -> Vec<Metric> {
-    let neighbours = knn(positions, k);
+    anisotropic_neighbourhoods(positions, &knn(positions, k), support)
+}
+
+/// Ellipsoids from the second moment of given neighbourhoods (sample indices), each scaled so
+/// that its farthest neighbour lies at ρ = 1/support.
+pub fn anisotropic_neighbourhoods(
+    positions: &[[f64; 3]],
+    neighbours: &[Vec<u32>],
+    support: f64,
+) -> Vec<Metric> {
     positions
         .par_iter()
-        .zip(&neighbours)
+        .zip(neighbours)
         .map(|(p, n)| {
             let ys: Vec<[f64; 3]> = n
                 .iter()
@@ -225,6 +238,32 @@ pub fn anisotropic_knn(positions: &[[f64; 3]], support: f64, k: usize) -> Vec<Me
             shape.map(|m| m * scale)
         })
         .collect()
+}
+
+/// The one-ring of every point of a mesh: the other points of the cells it belongs to.
+/// `remap` maps mesh point indices to sample indices (after duplicates were merged).
+pub fn one_rings(
+    cells: &crate::data::dataset::Cells,
+    remap: &[u32],
+    samples: usize,
+) -> Vec<Vec<u32>> {
+    let mut rings: Vec<Vec<u32>> = vec![Vec::new(); samples];
+    for c in 0..cells.len() {
+        let ids = cells.cell(c);
+        for &a in ids {
+            for &b in ids {
+                let (a, b) = (remap[a as usize], remap[b as usize]);
+                if a != b {
+                    rings[a as usize].push(b);
+                }
+            }
+        }
+    }
+    for r in &mut rings {
+        r.sort_unstable();
+        r.dedup();
+    }
+    rings
 }
 
 /// Diagonal supports of a rectilinear grid (module docs). A single-coordinate axis takes the
