@@ -79,14 +79,7 @@ impl Neighbours for GridNeighbours<'_> {
 
     fn for_each(&self, x: [f64; 3], visit: &mut dyn FnMut([f64; 3], f64, &Metric)) {
         let inv_h = self.inv_support();
-        let metric = [
-            inv_h[0] * inv_h[0],
-            inv_h[1] * inv_h[1],
-            inv_h[2] * inv_h[2],
-            0.0,
-            0.0,
-            0.0,
-        ];
+        let metric = crate::samples::supports::diagonal(inv_h.map(|v| 1.0 / v));
         let mut lo = [0usize; 3];
         let mut hi = [0usize; 3];
         for a in 0..3 {

@@ -187,14 +187,7 @@ impl SampleSet {
     /// Metric of sample i.
     pub fn metric(&self, i: usize) -> Metric {
         match &self.supports {
-            Supports::Uniform(h) => [
-                1.0 / (h[0] * h[0]),
-                1.0 / (h[1] * h[1]),
-                1.0 / (h[2] * h[2]),
-                0.0,
-                0.0,
-                0.0,
-            ],
+            Supports::Uniform(h) => supports::diagonal(*h),
             Supports::PerSample(m) => m[i],
         }
     }

@@ -176,9 +176,20 @@ fn offset(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [b[0] - a[0], b[1] - a[1], b[2] - a[2]]
 }
 
+/// The metric of an axis-aligned ellipsoid with half axes h.
+pub fn diagonal(h: [f64; 3]) -> Metric {
+    [
+        1.0 / (h[0] * h[0]),
+        1.0 / (h[1] * h[1]),
+        1.0 / (h[2] * h[2]),
+        0.0,
+        0.0,
+        0.0,
+    ]
+}
+
 fn isotropic(h: f64) -> Metric {
-    let m = 1.0 / (h * h);
-    [m, m, m, 0.0, 0.0, 0.0]
+    diagonal([h; 3])
 }
 
 /// h_i = support × distance to the k-th nearest other sample.
@@ -299,14 +310,7 @@ pub fn rectilinear(coords: &[Vec<f64>; 3], support: f64) -> Vec<Metric> {
                 let g = gaps[a][idx[a]];
                 support * if g > 0.0 { g } else { widest }
             });
-            [
-                1.0 / (h[0] * h[0]),
-                1.0 / (h[1] * h[1]),
-                1.0 / (h[2] * h[2]),
-                0.0,
-                0.0,
-                0.0,
-            ]
+            diagonal(h)
         })
         .collect()
 }
