@@ -255,6 +255,9 @@ impl SampleSet {
         array: Option<&str>,
         settings: &SampleSettings,
     ) -> Result<Self, SampleError> {
+        // Cell indices are used unchecked below: a dataset built by hand must pass the
+        // loaders' checks too.
+        dataset.validate(path)?;
         let mut set = Self::build(dataset, path, array, settings)?;
         set.spacing = match &set.positions {
             Positions::Grid { spacing, .. } => {
