@@ -211,7 +211,8 @@ pub struct TfPoint {
 }
 const _: () = assert!(std::mem::size_of::<TfPoint>() == 32);
 
-/// A sample of the octree path. GLSL twin: `Sample`.
+/// A sample of the octree path. GLSL twin: `Sample`; the kernels read it as three `vec4`
+/// texels of an `rgba32f` texel-buffer view (`binding::kind`), in this field order.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
 pub struct Sample {

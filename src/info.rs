@@ -5,7 +5,7 @@
 use crate::data::dataset::{Dataset, Geometry};
 use crate::gpu_types::Sample;
 use crate::recon::mls::Neighbours;
-use crate::recon::{Octree, OctreeSettings, SamplePoint};
+use crate::recon::{Octree, OctreeSettings};
 use crate::render::RenderError;
 use crate::samples::{Domain, SampleSet, SampleSettings, metric_rho2, supports};
 use std::collections::BTreeMap;
@@ -184,14 +184,7 @@ fn describe_samples(
         "  aspect ratio: min {:.2}, median {:.2}, max {:.2}",
         aspect[0], aspect[1], aspect[2]
     );
-    let points: Vec<SamplePoint> = (0..n)
-        .map(|i| SamplePoint {
-            position: set.position(i),
-            value: f64::from(set.values[i]),
-            metric: set.metric(i),
-        })
-        .collect();
-    let tree = Octree::build(points, octree, |_| {})?;
+    let tree = Octree::from_samples(set, octree, |_| {})?;
     let weighted = quantiles(
         picks
             .iter()

@@ -24,7 +24,7 @@
 
 use super::ReconError;
 use super::mls::Neighbours;
-use crate::samples::{Metric, metric_apply, metric_rho2, supports};
+use crate::samples::{Metric, SampleSet, metric_apply, metric_rho2, supports};
 use rayon::prelude::*;
 
 /// A scattered sample with an ellipsoidal support.
@@ -190,6 +190,22 @@ impl Prepared<'_> {
 }
 
 impl Octree {
+    /// The octree over every sample of a sample set.
+    pub fn from_samples(
+        set: &SampleSet,
+        settings: &OctreeSettings,
+        progress: impl FnMut(f64),
+    ) -> Result<Self, ReconError> {
+        let points = (0..set.len())
+            .map(|i| SamplePoint {
+                position: set.position(i),
+                value: f64::from(set.values[i]),
+                metric: set.metric(i),
+            })
+            .collect();
+        Self::build(points, settings, progress)
+    }
+
     /// Builds the octree; `progress` is called with the fraction of the work finished.
     pub fn build(
         samples: Vec<SamplePoint>,

@@ -60,7 +60,7 @@ impl Variant {
             } else {
                 NeighbourMode::Grid
             },
-            full_metric: field.samples.has_full_metric(),
+            full_metric: field.has_full_metric(),
             hull: false,
             method: None,
             adaptive_levels: 1,

@@ -18,7 +18,7 @@ pub mod transfer;
 
 use crate::data::{DataError, Volume};
 use crate::recon::mls::{MlsSettings, Neighbours};
-use crate::recon::{GridNeighbours, Octree, OctreeSettings, ReconError, SamplePoint};
+use crate::recon::{GridNeighbours, Octree, OctreeSettings, ReconError};
 use crate::recon::{NeighbourMode, Reconstruction};
 use crate::samples::bvh::HullBvh;
 use crate::samples::{Domain, Metric, Positions, Provenance, SampleSet, Supports};
@@ -62,6 +62,10 @@ pub struct Field {
     pub octree: Option<Octree>,
     /// Ray-clipping hierarchy over the boundary, for a hull domain.
     pub hull: Option<HullBvh>,
+    /// Smallest and largest sample value.
+    range: (f64, f64),
+    /// Whether any support is a rotated ellipsoid.
+    full_metric: bool,
 }
 
 impl Field {
@@ -108,25 +112,28 @@ impl Field {
         samples.translate(centre.to_array());
         let grid = matches!(samples.positions, Positions::Grid { .. })
             && matches!(samples.supports, Supports::Uniform(_));
+        // Derived once here: every frame's table key and shader variant read them.
+        let range = samples
+            .values
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(l, h), &v| {
+                (l.min(f64::from(v)), h.max(f64::from(v)))
+            });
+        let full_metric = samples.has_full_metric();
         let mut field = Self {
             frame_origin: centre,
             samples,
             reconstruction,
             octree: None,
             hull: None,
+            range,
+            full_metric,
         };
         if let Domain::Hull(h) = &field.samples.domain {
             field.hull = Some(HullBvh::build(h));
         }
         if !grid || reconstruction.neighbours == NeighbourMode::Octree {
-            let points: Vec<SamplePoint> = (0..field.samples.len())
-                .map(|i| SamplePoint {
-                    position: field.samples.position(i),
-                    value: f64::from(field.samples.values[i]),
-                    metric: field.samples.metric(i),
-                })
-                .collect();
-            field.octree = Some(Octree::build(points, octree, progress)?);
+            field.octree = Some(Octree::from_samples(&field.samples, octree, progress)?);
         }
         Ok(field)
     }
@@ -189,12 +196,12 @@ impl Field {
 
     /// Smallest and largest sample value.
     pub fn value_range(&self) -> (f64, f64) {
-        self.samples
-            .values
-            .iter()
-            .fold((f64::MAX, f64::MIN), |(l, h), &v| {
-                (l.min(f64::from(v)), h.max(f64::from(v)))
-            })
+        self.range
+    }
+
+    /// Whether any support is a rotated ellipsoid (the full-metric shader variant).
+    pub fn has_full_metric(&self) -> bool {
+        self.full_metric
     }
 }
 
