@@ -44,6 +44,24 @@ pub mod binding {
     pub const HULL_NODES: u32 = 14;
     /// Hull triangles, three `vec4` vertices each, in BVH leaf order (read-only).
     pub const HULL_TRIS: u32 = 15;
+    /// Splatting: the kernels, one `Sample` each with its volume in `metric_off.z` (read-only).
+    pub const SPLAT_KERNELS: u32 = 16;
+    /// Splatting: one `Splat` per kernel (written by splat_project).
+    pub const SPLATS: u32 = 17;
+    /// Splatting: entries per sheet (atomic counts of splat_project).
+    pub const SLAB_COUNTS: u32 = 18;
+    /// Splatting: first entry of each sheet in the list (written by the host).
+    pub const SLAB_OFFSETS: u32 = 19;
+    /// Splatting: entries written so far per sheet (atomic cursors of splat_bin).
+    pub const SLAB_CURSORS: u32 = 20;
+    /// Splatting: the binned entries, `uvec2(splat, block)`, sheet after sheet.
+    pub const SPLAT_LIST: u32 = 21;
+    /// Splatting: sheet buffers (f32 bits in `uint`s, added to by compare-and-swap).
+    pub const SHEETS: u32 = 22;
+    /// Splatting: one `uint` per occlusion tile, 1 when every pixel in it is opaque.
+    pub const OCCLUSION: u32 = 23;
+    /// Splatting: `SplatCounts` counters (atomic).
+    pub const SPLAT_STATS: u32 = 24;
 
     /// How kernels read a binding: the octree's samples, nodes and references through
     /// texel-buffer views (one AVX2 gather per 8 lanes on llvmpipe instead of a per-lane loop;
@@ -59,7 +77,7 @@ pub mod binding {
     }
 
     /// Every binding with its macro name.
-    pub const ALL: [(&str, u32); 16] = [
+    pub const ALL: [(&str, u32); 25] = [
         ("BINDING_PARAMS", PARAMS),
         ("BINDING_GRID", GRID),
         ("BINDING_SAMPLES", SAMPLES),
@@ -76,6 +94,15 @@ pub mod binding {
         ("BINDING_RAY_STATE", RAY_STATE),
         ("BINDING_HULL_NODES", HULL_NODES),
         ("BINDING_HULL_TRIS", HULL_TRIS),
+        ("BINDING_SPLAT_KERNELS", SPLAT_KERNELS),
+        ("BINDING_SPLATS", SPLATS),
+        ("BINDING_SLAB_COUNTS", SLAB_COUNTS),
+        ("BINDING_SLAB_OFFSETS", SLAB_OFFSETS),
+        ("BINDING_SLAB_CURSORS", SLAB_CURSORS),
+        ("BINDING_SPLAT_LIST", SPLAT_LIST),
+        ("BINDING_SHEETS", SHEETS),
+        ("BINDING_OCCLUSION", OCCLUSION),
+        ("BINDING_SPLAT_STATS", SPLAT_STATS),
     ];
 }
 
@@ -266,3 +293,77 @@ pub struct CountPush {
     pub _pad: [u32; 2],
 }
 const _: () = assert!(std::mem::size_of::<CountPush>() == 16);
+
+/// Constants of the splatting kernels. GLSL twin: `SplatParams`. Camera fields share their
+/// names with `RenderParams`, so `camera.glsl` and `shading.glsl` serve both renderers.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct SplatParams {
+    /// Eye (frame-relative) xyz; w: near-plane distance.
+    pub eye: [f32; 4],
+    /// View direction; w: focal length in pixels (per tangent unit, or per world unit when
+    /// orthographic).
+    pub forward: [f32; 4],
+    /// Right vector; w: pixel x of the optical axis.
+    pub right: [f32; 4],
+    /// Up vector; w: pixel y of the optical axis.
+    pub up: [f32; 4],
+    /// Domain box minimum; w: t where the first sheet starts.
+    pub box_min: [f32; 4],
+    /// Domain box maximum; w: sheet thickness Δs.
+    pub box_max: [f32; 4],
+    /// Background rgb; w: early-termination opacity.
+    pub background: [f32; 4],
+    /// Cutoff (standard deviations), low-pass variance (px²), Gaussian σ (fraction of the
+    /// support), lateral clamp of u₀/u₂.
+    pub kernel_filter: [f32; 4],
+    /// Blinn–Phong ambient, diffuse, specular, shininess.
+    pub lighting: [f32; 4],
+    pub width: u32,
+    pub height: u32,
+    /// 0 perspective, 1 orthographic.
+    pub projection: u32,
+    pub tf_count: u32,
+    pub tan_half_fov: f32,
+    pub ortho_half_height: f32,
+    /// Lateral clamp of u₁/u₂.
+    pub lateral_y: f32,
+    pub _pad0: f32,
+    /// Sheets in the frame.
+    pub slabs: u32,
+    /// Occlusion tiles per image row.
+    pub tiles_x: u32,
+    /// Kernels to project.
+    pub kernel_count: u32,
+    pub iso_count: u32,
+}
+const _: () = assert!(std::mem::size_of::<SplatParams>() == 192);
+
+/// One projected kernel (splat_project's output). GLSL twin: `Splat`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct Splat {
+    /// Pixel x, y of the centre, t there, conditional standard deviation of t.
+    pub centre_depth: [f32; 4],
+    /// Conic xx, xy, yy and the footprint's peak.
+    pub conic_amplitude: [f32; 4],
+    /// Depth slope b (2), unused ×2.
+    pub slope: [f32; 4],
+    /// Emitted colour (pre-shaded), unused.
+    pub color: [f32; 4],
+    /// Inclusive pixel box x0, y0, x1, y1.
+    pub bbox: [i32; 4],
+    /// First and last sheet (first > last: culled), blocks per row, blocks in all.
+    pub slabs: [u32; 4],
+}
+const _: () = assert!(std::mem::size_of::<Splat>() == 96);
+
+/// Push constants of the per-sheet splatting kernels. GLSL twin: `SlabPush`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct SlabPush {
+    /// The sheet accumulated (splat_accumulate) or just completed (splat_composite).
+    pub slab: u32,
+    pub _pad: [u32; 3],
+}
+const _: () = assert!(std::mem::size_of::<SlabPush>() == 16);

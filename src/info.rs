@@ -191,7 +191,7 @@ fn describe_samples(
             .map(|&i| {
                 let x = set.position(i);
                 let mut count = 0.0;
-                tree.for_each(x, &mut |q, _, m| {
+                tree.for_each(x, &mut |_, q, _, m| {
                     if metric_rho2(m, [q[0] - x[0], q[1] - x[1], q[2] - x[2]]) < 1.0 {
                         count += 1.0;
                     }

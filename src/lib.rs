@@ -8,6 +8,8 @@
 //! - [`recon`]: MLS reconstruction (f64 CPU reference) and the redundant octree [OCT].
 //! - [`render`]: cameras, transfer functions, the ray-casting integrator (CPU reference) and the
 //!   GPU renderer that drives the kernels in `glsl/`.
+//! - [`splat`]: EWA volume splatting, pre- and post-shaded with sheet buffers (CPU twins and
+//!   the GPU driver).
 //! - [`scene`]: the TOML scene contract.
 
 pub mod data;
@@ -18,4 +20,5 @@ pub mod recon;
 pub mod render;
 pub mod samples;
 pub mod scene;
+pub mod splat;
 pub mod vk;

@@ -191,7 +191,10 @@ fn run_render(
     let field = scene.field(|f| bar.set_position((f * 1000.0) as u64))?;
     bar.finish_and_clear();
     let ctx = context(device)?;
-    let setup = scene.ray_setup(&field)?;
+    let step_world = match scene.render.method.splat_shading() {
+        None => Some(scene.ray_setup(&field)?.step),
+        Some(_) => None,
+    };
     let upload_start = Instant::now();
     let mut renderer = Renderer::new(&ctx, field)?;
     let upload_ms = upload_start.elapsed().as_secs_f64() * 1e3;
@@ -254,9 +257,36 @@ fn run_render(
             "width": scene.camera.width,
             "height": scene.camera.height,
             "method": scene.render.method.name(),
-            "step_world": setup.step,
+            "step_world": step_world,
             "neighbours": if field.uses_octree() { "octree" } else { "grid" },
-            "gpu_ms": { "raycast": first.gpu_ms },
+            "gpu_ms": match &image.splat {
+                None => serde_json::json!({ "raycast": first.gpu_ms }),
+                Some(r) => serde_json::json!({
+                    "splat_project": r.stage_ms[0],
+                    "splat_bin": r.stage_ms[1],
+                    "splat_accumulate": r.stage_ms[2],
+                    "splat_composite": r.stage_ms[3],
+                }),
+            },
+            "splat": image.splat.as_ref().map(|r| serde_json::json!({
+                "sheets": r.slabs,
+                "sheet_thickness_world": r.slab,
+                "kernels_projected": r.counts.projected,
+                "kernels_culled_near": r.counts.culled_near,
+                "kernels_culled_outside": r.counts.culled_outside,
+                "kernels_culled_degenerate": r.counts.culled_degenerate,
+                "kernels_culled_empty": r.counts.culled_empty,
+                "kernels_kept": r.counts.kept(),
+                "footprints_binned": r.counts.entries,
+                "footprints_skipped_by_occlusion": r.counts.skipped_occluded,
+                "footprints_accumulated": r.counts.accumulated,
+                "gpu_ms_per_kernel": {
+                    "splat_project": r.stage_ms[0] / r.counts.projected.max(1) as f64,
+                    "splat_bin": r.stage_ms[1] / r.counts.kept().max(1) as f64,
+                    "splat_accumulate": r.stage_ms[2] / r.counts.kept().max(1) as f64,
+                    "splat_composite": r.stage_ms[3] / r.counts.kept().max(1) as f64,
+                },
+            })),
             "upload_ms": upload_ms,
             "frames": frames.iter().map(|f| serde_json::json!({
                 "gpu_ms": f.gpu_ms,

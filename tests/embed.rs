@@ -94,6 +94,8 @@ fn wraps_an_application_device() {
             let field = Field::new(
                 vmls::data::marschner_lobb::generate(9),
                 Reconstruction {
+                    method: vmls::recon::ReconMethod::Mls,
+                    sigma: vmls::recon::gaussian::DEFAULT_SIGMA,
                     basis: Basis::Linear,
                     weight: Weight::Wendland,
                     gradient: GradientMode::Local,

@@ -403,14 +403,10 @@ fn octree_finds_every_neighbour_of_anisotropic_supports() {
         fn basis_scale(&self, x: [f64; 3]) -> [f64; 3] {
             self.0.neighbours().basis_scale(x)
         }
-        fn for_each(
-            &self,
-            _x: [f64; 3],
-            visit: &mut dyn FnMut([f64; 3], f64, &vmls::samples::Metric),
-        ) {
+        fn for_each(&self, _x: [f64; 3], visit: &mut vmls::recon::mls::Visit<'_>) {
             let s = &self.0.samples;
             for i in 0..s.len() {
-                visit(s.position(i), f64::from(s.values[i]), &s.metric(i));
+                visit(i, s.position(i), f64::from(s.values[i]), &s.metric(i));
             }
         }
     }

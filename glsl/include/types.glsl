@@ -83,4 +83,44 @@ struct CountPush {
     uint _pad1;
 };
 
+struct SplatParams {
+    vec4 eye;
+    vec4 forward;
+    vec4 right;
+    vec4 up;
+    vec4 box_min;
+    vec4 box_max;
+    vec4 background;
+    vec4 kernel_filter;
+    vec4 lighting;
+    uint width;
+    uint height;
+    uint projection;
+    uint tf_count;
+    float tan_half_fov;
+    float ortho_half_height;
+    float lateral_y;
+    float _pad0;
+    uint slabs;
+    uint tiles_x;
+    uint kernel_count;
+    uint iso_count;
+};
+
+struct Splat {
+    vec4 centre_depth;
+    vec4 conic_amplitude;
+    vec4 slope;
+    vec4 color;
+    ivec4 bbox;
+    uvec4 slabs;
+};
+
+struct SlabPush {
+    uint slab;
+    uint _pad0;
+    uint _pad1;
+    uint _pad2;
+};
+
 #endif

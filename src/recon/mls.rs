@@ -93,6 +93,9 @@ pub struct MlsValue {
     pub terms: u32,
 }
 
+/// The visitor of [`Neighbours::for_each`]: `(index, position, value, metric)`.
+pub type Visit<'a> = dyn FnMut(usize, [f64; 3], f64, &Metric) + 'a;
+
 /// Anything that can list the samples whose support may contain x. Samples with zero weight
 /// may be listed; they are skipped.
 pub trait Neighbours {
@@ -101,9 +104,9 @@ pub trait Neighbours {
     /// the samples' own supports. Any positive scale gives the same f in exact arithmetic; a
     /// scale near the supports keeps the system well conditioned in f32.
     fn basis_scale(&self, x: [f64; 3]) -> [f64; 3];
-    /// `visit(position, value, metric)`: the sample's weight is θ(ρ) with
+    /// `visit(index, position, value, metric)` (index into the sample set): the sample's weight is θ(ρ) with
     /// ρ² = (x_i − x)ᵀ M_i (x_i − x).
-    fn for_each(&self, x: [f64; 3], visit: &mut dyn FnMut([f64; 3], f64, &Metric));
+    fn for_each(&self, x: [f64; 3], visit: &mut Visit<'_>);
 }
 
 /// θ(ρ) and θ'(ρ)/ρ (the factor that turns ∂ρ into ∂w), for ρ < 1; zero outside.
@@ -274,7 +277,7 @@ pub fn mls_evaluate(
 ) -> Option<MlsValue> {
     let mut sys = MlsSystem::new(settings.basis.terms());
     let scale = neighbours.basis_scale(x);
-    neighbours.for_each(x, &mut |p, f, m| {
+    neighbours.for_each(x, &mut |_, p, f, m| {
         let (_, y, rho) = offset(x, p, scale, m);
         mls_accumulate(&mut sys, settings.weight, y, rho, f);
     });
@@ -295,7 +298,7 @@ pub fn mls_evaluate(
     if settings.gradient == GradientMode::Analytic {
         // q_k = Σ ∂w_i/∂x_k (f_i − b_iᵀc) b_i, with ∂ρ/∂x = −M_i d / ρ.
         let mut q = [[0.0; MAX_TERMS]; 3];
-        neighbours.for_each(x, &mut |p, f, m| {
+        neighbours.for_each(x, &mut |_, p, f, m| {
             let (d, y, rho) = offset(x, p, scale, m);
             let (w, dw_over_rho) = mls_weight(settings.weight, rho);
             if w <= 0.0 {

@@ -3,13 +3,14 @@
 //!
 //! The GPU twins are `glsl/include/mls.glsl` and `glsl/include/neighbours.glsl`.
 
+pub mod gaussian;
 pub mod mls;
 pub mod octree;
 
 pub use mls::{Basis, GradientMode, MlsSettings, MlsValue, Neighbours, Weight, mls_evaluate};
 pub use octree::{Octree, OctreeSettings, OctreeStats, SamplePoint};
 
-use crate::samples::Metric;
+use mls::Visit;
 
 /// How neighbours are found (scene key `reconstruction.neighbours`). Only a regular grid has
 /// implicit neighbours; every other sample set always uses the octree.
@@ -19,9 +20,21 @@ pub enum NeighbourMode {
     Octree,
 }
 
-/// MLS settings (scene section `[reconstruction]`).
+/// Which field is reconstructed from the samples (scene key `reconstruction.method`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ReconMethod {
+    /// Moving least squares ([MLS] §3).
+    Mls,
+    /// The Gaussian sum that splatting integrates ([`gaussian`]).
+    Gaussian,
+}
+
+/// Reconstruction settings (scene section `[reconstruction]`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Reconstruction {
+    pub method: ReconMethod,
+    /// Gaussian kernels: σ as a fraction of the support radius ([`gaussian`]).
+    pub sigma: f64,
     pub basis: Basis,
     pub weight: Weight,
     pub gradient: GradientMode,
@@ -77,7 +90,7 @@ impl Neighbours for GridNeighbours<'_> {
         self.inv_support()
     }
 
-    fn for_each(&self, x: [f64; 3], visit: &mut dyn FnMut([f64; 3], f64, &Metric)) {
+    fn for_each(&self, x: [f64; 3], visit: &mut Visit<'_>) {
         let inv_h = self.inv_support();
         let metric = crate::samples::supports::diagonal(inv_h.map(|v| 1.0 / v));
         let mut lo = [0usize; 3];
@@ -100,8 +113,8 @@ impl Neighbours for GridNeighbours<'_> {
                         self.origin[1] + j as f64 * self.spacing[1],
                         self.origin[2] + k as f64 * self.spacing[2],
                     ];
-                    let f = self.values[i + self.dims[0] * (j + self.dims[1] * k)];
-                    visit(p, f64::from(f), &metric);
+                    let index = i + self.dims[0] * (j + self.dims[1] * k);
+                    visit(index, p, f64::from(self.values[index]), &metric);
                 }
             }
         }

@@ -23,7 +23,7 @@
 //! sphere it is the exact sphere–box test).
 
 use super::ReconError;
-use super::mls::Neighbours;
+use super::mls::{Neighbours, Visit};
 use crate::samples::{Metric, SampleSet, metric_apply, metric_rho2, supports};
 use rayon::prelude::*;
 
@@ -379,10 +379,10 @@ impl Neighbours for Octree {
         [self.leaf(x).1; 3]
     }
 
-    fn for_each(&self, x: [f64; 3], visit: &mut dyn FnMut([f64; 3], f64, &Metric)) {
+    fn for_each(&self, x: [f64; 3], visit: &mut Visit<'_>) {
         for &i in self.leaf(x).0 {
             let s = &self.samples[i as usize];
-            visit(s.position, s.value, &s.metric);
+            visit(i as usize, s.position, s.value, &s.metric);
         }
     }
 }

@@ -17,11 +17,13 @@ pub mod shading;
 pub mod transfer;
 
 use crate::data::{DataError, Volume};
-use crate::recon::mls::{MlsSettings, Neighbours};
+use crate::recon::ReconMethod;
+use crate::recon::gaussian::{KernelVolumes, gaussian_evaluate};
+use crate::recon::mls::{MlsSettings, MlsValue, Neighbours, Visit, mls_evaluate};
 use crate::recon::{GridNeighbours, Octree, OctreeSettings, ReconError};
 use crate::recon::{NeighbourMode, Reconstruction};
 use crate::samples::bvh::HullBvh;
-use crate::samples::{Domain, Metric, Positions, Provenance, SampleSet, Supports};
+use crate::samples::{Domain, Positions, Provenance, SampleSet, Supports};
 use crate::vk::VkError;
 use camera::{Camera, ViewBasis};
 use glam::DVec3;
@@ -42,6 +44,8 @@ pub enum RenderError {
     Camera(String),
     #[error(transparent)]
     Samples(#[from] crate::samples::SampleError),
+    #[error("{key}: {message}")]
+    Setting { key: &'static str, message: String },
     #[error("{path}: {message}")]
     Output { path: String, message: String },
     #[error(
@@ -66,6 +70,8 @@ pub struct Field {
     range: (f64, f64),
     /// Whether any support is a rotated ellipsoid.
     full_metric: bool,
+    /// Gaussian kernel volumes, computed at first use (Gaussian field, splatting).
+    volumes: std::sync::OnceLock<KernelVolumes>,
 }
 
 impl Field {
@@ -128,6 +134,7 @@ impl Field {
             hull: None,
             range,
             full_metric,
+            volumes: std::sync::OnceLock::new(),
         };
         if let Domain::Hull(h) = &field.samples.domain {
             field.hull = Some(HullBvh::build(h));
@@ -166,6 +173,36 @@ impl Field {
             (None, Some(g)) => Box::new(g),
             // from_samples builds an octree for everything that is not a uniform grid.
             (None, None) => Box::new(NoNeighbours),
+        }
+    }
+
+    /// The volume each sample's Gaussian kernel stands for ([`KernelVolumes`]), computed once.
+    pub fn kernel_volumes(&self) -> &KernelVolumes {
+        self.volumes.get_or_init(|| {
+            let neighbours: Box<dyn Neighbours + Sync + '_> = match (&self.octree, self.grid()) {
+                (Some(o), _) => Box::new(o),
+                (None, Some(g)) => Box::new(g),
+                (None, None) => Box::new(NoNeighbours),
+            };
+            KernelVolumes::compute(
+                &self.samples,
+                neighbours.as_ref(),
+                self.reconstruction.sigma,
+            )
+        })
+    }
+
+    /// The reconstructed field and its gradient at x (frame-relative), by the scene's method;
+    /// `None` where it is undefined.
+    pub fn evaluate(&self, neighbours: &dyn Neighbours, x: [f64; 3]) -> Option<MlsValue> {
+        match self.reconstruction.method {
+            ReconMethod::Mls => mls_evaluate(&self.mls(), neighbours, x),
+            ReconMethod::Gaussian => gaussian_evaluate(
+                self.reconstruction.sigma,
+                self.kernel_volumes(),
+                neighbours,
+                x,
+            ),
         }
     }
 
@@ -213,7 +250,7 @@ impl Neighbours for NoNeighbours {
         [1.0; 3]
     }
 
-    fn for_each(&self, _x: [f64; 3], _visit: &mut dyn FnMut([f64; 3], f64, &Metric)) {}
+    fn for_each(&self, _x: [f64; 3], _visit: &mut Visit<'_>) {}
 }
 
 impl Neighbours for &Octree {
@@ -221,7 +258,7 @@ impl Neighbours for &Octree {
         (*self).basis_scale(x)
     }
 
-    fn for_each(&self, x: [f64; 3], visit: &mut dyn FnMut([f64; 3], f64, &Metric)) {
+    fn for_each(&self, x: [f64; 3], visit: &mut Visit<'_>) {
         (*self).for_each(x, visit)
     }
 }
@@ -262,6 +299,15 @@ impl RaySetup {
         lighting: &shading::Lighting,
         field: &Field,
     ) -> Result<Self, RenderError> {
+        if render.method.splat_shading().is_some() {
+            return Err(RenderError::Setting {
+                key: "render.method",
+                message: format!(
+                    "'{}' splats; rays are set up for the ray-casting methods only",
+                    render.method.name()
+                ),
+            });
+        }
         let basis = camera.basis().map_err(RenderError::Camera)?;
         let (box_lo, box_hi) = field.bounds();
         let spacings = match render.method {
@@ -296,7 +342,7 @@ impl RaySetup {
         let (top, bottom) = match self.method {
             Method::Fixed => (self.step, self.step),
             Method::Adaptive => (self.l_max, self.l_min),
-            Method::Riemann | Method::Reference => return Vec::new(),
+            _ => return Vec::new(),
         };
         let mut lengths = vec![top];
         while let Some(&l) = lengths.last() {

@@ -17,7 +17,7 @@ use super::camera::clip_box;
 use super::preintegration::PreintegrationTables;
 use super::transfer::TransferFunction;
 use super::{Field, RaySetup};
-use crate::recon::mls::{MlsSettings, Neighbours};
+use crate::recon::mls::Neighbours;
 use crate::render::Method;
 use crate::samples::bvh::Segments;
 use glam::DVec3;
@@ -38,7 +38,7 @@ pub struct PixelResult {
 struct Ray<'a> {
     o: DVec3,
     d: DVec3,
-    mls: MlsSettings,
+    field: &'a Field,
     neighbours: &'a dyn Neighbours,
     color: [f64; 3],
     transmittance: f64,
@@ -134,7 +134,7 @@ pub fn raycast(
     let mut ray = Ray {
         o,
         d,
-        mls: field.mls(),
+        field,
         neighbours,
         color: [0.0; 3],
         transmittance: 1.0,
@@ -162,7 +162,7 @@ pub fn raycast(
         }
         let done = match setup.method {
             Method::Fixed | Method::Adaptive => 1.0 - ray.transmittance > setup.early_termination,
-            Method::Riemann | Method::Reference => ray.transmittance < setup.min_transmittance,
+            _ => ray.transmittance < setup.min_transmittance,
         };
         if done {
             break;

@@ -20,7 +20,11 @@ use super::shading::{Isosurface, Lighting};
 use super::transfer::TransferFunction;
 use super::{Field, Method, RaySetup, RenderError, RenderSettings, TableCache};
 use crate::gpu_types::{IsoSurface, RayPush, binding, ray_count};
+use crate::recon::ReconMethod;
 use crate::render::camera::Camera;
+use crate::splat::SplatCounts;
+use crate::splat::SplatSetup;
+use crate::splat::gpu::{GpuKernels, SplatPipelines, SplatTargets, SplatVariant, splat_frame};
 use crate::vk::{
     BindGroup, Buffer, BufferUsage, ComputePipeline, Context, ShaderCompiler, VkError,
 };
@@ -41,6 +45,19 @@ pub struct GpuImage {
     /// Submissions (bands × chunks).
     pub bands: u32,
     pub variant: String,
+    /// What splatting did (the splatting methods only).
+    pub splat: Option<SplatReport>,
+}
+
+/// A splatting frame's counters and per-stage GPU time.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SplatReport {
+    pub counts: SplatCounts,
+    /// GPU ms of splat_project, splat_bin, splat_accumulate (all sheets), splat_composite.
+    pub stage_ms: [f64; 4],
+    /// Sheets in the frame and their thickness in world units.
+    pub slabs: u32,
+    pub slab: f64,
 }
 
 /// Outer steps of the longest possible ray: midpoint steps or fixed intervals of `step`, or
@@ -138,9 +155,18 @@ fn frame_constants(
     if let Some(t) = tables {
         table_params(&mut params, t);
     }
-    // Never empty: a zero-sized binding is invalid, and iso_count says how many are real.
-    let mut isos: Vec<IsoSurface> = setup
-        .isosurfaces
+    let isos = iso_buffer_data(&setup.isosurfaces);
+    Ok(FrameConstants {
+        params: Buffer::from_slice(ctx, "render params", &[params])?,
+        tf: Buffer::from_slice(ctx, "transfer function", &gpu_tf)?,
+        iso: Buffer::from_slice(ctx, "isosurfaces", &isos)?,
+    })
+}
+
+/// The isosurfaces as kernels read them; never empty, since a zero-sized binding is invalid
+/// (the kernel constants say how many are real).
+pub fn iso_buffer_data(isosurfaces: &[Isosurface]) -> Vec<IsoSurface> {
+    let mut isos: Vec<IsoSurface> = isosurfaces
         .iter()
         .map(|i| IsoSurface {
             color_opacity: [
@@ -156,11 +182,7 @@ fn frame_constants(
     if isos.is_empty() {
         isos.push(IsoSurface::default());
     }
-    Ok(FrameConstants {
-        params: Buffer::from_slice(ctx, "render params", &[params])?,
-        tf: Buffer::from_slice(ctx, "transfer function", &gpu_tf)?,
-        iso: Buffer::from_slice(ctx, "isosurfaces", &isos)?,
-    })
+    isos
 }
 
 /// Image, counts and ray-state buffers for `pixels` pixels.
@@ -353,6 +375,7 @@ pub fn render(
         gpu_ms,
         bands,
         variant: variant.name("raycast"),
+        splat: None,
     })
 }
 
@@ -398,6 +421,11 @@ pub struct Renderer {
     /// The uploaded tables and the build they came from.
     table_buffer: Option<(usize, Buffer)>,
     targets: Option<FrameTargets>,
+    /// Splatting: the kernels (uploaded at the first splatting frame), compiled variants and
+    /// frame buffers.
+    splat_kernels: Option<GpuKernels>,
+    splat_pipelines: Vec<SplatPipelines>,
+    splat_targets: Option<SplatTargets>,
 }
 
 impl Renderer {
@@ -413,6 +441,9 @@ impl Renderer {
             tables: TableCache::default(),
             table_buffer: None,
             targets: None,
+            splat_kernels: None,
+            splat_pipelines: Vec::new(),
+            splat_targets: None,
         })
     }
 
@@ -433,6 +464,17 @@ impl Renderer {
         mut progress: impl FnMut(f64),
     ) -> Result<(GpuImage, FrameStats), RenderError> {
         let start = Instant::now();
+        if let Some(shading) = view.settings.method.splat_shading() {
+            return self.render_splat(view, shading, start);
+        }
+        if self.field.reconstruction.method == ReconMethod::Gaussian {
+            return Err(RenderError::Setting {
+                key: "reconstruction.method",
+                message: "\"gaussian\" is ray cast by the f64 CPU reference only \
+                          (vmls render --cpu); the GPU ray caster reconstructs with MLS"
+                    .into(),
+            });
+        }
         let setup = RaySetup::new(
             view.camera,
             view.settings,
@@ -514,6 +556,7 @@ impl Renderer {
                 gpu_ms,
                 bands,
                 variant: variant.name("raycast"),
+                splat: None,
             },
             FrameStats {
                 gpu_ms,
@@ -523,6 +566,90 @@ impl Renderer {
                 pipeline_built,
                 targets_allocated,
                 bands,
+            },
+        ))
+    }
+
+    /// One splatting frame: kernels uploaded once, variants and buffers kept between frames.
+    fn render_splat(
+        &mut self,
+        view: &View<'_>,
+        shading: crate::splat::Shading,
+        start: Instant,
+    ) -> Result<(GpuImage, FrameStats), RenderError> {
+        let setup = SplatSetup::new(
+            shading,
+            &view.settings.splat,
+            view.camera,
+            view.settings.early_termination,
+            view.settings.background,
+            view.isosurfaces,
+            view.lighting,
+            &self.field,
+        )?;
+        if self.splat_kernels.is_none() {
+            self.splat_kernels = Some(GpuKernels::upload(&self.ctx, &self.field)?);
+        }
+        let Some(kernels) = self.splat_kernels.as_ref() else {
+            return Err(VkError::Usage("splat kernels missing".into()).into());
+        };
+        let variant = SplatVariant::of(&setup);
+        let cached = self
+            .splat_pipelines
+            .iter()
+            .position(|p| *p.variant() == variant);
+        let pipeline_built = cached.is_none();
+        let index = match cached {
+            Some(i) => i,
+            None => {
+                let p = SplatPipelines::new(&self.ctx, &self.compiler, &variant)?;
+                self.splat_pipelines.push(p);
+                self.splat_pipelines.len() - 1
+            }
+        };
+        let targets_allocated = !self
+            .splat_targets
+            .as_ref()
+            .is_some_and(|t| t.fits(&setup, kernels));
+        if targets_allocated {
+            self.splat_targets = None;
+            self.splat_targets = Some(SplatTargets::new(&self.ctx, &setup, kernels)?);
+        }
+        let Some(targets) = self.splat_targets.as_mut() else {
+            return Err(VkError::Usage("splat frame buffers missing".into()).into());
+        };
+        let image = splat_frame(
+            &self.ctx,
+            &self.splat_pipelines[index],
+            kernels,
+            targets,
+            &setup,
+            view.transfer,
+        )?;
+        let gpu_ms = image.gpu_ms();
+        let n = image.pixels.len();
+        Ok((
+            GpuImage {
+                pixels: image.pixels,
+                counts: vec![0; n],
+                gpu_ms,
+                bands: image.submissions,
+                variant: image.variant,
+                splat: Some(SplatReport {
+                    counts: image.counts,
+                    stage_ms: image.stage_ms,
+                    slabs: setup.slabs,
+                    slab: setup.slab,
+                }),
+            },
+            FrameStats {
+                gpu_ms,
+                wall_ms: start.elapsed().as_secs_f64() * 1e3,
+                tables_built: false,
+                table_ms: 0.0,
+                pipeline_built,
+                targets_allocated,
+                bands: image.submissions,
             },
         ))
     }

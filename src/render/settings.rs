@@ -1,5 +1,5 @@
-//! The ray caster's configuration (scene section `[render]`): owned by this layer, read from
-//! the scene file by `scene`.
+//! The renderer's configuration (scene sections `[render]` and `[splat]`): owned by this layer,
+//! read from the scene file by `scene`.
 
 /// The integrator.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -12,6 +12,10 @@ pub enum Method {
     Reference,
     /// [MLS] adaptive subdivision between `render.l_max` and `render.l_min`.
     Adaptive,
+    /// Pre-shaded EWA splatting ([EWA], `crate::splat`).
+    Splat,
+    /// Post-shaded splatting into sheet buffers ([BLUR], `crate::splat`).
+    SplatPost,
 }
 
 impl Method {
@@ -22,6 +26,17 @@ impl Method {
             Method::Riemann => "riemann",
             Method::Reference => "reference",
             Method::Adaptive => "adaptive",
+            Method::Splat => "splat",
+            Method::SplatPost => "splat-post",
+        }
+    }
+
+    /// The splatting mode, for the splatting methods.
+    pub fn splat_shading(self) -> Option<crate::splat::Shading> {
+        match self {
+            Method::Splat => Some(crate::splat::Shading::Pre),
+            Method::SplatPost => Some(crate::splat::Shading::Post),
+            _ => None,
         }
     }
 
@@ -51,4 +66,6 @@ pub struct RenderSettings {
     pub early_termination: f64,
     /// Preintegration table resolution per scalar axis.
     pub table_resolution: usize,
+    /// Splatting settings (scene section `[splat]`).
+    pub splat: crate::splat::SplatSettings,
 }

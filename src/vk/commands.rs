@@ -14,7 +14,7 @@ use super::{VkError, VkResultExt};
 use ash::vk;
 
 /// Timestamp pairs per submission; further dispatches run untimed.
-const MAX_TIMED_DISPATCHES: u32 = 128;
+const MAX_TIMED_DISPATCHES: u32 = 8192;
 
 /// GPU time of one dispatch.
 #[derive(Debug, Clone)]
@@ -40,18 +40,20 @@ impl Recorder<'_> {
             let barrier = [vk::MemoryBarrier::default()
                 .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
                 .dst_access_mask(
-                    vk::AccessFlags::SHADER_READ
+                    vk::AccessFlags::INDIRECT_COMMAND_READ
+                        | vk::AccessFlags::SHADER_READ
                         | vk::AccessFlags::SHADER_WRITE
                         | vk::AccessFlags::TRANSFER_READ
                         | vk::AccessFlags::TRANSFER_WRITE,
                 )];
-            let stages = vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER;
+            let src = vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER;
+            let dst = src | vk::PipelineStageFlags::DRAW_INDIRECT;
             // SAFETY: `cmd` is in the recording state.
             unsafe {
                 self.shared.device.cmd_pipeline_barrier(
                     self.cmd,
-                    stages,
-                    stages,
+                    src,
+                    dst,
                     vk::DependencyFlags::empty(),
                     &barrier,
                     &[],
@@ -119,6 +121,80 @@ impl Recorder<'_> {
                 );
             }
             device.cmd_dispatch(self.cmd, groups[0], groups[1], groups[2]);
+            if let Some(pool) = timed {
+                device.cmd_write_timestamp(
+                    self.cmd,
+                    vk::PipelineStageFlags::BOTTOM_OF_PIPE,
+                    pool,
+                    2 * index + 1,
+                );
+            }
+        }
+        self.labels.push(label.to_string());
+        Ok(())
+    }
+
+    /// Records an indirect dispatch: the workgroup counts are three `u32` at byte `offset` of
+    /// `args`, written before this submission or by an earlier command in it.
+    pub fn dispatch_indirect(
+        &mut self,
+        pipeline: &ComputePipeline,
+        bind_group: &BindGroup<'_>,
+        push: &[u8],
+        args: &Buffer,
+        offset: u64,
+        label: &str,
+    ) -> Result<(), VkError> {
+        if push.len() != pipeline.push_size as usize {
+            return Err(VkError::Usage(format!(
+                "dispatch '{label}': {} bytes of push constants for pipeline '{}' which declares {}",
+                push.len(),
+                pipeline.name(),
+                pipeline.push_size
+            )));
+        }
+        if !offset.is_multiple_of(4) || offset + 12 > args.size() {
+            return Err(VkError::Usage(format!(
+                "dispatch '{label}': indirect arguments at byte {offset} of '{}' ({} bytes)",
+                args.name(),
+                args.size()
+            )));
+        }
+        self.barrier();
+        let device = &self.shared.device;
+        let index = u32::try_from(self.labels.len()).unwrap_or(u32::MAX);
+        let timed = self.queries.filter(|_| index < MAX_TIMED_DISPATCHES);
+        // SAFETY: as in `dispatch`; `args` is live with INDIRECT_BUFFER usage (every storage
+        // buffer has it) and holds 12 bytes at the 4-aligned `offset` (checked above). The
+        // global barrier also covers INDIRECT_COMMAND_READ (see `barrier`).
+        unsafe {
+            if let Some(pool) = timed {
+                device.cmd_write_timestamp(
+                    self.cmd,
+                    vk::PipelineStageFlags::TOP_OF_PIPE,
+                    pool,
+                    2 * index,
+                );
+            }
+            device.cmd_bind_pipeline(self.cmd, vk::PipelineBindPoint::COMPUTE, pipeline.pipeline);
+            device.cmd_bind_descriptor_sets(
+                self.cmd,
+                vk::PipelineBindPoint::COMPUTE,
+                pipeline.layout,
+                0,
+                &[bind_group.set],
+                &[],
+            );
+            if !push.is_empty() {
+                device.cmd_push_constants(
+                    self.cmd,
+                    pipeline.layout,
+                    vk::ShaderStageFlags::COMPUTE,
+                    0,
+                    push,
+                );
+            }
+            device.cmd_dispatch_indirect(self.cmd, args.handle, offset);
             if let Some(pool) = timed {
                 device.cmd_write_timestamp(
                     self.cmd,

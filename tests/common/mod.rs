@@ -39,6 +39,8 @@ pub fn recon(
     support: f64,
 ) -> Reconstruction {
     Reconstruction {
+        method: vmls::recon::ReconMethod::Mls,
+        sigma: vmls::recon::gaussian::DEFAULT_SIGMA,
         basis,
         weight,
         gradient,

@@ -52,7 +52,7 @@ impl Knot {
 pub(super) fn knot(ray: &mut Ray<'_>, t: f64) -> Knot {
     ray.evaluations += 1;
     let x = (ray.o + ray.d * t).to_array();
-    match crate::recon::mls::mls_evaluate(&ray.mls, ray.neighbours, x) {
+    match ray.field.evaluate(ray.neighbours, x) {
         Some(m) => Knot {
             t,
             s: Some(m.value),

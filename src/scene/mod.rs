@@ -1,7 +1,7 @@
 //! The scene file: the external contract of `vmls render`.
 //!
 //! A scene is TOML with the sections `[volume]`, `[reconstruction]`, `[octree]`, `[transfer]`,
-//! `[camera]` and `[render]`; every key is optional and has the default of the built-in scene
+//! `[lighting]`, `[camera]`, `[render]` and `[splat]` (in [`splat`]); every key is optional and has the default of the built-in scene
 //! (Marschner–Lobb 41³). `--set section.key=value` overrides are applied to the parsed table
 //! before validation, with the value read as TOML (falling back to a bare string).
 //!
@@ -12,7 +12,9 @@
 //! Where the issue text was ambiguous: `camera.height` is the image height in pixels, so the
 //! orthographic view height is `camera.view_height` (world units).
 
-use crate::recon::{Basis, GradientMode, OctreeSettings, Weight};
+mod splat;
+
+use crate::recon::{Basis, GradientMode, OctreeSettings, ReconMethod, Weight};
 use crate::render::camera::{Camera, Projection};
 use crate::render::shading::{Isosurface, Lighting, MAX_ISOSURFACES};
 use crate::render::transfer::TransferFunction;
@@ -89,6 +91,7 @@ const KNOWN: &[(&str, &[&str])] = &[
         "reconstruction",
         &[
             "method",
+            "sigma",
             "basis",
             "weight",
             "support",
@@ -117,6 +120,7 @@ const KNOWN: &[(&str, &[&str])] = &[
             "height",
         ],
     ),
+    ("splat", splat::KEYS),
     (
         "render",
         &[
@@ -490,8 +494,21 @@ impl Scene {
         };
 
         let rec = section("reconstruction");
-        rec.choice("method", (), &[("mls", ())])?;
         let reconstruction = Reconstruction {
+            method: rec.choice(
+                "method",
+                ReconMethod::Mls,
+                &[
+                    ("mls", ReconMethod::Mls),
+                    ("gaussian", ReconMethod::Gaussian),
+                ],
+            )?,
+            sigma: rec.float(
+                "sigma",
+                crate::recon::gaussian::DEFAULT_SIGMA,
+                0.05,
+                1.0 / 3.0,
+            )?,
             basis: rec.choice(
                 "basis",
                 Basis::Linear,
@@ -630,6 +647,8 @@ impl Scene {
                     ("riemann", Method::Riemann),
                     ("reference", Method::Reference),
                     ("adaptive", Method::Adaptive),
+                    ("splat", Method::Splat),
+                    ("splat-post", Method::SplatPost),
                 ],
             )?,
             step: ren.positive("step", 0.25, 1e3)?,
@@ -641,6 +660,7 @@ impl Scene {
             epsilon: ren.float("epsilon", 0.03, 0.0, 1e3)?,
             early_termination: ren.float("early_termination", 0.99, 0.0, 1.0)?,
             table_resolution: ren.int("table_resolution", 512, 2, 4096)? as usize,
+            splat: splat::parse(&section("splat"))?,
         };
         if render.l_min > render.l_max {
             return Err(ren.err(

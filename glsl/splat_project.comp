@@ -1,0 +1,182 @@
+#version 450
+// Stage splat_project: f32 twin of src/splat/project.rs ([EWA] §4-6). One invocation per
+// kernel: ray-space Jacobian, footprint, resampling filter, conic, bounding box, depth and
+// sheet range, culling guards; counts each sheet's binned entries.
+// Variant macros: SPLAT_POST (0 pre-shaded, 1 post-shaded), SPLAT_ANTIALIAS (0 ewa, 1 swan,
+// 2 none), SPLAT_ORTHO (0 perspective, 1 orthographic).
+#extension GL_EXT_control_flow_attributes : enable
+
+layout(local_size_x = 64) in;
+
+#include "types.glsl"
+#include "splat.glsl"
+
+layout(std430, binding = BINDING_PARAMS) readonly buffer ParamsBuf { SplatParams params; };
+layout(std430, binding = BINDING_SPLAT_KERNELS) readonly buffer KernelBuf { Sample kernels[]; };
+layout(std430, binding = BINDING_SPLATS) writeonly buffer SplatBuf { Splat splats[]; };
+layout(std430, binding = BINDING_SLAB_COUNTS) buffer CountBuf { uint slab_counts[]; };
+layout(std430, binding = BINDING_SPLAT_STATS) buffer StatsBuf { uint stats[]; };
+
+#if SPLAT_POST == 0
+#include "transfer.glsl"
+#endif
+
+// SplatCounts order: projected, near, outside, degenerate, empty.
+const uint CULL_NEAR = 1u;
+const uint CULL_OUTSIDE = 2u;
+const uint CULL_DEGENERATE = 3u;
+const uint CULL_EMPTY = 4u;
+
+const float MIN_VARIANCE = 1e-6;
+
+Splat culled(uint reason) {
+    atomicAdd(stats[reason], 1u);
+    Splat s;
+    s.centre_depth = vec4(0.0);
+    s.conic_amplitude = vec4(0.0);
+    s.slope = vec4(0.0);
+    s.color = vec4(0.0);
+    s.bbox = ivec4(0);
+    s.slabs = uvec4(1u, 0u, 0u, 0u);
+    return s;
+}
+
+// M^-1 of the metric (xx, yy, zz, xy, xz, yz); false when singular.
+bool metric_inverse(vec4 m, vec4 mo, out mat3 inv) {
+    float a = m.x, b = m.y, c = m.z, d = m.w, e = mo.x, f = mo.y;
+    float c00 = b * c - f * f;
+    float c01 = e * f - d * c;
+    float c02 = d * f - b * e;
+    float c11 = a * c - e * e;
+    float c12 = d * e - a * f;
+    float c22 = a * b - d * d;
+    float det = a * c00 + d * c01 + e * c02;
+    if (!(det > 0.0) || isinf(det)) {
+        return false;
+    }
+    float i = 1.0 / det;
+    // Symmetric: column-major equals row-major.
+    inv = mat3(c00, c01, c02, c01, c11, c12, c02, c12, c22) * i;
+    return true;
+}
+
+Splat project(Sample k) {
+    vec3 p = k.pos_value.xyz;
+    float value = k.pos_value.w;
+    float volume = k.metric_off.z;
+#if SPLAT_POST == 1
+    float weight = value * volume;
+    vec3 color = vec3(0.0);
+#else
+    vec4 ct = transfer_lookup(value, params.tf_count);
+    float weight = ct.a * volume;
+    vec3 color = ct.rgb;
+#endif
+    if (weight == 0.0) {
+        return culled(CULL_EMPTY);
+    }
+    mat3 minv;
+    if (!metric_inverse(k.metric, k.metric_off, minv)) {
+        return culled(CULL_DEGENERATE);
+    }
+    float sigma = params.kernel_filter.z;
+    mat3 v_obj = minv * (sigma * sigma);
+    vec3 right = params.right.xyz, up = params.up.xyz, fwd = params.forward.xyz;
+    vec3 d = p - params.eye.xyz;
+    vec3 u = vec3(dot(d, right), dot(d, up), dot(d, fwd));
+    float cutoff = params.kernel_filter.x;
+    float reach = cutoff * sqrt(max(dot(fwd, v_obj * fwd), 0.0));
+    if (u.z - reach <= params.eye.w) {
+        return culled(CULL_NEAR);
+    }
+    float f = params.forward.w;
+    vec2 centre;
+    float t;
+    // Rows of A = J W, stored as the columns of `at` (at = transpose(A)).
+#if SPLAT_ORTHO == 1
+    centre = vec2(params.right.w + f * u.x, params.up.w - f * u.y);
+    t = u.z;
+    mat3 at = mat3(f * right, -f * up, fwd);
+#else
+    float l = length(u);
+    float inv = 1.0 / u.z;
+    float cx = clamp(u.x * inv, -params.kernel_filter.w, params.kernel_filter.w);
+    float cy = clamp(u.y * inv, -params.lateral_y, params.lateral_y);
+    centre = vec2(params.right.w + f * u.x * inv, params.up.w - f * u.y * inv);
+    t = l;
+    vec3 j0 = vec3(f * inv, 0.0, -f * cx * inv);
+    vec3 j1 = vec3(0.0, -f * inv, f * cy * inv);
+    vec3 j2 = u / l;
+    // Row i of J W is sum_k J[i][k] W[k] with W's rows right, up, forward.
+    mat3 at = mat3(j0.x * right + j0.y * up + j0.z * fwd,
+                   j1.x * right + j1.y * up + j1.z * fwd,
+                   j2.x * right + j2.y * up + j2.z * fwd);
+#endif
+    // V = A V'' A^T; with at = A^T: V = transpose(at) * v_obj * at.
+    mat3 v = transpose(at) * v_obj * at;
+    vec3 vhat = vec3(v[0][0], v[1][0], v[1][1]);
+    vec2 vxt = vec2(v[2][0], v[2][1]);
+    float vtt = v[2][2];
+    float det_hat = vhat.x * vhat.z - vhat.y * vhat.y;
+    vec3 vf = vec3(max(vhat.x, MIN_VARIANCE), vhat.y, max(vhat.z, MIN_VARIANCE));
+    float lowpass = params.kernel_filter.y;
+#if SPLAT_ANTIALIAS == 0
+    vf += vec3(lowpass, 0.0, lowpass);
+#elif SPLAT_ANTIALIAS == 1
+    float mean = 0.5 * (vf.x + vf.z);
+    float r = sqrt(0.25 * (vf.x - vf.z) * (vf.x - vf.z) + vf.y * vf.y);
+    float minor = max(mean - r, MIN_VARIANCE);
+    vf *= max(lowpass / minor, 1.0);
+#endif
+    float det_f = vf.x * vf.z - vf.y * vf.y;
+    if (!(det_hat > 0.0) || !(det_f > 0.0) || isinf(det_f)) {
+        return culled(CULL_DEGENERATE);
+    }
+    vec2 slope = vec2(vhat.z * vxt.x - vhat.y * vxt.y, vhat.x * vxt.y - vhat.y * vxt.x) / det_hat;
+    float cond = max(vtt - dot(slope, vxt), 1e-12 * vtt);
+    float amplitude = weight * abs(determinant(at)) / (6.283185307179586 * sqrt(det_f));
+    vec3 conic = vec3(vf.z, -vf.y, vf.x) / det_f;
+    float w = float(params.width), h = float(params.height);
+    float rx = cutoff * sqrt(vf.x);
+    float ry = cutoff * sqrt(vf.z);
+    ivec4 bbox = ivec4(
+        int(min(max(ceil(centre.x - rx), 0.0), w)),
+        int(min(max(ceil(centre.y - ry), 0.0), h)),
+        int(max(min(floor(centre.x + rx), w - 1.0), -1.0)),
+        int(max(min(floor(centre.y + ry), h - 1.0), -1.0)));
+    float spread = slope.x * (vf.x * slope.x + vf.y * slope.y)
+                 + slope.y * (vf.y * slope.x + vf.z * slope.y);
+    float depth_reach = cutoff * (sqrt(max(spread, 0.0)) + sqrt(cond));
+    float slab0 = params.box_min.w, slab = params.box_max.w;
+    float first = floor((t - depth_reach - slab0) / slab);
+    float last = floor((t + depth_reach - slab0) / slab);
+    float checks = amplitude + conic.x + conic.y + conic.z + slope.x + slope.y + t + cond;
+    if (isnan(checks) || isinf(checks)) {
+        return culled(CULL_DEGENERATE);
+    }
+    if (bbox.x > bbox.z || bbox.y > bbox.w || last < 0.0 || first >= float(params.slabs)) {
+        return culled(CULL_OUTSIDE);
+    }
+    Splat s;
+    s.centre_depth = vec4(centre, t, sqrt(cond));
+    s.conic_amplitude = vec4(conic, amplitude);
+    s.slope = vec4(slope, 0.0, 0.0);
+    s.color = vec4(color, 0.0);
+    s.bbox = bbox;
+    uint bx = uint(bbox.z - bbox.x) / uint(SPLAT_BLOCK) + 1u;
+    uint by = uint(bbox.w - bbox.y) / uint(SPLAT_BLOCK) + 1u;
+    s.slabs = uvec4(uint(max(first, 0.0)), uint(min(last, float(params.slabs - 1u))), bx, bx * by);
+    return s;
+}
+
+void main() {
+    uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
+    for (uint i = gl_GlobalInvocationID.x; i < params.kernel_count; i += stride) {
+        atomicAdd(stats[0], 1u);
+        Splat s = project(kernels[i]);
+        splats[i] = s;
+        for (uint k = s.slabs.x; k <= s.slabs.y; ++k) {
+            atomicAdd(slab_counts[k], s.slabs.w);
+        }
+    }
+}

@@ -1,0 +1,32 @@
+//! Scene section `[splat]`: the splatting renderer's settings (`crate::splat::SplatSettings`).
+
+use super::{SceneError, Section};
+use crate::splat::{Antialias, SplatSettings};
+use toml::Value;
+
+/// Keys of `[splat]`.
+pub(super) const KEYS: &[&str] = &["slab", "cutoff", "lowpass", "antialias", "occlusion"];
+
+/// Reads `[splat]`; every key is optional.
+pub(super) fn parse(sec: &Section<'_>) -> Result<SplatSettings, SceneError> {
+    let d = SplatSettings::default();
+    Ok(SplatSettings {
+        slab: sec.positive("slab", d.slab, 1e3)?,
+        cutoff: sec.float("cutoff", d.cutoff, 1.0, 6.0)?,
+        lowpass: sec.float("lowpass", d.lowpass, 0.0, 100.0)?,
+        antialias: sec.choice(
+            "antialias",
+            d.antialias,
+            &[
+                ("ewa", Antialias::Ewa),
+                ("swan", Antialias::Swan),
+                ("none", Antialias::None),
+            ],
+        )?,
+        occlusion: match sec.get("occlusion") {
+            None => d.occlusion,
+            Some(Value::Boolean(b)) => *b,
+            Some(v) => return Err(sec.err("occlusion", "true or false", v)),
+        },
+    })
+}

@@ -1,0 +1,272 @@
+//! EWA volume splatting ([EWA]), pre-shaded and post-shaded with image-aligned sheet buffers
+//! ([BLUR]): the second renderer. It reads the same sample set as ray casting.
+//!
+//! Every sample becomes a Gaussian kernel of covariance `V_i = σ² M_i⁻¹` and weight `v_i`
+//! (`recon::gaussian`: the splatted extinction or density is exactly the Gaussian-sum field
+//! that `reconstruction.method = "gaussian"` ray casts). A frame runs these stages, each with
+//! an f64 CPU twin here and a GLSL kernel of the same name:
+//! - `splat_setup` (host, [`SplatSetup::new`]): camera frame, focal length in pixels, and the
+//!   sheets: slabs of thickness Δs = `splat.slab` × spacing in the distance t from the eye
+//!   (spherical shells for a perspective camera, planes for an orthographic one), so that every
+//!   pixel's ray is cut at the same t as a ray caster with step Δs would cut it;
+//! - `splat_project` ([`project`]): per kernel, the ray-space Jacobian, footprint, conic,
+//!   resampling filter, bounding box, depth and slab range, with the culling guards;
+//! - `splat_bin`: a counting sort of (kernel, slab, pixel block) entries by slab (counts and
+//!   scatter on the GPU, the prefix sum of one number per slab on the host);
+//! - per slab, front to back: `splat_accumulate` adds each footprint's share of the slab to the
+//!   sheet, and `splat_composite` classifies (post-shaded) or resolves (pre-shaded) the sheet
+//!   and composites it into the image, updating the occlusion map ([`accumulate`]).
+
+pub mod accumulate;
+pub mod gpu;
+pub mod project;
+
+use crate::render::camera::{Camera, Projection, ViewBasis};
+use crate::render::shading::{Isosurface, Lighting};
+use crate::render::{Field, RenderError};
+use glam::DVec3;
+
+/// Pixel blocks of one binned entry are at most this many pixels on a side, so that one
+/// invocation never loops over more than BLOCK² pixels (llvmpipe ends loops after 65 535
+/// iterations, LAVAPIPE.md).
+pub const BLOCK: u32 = 32;
+/// Occlusion-map tiles are this many pixels on a side.
+pub const TILE: u32 = 8;
+/// At most this many sheets per frame.
+pub const MAX_SLABS: u32 = 16_384;
+/// 3DGS's guard: the Jacobian's lateral terms are evaluated at most this far outside the view
+/// cone (in units of its half-angle tangent), so kernels far off-screen cannot explode.
+pub const LATERAL_CLAMP: f64 = 1.3;
+/// Smallest footprint variance in px² (keeps the conic finite for needle-thin kernels).
+pub const MIN_VARIANCE: f64 = 1e-6;
+
+/// Pre- or post-shaded splatting (`render.method = "splat"` or `"splat-post"`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Shading {
+    /// Classify each kernel, splat extinction and emission, resolve each sheet ([EWA]).
+    Pre,
+    /// Splat the field into sheets, then classify and shade per pixel ([BLUR]).
+    Post,
+}
+
+/// `splat.antialias`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Antialias {
+    /// [EWA]'s resampling filter: the footprint convolved with the low-pass Gaussian.
+    Ewa,
+    /// [SWAN]: the footprint scaled uniformly until its minor variance reaches the low-pass's.
+    Swan,
+    /// No low-pass filter (aliases under minification).
+    None,
+}
+
+/// Scene section `[splat]`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SplatSettings {
+    /// Sheet thickness in sample spacings.
+    pub slab: f64,
+    /// Footprints are cut at this many standard deviations.
+    pub cutoff: f64,
+    /// Variance of the low-pass filter in px² (1: the identity of [EWA] §6).
+    pub lowpass: f64,
+    pub antialias: Antialias,
+    /// Early splat elimination with the occlusion map.
+    pub occlusion: bool,
+}
+
+impl Default for SplatSettings {
+    fn default() -> Self {
+        Self {
+            slab: 0.5,
+            cutoff: 3.5,
+            lowpass: 1.0,
+            antialias: Antialias::Ewa,
+            occlusion: true,
+        }
+    }
+}
+
+/// The host stage `splat_setup`: everything the kernels share in one frame.
+#[derive(Debug, Clone)]
+pub struct SplatSetup {
+    pub shading: Shading,
+    pub settings: SplatSettings,
+    pub camera: Camera,
+    pub basis: ViewBasis,
+    /// Eye relative to the frame origin.
+    pub eye: DVec3,
+    pub frame_origin: DVec3,
+    /// Pixels per unit of tangent (perspective) or per world unit (orthographic).
+    pub focal: f64,
+    /// Pixel coordinates of the optical axis (W/2 − ½, H/2 − ½).
+    pub centre: [f64; 2],
+    /// Lateral clamp of u₀/u₂ and u₁/u₂ (perspective).
+    pub lateral: [f64; 2],
+    /// Kernels reaching closer than this to the eye plane are culled.
+    pub near: f64,
+    /// t where the first sheet starts, sheet thickness, sheet count.
+    pub slab0: f64,
+    pub slab: f64,
+    pub slabs: u32,
+    /// Gaussian σ as a fraction of the support radius.
+    pub sigma: f64,
+    /// Domain box (frame-relative): post-shaded sheets integrate only inside it.
+    pub box_lo: DVec3,
+    pub box_hi: DVec3,
+    /// Pixels stop compositing (and occlude) beyond this opacity.
+    pub early_termination: f64,
+    pub background: [f64; 3],
+    pub isosurfaces: Vec<Isosurface>,
+    pub lighting: Lighting,
+}
+
+impl SplatSetup {
+    /// The setup of a frame. Errors name the scene key at fault.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        shading: Shading,
+        settings: &SplatSettings,
+        camera: &Camera,
+        early_termination: f64,
+        background: [f64; 3],
+        isosurfaces: &[Isosurface],
+        lighting: &Lighting,
+        field: &Field,
+    ) -> Result<Self, RenderError> {
+        if shading == Shading::Pre && !isosurfaces.is_empty() {
+            return Err(RenderError::Setting {
+                key: "transfer.isosurfaces",
+                message: "isosurfaces need render.method = \"splat-post\" (pre-shaded surface \
+                          splats are not implemented yet)"
+                    .into(),
+            });
+        }
+        let basis = camera.basis().map_err(RenderError::Camera)?;
+        let frame_origin = field.frame_origin;
+        let eye = DVec3::from(camera.eye) - frame_origin;
+        let (w, h) = (f64::from(camera.width), f64::from(camera.height));
+        let (box_lo, box_hi) = field.bounds();
+        // Kernels reach past the domain by at most their support (ρ = 1).
+        let reach = (0..field.samples.len())
+            .map(|i| field.samples.support_extent(i))
+            .fold([0.0f64; 3], |m, e| {
+                [m[0].max(e[0]), m[1].max(e[1]), m[2].max(e[2])]
+            });
+        let lo = box_lo - DVec3::from(reach);
+        let hi = box_hi + DVec3::from(reach);
+        let corners = (0..8).map(|c| {
+            DVec3::new(
+                if c & 1 == 0 { lo.x } else { hi.x },
+                if c & 2 == 0 { lo.y } else { hi.y },
+                if c & 4 == 0 { lo.z } else { hi.z },
+            )
+        });
+        let diagonal = (hi - lo).length();
+        let (focal, lateral, near, t_min, t_max) = match camera.projection {
+            Projection::Perspective { fov_y_degrees } => {
+                let tan = (fov_y_degrees.to_radians() * 0.5).tan();
+                let t_max = corners.map(|c| (c - eye).length()).fold(0.0, f64::max);
+                let nearest = eye.clamp(lo, hi);
+                let near = 1e-4 * diagonal;
+                let t_min = (nearest - eye).length().max(near);
+                (
+                    h / (2.0 * tan),
+                    [LATERAL_CLAMP * tan * w / h, LATERAL_CLAMP * tan],
+                    near,
+                    t_min,
+                    t_max,
+                )
+            }
+            Projection::Orthographic { view_height } => {
+                let depths = corners.map(|c| (c - eye).dot(basis.forward));
+                let (a, b) = depths.fold((f64::MAX, f64::MIN), |(a, b), d| (a.min(d), b.max(d)));
+                (h / view_height, [f64::MAX; 2], 0.0, a.max(0.0), b)
+            }
+        };
+        let slab = settings.slab * field.min_spacing();
+        let count = ((t_max - t_min) / slab).ceil().max(1.0);
+        if count > f64::from(MAX_SLABS) || !count.is_finite() {
+            return Err(RenderError::Setting {
+                key: "splat.slab",
+                message: format!(
+                    "{} sheets of {slab:.4e} would cover the volume's depth {:.4e}; at most \
+                     {MAX_SLABS} are allowed: raise splat.slab",
+                    count,
+                    t_max - t_min
+                ),
+            });
+        }
+        Ok(Self {
+            shading,
+            settings: *settings,
+            camera: *camera,
+            basis,
+            eye,
+            frame_origin,
+            focal,
+            centre: [0.5 * w - 0.5, 0.5 * h - 0.5],
+            lateral,
+            near,
+            slab0: t_min,
+            slab,
+            slabs: count as u32,
+            sigma: field.reconstruction.sigma,
+            box_lo,
+            box_hi,
+            early_termination,
+            background,
+            isosurfaces: isosurfaces.to_vec(),
+            lighting: *lighting,
+        })
+    }
+
+    /// Whether the camera is orthographic.
+    pub fn orthographic(&self) -> bool {
+        matches!(self.camera.projection, Projection::Orthographic { .. })
+    }
+
+    /// Sheet k covers t in [slab0 + k·Δs, slab0 + (k+1)·Δs].
+    pub fn slab_bounds(&self, k: u32) -> (f64, f64) {
+        let a = self.slab0 + f64::from(k) * self.slab;
+        (a, a + self.slab)
+    }
+}
+
+/// Blocks of at most BLOCK × BLOCK pixels covering a bounding box [x0, x1] × [y0, y1].
+pub fn blocks(bbox: [i32; 4]) -> (u32, u32) {
+    let bx = ((bbox[2] - bbox[0]) as u32 / BLOCK) + 1;
+    let by = ((bbox[3] - bbox[1]) as u32 / BLOCK) + 1;
+    (bx, by)
+}
+
+/// What a frame did with its kernels (`--stats`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SplatCounts {
+    /// Kernels that went through `splat_project`.
+    pub projected: u64,
+    /// Culled: behind the eye or reaching the near plane.
+    pub culled_near: u64,
+    /// Culled: footprint or depth range outside the image or the sheets.
+    pub culled_outside: u64,
+    /// Culled: degenerate covariance (det ≤ 0 after the guards).
+    pub culled_degenerate: u64,
+    /// Culled: zero weight (transparent or zero-valued).
+    pub culled_empty: u64,
+    /// Binned entries (kernel × sheet × pixel block).
+    pub entries: u64,
+    /// Entries skipped because every pixel they cover was opaque.
+    pub skipped_occluded: u64,
+    /// Entries accumulated into a sheet.
+    pub accumulated: u64,
+}
+
+impl SplatCounts {
+    /// Kernels that survived projection.
+    pub fn kept(&self) -> u64 {
+        self.projected
+            - self.culled_near
+            - self.culled_outside
+            - self.culled_degenerate
+            - self.culled_empty
+    }
+}
