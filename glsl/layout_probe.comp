@@ -15,6 +15,9 @@ layout(std430, binding = BINDING_PROBE) writeonly buffer ProbeBuf {
     RayPush ray_push;
     CountPush count_push;
     IsoSurface iso_surface;
+    SplatParams splat_params;
+    Splat splat;
+    SlabPush slab_push;
 };
 
 vec4 v(float k) { return vec4(k, k + 0.25, k + 0.5, k + 0.75); }
@@ -77,4 +80,35 @@ void main() {
 
     ray_push = RayPush(1u, 2u, 3u, 4u);
     count_push = CountPush(1u, 2u, 3u, 4u);
+
+    splat_params.eye = v(1.0);
+    splat_params.forward = v(2.0);
+    splat_params.right = v(3.0);
+    splat_params.up = v(4.0);
+    splat_params.box_min = v(5.0);
+    splat_params.box_max = v(6.0);
+    splat_params.background = v(7.0);
+    splat_params.kernel_filter = v(8.0);
+    splat_params.lighting = v(9.0);
+    splat_params.width = 10u;
+    splat_params.height = 11u;
+    splat_params.projection = 12u;
+    splat_params.tf_count = 13u;
+    splat_params.tan_half_fov = 14.0;
+    splat_params.ortho_half_height = 15.0;
+    splat_params.lateral_y = 16.0;
+    splat_params._pad0 = 17.0;
+    splat_params.slabs = 18u;
+    splat_params.tiles_x = 19u;
+    splat_params.kernel_count = 20u;
+    splat_params.iso_count = 21u;
+
+    splat.centre_depth = v(1.0);
+    splat.conic_amplitude = v(2.0);
+    splat.slope = v(3.0);
+    splat.color = v(4.0);
+    splat.bbox = ivec4(5, 6, 7, 8);
+    splat.slabs = uvec4(9u, 10u, 11u, 12u);
+
+    slab_push = SlabPush(1u, 2u, 3u, 4u);
 }

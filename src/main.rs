@@ -61,6 +61,11 @@ enum Command {
         /// its up axis each frame; the last is written, `--stats` lists every frame's cost.
         #[arg(long, default_value_t = 1)]
         frames: u32,
+        /// Render with the f64 CPU twins of the kernels instead of the GPU: slow, for ground
+        /// truth (e.g. reconstruction.method = "gaussian" with render.method = "reference", the
+        /// exact image splatting approximates).
+        #[arg(long)]
+        cpu: bool,
         #[command(flatten)]
         device: DeviceArgs,
     },
@@ -123,6 +128,8 @@ enum CliError {
     Scene(#[from] SceneError),
     #[error(transparent)]
     Render(#[from] RenderError),
+    #[error("{0}")]
+    Usage(String),
 }
 
 impl From<vmls::vk::VkError> for CliError {
@@ -319,6 +326,72 @@ fn run_render(
                 "inverted_cells": field.samples.provenance.inverted_cells,
                 "supports": field.samples.provenance.support_kind,
             },
+        });
+        write_json(stats, &value)?;
+    }
+    Ok(())
+}
+
+/// `vmls render --cpu`: the f64 CPU twins, rows over all cores.
+fn run_render_cpu(
+    scene_path: Option<&Path>,
+    output: &Path,
+    stats: Option<&Path>,
+    set: &[String],
+) -> Result<(), CliError> {
+    let start = Instant::now();
+    format_of(output)?;
+    let scene = Scene::load(scene_path, set)?;
+    let field = scene.field(|_| {})?;
+    let (pixels, splat): (Vec<[f64; 4]>, _) = match scene.render.method.splat_shading() {
+        Some(shading) => {
+            let setup = vmls::splat::SplatSetup::new(
+                shading,
+                &scene.render.splat,
+                &scene.camera,
+                scene.render.early_termination,
+                scene.render.background,
+                &scene.isosurfaces,
+                &scene.lighting,
+                &field,
+            )?;
+            let image = vmls::splat::accumulate::splat_image(&setup, &field, &scene.transfer);
+            (image.pixels, Some(image.counts))
+        }
+        None => {
+            let setup = scene.ray_setup(&field)?;
+            let tables = vmls::render::build_tables(
+                &setup,
+                &field,
+                &scene.transfer,
+                scene.render.table_resolution,
+                |_| {},
+            );
+            let image = vmls::render::raycast::raycast_image(
+                &setup,
+                &field,
+                &scene.transfer,
+                tables.as_ref(),
+            );
+            (image.iter().map(|p| p.rgba).collect(), None)
+        }
+    };
+    let rgba: Vec<[f32; 4]> = pixels.iter().map(|p| p.map(|c| c as f32)).collect();
+    write_image(output, scene.camera.width, scene.camera.height, &rgba)?;
+    if let Some(stats) = stats {
+        let value = serde_json::json!({
+            "device": "cpu (f64 reference twins)",
+            "method": scene.render.method.name(),
+            "width": scene.camera.width,
+            "height": scene.camera.height,
+            "wall_ms": start.elapsed().as_secs_f64() * 1e3,
+            "splat": splat.map(|c| serde_json::json!({
+                "kernels_projected": c.projected,
+                "kernels_kept": c.kept(),
+                "footprints_binned": c.entries,
+                "footprints_skipped_by_occlusion": c.skipped_occluded,
+                "footprints_accumulated": c.accumulated,
+            })),
         });
         write_json(stats, &value)?;
     }
@@ -572,6 +645,27 @@ fn main() {
             eval_map,
             set,
             frames,
+            cpu: true,
+            device: _,
+        } => {
+            if eval_map.is_some() || *frames != 1 {
+                Err(CliError::Usage(
+                    "--cpu renders one frame without evaluation counts: drop --eval-map and \
+                     --frames"
+                        .into(),
+                ))
+            } else {
+                run_render_cpu(scene.as_deref(), output, stats.as_deref(), set)
+            }
+        }
+        Command::Render {
+            scene,
+            output,
+            stats,
+            eval_map,
+            set,
+            frames,
+            cpu: false,
             device,
         } => run_render(
             scene.as_deref(),

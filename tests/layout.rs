@@ -130,6 +130,57 @@ fn glsl_and_rust_layouts_agree() {
         "CountPush"
     );
 
+    let sp: &SplatParams = take(bytes, &mut at);
+    assert_eq!(
+        *sp,
+        SplatParams {
+            eye: v(1.0),
+            forward: v(2.0),
+            right: v(3.0),
+            up: v(4.0),
+            box_min: v(5.0),
+            box_max: v(6.0),
+            background: v(7.0),
+            kernel_filter: v(8.0),
+            lighting: v(9.0),
+            width: 10,
+            height: 11,
+            projection: 12,
+            tf_count: 13,
+            tan_half_fov: 14.0,
+            ortho_half_height: 15.0,
+            lateral_y: 16.0,
+            _pad0: 17.0,
+            slabs: 18,
+            tiles_x: 19,
+            kernel_count: 20,
+            iso_count: 21,
+        },
+        "SplatParams"
+    );
+    let sp: &Splat = take(bytes, &mut at);
+    assert_eq!(
+        *sp,
+        Splat {
+            centre_depth: v(1.0),
+            conic_amplitude: v(2.0),
+            slope: v(3.0),
+            color: v(4.0),
+            bbox: [5, 6, 7, 8],
+            slabs: [9, 10, 11, 12],
+        },
+        "Splat"
+    );
+    let sp: &SlabPush = take(bytes, &mut at);
+    assert_eq!(
+        *sp,
+        SlabPush {
+            slab: 1,
+            _pad: [2, 3, 4]
+        },
+        "SlabPush"
+    );
+
     drop(group);
     drop((out, pipeline));
     finish(ctx);

@@ -512,3 +512,61 @@ fn pre_shaded_isosurfaces_and_bad_splat_keys_are_refused_by_name() {
     let d = SplatSettings::default();
     assert_eq!(d.antialias, Antialias::Ewa);
 }
+
+/// Width in pixels over which opacity rises from 10% to 90% of its plateau along row `y`,
+/// scanning from the left (the first rising edge).
+fn edge_width(pixels: &[[f64; 4]], w: usize, y: usize) -> f64 {
+    let row: Vec<f64> = (0..w).map(|x| pixels[y * w + x][3]).collect();
+    let top = row.iter().copied().fold(0.0, f64::max);
+    let cross = |level: f64| {
+        let i = row.iter().position(|&a| a >= level * top).expect("edge");
+        // Linear interpolation between the two pixels around the crossing.
+        if i == 0 {
+            return 0.0;
+        }
+        let (a, b) = (row[i - 1], row[i]);
+        (i - 1) as f64 + (level * top - a) / (b - a)
+    };
+    cross(0.9) - cross(0.1)
+}
+
+#[test]
+fn post_shaded_edges_are_crisper_than_pre_shaded() {
+    // A cube of value 1 in a 21³ grid of zeros, seen face-on; an opaque step at 0.5.
+    let volume = volume_from([21; 3], [0.1; 3], [-1.0; 3], |p| {
+        if p.iter().all(|c| c.abs() < 0.5 + 1e-9) {
+            1.0
+        } else {
+            0.0
+        }
+    });
+    let s = scene(&[
+        "camera.eye=[0.0,-4.0,0.0]",
+        "camera.fov_y=40.0",
+        "camera.width=64",
+        "camera.height=64",
+        "transfer.points=[[0.0,0.0,0.0,0.0,0.0],[0.45,0.0,0.0,0.0,0.0],[0.55,1.0,1.0,1.0,400.0],[1.0,1.0,1.0,1.0,400.0]]",
+    ]);
+    let field = Field::new(
+        volume,
+        s.reconstruction,
+        &vmls::recon::OctreeSettings::default(),
+        |_| {},
+    )
+    .expect("field");
+    let mut widths = Vec::new();
+    for shading in [Shading::Pre, Shading::Post] {
+        let image = splat_image(&setup(&s, &field, shading), &field, &s.transfer);
+        widths.push(edge_width(&image.pixels, 64, 32));
+    }
+    eprintln!(
+        "edge width 10–90% in pixels: pre-shaded {:.2}, post-shaded {:.2}",
+        widths[0], widths[1]
+    );
+    assert!(
+        widths[1] < 0.6 * widths[0],
+        "post-shaded edge {:.2} px is not crisper than pre-shaded {:.2} px",
+        widths[1],
+        widths[0]
+    );
+}
