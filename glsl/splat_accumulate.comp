@@ -2,7 +2,8 @@
 // Stage splat_accumulate (twin: splat_accumulate in src/splat/accumulate.rs), one dispatch per
 // sheet, one invocation per binned entry: early splat elimination against the occlusion map
 // ([BLUR] §4), then each pixel of the entry's block gets the footprint's share of the sheet.
-// Variant macros: SPLAT_POST, SPLAT_OCCLUSION (0 off, 1 on).
+// Variant macros: SPLAT_POST, SPLAT_OCCLUSION (0 off, 1 on), SPLAT_SURFACES (pre-shaded sheets
+// of 9 channels: D, E.rgb, then the surface splats' W, sum q*alpha, C.rgb).
 // Sheets are f32 bits in uints added to by compare-and-swap: portable to any Vulkan device
 // (no float-atomic feature needed), lock-free (one lane of a contended group always succeeds),
 // and on llvmpipe what a native float atomic compiles to anyway.
@@ -89,6 +90,19 @@ void main() {
                 if (g > 0.0) {
 #if SPLAT_POST == 1
                     sheet_add((k % 5u) * pixels + p, g);
+#elif SPLAT_SURFACES == 1
+                    if (s.color.w > 0.0) {
+                        sheet_add(9u * p + 4u, g);
+                        sheet_add(9u * p + 5u, g * s.color.w);
+                        sheet_add(9u * p + 6u, g * s.color.r);
+                        sheet_add(9u * p + 7u, g * s.color.g);
+                        sheet_add(9u * p + 8u, g * s.color.b);
+                    } else {
+                        sheet_add(9u * p, g);
+                        sheet_add(9u * p + 1u, g * s.color.r);
+                        sheet_add(9u * p + 2u, g * s.color.g);
+                        sheet_add(9u * p + 3u, g * s.color.b);
+                    }
 #else
                     sheet_add(4u * p, g);
                     sheet_add(4u * p + 1u, g * s.color.r);

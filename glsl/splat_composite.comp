@@ -88,12 +88,30 @@ void main() {
     if (inside) {
         vec4 acc = image[p];
 #if SPLAT_POST == 0
-        vec4 e = vec4(uintBitsToFloat(sheets[4u * p]), uintBitsToFloat(sheets[4u * p + 1u]),
-                      uintBitsToFloat(sheets[4u * p + 2u]), uintBitsToFloat(sheets[4u * p + 3u]));
-        sheets[4u * p] = 0u;
-        sheets[4u * p + 1u] = 0u;
-        sheets[4u * p + 2u] = 0u;
-        sheets[4u * p + 3u] = 0u;
+#if SPLAT_SURFACES == 1
+        const uint STRIDE = 9u;
+        float sw = uintBitsToFloat(sheets[9u * p + 4u]);
+        float sa = uintBitsToFloat(sheets[9u * p + 5u]);
+        vec3 sc = vec3(uintBitsToFloat(sheets[9u * p + 6u]), uintBitsToFloat(sheets[9u * p + 7u]),
+                       uintBitsToFloat(sheets[9u * p + 8u]));
+        for (uint c = 4u; c < 9u; ++c) {
+            sheets[9u * p + c] = 0u;
+        }
+        // Surface splats first: coverage min(W, 1), normalised opacity and colour.
+        if (!(acc.w > done) && sw > 0.0) {
+            float cover = min(sw, 1.0) / sw;
+            acc.rgb += (1.0 - acc.w) * sc * cover;
+            acc.w += (1.0 - acc.w) * sa * cover;
+        }
+#else
+        const uint STRIDE = 4u;
+#endif
+        vec4 e = vec4(uintBitsToFloat(sheets[STRIDE * p]), uintBitsToFloat(sheets[STRIDE * p + 1u]),
+                      uintBitsToFloat(sheets[STRIDE * p + 2u]), uintBitsToFloat(sheets[STRIDE * p + 3u]));
+        sheets[STRIDE * p] = 0u;
+        sheets[STRIDE * p + 1u] = 0u;
+        sheets[STRIDE * p + 2u] = 0u;
+        sheets[STRIDE * p + 3u] = 0u;
         if (!(acc.w > done) && e.x > 0.0) {
             float alpha = 1.0 - exp(-e.x);
             acc.rgb += (1.0 - acc.w) * e.yzw / e.x * alpha;

@@ -3,7 +3,8 @@
 // kernel: ray-space Jacobian, footprint, resampling filter, conic, bounding box, depth and
 // sheet range, culling guards; counts each sheet's binned entries.
 // Variant macros: SPLAT_POST (0 pre-shaded, 1 post-shaded), SPLAT_ANTIALIAS (0 ewa, 1 swan,
-// 2 none), SPLAT_ORTHO (0 perspective, 1 orthographic).
+// 2 none), SPLAT_ORTHO (0 perspective, 1 orthographic), SPLAT_SURFACES (surface splats of
+// isosurfaces: metric_off.w = 1 + isosurface index, pos_value.w = the metric's scale).
 #extension GL_EXT_control_flow_attributes : enable
 
 layout(local_size_x = 64) in;
@@ -19,6 +20,11 @@ layout(std430, binding = BINDING_SPLAT_STATS) buffer StatsBuf { uint stats[]; };
 
 #if SPLAT_POST == 0
 #include "transfer.glsl"
+#endif
+#if SPLAT_SURFACES == 1
+#include "shading.glsl"
+// Tangential over normal standard deviation (src/splat/surface.rs FLATNESS).
+const float FLATNESS = 10.0;
 #endif
 
 // SplatCounts order: projected, near, outside, degenerate, empty.
@@ -64,13 +70,35 @@ Splat project(Sample k) {
     vec3 p = k.pos_value.xyz;
     float value = k.pos_value.w;
     float volume = k.metric_off.z;
+    float opacity = 0.0;
 #if SPLAT_POST == 1
     float weight = value * volume;
     vec3 color = vec3(0.0);
 #else
-    vec4 ct = transfer_lookup(value, params.tf_count);
-    float weight = ct.a * volume;
-    vec3 color = ct.rgb;
+    float weight;
+    vec3 color;
+#if SPLAT_SURFACES == 1
+    if (k.metric_off.w > 0.5) {
+        IsoSurface iso = isos[uint(k.metric_off.w) - 1u];
+#if SPLAT_ORTHO == 1
+        vec3 view = params.forward.xyz;
+#else
+        vec3 view = normalize(p - params.eye.xyz);
+#endif
+        vec4 m = k.metric, mo = k.metric_off;
+        float rho2 = m.x * view.x * view.x + m.y * view.y * view.y + m.z * view.z * view.z
+                   + 2.0 * (m.w * view.x * view.y + mo.x * view.x * view.z + mo.y * view.y * view.z);
+        float c = sqrt(clamp((rho2 / value - 1.0) / (FLATNESS * FLATNESS - 1.0), 0.0, 1.0));
+        weight = volume * c;
+        color = shade_cos(iso, c);
+        opacity = iso.color_opacity.a;
+    } else
+#endif
+    {
+        vec4 ct = transfer_lookup(value, params.tf_count);
+        weight = ct.a * volume;
+        color = ct.rgb;
+    }
 #endif
     if (weight == 0.0) {
         return culled(CULL_EMPTY);
@@ -161,7 +189,7 @@ Splat project(Sample k) {
     s.centre_depth = vec4(centre, t, sqrt(cond));
     s.conic_amplitude = vec4(conic, amplitude);
     s.slope = vec4(slope, 0.0, 0.0);
-    s.color = vec4(color, 0.0);
+    s.color = vec4(color, opacity);
     s.bbox = bbox;
     uint bx = uint(bbox.z - bbox.x) / uint(SPLAT_BLOCK) + 1u;
     uint by = uint(bbox.w - bbox.y) / uint(SPLAT_BLOCK) + 1u;

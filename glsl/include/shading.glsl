@@ -6,13 +6,16 @@
 
 layout(std430, binding = BINDING_ISO) readonly buffer IsoBuf { IsoSurface isos[]; };
 
-vec3 shade_surface(IsoSurface iso, vec3 gradient, vec3 dir) {
-    float len = length(gradient);
-    float c = len > 1e-12 ? abs(dot(gradient / len, -dir)) : 1.0;
+vec3 shade_cos(IsoSurface iso, float c) {
     vec4 light = params.lighting;
     float lit = light.x + light.y * c;
     float spec = light.z * pow(c, light.w);
     return iso.color_opacity.a * (iso.color_opacity.rgb * lit + spec);
+}
+
+vec3 shade_surface(IsoSurface iso, vec3 gradient, vec3 dir) {
+    float len = length(gradient);
+    return shade_cos(iso, len > 1e-12 ? abs(dot(gradient / len, -dir)) : 1.0);
 }
 
 #endif

@@ -587,8 +587,18 @@ impl Renderer {
             view.lighting,
             &self.field,
         )?;
-        if self.splat_kernels.is_none() {
-            self.splat_kernels = Some(GpuKernels::upload(&self.ctx, &self.field)?);
+        let surfaces: &[Isosurface] = if setup.settings.surface {
+            &setup.isosurfaces
+        } else {
+            &[]
+        };
+        if !self
+            .splat_kernels
+            .as_ref()
+            .is_some_and(|k| k.has_surfaces_of(surfaces))
+        {
+            self.splat_kernels = None;
+            self.splat_kernels = Some(GpuKernels::upload(&self.ctx, &self.field, surfaces)?);
         }
         let Some(kernels) = self.splat_kernels.as_ref() else {
             return Err(VkError::Usage("splat kernels missing".into()).into());

@@ -52,6 +52,11 @@ pub fn shade_surface(
     } else {
         1.0
     };
+    shade_cos(iso, light, cos)
+}
+
+/// The same shading from |n·l| directly (surface splats know it, not the normal).
+pub fn shade_cos(iso: &Isosurface, light: &Lighting, cos: f64) -> [f64; 3] {
     let lit = light.ambient + light.diffuse * cos;
     let spec = light.specular * cos.powf(light.shininess);
     [0, 1, 2].map(|k| iso.opacity * (iso.color[k] * lit + spec))

@@ -5,7 +5,14 @@ use crate::splat::{Antialias, SplatSettings};
 use toml::Value;
 
 /// Keys of `[splat]`.
-pub(super) const KEYS: &[&str] = &["slab", "cutoff", "lowpass", "antialias", "occlusion"];
+pub(super) const KEYS: &[&str] = &[
+    "slab",
+    "cutoff",
+    "lowpass",
+    "antialias",
+    "occlusion",
+    "surface",
+];
 
 /// Reads `[splat]`; every key is optional.
 pub(super) fn parse(sec: &Section<'_>) -> Result<SplatSettings, SceneError> {
@@ -23,10 +30,15 @@ pub(super) fn parse(sec: &Section<'_>) -> Result<SplatSettings, SceneError> {
                 ("none", Antialias::None),
             ],
         )?,
-        occlusion: match sec.get("occlusion") {
-            None => d.occlusion,
-            Some(Value::Boolean(b)) => *b,
-            Some(v) => return Err(sec.err("occlusion", "true or false", v)),
-        },
+        occlusion: flag(sec, "occlusion", d.occlusion)?,
+        surface: flag(sec, "surface", d.surface)?,
     })
+}
+
+fn flag(sec: &Section<'_>, key: &str, default: bool) -> Result<bool, SceneError> {
+    match sec.get(key) {
+        None => Ok(default),
+        Some(Value::Boolean(b)) => Ok(*b),
+        Some(v) => Err(sec.err(key, "true or false", v)),
+    }
 }

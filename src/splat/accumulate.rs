@@ -22,6 +22,7 @@
 //!   - the occlusion map marks tiles where every pixel's opacity exceeds early termination.
 
 use super::project::{Cull, Kernel, Splat, splat_footprint, splat_project};
+use super::surface::{KernelKind, surface_kernels};
 use super::{BLOCK, Shading, SplatCounts, SplatSetup, TILE, blocks};
 use crate::render::Field;
 use crate::render::camera::clip_box;
@@ -31,6 +32,8 @@ use glam::DVec3;
 
 /// Post-shaded sheets kept at once: sheets k−3..k are read while k+1's is cleared.
 pub const RING: usize = 5;
+/// Pre-shaded sheet channels: D, E.rgb, then (with surface splats) W, Σq·α, C.rgb.
+pub const SHEET: usize = 9;
 
 /// The kernels of a field, frame-relative.
 pub fn kernels(field: &Field) -> impl Iterator<Item = Kernel> + '_ {
@@ -41,6 +44,7 @@ pub fn kernels(field: &Field) -> impl Iterator<Item = Kernel> + '_ {
         value: f64::from(s.values[i]),
         metric: s.metric(i),
         volume: volumes.get(i),
+        kind: KernelKind::Volume,
     })
 }
 
@@ -60,8 +64,9 @@ struct Frame<'a> {
     /// Premultiplied colour and transmittance per pixel.
     color: Vec<[f64; 3]>,
     transmittance: Vec<f64>,
-    /// Pre-shaded: (D, E) per pixel; post-shaded: RING sheets of field integrals.
-    sheet: Vec<[f64; 4]>,
+    /// Pre-shaded: per pixel the volume's (D, E.rgb) and the surface splats' (W, Σq·α, C.rgb);
+    /// post-shaded: RING sheets of field integrals.
+    sheet: Vec<[f64; SHEET]>,
     ring: Vec<Vec<f64>>,
     /// Per occlusion tile: every pixel opaque.
     opaque: Vec<bool>,
@@ -197,6 +202,14 @@ fn splat_accumulate(
                     continue;
                 }
                 match setup.shading {
+                    Shading::Pre if s.opacity > 0.0 => {
+                        let e = &mut frame.sheet[p];
+                        e[4] += g;
+                        e[5] += g * s.opacity;
+                        for c in 0..3 {
+                            e[c + 6] += g * s.color[c];
+                        }
+                    }
                     Shading::Pre => {
                         let e = &mut frame.sheet[p];
                         e[0] += g;
@@ -231,7 +244,19 @@ fn splat_composite(frame: &mut Frame<'_>, tf: &TransferFunction, k: u32) {
         match setup.shading {
             Shading::Pre => {
                 let e = std::mem::take(&mut frame.sheet[p]);
-                if frame.done(p) || e[0] <= 0.0 {
+                if frame.done(p) {
+                    continue;
+                }
+                if e[4] > 0.0 {
+                    // Surface splats first: coverage min(W, 1), normalised opacity and colour.
+                    let cover = e[4].min(1.0) / e[4];
+                    let t = frame.transmittance[p];
+                    for c in 0..3 {
+                        frame.color[p][c] += t * e[c + 6] * cover;
+                    }
+                    frame.transmittance[p] *= 1.0 - e[5] * cover;
+                }
+                if e[0] <= 0.0 {
                     continue;
                 }
                 let alpha = 1.0 - (-e[0]).exp();
@@ -312,7 +337,12 @@ fn splat_composite(frame: &mut Frame<'_>, tf: &TransferFunction, k: u32) {
 pub fn splat_image(setup: &SplatSetup, field: &Field, tf: &TransferFunction) -> SplatImage {
     let mut counts = SplatCounts::default();
     let mut splats = Vec::new();
-    for kernel in kernels(field) {
+    let surfaces = if setup.settings.surface {
+        surface_kernels(field, &setup.isosurfaces)
+    } else {
+        Vec::new()
+    };
+    for kernel in kernels(field).chain(surfaces) {
         counts.projected += 1;
         match splat_project(setup, tf, &kernel) {
             Ok(s) => splats.push(s),
@@ -330,7 +360,7 @@ pub fn splat_image(setup: &SplatSetup, field: &Field, tf: &TransferFunction) -> 
         color: vec![[0.0; 3]; w * h],
         transmittance: vec![1.0; w * h],
         sheet: vec![
-            [0.0; 4];
+            [0.0; SHEET];
             if setup.shading == Shading::Pre {
                 w * h
             } else {

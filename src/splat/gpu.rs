@@ -8,6 +8,7 @@
 //! `splat_composite` (post-shaded: one more composite for the last sheet), in submissions of
 //! at most `SLABS_PER_SUBMISSION` sheets so that every dispatch is timed.
 
+use super::surface::KernelKind;
 use super::{Antialias, Shading, SplatCounts, SplatSetup, TILE};
 use crate::gpu_types::{SlabPush, Splat, SplatParams, binding};
 use crate::render::Field;
@@ -27,19 +28,33 @@ const STATS: usize = 8;
 pub struct GpuKernels {
     buffer: Buffer,
     count: u32,
+    /// The isosurface values whose surface splats follow the volume kernels.
+    surface_values: Vec<f64>,
 }
 
 impl GpuKernels {
-    /// Uploads every sample of the field as a Gaussian kernel.
-    pub fn upload(ctx: &Context, field: &Field) -> Result<Self, VkError> {
+    /// Uploads every sample of the field as a Gaussian kernel, then the surface splats of
+    /// `isosurfaces` (none: no surface splats). A surface splat keeps its metric's scale in
+    /// `pos_value.w` and 1 + its isosurface index in `metric_off.w` (0 for volume kernels).
+    pub fn upload(
+        ctx: &Context,
+        field: &Field,
+        isosurfaces: &[crate::render::shading::Isosurface],
+    ) -> Result<Self, VkError> {
+        let surfaces = super::surface::surface_kernels(field, isosurfaces);
         let data: Vec<crate::gpu_types::Sample> = super::accumulate::kernels(field)
+            .chain(surfaces)
             .map(|k| {
                 let m = k.metric.map(|v| v as f32);
                 let p = k.position.map(|v| v as f32);
+                let (w, tag) = match k.kind {
+                    KernelKind::Volume => (k.value, 0.0),
+                    KernelKind::Surface { iso, scale } => (scale, 1.0 + iso as f32),
+                };
                 crate::gpu_types::Sample {
-                    pos_value: [p[0], p[1], p[2], k.value as f32],
+                    pos_value: [p[0], p[1], p[2], w as f32],
                     metric: [m[0], m[1], m[2], m[3]],
-                    metric_off: [m[4], m[5], k.volume as f32, 0.0],
+                    metric_off: [m[4], m[5], k.volume as f32, tag],
                 }
             })
             .collect();
@@ -48,7 +63,18 @@ impl GpuKernels {
         Ok(Self {
             buffer: Buffer::from_slice(ctx, "splat kernels", &data)?,
             count,
+            surface_values: isosurfaces.iter().map(|i| i.value).collect(),
         })
+    }
+
+    /// Whether these kernels carry the surface splats of exactly these isosurfaces.
+    pub fn has_surfaces_of(&self, isosurfaces: &[crate::render::shading::Isosurface]) -> bool {
+        self.surface_values.len() == isosurfaces.len()
+            && self
+                .surface_values
+                .iter()
+                .zip(isosurfaces)
+                .all(|(v, i)| *v == i.value)
     }
 
     /// Bytes on the device.
@@ -65,6 +91,8 @@ pub struct SplatVariant {
     pub orthographic: bool,
     pub occlusion: bool,
     pub isosurfaces: bool,
+    /// Surface splats (pre-shaded isosurfaces).
+    pub surfaces: bool,
 }
 
 impl SplatVariant {
@@ -76,6 +104,7 @@ impl SplatVariant {
             orthographic: setup.orthographic(),
             occlusion: setup.settings.occlusion,
             isosurfaces: !setup.isosurfaces.is_empty(),
+            surfaces: setup.settings.surface && !setup.isosurfaces.is_empty(),
         }
     }
 
@@ -97,6 +126,7 @@ impl SplatVariant {
             ("SPLAT_ORTHO".into(), flag(self.orthographic)),
             ("SPLAT_OCCLUSION".into(), flag(self.occlusion)),
             ("SPLAT_ISOSURFACES".into(), flag(self.isosurfaces)),
+            ("SPLAT_SURFACES".into(), flag(self.surfaces)),
         ]);
         d
     }
@@ -120,7 +150,13 @@ impl SplatVariant {
                 "perspective"
             },
             if self.occlusion { " occlusion" } else { "" },
-            if self.isosurfaces { " isosurfaces" } else { "" },
+            if self.surfaces {
+                " surface-splats"
+            } else if self.isosurfaces {
+                " isosurfaces"
+            } else {
+                ""
+            },
         )
     }
 }
@@ -156,6 +192,9 @@ impl SplatPipelines {
         let mut project = vec![PARAMS, SPLAT_KERNELS, SPLATS, SLAB_COUNTS, SPLAT_STATS];
         if !post {
             project.push(TRANSFER);
+        }
+        if variant.surfaces {
+            project.push(ISO);
         }
         let mut composite = vec![PARAMS, SHEETS, IMAGE, OCCLUSION];
         if post {
@@ -199,7 +238,7 @@ impl SplatPipelines {
 
 /// Frame buffers of one image size, sheet count and kernel count; the entry list grows.
 pub struct SplatTargets {
-    key: (u32, u32, u32, u32, Shading),
+    key: (u32, u32, u32, u32, Shading, bool),
     splats: Buffer,
     counts: Buffer,
     offsets: Buffer,
@@ -213,13 +252,14 @@ pub struct SplatTargets {
 }
 
 impl SplatTargets {
-    fn key(setup: &SplatSetup, kernels: &GpuKernels) -> (u32, u32, u32, u32, Shading) {
+    fn key(setup: &SplatSetup, kernels: &GpuKernels) -> (u32, u32, u32, u32, Shading, bool) {
         (
             setup.camera.width,
             setup.camera.height,
             setup.slabs,
             kernels.count,
             setup.shading,
+            SplatVariant::of(setup).surfaces,
         )
     }
 
@@ -238,6 +278,9 @@ impl SplatTargets {
         let slabs = u64::from(setup.slabs);
         let tiles = w.div_ceil(u64::from(TILE)) * h.div_ceil(u64::from(TILE));
         let sheet_floats = match setup.shading {
+            Shading::Pre if SplatVariant::of(setup).surfaces => {
+                super::accumulate::SHEET as u64 * pixels
+            }
             Shading::Pre => 4 * pixels,
             Shading::Post => super::accumulate::RING as u64 * pixels,
         };
@@ -379,6 +422,9 @@ pub fn splat_frame(
     ];
     if setup.shading == Shading::Pre {
         project_bind.push((binding::TRANSFER, &tf_buf));
+    }
+    if pipelines.variant.surfaces {
+        project_bind.push((binding::ISO, &iso_buf));
     }
     let group = BindGroup::new(ctx, &pipelines.project, &project_bind)?;
     let timings = ctx.submit(|rec| {

@@ -20,6 +20,7 @@
 pub mod accumulate;
 pub mod gpu;
 pub mod project;
+pub mod surface;
 
 use crate::render::camera::{Camera, Projection, ViewBasis};
 use crate::render::shading::{Isosurface, Lighting};
@@ -72,6 +73,8 @@ pub struct SplatSettings {
     pub antialias: Antialias,
     /// Early splat elimination with the occlusion map.
     pub occlusion: bool,
+    /// Isosurfaces as surface splats (pre-shaded splatting).
+    pub surface: bool,
 }
 
 impl Default for SplatSettings {
@@ -82,6 +85,7 @@ impl Default for SplatSettings {
             lowpass: 1.0,
             antialias: Antialias::Ewa,
             occlusion: true,
+            surface: false,
         }
     }
 }
@@ -133,11 +137,19 @@ impl SplatSetup {
         lighting: &Lighting,
         field: &Field,
     ) -> Result<Self, RenderError> {
-        if shading == Shading::Pre && !isosurfaces.is_empty() {
+        if shading == Shading::Pre && !isosurfaces.is_empty() && !settings.surface {
             return Err(RenderError::Setting {
                 key: "transfer.isosurfaces",
-                message: "isosurfaces need render.method = \"splat-post\" (pre-shaded surface \
-                          splats are not implemented yet)"
+                message: "pre-shaded splatting draws isosurfaces as surface splats: set \
+                          splat.surface = true, or use render.method = \"splat-post\""
+                    .into(),
+            });
+        }
+        if shading == Shading::Post && settings.surface {
+            return Err(RenderError::Setting {
+                key: "splat.surface",
+                message: "surface splats belong to pre-shaded splatting (render.method = \
+                          \"splat\"); post-shaded splatting finds isosurfaces in its sheets"
                     .into(),
             });
         }

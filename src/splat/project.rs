@@ -19,7 +19,9 @@
 //! behind the eye) are culled; a footprint variance below `MIN_VARIANCE` px² is raised to it;
 //! det ≤ 0 or any non-finite intermediate culls the kernel as degenerate.
 
+use super::surface::{KernelKind, normal_cos2};
 use super::{Antialias, MIN_VARIANCE, Shading, SplatCounts, SplatSetup};
+use crate::render::shading::shade_cos;
 use crate::render::transfer::TransferFunction;
 use crate::samples::Metric;
 use glam::DVec3;
@@ -30,8 +32,9 @@ pub struct Kernel {
     pub position: [f64; 3],
     pub value: f64,
     pub metric: Metric,
-    /// The volume it stands for (`KernelVolumes`).
+    /// The volume it stands for (`KernelVolumes`); a surface splat's area.
     pub volume: f64,
+    pub kind: KernelKind,
 }
 
 /// A projected kernel (twin of the GLSL `Splat`).
@@ -48,8 +51,10 @@ pub struct Splat {
     pub slope: [f64; 2],
     /// Conditional standard deviation s of t.
     pub depth_sigma: f64,
-    /// Emitted colour (pre-shaded).
+    /// Emitted colour (pre-shaded); a surface splat's shaded, premultiplied colour.
     pub color: [f64; 3],
+    /// A surface splat's isosurface opacity; 0 for volume kernels.
+    pub opacity: f64,
     /// Inclusive pixel box x0, y0, x1, y1.
     pub bbox: [i32; 4],
     /// Inclusive sheet range.
@@ -180,11 +185,24 @@ pub fn splat_project(
     tf: &TransferFunction,
     kernel: &Kernel,
 ) -> Result<Splat, Cull> {
-    let (weight, color) = match setup.shading {
-        Shading::Post => (kernel.value * kernel.volume, [0.0; 3]),
-        Shading::Pre => {
+    let (weight, color, opacity) = match (kernel.kind, setup.shading) {
+        (KernelKind::Surface { iso, scale }, _) => {
+            let Some(iso) = setup.isosurfaces.get(iso as usize) else {
+                return Err(Cull::Empty);
+            };
+            let view = if setup.orthographic() {
+                setup.basis.forward
+            } else {
+                (DVec3::from(kernel.position) - setup.eye).normalize_or_zero()
+            };
+            let cos = normal_cos2(&kernel.metric, scale, view.to_array()).sqrt();
+            let rgb = shade_cos(iso, &setup.lighting, cos);
+            (kernel.volume * cos, rgb, iso.opacity)
+        }
+        (KernelKind::Volume, Shading::Post) => (kernel.value * kernel.volume, [0.0; 3], 0.0),
+        (KernelKind::Volume, Shading::Pre) => {
             let (c, tau) = tf.lookup(kernel.value);
-            (tau * kernel.volume, c)
+            (tau * kernel.volume, c, 0.0)
         }
     };
     if weight == 0.0 {
@@ -257,6 +275,7 @@ pub fn splat_project(
         slope,
         depth_sigma: cond.sqrt(),
         color,
+        opacity,
         bbox,
         slabs: [
             first.max(0.0) as u32,
