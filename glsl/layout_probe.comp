@@ -103,12 +103,13 @@ void main() {
     splat_params.kernel_count = 20u;
     splat_params.iso_count = 21u;
 
-    splat.centre_depth = v(1.0);
-    splat.conic_amplitude = v(2.0);
-    splat.slope = v(3.0);
-    splat.color = v(4.0);
-    splat.bbox = ivec4(5, 6, 7, 8);
-    splat.slabs = uvec4(9u, 10u, 11u, 12u);
+    splat.footprint0 = v(1.0);
+    splat.footprint1 = v(2.0);
+    splat.footprint2 = v(3.0);
+    splat.footprint3 = v(4.0);
+    splat.color = v(5.0);
+    splat.bbox = ivec4(6, 7, 8, 9);
+    splat.slabs = uvec4(10u, 11u, 12u, 13u);
 
     slab_push = SlabPush(1u, 2u, 3u, 4u);
 }

@@ -11,10 +11,11 @@
 layout(local_size_x = 64) in;
 
 #include "types.glsl"
-#include "splat.glsl"
 
 layout(push_constant) uniform PushBlock { SlabPush push; };
 layout(std430, binding = BINDING_PARAMS) readonly buffer ParamsBuf { SplatParams params; };
+
+#include "splat.glsl"
 layout(std430, binding = BINDING_SPLATS) readonly buffer SplatBuf { Splat splats[]; };
 layout(std430, binding = BINDING_SLAB_COUNTS) readonly buffer CountBuf { uint slab_counts[]; };
 layout(std430, binding = BINDING_SLAB_OFFSETS) readonly buffer OffsetBuf { uint slab_offsets[]; };

@@ -12,10 +12,11 @@
 layout(local_size_x = 8, local_size_y = 8) in;
 
 #include "types.glsl"
-#include "splat.glsl"
 
 layout(push_constant) uniform PushBlock { SlabPush push; };
 layout(std430, binding = BINDING_PARAMS) readonly buffer ParamsBuf { SplatParams params; };
+
+#include "splat.glsl"
 layout(std430, binding = BINDING_SHEETS) buffer SheetBuf { uint sheets[]; };
 layout(std430, binding = BINDING_IMAGE) buffer ImageBuf { vec4 image[]; };
 layout(std430, binding = BINDING_OCCLUSION) writeonly buffer OcclusionBuf { uint occlusion[]; };

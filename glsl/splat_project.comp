@@ -10,13 +10,14 @@
 layout(local_size_x = 64) in;
 
 #include "types.glsl"
-#include "splat.glsl"
 
 layout(std430, binding = BINDING_PARAMS) readonly buffer ParamsBuf { SplatParams params; };
 layout(std430, binding = BINDING_SPLAT_KERNELS) readonly buffer KernelBuf { Sample kernels[]; };
 layout(std430, binding = BINDING_SPLATS) writeonly buffer SplatBuf { Splat splats[]; };
 layout(std430, binding = BINDING_SLAB_COUNTS) buffer CountBuf { uint slab_counts[]; };
 layout(std430, binding = BINDING_SPLAT_STATS) buffer StatsBuf { uint stats[]; };
+
+#include "splat.glsl"
 
 #if SPLAT_POST == 0
 #include "transfer.glsl"
@@ -38,9 +39,10 @@ const float MIN_VARIANCE = 1e-6;
 Splat culled(uint reason) {
     atomicAdd(stats[reason], 1u);
     Splat s;
-    s.centre_depth = vec4(0.0);
-    s.conic_amplitude = vec4(0.0);
-    s.slope = vec4(0.0);
+    s.footprint0 = vec4(0.0);
+    s.footprint1 = vec4(0.0);
+    s.footprint2 = vec4(0.0);
+    s.footprint3 = vec4(0.0);
     s.color = vec4(0.0);
     s.bbox = ivec4(0);
     s.slabs = uvec4(1u, 0u, 0u, 0u);
@@ -164,9 +166,37 @@ Splat project(Sample k) {
     float cond = max(vtt - dot(slope, vxt), 1e-12 * vtt);
     float amplitude = weight * abs(determinant(at)) / (6.283185307179586 * sqrt(det_f));
     vec3 conic = vec3(vf.z, -vf.y, vf.x) / det_f;
+#if SPLAT_ORTHO == 1
+    const float widen = 1.0, pad = 0.0;
+    float checks_exact = 0.0;
+#else
+    // Perspective-exact footprint: the filtered covariance in object space ([EWA]'s screen
+    // low-pass pulled back through A), its precision and adjugate in the camera frame.
+    const float widen = 1.1, pad = 1.0;
+    mat3 a_mat = transpose(at);
+#if SPLAT_ANTIALIAS == 0
+    mat3 ai = inverse(a_mat);
+    mat3 v_f = v_obj + ai * mat3(lowpass, 0.0, 0.0, 0.0, lowpass, 0.0, 0.0, 0.0, 0.0) * transpose(ai);
+#elif SPLAT_ANTIALIAS == 1
+    mat3 v_f = v_obj * (vf.x / max(vhat.x, MIN_VARIANCE));
+#else
+    mat3 v_f = v_obj;
+#endif
+    mat3 p_obj = inverse(v_f);
+    float det_p = determinant(p_obj);
+    if (!(det_p > 0.0) || isinf(det_p)) {
+        return culled(CULL_DEGENERATE);
+    }
+    mat3 e_rows = transpose(mat3(right, up, fwd));
+    mat3 qm = e_rows * p_obj * transpose(e_rows);
+    mat3 jm = e_rows * v_f * transpose(e_rows) * det_p;
+    float ray_amp = weight * sqrt(det_p) / 6.283185307179586;
+    float checks_exact = qm[0][0] + qm[1][0] + qm[1][1] + qm[2][0] + qm[2][1] + qm[2][2]
+                       + jm[0][0] + jm[1][0] + jm[1][1] + jm[2][0] + jm[2][1] + jm[2][2] + ray_amp;
+#endif
     float w = float(params.width), h = float(params.height);
-    float rx = cutoff * sqrt(vf.x);
-    float ry = cutoff * sqrt(vf.z);
+    float rx = cutoff * sqrt(vf.x) * widen + pad;
+    float ry = cutoff * sqrt(vf.z) * widen + pad;
     ivec4 bbox = ivec4(
         int(min(max(ceil(centre.x - rx), 0.0), w)),
         int(min(max(ceil(centre.y - ry), 0.0), h)),
@@ -174,11 +204,12 @@ Splat project(Sample k) {
         int(max(min(floor(centre.y + ry), h - 1.0), -1.0)));
     float spread = slope.x * (vf.x * slope.x + vf.y * slope.y)
                  + slope.y * (vf.y * slope.x + vf.z * slope.y);
-    float depth_reach = cutoff * (sqrt(max(spread, 0.0)) + sqrt(cond));
+    float depth_reach = cutoff * (sqrt(max(spread, 0.0)) + sqrt(cond)) * widen;
     float slab0 = params.box_min.w, slab = params.box_max.w;
     float first = floor((t - depth_reach - slab0) / slab);
     float last = floor((t + depth_reach - slab0) / slab);
-    float checks = amplitude + conic.x + conic.y + conic.z + slope.x + slope.y + t + cond;
+    float checks = amplitude + conic.x + conic.y + conic.z + slope.x + slope.y + t + cond
+                 + checks_exact;
     if (isnan(checks) || isinf(checks)) {
         return culled(CULL_DEGENERATE);
     }
@@ -186,9 +217,17 @@ Splat project(Sample k) {
         return culled(CULL_OUTSIDE);
     }
     Splat s;
-    s.centre_depth = vec4(centre, t, sqrt(cond));
-    s.conic_amplitude = vec4(conic, amplitude);
-    s.slope = vec4(slope, 0.0, 0.0);
+#if SPLAT_ORTHO == 1
+    s.footprint0 = vec4(centre, t, sqrt(cond));
+    s.footprint1 = vec4(conic, amplitude);
+    s.footprint2 = vec4(slope, 0.0, 0.0);
+    s.footprint3 = vec4(0.0);
+#else
+    s.footprint0 = vec4(qm[0][0], qm[1][0], qm[1][1], qm[2][0]);
+    s.footprint1 = vec4(qm[2][1], qm[2][2], -u.x, -u.y);
+    s.footprint2 = vec4(jm[0][0], jm[1][0], jm[1][1], jm[2][0]);
+    s.footprint3 = vec4(jm[2][1], jm[2][2], -u.z, ray_amp);
+#endif
     s.color = vec4(color, opacity);
     s.bbox = bbox;
     uint bx = uint(bbox.z - bbox.x) / uint(SPLAT_BLOCK) + 1u;

@@ -339,24 +339,28 @@ pub struct SplatParams {
 }
 const _: () = assert!(std::mem::size_of::<SplatParams>() == 192);
 
-/// One projected kernel (splat_project's output). GLSL twin: `Splat`.
+/// One projected kernel (splat_project's output). GLSL twin: `Splat`. The footprint words
+/// depend on the projection (`splat::project::Splat` names them):
+/// - orthographic (affine footprint): centre x, y, t, depth σ | conic xx, xy, yy, peak |
+///   depth slope x, y, 0, 0 | unused;
+/// - perspective (per-pixel ray integral): Q xx, xy, yy, xz | Q yz, zz, r.x, r.y |
+///   adj(P) xx, xy, yy, xz | adj(P) yz, zz, r.z, w·√det P/(2π).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
 pub struct Splat {
-    /// Pixel x, y of the centre, t there, conditional standard deviation of t.
-    pub centre_depth: [f32; 4],
-    /// Conic xx, xy, yy and the footprint's peak.
-    pub conic_amplitude: [f32; 4],
-    /// Depth slope b (2), unused ×2.
-    pub slope: [f32; 4],
-    /// Emitted colour (pre-shaded), unused.
+    pub footprint0: [f32; 4],
+    pub footprint1: [f32; 4],
+    pub footprint2: [f32; 4],
+    pub footprint3: [f32; 4],
+    /// Emitted colour (pre-shaded) or a surface splat's shaded colour; w: the surface's opacity
+    /// (0 for volume kernels).
     pub color: [f32; 4],
     /// Inclusive pixel box x0, y0, x1, y1.
     pub bbox: [i32; 4],
     /// First and last sheet (first > last: culled), blocks per row, blocks in all.
     pub slabs: [u32; 4],
 }
-const _: () = assert!(std::mem::size_of::<Splat>() == 96);
+const _: () = assert!(std::mem::size_of::<Splat>() == 112);
 
 /// Push constants of the per-sheet splatting kernels. GLSL twin: `SlabPush`.
 #[repr(C)]

@@ -162,12 +162,13 @@ fn glsl_and_rust_layouts_agree() {
     assert_eq!(
         *sp,
         Splat {
-            centre_depth: v(1.0),
-            conic_amplitude: v(2.0),
-            slope: v(3.0),
-            color: v(4.0),
-            bbox: [5, 6, 7, 8],
-            slabs: [9, 10, 11, 12],
+            footprint0: v(1.0),
+            footprint1: v(2.0),
+            footprint2: v(3.0),
+            footprint3: v(4.0),
+            color: v(5.0),
+            bbox: [6, 7, 8, 9],
+            slabs: [10, 11, 12, 13],
         },
         "Splat"
     );

@@ -28,17 +28,49 @@ float phi_between(float za, float zb) {
 }
 
 // The share of a splat's line integral through pixel (x, y) that lies in t in [ta, tb]; zero
-// outside the cutoff ellipse.
+// outside the cutoff. Orthographic: the affine footprint (exact there); perspective: the exact
+// integral along the pixel's own ray (src/splat/project.rs explains both and the word layout).
+// Needs SplatParams params.
 float splat_footprint(Splat s, float cutoff, vec2 pixel, float ta, float tb) {
-    vec2 d = pixel - s.centre_depth.xy;
-    vec4 c = s.conic_amplitude;
+#if SPLAT_ORTHO == 1
+    vec2 d = pixel - s.footprint0.xy;
+    vec4 c = s.footprint1;
     float q = c.x * d.x * d.x + 2.0 * c.y * d.x * d.y + c.z * d.y * d.y;
     if (q > cutoff * cutoff) {
         return 0.0;
     }
-    float m = s.centre_depth.z + dot(s.slope.xy, d);
-    float inv = 1.0 / s.centre_depth.w;
+    float m = s.footprint0.z + dot(s.footprint2.xy, d);
+    float inv = 1.0 / s.footprint0.w;
     return c.w * exp(-0.5 * q) * phi_between((ta - m) * inv, (tb - m) * inv);
+#else
+    float f = params.forward.w;
+    float dx = (pixel.x - params.right.w) / f;
+    float dy = (params.up.w - pixel.y) / f;
+    vec4 q0 = s.footprint0, q1 = s.footprint1, j0 = s.footprint2, j1 = s.footprint3;
+    // a' = d'^T Q d', b' = d'^T Q r with d' = (dx, dy, 1).
+    vec3 qd = vec3(q0.x * dx + q0.y * dy + q0.w,
+                   q0.y * dx + q0.z * dy + q1.x,
+                   q0.w * dx + q1.x * dy + q1.y);
+    float a = dx * qd.x + dy * qd.y + qd.z;
+    vec3 r = vec3(q1.z, q1.w, j1.z);
+    float b = dot(r, qd);
+    // c - b'^2/a' = (r x d')^T adj(P) (r x d') / a', free of cancellation.
+    vec3 w = vec3(r.y - r.z * dy, r.z * dx - r.x, r.x * dy - r.y * dx);
+    float g = j0.x * w.x * w.x + j0.z * w.y * w.y + j1.y * w.z * w.z
+            + 2.0 * (j0.y * w.x * w.y + j0.w * w.x * w.z + j1.x * w.y * w.z);
+    if (!(a > 0.0)) {
+        return 0.0;
+    }
+    float e = g / a;
+    if (e > cutoff * cutoff) {
+        return 0.0;
+    }
+    float len = sqrt(1.0 + dx * dx + dy * dy);
+    float inv_sqrt_a = inversesqrt(a);
+    float m = -b * len / a;
+    float inv = 1.0 / (len * inv_sqrt_a);
+    return j1.w * len * inv_sqrt_a * exp(-0.5 * e) * phi_between((ta - m) * inv, (tb - m) * inv);
+#endif
 }
 
 // Inclusive pixel box of block b of a splat's bounding box.

@@ -108,9 +108,10 @@ struct SplatParams {
 };
 
 struct Splat {
-    vec4 centre_depth;
-    vec4 conic_amplitude;
-    vec4 slope;
+    vec4 footprint0;
+    vec4 footprint1;
+    vec4 footprint2;
+    vec4 footprint3;
     vec4 color;
     ivec4 bbox;
     uvec4 slabs;

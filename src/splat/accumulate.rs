@@ -196,8 +196,7 @@ fn splat_accumulate(
                 if setup.settings.occlusion && setup.shading == Shading::Pre && frame.done(p) {
                     continue;
                 }
-                let g =
-                    splat_footprint(s, setup.settings.cutoff, f64::from(x), f64::from(y), ta, tb);
+                let g = splat_footprint(s, setup, f64::from(x), f64::from(y), ta, tb);
                 if g <= 0.0 {
                     continue;
                 }
