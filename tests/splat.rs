@@ -96,12 +96,8 @@ fn one_kernel_footprint_is_the_line_integral_of_its_gaussian() {
         Projection::Orthographic { view_height: 1.6 },
     ];
     let metrics = [
-        ("isotropic", rotated_metric([0.08; 3], 0.0), 1e-3),
-        (
-            "anisotropic 16:1",
-            rotated_metric([0.16, 0.01, 0.05], 0.7),
-            1e-2,
-        ),
+        ("isotropic", rotated_metric([0.08; 3], 0.0)),
+        ("anisotropic 16:1", rotated_metric([0.16, 0.01, 0.05], 0.7)),
     ];
     let mut checked = 0;
     for projection in projections {
