@@ -3,7 +3,8 @@
 // kernel: ray-space Jacobian, footprint, resampling filter, conic, bounding box, depth and
 // sheet range, culling guards; counts each sheet's binned entries.
 // Variant macros: SPLAT_POST (0 pre-shaded, 1 post-shaded), SPLAT_ANTIALIAS (0 ewa, 1 swan,
-// 2 none), SPLAT_ORTHO (0 perspective, 1 orthographic), SPLAT_SURFACES (surface splats of
+// 2 none), SPLAT_ORTHO (0 perspective, 1 orthographic), SPLAT_EXACT (per-pixel ray integrals
+// instead of the affine footprint; perspective only), SPLAT_SURFACES (surface splats of
 // isosurfaces: metric_off.w = 1 + isosurface index, pos_value.w = the metric's scale).
 #extension GL_EXT_control_flow_attributes : enable
 
@@ -65,6 +66,32 @@ bool metric_inverse(vec4 m, vec4 mo, out mat3 inv) {
     float i = 1.0 / det;
     // Symmetric: column-major equals row-major.
     inv = mat3(c00, c01, c02, c01, c11, c12, c02, c12, c22) * i;
+    return true;
+}
+
+// Twin of cutoff_conic in src/splat/project.rs: the image-plane ellipse of the rays within
+// `cut` of the kernel centre, d'^T (K - cut^2 Q) d' <= 0 with K = [r]x^T adj(P) [r]x. Writes
+// (centre x, centre y, half width, half height) in pixels; false when it is not an ellipse.
+bool cutoff_conic(mat3 qm, mat3 jm, vec3 r, float cut, out vec4 box) {
+    // Cross-product matrix of r (columns), so that x * d = r x d.
+    mat3 x = mat3(0.0, r.z, -r.y, -r.z, 0.0, r.x, r.y, -r.x, 0.0);
+    mat3 hm = transpose(x) * jm * x - qm * (cut * cut);
+    float h00 = hm[0][0], h01 = hm[1][0], h11 = hm[1][1];
+    float h02 = hm[2][0], h12 = hm[2][1], h22 = hm[2][2];
+    float det = h00 * h11 - h01 * h01;
+    box = vec4(0.0);
+    if (!(h00 > 0.0) || !(det > 0.0) || isinf(det)) {
+        return false;
+    }
+    float cx = -(h11 * h02 - h01 * h12) / det;
+    float cy = -(h00 * h12 - h01 * h02) / det;
+    float f0 = h22 + h02 * cx + h12 * cy;
+    if (!(f0 < 0.0)) {
+        return false;
+    }
+    float f = params.forward.w;
+    box = vec4(params.right.w + f * cx, params.up.w - f * cy,
+               f * sqrt(-f0 * h11 / det), f * sqrt(-f0 * h00 / det));
     return true;
 }
 
@@ -166,13 +193,14 @@ Splat project(Sample k) {
     float cond = max(vtt - dot(slope, vxt), 1e-12 * vtt);
     float amplitude = weight * abs(determinant(at)) / (6.283185307179586 * sqrt(det_f));
     vec3 conic = vec3(vf.z, -vf.y, vf.x) / det_f;
-#if SPLAT_ORTHO == 1
-    const float widen = 1.0, pad = 0.0;
+#if SPLAT_EXACT == 0
+    const float widen = 1.0;
     float checks_exact = 0.0;
+    vec4 box = vec4(centre, cutoff * sqrt(vf.x), cutoff * sqrt(vf.z));
 #else
     // Perspective-exact footprint: the filtered covariance in object space ([EWA]'s screen
     // low-pass pulled back through A), its precision and adjugate in the camera frame.
-    const float widen = 1.1, pad = 1.0;
+    const float widen = 1.1;
     mat3 a_mat = transpose(at);
 #if SPLAT_ANTIALIAS == 0
     mat3 ai = inverse(a_mat);
@@ -193,15 +221,17 @@ Splat project(Sample k) {
     float ray_amp = weight * sqrt(det_p) / 6.283185307179586;
     float checks_exact = qm[0][0] + qm[1][0] + qm[1][1] + qm[2][0] + qm[2][1] + qm[2][2]
                        + jm[0][0] + jm[1][0] + jm[1][1] + jm[2][0] + jm[2][1] + jm[2][2] + ray_amp;
+    vec4 box;
+    if (!cutoff_conic(qm, jm, -u, cutoff, box)) {
+        return culled(CULL_DEGENERATE);
+    }
 #endif
     float w = float(params.width), h = float(params.height);
-    float rx = cutoff * sqrt(vf.x) * widen + pad;
-    float ry = cutoff * sqrt(vf.z) * widen + pad;
     ivec4 bbox = ivec4(
-        int(min(max(ceil(centre.x - rx), 0.0), w)),
-        int(min(max(ceil(centre.y - ry), 0.0), h)),
-        int(max(min(floor(centre.x + rx), w - 1.0), -1.0)),
-        int(max(min(floor(centre.y + ry), h - 1.0), -1.0)));
+        int(min(max(ceil(box.x - box.z), 0.0), w)),
+        int(min(max(ceil(box.y - box.w), 0.0), h)),
+        int(max(min(floor(box.x + box.z), w - 1.0), -1.0)),
+        int(max(min(floor(box.y + box.w), h - 1.0), -1.0)));
     float spread = slope.x * (vf.x * slope.x + vf.y * slope.y)
                  + slope.y * (vf.y * slope.x + vf.z * slope.y);
     float depth_reach = cutoff * (sqrt(max(spread, 0.0)) + sqrt(cond)) * widen;
@@ -217,7 +247,7 @@ Splat project(Sample k) {
         return culled(CULL_OUTSIDE);
     }
     Splat s;
-#if SPLAT_ORTHO == 1
+#if SPLAT_EXACT == 0
     s.footprint0 = vec4(centre, t, sqrt(cond));
     s.footprint1 = vec4(conic, amplitude);
     s.footprint2 = vec4(slope, 0.0, 0.0);

@@ -161,6 +161,52 @@ fn one_kernel_footprint_is_the_line_integral_of_its_gaussian() {
         }
     }
     assert_eq!(checked, 2 * 3 * 3 * 2);
+
+    // The affine footprint ([EWA] §4, `splat.footprint = "affine"`) on the needle at distance 2.
+    let mut s = base.clone();
+    s.render.splat.exact = false;
+    s.camera.eye = (DVec3::new(0.6, -0.5, 0.45).normalize() * 2.0).to_array();
+    let setup = setup(&s, &field, Shading::Post);
+    let metric = rotated_metric([0.16, 0.01, 0.05], 0.7);
+    let kernel = Kernel {
+        position: [0.3, -0.2, 0.1],
+        value: 0.7,
+        metric,
+        volume: 2e-3,
+        kind: KernelKind::Volume,
+    };
+    let splat = splat_project(&setup, &s.transfer, &kernel).expect("kept");
+    let (cx, cy) = (
+        splat.centre[0].round() as i32,
+        splat.centre[1].round() as i32,
+    );
+    let (mut peak, mut worst) = (0.0f64, 0.0f64);
+    for y in cy - 12..=cy + 12 {
+        for x in cx - 12..=cx + 12 {
+            let (o, d) = s
+                .camera
+                .ray(&setup.basis, setup.frame_origin, x as u32, y as u32);
+            let exact = line_integral(
+                0.7 * 2e-3,
+                setup.sigma,
+                &metric,
+                DVec3::new(0.3, -0.2, 0.1),
+                o,
+                d,
+            );
+            let got = splat_footprint(&splat, &setup, f64::from(x), f64::from(y), -1e30, 1e30);
+            peak = peak.max(exact);
+            if got > 0.0 {
+                worst = worst.max((got - exact).abs());
+            }
+        }
+    }
+    // Measured 5.9e-3: why exact footprints are the default.
+    assert!(
+        worst > 2e-3 * peak && worst < 1e-2 * peak,
+        "affine needle error {:.2e} of the peak",
+        worst / peak
+    );
 }
 
 fn max_diff(a: &[[f32; 4]], b: &[[f64; 4]]) -> f64 {
@@ -197,7 +243,7 @@ const GPU_TOLERANCE: f64 = 2e-3;
 #[test]
 fn gpu_splatting_matches_its_cpu_twin_on_a_grid() {
     let (ctx, _) = gpu();
-    let cases: [(&str, &[&str]); 5] = [
+    let cases: [(&str, &[&str]); 6] = [
         (
             "pre-shaded surface splats",
             &[
@@ -216,6 +262,10 @@ fn gpu_splatting_matches_its_cpu_twin_on_a_grid() {
                 "camera.projection=\"orthographic\"",
                 "camera.view_height=2.4",
             ],
+        ),
+        (
+            "post-shaded, affine footprints",
+            &["render.method=\"splat-post\"", "splat.footprint=\"affine\""],
         ),
         (
             "pre-shaded swan, no occlusion",
@@ -494,6 +544,8 @@ fn pre_shaded_isosurfaces_and_bad_splat_keys_are_refused_by_name() {
         ("splat.antialias=\"box\"", "splat.antialias"),
         ("splat.slab=-1.0", "splat.slab"),
         ("splat.occlusion=3", "splat.occlusion"),
+        ("splat.footprint=\"ray\"", "splat.footprint"),
+        ("splat.surface=1", "splat.surface"),
         ("splat.sheets=3", "sheets"),
         ("reconstruction.sigma=0.5", "reconstruction.sigma"),
     ] {

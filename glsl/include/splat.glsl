@@ -28,11 +28,12 @@ float phi_between(float za, float zb) {
 }
 
 // The share of a splat's line integral through pixel (x, y) that lies in t in [ta, tb]; zero
-// outside the cutoff. Orthographic: the affine footprint (exact there); perspective: the exact
-// integral along the pixel's own ray (src/splat/project.rs explains both and the word layout).
+// outside the cutoff. SPLAT_EXACT == 0: the affine footprint (exact for orthographic cameras);
+// else the exact integral along the pixel's own ray (src/splat/project.rs explains both and the
+// word layout).
 // Needs SplatParams params.
 float splat_footprint(Splat s, float cutoff, vec2 pixel, float ta, float tb) {
-#if SPLAT_ORTHO == 1
+#if SPLAT_EXACT == 0
     vec2 d = pixel - s.footprint0.xy;
     vec4 c = s.footprint1;
     float q = c.x * d.x * d.x + 2.0 * c.y * d.x * d.y + c.z * d.y * d.y;

@@ -12,6 +12,7 @@ pub(super) const KEYS: &[&str] = &[
     "antialias",
     "occlusion",
     "surface",
+    "footprint",
 ];
 
 /// Reads `[splat]`; every key is optional.
@@ -32,6 +33,7 @@ pub(super) fn parse(sec: &Section<'_>) -> Result<SplatSettings, SceneError> {
         )?,
         occlusion: flag(sec, "occlusion", d.occlusion)?,
         surface: flag(sec, "surface", d.surface)?,
+        exact: sec.choice("footprint", d.exact, &[("exact", true), ("affine", false)])?,
     })
 }
 

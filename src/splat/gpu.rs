@@ -89,6 +89,8 @@ pub struct SplatVariant {
     pub shading: Shading,
     pub antialias: Antialias,
     pub orthographic: bool,
+    /// Per-pixel ray integrals (perspective, `splat.footprint = "exact"`).
+    pub exact: bool,
     pub occlusion: bool,
     pub isosurfaces: bool,
     /// Surface splats (pre-shaded isosurfaces).
@@ -102,6 +104,7 @@ impl SplatVariant {
             shading: setup.shading,
             antialias: setup.settings.antialias,
             orthographic: setup.orthographic(),
+            exact: setup.exact_footprints(),
             occlusion: setup.settings.occlusion,
             isosurfaces: !setup.isosurfaces.is_empty(),
             surfaces: setup.settings.surface && !setup.isosurfaces.is_empty(),
@@ -124,6 +127,7 @@ impl SplatVariant {
                 .into(),
             ),
             ("SPLAT_ORTHO".into(), flag(self.orthographic)),
+            ("SPLAT_EXACT".into(), flag(self.exact)),
             ("SPLAT_OCCLUSION".into(), flag(self.occlusion)),
             ("SPLAT_ISOSURFACES".into(), flag(self.isosurfaces)),
             ("SPLAT_SURFACES".into(), flag(self.surfaces)),
@@ -134,7 +138,7 @@ impl SplatVariant {
     /// Human-readable name for `--stats`.
     pub fn name(&self) -> String {
         format!(
-            "splat {} {} {}{}{}",
+            "splat {} {} {}{}{}{}",
             match self.shading {
                 Shading::Pre => "pre-shaded",
                 Shading::Post => "post-shaded",
@@ -149,6 +153,7 @@ impl SplatVariant {
             } else {
                 "perspective"
             },
+            if self.exact { " exact-footprints" } else { "" },
             if self.occlusion { " occlusion" } else { "" },
             if self.surfaces {
                 " surface-splats"

@@ -75,6 +75,10 @@ pub struct SplatSettings {
     pub occlusion: bool,
     /// Isosurfaces as surface splats (pre-shaded splatting).
     pub surface: bool,
+    /// Perspective footprints: the exact ray integral per pixel, or [EWA]'s affine footprint
+    /// (about half the accumulation time; errs where kernels are large or thin for their
+    /// distance).
+    pub exact: bool,
 }
 
 impl Default for SplatSettings {
@@ -86,6 +90,7 @@ impl Default for SplatSettings {
             antialias: Antialias::Ewa,
             occlusion: true,
             surface: false,
+            exact: true,
         }
     }
 }
@@ -235,6 +240,12 @@ impl SplatSetup {
     /// Whether the camera is orthographic.
     pub fn orthographic(&self) -> bool {
         matches!(self.camera.projection, Projection::Orthographic { .. })
+    }
+
+    /// Whether footprints are per-pixel ray integrals (perspective with `splat.footprint =
+    /// "exact"`); otherwise affine ([EWA] §4, exact for an orthographic camera).
+    pub fn exact_footprints(&self) -> bool {
+        self.settings.exact && !self.orthographic()
     }
 
     /// Sheet k covers t in [slab0 + k·Δs, slab0 + (k+1)·Δs].

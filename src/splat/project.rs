@@ -25,8 +25,9 @@
 //! polynomial in the pixel, and a = a′/|d′|², b = b′/|d′| — no more work per pixel than the
 //! conic. The resampling filter is then applied in object space: the screen low-pass diag(L, L, 0)
 //! pulled back through A, V″_f = V″ + A⁻¹diag(L, L, 0)A⁻ᵀ, which is [EWA]'s V̂ + L·I wherever the
-//! affine map holds; SWAN scales V″ uniformly. The affine V still gives the bounding box and the
-//! sheet range, both widened by 10% and a pixel for the difference.
+//! affine map holds; SWAN scales V″ uniformly. The rays within the cutoff form a cone whose
+//! section by the image plane is an exact ellipse ([`cutoff_conic`]): it gives the bounding box;
+//! the affine V gives the sheet range, widened by 10% for the difference.
 //!
 //! Guards where 3D-Gaussian-splatting renderers break: kernels reaching the near plane (or
 //! behind the eye) are culled; a footprint variance below `MIN_VARIANCE` px² is raised to it;
@@ -348,19 +349,24 @@ pub fn splat_project(
     let conic = [vf[2] / det_f, -vf[1] / det_f, vf[0] / det_f];
     let cut = setup.settings.cutoff;
     let (w, h) = (setup.camera.width as i32, setup.camera.height as i32);
-    // Perspective: widened for the exact footprint's departure from the affine ellipse.
-    let (widen, pad) = if setup.orthographic() {
-        (1.0, 0.0)
+    // The pixel-space box of the cutoff region: the affine ellipse (orthographic), or the exact
+    // conic of rays within `cutoff` of the centre (perspective, `cutoff_conic`).
+    let (widen, (bx, by, rx, ry)) = if !setup.exact_footprints() {
+        (
+            1.0,
+            (centre[0], centre[1], cut * vf[0].sqrt(), cut * vf[2].sqrt()),
+        )
     } else {
-        (1.1, 1.0)
+        let Some(b) = cutoff_conic(setup, &precision, &adjugate, eye_offset, cut) else {
+            return Err(Cull::Degenerate);
+        };
+        (1.1, b)
     };
-    let rx = cut * vf[0].sqrt() * widen + pad;
-    let ry = cut * vf[2].sqrt() * widen + pad;
     let bbox = [
-        ((centre[0] - rx).ceil().max(0.0).min(f64::from(w))) as i32,
-        ((centre[1] - ry).ceil().max(0.0).min(f64::from(h))) as i32,
-        ((centre[0] + rx).floor().min(f64::from(w - 1)).max(-1.0)) as i32,
-        ((centre[1] + ry).floor().min(f64::from(h - 1)).max(-1.0)) as i32,
+        ((bx - rx).ceil().max(0.0).min(f64::from(w))) as i32,
+        ((by - ry).ceil().max(0.0).min(f64::from(h))) as i32,
+        ((bx + rx).floor().min(f64::from(w - 1)).max(-1.0)) as i32,
+        ((by + ry).floor().min(f64::from(h - 1)).max(-1.0)) as i32,
     ];
     let spread = slope[0] * (vf[0] * slope[0] + vf[1] * slope[1])
         + slope[1] * (vf[1] * slope[0] + vf[2] * slope[1]);
@@ -426,12 +432,54 @@ pub fn phi_between(za: f64, zb: f64) -> f64 {
     }
 }
 
+/// The rays through d′ = (dx, dy, 1) whose Mahalanobis distance to the kernel centre is at most
+/// `cut` satisfy d′ᵀ(K − cut²·Q)d′ ≤ 0 with K = [r]ₓᵀ adj(P) [r]ₓ (the numerator of
+/// [`splat_footprint`]'s e): an ellipse in the image plane while the kernel lies in front of the
+/// eye. Returns its centre and half extents in pixels; `None` when it is not an ellipse.
+pub fn cutoff_conic(
+    setup: &SplatSetup,
+    q: &[f64; 6],
+    j: &[f64; 6],
+    r: [f64; 3],
+    cut: f64,
+) -> Option<(f64, f64, f64, f64)> {
+    let jm = [[j[0], j[1], j[3]], [j[1], j[2], j[4]], [j[3], j[4], j[5]]];
+    // (r × d′) = X d′ with X the cross-product matrix of r.
+    let x = [[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]];
+    let k = mul(&mul(&transpose(&x), &jm), &x);
+    let qm = [[q[0], q[1], q[3]], [q[1], q[2], q[4]], [q[3], q[4], q[5]]];
+    let c2 = cut * cut;
+    let hm = |a: usize, b: usize| k[a][b] - c2 * qm[a][b];
+    let (h00, h01, h11, h02, h12, h22) =
+        (hm(0, 0), hm(0, 1), hm(1, 1), hm(0, 2), hm(1, 2), hm(2, 2));
+    let det = h00 * h11 - h01 * h01;
+    if h00 <= 0.0 || det <= 0.0 || !det.is_finite() {
+        return None;
+    }
+    // Centre −H₂⁻¹(h02, h12), value there, extents √(−F₀·(H₂⁻¹)_aa).
+    let cx = -(h11 * h02 - h01 * h12) / det;
+    let cy = -(h00 * h12 - h01 * h02) / det;
+    let f0 = h22 + h02 * cx + h12 * cy;
+    if f0 >= 0.0 {
+        return None;
+    }
+    let ex = (-f0 * h11 / det).sqrt();
+    let ey = (-f0 * h00 / det).sqrt();
+    let f = setup.focal;
+    Some((
+        setup.centre[0] + f * cx,
+        setup.centre[1] - f * cy,
+        f * ex,
+        f * ey,
+    ))
+}
+
 /// Stage `splat_footprint`: the share of a splat's line integral through pixel (x, y) that lies
-/// in t ∈ [ta, tb]; zero outside the cutoff. Orthographic: the affine footprint (exact there);
-/// perspective: the integral along the pixel's own ray.
+/// in t ∈ [ta, tb]; zero outside the cutoff. The affine footprint (orthographic, where it is
+/// exact, or `splat.footprint = "affine"`), else the integral along the pixel's own ray.
 pub fn splat_footprint(splat: &Splat, setup: &SplatSetup, x: f64, y: f64, ta: f64, tb: f64) -> f64 {
     let cutoff = setup.settings.cutoff;
-    if setup.orthographic() {
+    if !setup.exact_footprints() {
         let dx = x - splat.centre[0];
         let dy = y - splat.centre[1];
         let q =
