@@ -6,7 +6,9 @@
 //   slab inside the domain box; isosurfaces crossed since the previous sheet are located by
 //   linear interpolation and shaded with central-difference gradients within and across sheets.
 // Then the tile's occlusion flag: 1 when every pixel in it is opaque.
-// image[p] = (premultiplied colour, opacity). Variant macros: SPLAT_POST, SPLAT_ORTHO.
+// image[p] = (premultiplied colour, opacity). Variant macros: SPLAT_POST, SPLAT_ORTHO,
+// SPLAT_ISOSURFACES, SPLAT_SURFACES, SPLAT_HULL (post-shaded: the pixels' hull segments bound the
+// domain instead of the box).
 #extension GL_EXT_control_flow_attributes : enable
 
 layout(local_size_x = 8, local_size_y = 8) in;
@@ -22,6 +24,9 @@ layout(std430, binding = BINDING_IMAGE) buffer ImageBuf { vec4 image[]; };
 layout(std430, binding = BINDING_OCCLUSION) writeonly buffer OcclusionBuf { uint occlusion[]; };
 
 #if SPLAT_POST == 1
+#if SPLAT_HULL == 1
+layout(std430, binding = BINDING_PIXEL_SEGMENTS) readonly buffer SegBuf { vec2 pixel_segments[]; };
+#endif
 #include "transfer.glsl"
 #include "camera.glsl"
 #if SPLAT_ISOSURFACES == 1
@@ -69,9 +74,21 @@ vec3 sheet_gradient(int k, int x, int y, vec3 d) {
     return gx * params.right.xyz + gy * params.up.xyz + gt * d;
 }
 
-float slab_overlap(int j, float t_in, float t_out) {
+// The length of sheet j's slab inside the domain along this pixel's ray: the box's [t_in,
+// t_out], or the sum over the pixel's hull segments.
+float slab_overlap(int j, float t_in, float t_out, uint p) {
     float a = params.box_min.w + float(j) * params.box_max.w;
-    return max(min(a + params.box_max.w, t_out) - max(a, t_in), 0.0);
+    float b = a + params.box_max.w;
+#if SPLAT_HULL == 1
+    float len = 0.0;
+    for (uint i = 0u; i < uint(SPLAT_SEGMENTS); ++i) {
+        vec2 s = pixel_segments[p * uint(SPLAT_SEGMENTS) + i];
+        len += max(min(b, s.y) - max(a, s.x), 0.0);
+    }
+    return len;
+#else
+    return max(min(b, t_out) - max(a, t_in), 0.0);
+#endif
 }
 #endif
 
@@ -126,10 +143,10 @@ void main() {
             camera_ray(px, o, d);
             if (clip_box(o, d, params.box_min.xyz, params.box_max.xyz, t_in, t_out)) {
                 int x = int(px.x), y = int(px.y);
-                float len = slab_overlap(j, t_in, t_out);
+                float len = slab_overlap(j, t_in, t_out, p);
                 float v = sheet_value(j, x, y);
 #if SPLAT_ISOSURFACES == 1
-                if (j >= 1 && len > 0.0 && slab_overlap(j - 1, t_in, t_out) > 0.0) {
+                if (j >= 1 && len > 0.0 && slab_overlap(j - 1, t_in, t_out, p) > 0.0) {
                     float v0 = sheet_value(j - 1, x, y);
                     // Crossings in order of their position between the two sheets.
                     float pos[4];

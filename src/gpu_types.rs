@@ -62,6 +62,9 @@ pub mod binding {
     pub const OCCLUSION: u32 = 23;
     /// Splatting: `SplatCounts` counters (atomic).
     pub const SPLAT_STATS: u32 = 24;
+    /// Post-shaded splatting over a hull: each pixel's inside segments, `SPLAT_SEGMENTS` ×
+    /// `vec2(t_in, t_out)` per pixel (written by splat_segments).
+    pub const PIXEL_SEGMENTS: u32 = 25;
 
     /// How kernels read a binding: the octree's samples, nodes and references through
     /// texel-buffer views (one AVX2 gather per 8 lanes on llvmpipe instead of a per-lane loop;
@@ -77,7 +80,7 @@ pub mod binding {
     }
 
     /// Every binding with its macro name.
-    pub const ALL: [(&str, u32); 25] = [
+    pub const ALL: [(&str, u32); 26] = [
         ("BINDING_PARAMS", PARAMS),
         ("BINDING_GRID", GRID),
         ("BINDING_SAMPLES", SAMPLES),
@@ -103,6 +106,7 @@ pub mod binding {
         ("BINDING_SHEETS", SHEETS),
         ("BINDING_OCCLUSION", OCCLUSION),
         ("BINDING_SPLAT_STATS", SPLAT_STATS),
+        ("BINDING_PIXEL_SEGMENTS", PIXEL_SEGMENTS),
     ];
 }
 

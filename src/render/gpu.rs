@@ -323,7 +323,8 @@ impl GpuField {
     }
 
     /// (binding, buffer) pairs of the hull (empty for a box domain).
-    pub(super) fn hull_bindings(&self) -> Vec<(u32, &Buffer)> {
+    /// The hull's BVH buffers with their bindings (none for a box domain).
+    pub fn hull_bindings(&self) -> Vec<(u32, &Buffer)> {
         match &self.hull {
             Some([n, t]) => vec![(binding::HULL_NODES, n), (binding::HULL_TRIS, t)],
             None => Vec::new(),

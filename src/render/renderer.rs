@@ -635,6 +635,7 @@ impl Renderer {
             targets,
             &setup,
             view.transfer,
+            &self.gpu_field.hull_bindings(),
         )?;
         let gpu_ms = image.gpu_ms();
         let n = image.pixels.len();

@@ -71,6 +71,8 @@ struct Frame<'a> {
     /// Per occlusion tile: every pixel opaque.
     opaque: Vec<bool>,
     tiles_x: usize,
+    /// Post-shaded over a hull: each pixel's inside segments (`splat_segments`).
+    segments: Option<Vec<Vec<(f64, f64)>>>,
 }
 
 impl Frame<'_> {
@@ -273,12 +275,21 @@ fn splat_composite(frame: &mut Frame<'_>, tf: &TransferFunction, k: u32) {
                 let (o, d) = setup
                     .camera
                     .ray(&setup.basis, setup.frame_origin, x as u32, y as u32);
-                let Some((t_in, t_out)) = clip_box(o, d, setup.box_lo, setup.box_hi) else {
-                    continue;
+                let inside: Vec<(f64, f64)> = match &frame.segments {
+                    Some(s) => s[p].clone(),
+                    None => clip_box(o, d, setup.box_lo, setup.box_hi)
+                        .into_iter()
+                        .collect(),
                 };
+                if inside.is_empty() {
+                    continue;
+                }
                 let overlap = |j: i64| {
                     let (a, b) = setup.slab_bounds(j as u32);
-                    (b.min(t_out) - a.max(t_in)).max(0.0)
+                    inside
+                        .iter()
+                        .map(|&(t_in, t_out)| (b.min(t_out) - a.max(t_in)).max(0.0))
+                        .sum::<f64>()
                 };
                 let len = overlap(j);
                 let v = frame.value(j, x, y);
@@ -332,6 +343,29 @@ fn splat_composite(frame: &mut Frame<'_>, tf: &TransferFunction, k: u32) {
     }
 }
 
+/// Stage `splat_segments` (post-shaded over a hull): every pixel's inside segments, as the ray
+/// caster clips its rays. The GPU keeps at most `PIXEL_SEGMENTS` and fails beyond.
+pub fn splat_segments(setup: &SplatSetup, field: &Field) -> Option<Vec<Vec<(f64, f64)>>> {
+    let hull = field
+        .hull
+        .as_ref()
+        .filter(|_| setup.shading == Shading::Post)?;
+    let (w, h) = (setup.camera.width, setup.camera.height);
+    Some(
+        (0..w * h)
+            .map(|p| {
+                let (o, d) = setup
+                    .camera
+                    .ray(&setup.basis, setup.frame_origin, p % w, p / w);
+                match hull.segments(o.to_array(), d.to_array()) {
+                    crate::samples::bvh::Segments::List(s) => s,
+                    crate::samples::bvh::Segments::Overflow => Vec::new(),
+                }
+            })
+            .collect(),
+    )
+}
+
 /// The whole frame on the CPU, stage by stage as on the GPU.
 pub fn splat_image(setup: &SplatSetup, field: &Field, tf: &TransferFunction) -> SplatImage {
     let mut counts = SplatCounts::default();
@@ -376,6 +410,7 @@ pub fn splat_image(setup: &SplatSetup, field: &Field, tf: &TransferFunction) -> 
         ],
         opaque: vec![false; tiles_x * h.div_ceil(TILE as usize)],
         tiles_x,
+        segments: splat_segments(setup, field),
     };
     for k in 0..setup.slabs {
         splat_accumulate(&mut frame, &splats, &lists[k as usize], k, &mut counts);

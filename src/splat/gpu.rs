@@ -95,6 +95,8 @@ pub struct SplatVariant {
     pub isosurfaces: bool,
     /// Surface splats (pre-shaded isosurfaces).
     pub surfaces: bool,
+    /// Post-shaded over a hull: per-pixel inside segments bound the domain.
+    pub hull: bool,
 }
 
 impl SplatVariant {
@@ -108,6 +110,7 @@ impl SplatVariant {
             occlusion: setup.settings.occlusion,
             isosurfaces: !setup.isosurfaces.is_empty(),
             surfaces: setup.settings.surface && !setup.isosurfaces.is_empty(),
+            hull: setup.hull && setup.shading == Shading::Post,
         }
     }
 
@@ -131,6 +134,8 @@ impl SplatVariant {
             ("SPLAT_OCCLUSION".into(), flag(self.occlusion)),
             ("SPLAT_ISOSURFACES".into(), flag(self.isosurfaces)),
             ("SPLAT_SURFACES".into(), flag(self.surfaces)),
+            ("SPLAT_HULL".into(), flag(self.hull)),
+            ("SPLAT_SEGMENTS".into(), super::PIXEL_SEGMENTS.to_string()),
         ]);
         d
     }
@@ -173,6 +178,7 @@ pub struct SplatPipelines {
     bin: ComputePipeline,
     accumulate: ComputePipeline,
     composite: ComputePipeline,
+    segments: Option<ComputePipeline>,
 }
 
 impl SplatPipelines {
@@ -208,6 +214,9 @@ impl SplatPipelines {
                 composite.push(ISO);
             }
         }
+        if variant.hull {
+            composite.push(PIXEL_SEGMENTS);
+        }
         Ok(Self {
             variant: variant.clone(),
             project: make("splat_project.comp", &project, 0)?,
@@ -232,6 +241,15 @@ impl SplatPipelines {
                 push,
             )?,
             composite: make("splat_composite.comp", &composite, push)?,
+            segments: if variant.hull {
+                Some(make(
+                    "splat_segments.comp",
+                    &[PARAMS, PIXEL_SEGMENTS, SPLAT_STATS, HULL_NODES, HULL_TRIS],
+                    0,
+                )?)
+            } else {
+                None
+            },
         })
     }
 
@@ -254,6 +272,7 @@ pub struct SplatTargets {
     occlusion: Buffer,
     stats: Buffer,
     list: Option<Buffer>,
+    segments: Option<Buffer>,
 }
 
 impl SplatTargets {
@@ -266,6 +285,12 @@ impl SplatTargets {
             setup.shading,
             SplatVariant::of(setup).surfaces,
         )
+    }
+
+    fn segments(&self) -> Result<&Buffer, VkError> {
+        self.segments
+            .as_ref()
+            .ok_or_else(|| VkError::Usage("pixel hull segments missing".into()))
     }
 
     /// Whether these buffers fit a setup.
@@ -305,6 +330,14 @@ impl SplatTargets {
             occlusion: storage("occlusion map", 4 * tiles)?,
             stats: storage("splat counters", 4 * STATS as u64)?,
             list: None,
+            segments: if SplatVariant::of(setup).hull {
+                Some(storage(
+                    "pixel hull segments",
+                    8 * super::PIXEL_SEGMENTS as u64 * pixels,
+                )?)
+            } else {
+                None
+            },
         })
     }
 }
@@ -315,7 +348,8 @@ pub struct SplatGpuImage {
     /// (C + T·background, 1 − T) per pixel, row 0 at the top.
     pub pixels: Vec<[f32; 4]>,
     pub counts: SplatCounts,
-    /// GPU milliseconds of project, bin, accumulate (all sheets), composite (all sheets).
+    /// GPU milliseconds of project, bin (with splat_segments), accumulate (all sheets), composite
+    /// (all sheets).
     pub stage_ms: [f64; 4],
     pub submissions: u32,
     pub variant: String,
@@ -385,7 +419,7 @@ fn sum_ms(timings: &[crate::vk::DispatchTiming], stage_ms: &mut [f64; 4]) {
     for t in timings {
         let i = match t.label.as_str() {
             "splat_project" => 0,
-            "splat_bin" => 1,
+            "splat_bin" | "splat_segments" => 1,
             "splat_accumulate" => 2,
             _ => 3,
         };
@@ -393,7 +427,8 @@ fn sum_ms(timings: &[crate::vk::DispatchTiming], stage_ms: &mut [f64; 4]) {
     }
 }
 
-/// Renders one frame; `targets` must fit the setup (see [`SplatTargets::fits`]).
+/// Renders one frame; `targets` must fit the setup (see [`SplatTargets::fits`]); `hull` are the
+/// field's hull bindings (`GpuField::hull_bindings`), read by post-shaded frames over a hull.
 pub fn splat_frame(
     ctx: &Context,
     pipelines: &SplatPipelines,
@@ -401,6 +436,7 @@ pub fn splat_frame(
     targets: &mut SplatTargets,
     setup: &SplatSetup,
     tf: &TransferFunction,
+    hull: &[(u32, &Buffer)],
 ) -> Result<SplatGpuImage, VkError> {
     if !targets.fits(setup, kernels) {
         return Err(VkError::Usage(
@@ -432,9 +468,29 @@ pub fn splat_frame(
         project_bind.push((binding::ISO, &iso_buf));
     }
     let group = BindGroup::new(ctx, &pipelines.project, &project_bind)?;
+    let tiles = [
+        setup.camera.width.div_ceil(TILE),
+        setup.camera.height.div_ceil(TILE),
+        1,
+    ];
+    let segments = match &pipelines.segments {
+        Some(p) => {
+            let mut b = vec![
+                (binding::PARAMS, &params_buf),
+                (binding::PIXEL_SEGMENTS, t.segments()?),
+                (binding::SPLAT_STATS, &t.stats),
+            ];
+            b.extend(hull.iter().copied());
+            Some((p, BindGroup::new(ctx, p, &b)?))
+        }
+        None => None,
+    };
     let timings = ctx.submit(|rec| {
         rec.fill(&t.counts, 0);
         rec.fill(&t.stats, 0);
+        if let Some((p, g)) = &segments {
+            rec.dispatch(p, g, &[], tiles, "splat_segments")?;
+        }
         rec.dispatch(
             &pipelines.project,
             &group,
@@ -443,7 +499,17 @@ pub fn splat_frame(
             "splat_project",
         )
     })?;
-    drop(group);
+    drop((group, segments));
+    if pipelines.segments.is_some() {
+        let stats: Vec<u32> = t.stats.read(ctx)?;
+        if let Some(&n) = stats.get(5).filter(|&&n| n > 0) {
+            return Err(VkError::Usage(format!(
+                "splatting: the rays of {n} pixels cross the domain's boundary into more than {} \
+                 inside segments; post-shaded splatting keeps {0} per pixel: ray cast this mesh",
+                super::PIXEL_SEGMENTS
+            )));
+        }
+    }
     sum_ms(&timings, &mut stage_ms);
     let counts: Vec<u32> = t.counts.read(ctx)?;
     let mut offsets = Vec::with_capacity(counts.len());
@@ -518,12 +584,10 @@ pub fn splat_frame(
             composite_bind.push((binding::ISO, &iso_buf));
         }
     }
+    if pipelines.variant.hull {
+        composite_bind.push((binding::PIXEL_SEGMENTS, t.segments()?));
+    }
     let composite = BindGroup::new(ctx, &pipelines.composite, &composite_bind)?;
-    let tiles = [
-        setup.camera.width.div_ceil(TILE),
-        setup.camera.height.div_ceil(TILE),
-        1,
-    ];
     let steps = setup.slabs + u32::from(setup.shading == Shading::Post);
     let mut submissions = 1;
     let mut k = 0;

@@ -38,6 +38,9 @@ pub const MAX_SLABS: u32 = 16_384;
 /// 3DGS's guard: the Jacobian's lateral terms are evaluated at most this far outside the view
 /// cone (in units of its half-angle tangent), so kernels far off-screen cannot explode.
 pub const LATERAL_CLAMP: f64 = 1.3;
+/// Post-shaded splatting over a hull keeps at most this many inside segments per pixel; a ray
+/// crossing the boundary more often is an error on the GPU.
+pub const PIXEL_SEGMENTS: usize = 4;
 /// Smallest footprint variance in px² (keeps the conic finite for needle-thin kernels).
 pub const MIN_VARIANCE: f64 = 1e-6;
 
@@ -119,9 +122,11 @@ pub struct SplatSetup {
     pub slabs: u32,
     /// Gaussian σ as a fraction of the support radius.
     pub sigma: f64,
-    /// Domain box (frame-relative): post-shaded sheets integrate only inside it.
+    /// Domain box (frame-relative): post-shaded sheets integrate only inside it, and only
+    /// inside the hull when `hull` (the field's boundary, as the ray caster clips).
     pub box_lo: DVec3,
     pub box_hi: DVec3,
+    pub hull: bool,
     /// Pixels stop compositing (and occlude) beyond this opacity.
     pub early_termination: f64,
     pub background: [f64; 3],
@@ -230,6 +235,7 @@ impl SplatSetup {
             sigma: field.reconstruction.sigma,
             box_lo,
             box_hi,
+            hull: field.hull.is_some(),
             early_termination,
             background,
             isosurfaces: isosurfaces.to_vec(),

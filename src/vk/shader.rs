@@ -36,6 +36,7 @@ static SOURCES: &[(&str, &str)] = embed![
     "splat_bin.comp",
     "splat_accumulate.comp",
     "splat_composite.comp",
+    "splat_segments.comp",
     "mls_eval.comp",
     "probe_fma.comp",
     "layout_probe.comp",
