@@ -879,3 +879,45 @@ fn post_shaded_sheets_over_a_hull_converge_to_the_ray_cast_gaussian_field() {
     }
     assert!(errors[2].1 < 0.02, "finest sheets: {errors:?}");
 }
+
+#[test]
+fn a_new_camera_reuses_the_splatting_kernels_pipelines_and_buffers() {
+    let (ctx, _) = gpu();
+    let s = scene(&["render.method=\"splat-post\""]);
+    let field = s.field(|_| {}).expect("field");
+    let mut renderer = Renderer::new(&ctx, field.clone()).expect("renderer");
+    let mut frame = |camera: &vmls::render::camera::Camera| {
+        renderer
+            .render(
+                &View {
+                    camera,
+                    settings: &s.render,
+                    transfer: &s.transfer,
+                    isosurfaces: &s.isosurfaces,
+                    lighting: &s.lighting,
+                },
+                |_| {},
+            )
+            .expect("frame")
+    };
+    let (_, first) = frame(&s.camera);
+    assert!(first.pipeline_built && first.targets_allocated);
+    let turned = s.camera.orbited(0.4);
+    let (image, second) = frame(&turned);
+    assert!(
+        !second.pipeline_built && !second.targets_allocated,
+        "{second:?}"
+    );
+    // The same frame from scratch on the CPU twin.
+    let mut moved = s.clone();
+    moved.camera = turned;
+    let cpu = splat_image(
+        &setup(&moved, &field, Shading::Post),
+        &field,
+        &moved.transfer,
+    );
+    let diff = max_diff(&image.pixels, &cpu.pixels);
+    assert!(diff < GPU_TOLERANCE, "turned camera: GPU vs CPU {diff:.3e}");
+    drop(renderer);
+    finish(ctx);
+}

@@ -259,9 +259,11 @@ impl SplatPipelines {
     }
 }
 
-/// Frame buffers of one image size, sheet count and kernel count; the entry list grows.
+/// Frame buffers of one image size and kernel count, for up to `slab_capacity` sheets (a new
+/// camera changes the sheet count: a quarter more is allocated); the entry list grows.
 pub struct SplatTargets {
-    key: (u32, u32, u32, u32, Shading, bool),
+    key: (u32, u32, u32, Shading, bool),
+    slab_capacity: u32,
     splats: Buffer,
     counts: Buffer,
     offsets: Buffer,
@@ -276,11 +278,10 @@ pub struct SplatTargets {
 }
 
 impl SplatTargets {
-    fn key(setup: &SplatSetup, kernels: &GpuKernels) -> (u32, u32, u32, u32, Shading, bool) {
+    fn key(setup: &SplatSetup, kernels: &GpuKernels) -> (u32, u32, u32, Shading, bool) {
         (
             setup.camera.width,
             setup.camera.height,
-            setup.slabs,
             kernels.count,
             setup.shading,
             SplatVariant::of(setup).surfaces,
@@ -295,7 +296,7 @@ impl SplatTargets {
 
     /// Whether these buffers fit a setup.
     pub fn fits(&self, setup: &SplatSetup, kernels: &GpuKernels) -> bool {
-        self.key == Self::key(setup, kernels)
+        self.key == Self::key(setup, kernels) && setup.slabs <= self.slab_capacity
     }
 
     /// Allocates the buffers of a setup.
@@ -305,7 +306,11 @@ impl SplatTargets {
             u64::from(setup.camera.height),
         );
         let pixels = w * h;
-        let slabs = u64::from(setup.slabs);
+        let capacity = setup
+            .slabs
+            .saturating_add(setup.slabs / 4)
+            .min(super::MAX_SLABS);
+        let slabs = u64::from(capacity);
         let tiles = w.div_ceil(u64::from(TILE)) * h.div_ceil(u64::from(TILE));
         let sheet_floats = match setup.shading {
             Shading::Pre if SplatVariant::of(setup).surfaces => {
@@ -317,6 +322,7 @@ impl SplatTargets {
         let storage = |name: &str, bytes: u64| Buffer::new(ctx, name, bytes, BufferUsage::Storage);
         Ok(Self {
             key: Self::key(setup, kernels),
+            slab_capacity: capacity,
             splats: storage(
                 "splats",
                 u64::from(kernels.count) * std::mem::size_of::<Splat>() as u64,
