@@ -44,9 +44,9 @@ void main() {
     render_params.step = 22.0;
     render_params.min_transmittance = 23.0;
     render_params.support_cells = 24.0;
-    render_params._pad0 = 25.0;
-    render_params._pad1 = 26.0;
-    render_params._pad2 = 27.0;
+    render_params.gauss_sigma = 25.0;
+    render_params.gauss_weight = 26.0;
+    render_params._pad0 = 27.0;
     render_params.preint_range = v(28.0);
     render_params.preint_dims = uvec4(29u, 30u, 31u, 32u);
     render_params.integrator = v(33.0);

@@ -202,7 +202,11 @@ pub struct RenderParams {
     pub min_transmittance: f32,
     /// Support radius in grid-index units (the grid path's search radius).
     pub support_cells: f32,
-    pub _pad: [f32; 3],
+    /// Gaussian field: σ (fraction of the support radius), and on a grid every sample's weight
+    /// v·norm (octree samples carry theirs in `Sample::metric_off.z`).
+    pub gauss_sigma: f32,
+    pub gauss_weight: f32,
+    pub _pad0: f32,
     /// Preintegration: s of the first and last table node, longest table length (world), and
     /// the adaptive method's shortest interval l_min (world).
     pub preint_range: [f32; 4],

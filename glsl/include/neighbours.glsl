@@ -227,8 +227,65 @@ void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float
 }
 #endif
 
+#if MLS_GAUSSIAN == 1
+// The Gaussian-sum field (twin: gaussian_evaluate in src/recon/gaussian.rs): f = sum of
+// w_i f_i exp(-rho^2 / (2 sigma^2)) over samples with rho < 1, w_i = v_i * norm_i, and its
+// gradient sum w_i f_i exp(...) M_i d / sigma^2 (d = x_i - x). terms = 0 where no kernel reaches.
+MlsResult gaussian_evaluate(vec3 x) {
+    float k = -0.5 / (params.gauss_sigma * params.gauss_sigma);
+    float value = 0.0;
+    vec3 grad = vec3(0.0);
+    uint count = 0u;
+#if MLS_NEIGHBOURS == 0
+    vec3 gp = (x - params.grid_origin.xyz) * params.grid_inv_spacing.xyz;
+    float sc = params.support_cells;
+    float inv_sc = 1.0 / sc;
+    ivec3 lo = max(ivec3(ceil(gp - sc)), ivec3(0));
+    ivec3 hi = min(ivec3(floor(gp + sc)), params.grid_dims.xyz - 1);
+    vec3 inv_h = params.inv_support.xyz;
+    for (int kk = lo.z; kk <= hi.z; ++kk) {
+        for (int j = lo.y; j <= hi.y; ++j) {
+            int row = params.grid_dims.x * (j + params.grid_dims.y * kk);
+            for (int i = lo.x; i <= hi.x; ++i) {
+                vec3 y = (vec3(i, j, kk) - gp) * inv_sc;
+                float rho2 = dot(y, y);
+                if (rho2 < 1.0) {
+                    float wf = params.gauss_weight * grid[GRID_PAD + row + i] * exp(k * rho2);
+                    value += wf;
+                    // M d = d / h^2 = y / h.
+                    grad += wf * (y * inv_h);
+                    ++count;
+                }
+            }
+        }
+    }
+#else
+    uvec3 leaf = octree_leaf(x);
+    for (uint r = leaf.x; r < leaf.x + leaf.y; ++r) {
+        int i = int(imageLoad(indices, int(r)).x);
+        vec4 pos_value = imageLoad(samples, 3 * i);
+        vec3 d = pos_value.xyz - x;
+        vec3 md = metric_apply(i, d);
+        float rho2 = dot(d, md);
+        if (rho2 < 1.0) {
+            float w = imageLoad(samples, 3 * i + 2).z;
+            float wf = w * pos_value.w * exp(k * rho2);
+            value += wf;
+            grad += wf * md;
+            ++count;
+        }
+    }
+#endif
+    return MlsResult(value, grad / (params.gauss_sigma * params.gauss_sigma), count,
+                     count > 0u ? 1u : 0u);
+}
+#endif
+
 // f(x), ∇f(x); terms == 0 where no sample has weight (the field is undefined there).
 MlsResult mls_evaluate(vec3 x) {
+#if MLS_GAUSSIAN == 1
+    return gaussian_evaluate(x);
+#endif
     MlsSystem s;
     [[unroll]] for (int i = 0; i < MLS_PACKED; ++i) s.a[i] = 0.0;
     [[unroll]] for (int i = 0; i < MLS_TERMS; ++i) s.r[i] = 0.0;

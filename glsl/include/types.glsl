@@ -26,9 +26,9 @@ struct RenderParams {
     float step;
     float min_transmittance;
     float support_cells;
+    float gauss_sigma;
+    float gauss_weight;
     float _pad0;
-    float _pad1;
-    float _pad2;
     vec4 preint_range;
     uvec4 preint_dims;
     vec4 integrator;

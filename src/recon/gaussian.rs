@@ -32,13 +32,18 @@ pub fn metric_det(m: &Metric) -> f64 {
         + m[4] * (m[3] * m[5] - m[1] * m[4])
 }
 
+/// The normalisation of G_V, V = σ²M⁻¹: √det M / ((2π)^{3/2} σ³).
+pub fn gaussian_norm(sigma: f64, m: &Metric) -> f64 {
+    metric_det(m).max(0.0).sqrt() / (TWO_PI_3_2 * sigma * sigma * sigma)
+}
+
 /// G_{V}(d) and its gradient with respect to x (d = x − x_i), V = σ²M⁻¹; zero beyond ρ = 1.
 pub fn gaussian_kernel(sigma: f64, m: &Metric, d: [f64; 3]) -> (f64, [f64; 3]) {
     let rho2 = metric_rho2(m, d);
     if rho2 >= 1.0 {
         return (0.0, [0.0; 3]);
     }
-    let norm = metric_det(m).max(0.0).sqrt() / (TWO_PI_3_2 * sigma * sigma * sigma);
+    let norm = gaussian_norm(sigma, m);
     let g = norm * (-0.5 * rho2 / (sigma * sigma)).exp();
     // ∇G = −G V⁻¹ d = −G M d / σ².
     let md = metric_apply(m, d);

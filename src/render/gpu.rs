@@ -44,6 +44,8 @@ pub struct Variant {
     pub isosurfaces: usize,
     /// Rays are clipped to a boundary hull (else to the domain's box).
     pub hull: bool,
+    /// The Gaussian-sum field instead of MLS (`reconstruction.method = "gaussian"`).
+    pub gaussian: bool,
 }
 
 impl Variant {
@@ -62,6 +64,7 @@ impl Variant {
             },
             full_metric: field.has_full_metric(),
             hull: false,
+            gaussian: r.method == crate::recon::ReconMethod::Gaussian,
             method: None,
             adaptive_levels: 1,
             isosurfaces: 0,
@@ -109,6 +112,7 @@ impl Variant {
             flag(self.neighbours == NeighbourMode::Octree),
         ));
         d.push(("MLS_FULL_METRIC".into(), flag(self.full_metric)));
+        d.push(("MLS_GAUSSIAN".into(), flag(self.gaussian)));
         d.push(("HULL".into(), flag(self.hull)));
         let ray_method = match self.method {
             Some(Method::Fixed) => 1,
@@ -128,10 +132,11 @@ impl Variant {
     pub fn name(&self, kernel: &str) -> String {
         format!(
             "{kernel}:{}-{}-{}-{}{}",
-            match self.basis {
-                Basis::Constant => "constant",
-                Basis::Linear => "linear",
-                Basis::Quadratic => "quadratic",
+            match (self.gaussian, self.basis) {
+                (true, _) => "gaussian",
+                (false, Basis::Constant) => "constant",
+                (false, Basis::Linear) => "linear",
+                (false, Basis::Quadratic) => "quadratic",
             },
             match self.weight {
                 Weight::Wendland => "wendland",
@@ -180,7 +185,15 @@ pub fn render_params(field: &Field, setup: Option<&RaySetup>, tf_count: u32) -> 
         p.inv_support = [inv_h[0] as f32, inv_h[1] as f32, inv_h[2] as f32, 0.0];
         p.grid_dims = [g.dims[0] as i32, g.dims[1] as i32, g.dims[2] as i32, 0];
         p.support_cells = g.support as f32;
+        if field.reconstruction.method == crate::recon::ReconMethod::Gaussian {
+            let h = g.spacing.map(|s| s * g.support);
+            let metric = crate::samples::supports::diagonal(h);
+            p.gauss_weight = (field.kernel_volumes().get(0)
+                * crate::recon::gaussian::gaussian_norm(field.reconstruction.sigma, &metric))
+                as f32;
+        }
     }
+    p.gauss_sigma = field.reconstruction.sigma as f32;
     if let Some(o) = &field.octree {
         p.octree_root = v4(o.root_center.into(), o.root_half);
     }
@@ -283,15 +296,23 @@ impl GpuField {
                 })
             }
             Some(o) => {
+                // The Gaussian field reads each sample's weight v_i·norm_i (`gaussian_weight`).
+                let gaussian = field.reconstruction.method == crate::recon::ReconMethod::Gaussian;
+                let volumes = gaussian.then(|| field.kernel_volumes());
+                let sigma = field.reconstruction.sigma;
                 let samples: Vec<Sample> = o
                     .samples
                     .iter()
-                    .map(|s| {
+                    .enumerate()
+                    .map(|(i, s)| {
                         let m = s.metric.map(|v| v as f32);
+                        let w = volumes.map_or(0.0, |v| {
+                            v.get(i) * crate::recon::gaussian::gaussian_norm(sigma, &s.metric)
+                        });
                         Sample {
                             pos_value: v4(s.position.into(), s.value),
                             metric: [m[0], m[1], m[2], m[3]],
-                            metric_off: [m[4], m[5], 0.0, 0.0],
+                            metric_off: [m[4], m[5], w as f32, 0.0],
                         }
                     })
                     .collect();
@@ -322,7 +343,6 @@ impl GpuField {
         b
     }
 
-    /// (binding, buffer) pairs of the hull (empty for a box domain).
     /// The hull's BVH buffers with their bindings (none for a box domain).
     pub fn hull_bindings(&self) -> Vec<(u32, &Buffer)> {
         match &self.hull {

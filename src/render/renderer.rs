@@ -20,7 +20,6 @@ use super::shading::{Isosurface, Lighting};
 use super::transfer::TransferFunction;
 use super::{Field, Method, RaySetup, RenderError, RenderSettings, TableCache};
 use crate::gpu_types::{IsoSurface, RayPush, binding, ray_count};
-use crate::recon::ReconMethod;
 use crate::render::camera::Camera;
 use crate::splat::SplatCounts;
 use crate::splat::SplatSetup;
@@ -466,14 +465,6 @@ impl Renderer {
         let start = Instant::now();
         if let Some(shading) = view.settings.method.splat_shading() {
             return self.render_splat(view, shading, start);
-        }
-        if self.field.reconstruction.method == ReconMethod::Gaussian {
-            return Err(RenderError::Setting {
-                key: "reconstruction.method",
-                message: "\"gaussian\" is ray cast by the f64 CPU reference only \
-                          (vmls render --cpu); the GPU ray caster reconstructs with MLS"
-                    .into(),
-            });
         }
         let setup = RaySetup::new(
             view.camera,

@@ -2,6 +2,8 @@
 //! any validation error or leaked allocation.
 #![allow(dead_code)]
 
+pub mod splat;
+
 use vmls::data::dataset::{CellType, Cells, Geometry};
 use vmls::data::{Volume, marschner_lobb};
 use vmls::recon::{Basis, GradientMode, OctreeSettings, Weight};
