@@ -194,6 +194,13 @@ fn run_render(
         check_path(map)?;
     }
     let scene = Scene::load(scene_path, set)?;
+    if eval_map.is_some() && scene.render.method.splat_shading().is_some() {
+        return Err(CliError::Usage(format!(
+            "--eval-map counts MLS evaluations per ray; render.method = \"{}\" splats and \
+             evaluates none (its counts are in --stats)",
+            scene.render.method.name()
+        )));
+    }
     let bar = progress_bar("octree");
     let field = scene.field(|f| bar.set_position((f * 1000.0) as u64))?;
     bar.finish_and_clear();

@@ -463,3 +463,67 @@ fn irregular_files_render_and_info_describes_them() {
     let out = vmls(&["info", s(&bad)]);
     assert_eq!(out.status.code(), Some(1));
 }
+
+#[test]
+fn splatting_from_the_command_line() {
+    let d = dir("splat");
+    let (img, st, map) = (d.join("s.png"), d.join("s.json"), d.join("m.png"));
+    let size = ["--set", "camera.width=24", "--set", "camera.height=16"];
+    let mut args = vec![
+        "render",
+        "-o",
+        s(&img),
+        "--stats",
+        s(&st),
+        "--set",
+        "render.method=\"splat-post\"",
+        "--set",
+        "volume.resolution=9",
+    ];
+    args.extend(size);
+    let out = vmls(&args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stats: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&st).expect("stats")).expect("json");
+    assert_eq!(stats["method"], "splat-post");
+    assert_eq!(stats["splat"]["kernels_projected"], 729);
+    assert!(stats["gpu_ms"]["splat_accumulate"].as_f64().expect("ms") > 0.0);
+    assert!(
+        stats["variant"]
+            .as_str()
+            .expect("variant")
+            .contains("post-shaded")
+    );
+
+    // No evaluation map for splats, and nothing written.
+    let mut bad = vec!["render", "-o", s(&img), "--eval-map", s(&map)];
+    bad.extend(["--set", "render.method=\"splat\""]);
+    assert_fails(&vmls(&bad), &["--eval-map", "splat"], &map);
+
+    // The f64 CPU twins: the Gaussian field's reference image.
+    let cpu = d.join("ref.png");
+    let mut args = vec![
+        "render",
+        "--cpu",
+        "-o",
+        s(&cpu),
+        "--set",
+        "reconstruction.method=\"gaussian\"",
+        "--set",
+        "render.method=\"reference\"",
+        "--set",
+        "volume.resolution=9",
+    ];
+    args.extend(size);
+    let out = vmls(&args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(image::open(&cpu).expect("png").to_rgba8().dimensions(), (24, 16));
+}

@@ -216,6 +216,25 @@ fn pre_shaded_isosurfaces_and_bad_splat_keys_are_refused_by_name() {
             .to_string();
         assert!(e.contains(key), "{set}: {e}");
     }
+    let post = scene(&["render.method=\"splat-post\"", "splat.surface=true"]);
+    let err = SplatSetup::new(
+        Shading::Post,
+        &post.render.splat,
+        &post.camera,
+        0.99,
+        [0.0; 3],
+        &[],
+        &post.lighting,
+        &field,
+    )
+    .expect_err("surface splats with post-shading");
+    assert!(matches!(
+        err,
+        RenderError::Setting {
+            key: "splat.surface",
+            ..
+        }
+    ));
     let tiny = scene(&["render.method=\"splat-post\"", "splat.slab=1e-4"]);
     let err = SplatSetup::new(
         Shading::Post,
