@@ -525,5 +525,8 @@ fn splatting_from_the_command_line() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    assert_eq!(image::open(&cpu).expect("png").to_rgba8().dimensions(), (24, 16));
+    assert_eq!(
+        image::open(&cpu).expect("png").to_rgba8().dimensions(),
+        (24, 16)
+    );
 }

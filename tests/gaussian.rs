@@ -5,15 +5,13 @@
 mod common;
 
 use common::*;
-use std::path::Path;
-use vmls::data::dataset::{DataArray, Dataset, Geometry, Location};
+use vmls::data::dataset::Geometry;
 use vmls::probe::Lcg;
 use vmls::recon::{OctreeSettings, ReconMethod};
 use vmls::render::Field;
 use vmls::render::gpu::{GpuField, evaluate};
 use vmls::render::raycast::raycast_image;
 use vmls::render::renderer::{Renderer, View};
-use vmls::samples::{SampleSet, SampleSettings};
 use vmls::scene::Scene;
 
 fn gaussian_scene(extra: &[&str]) -> Scene {
@@ -35,33 +33,10 @@ fn scattered_field() -> Field {
     let points: Vec<[f64; 3]> = (0..3000)
         .map(|_| [rng.next_f64(), rng.next_f64(), rng.next_f64()])
         .collect();
-    let values = points
-        .iter()
-        .map(|p| (0.5 + 0.3 * (4.0 * p[0]).sin() * p[1]) as f32)
-        .collect();
-    let d = Dataset {
-        geometry: Geometry::Points { points },
-        arrays: vec![DataArray {
-            name: "f".into(),
-            location: Location::Point,
-            components: 1,
-            values,
-        }],
-    };
-    let set = SampleSet::from_dataset(
-        &d,
-        Path::new("cloud"),
-        None,
-        &SampleSettings {
-            support: 2.4,
-            knn_support: vmls::samples::KNN_SUPPORT,
-            knn: 8,
-            anisotropic: Some(true),
-        },
-    )
-    .expect("sample set");
-    let s = gaussian_scene(&[]);
-    Field::from_samples(set, s.reconstruction, &OctreeSettings::default(), |_| {}).expect("field")
+    let d = splat::point_data(Geometry::Points { points }, |p| {
+        0.5 + 0.3 * (4.0 * p[0]).sin() * p[1]
+    });
+    splat::field_of(splat::point_samples(&d, Some(true)), &gaussian_scene(&[]))
 }
 
 /// Largest |GPU − CPU| relative to the largest |value|, and how many points disagree about

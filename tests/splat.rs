@@ -9,7 +9,6 @@ use common::*;
 use glam::DVec3;
 use vmls::render::Field;
 use vmls::render::camera::Projection;
-use vmls::render::raycast::raycast_image;
 use vmls::render::renderer::Renderer;
 use vmls::samples::Metric;
 use vmls::splat::Shading;
@@ -235,34 +234,16 @@ fn gpu_splatting_matches_its_cpu_twin_on_a_grid() {
 #[test]
 fn post_shaded_sheets_converge_to_the_ray_cast_gaussian_field() {
     let common = [
-        "reconstruction.method=\"gaussian\"",
         "render.early_termination=0.99999",
         "splat.antialias=\"none\"",
         "splat.cutoff=4.0",
         "camera.width=32",
         "camera.height=32",
     ];
-    let mut extra = common.to_vec();
-    extra.extend([
-        "render.method=\"reference\"",
-        "render.reference_step=0.0625",
-    ]);
-    let reference_scene = scene(&extra);
-    let field = reference_scene.field(|_| {}).expect("field");
-    let rs = reference_scene.ray_setup(&field).expect("ray setup");
-    let reference: Vec<[f64; 4]> = raycast_image(&rs, &field, &reference_scene.transfer, None)
-        .iter()
-        .map(|p| p.rgba)
-        .collect();
-    let mut errors = Vec::new();
-    for slab in [1.0, 0.5, 0.25, 0.125] {
-        let mut extra = common.to_vec();
-        let key = format!("splat.slab={slab}");
-        extra.extend(["render.method=\"splat-post\"", key.as_str()]);
-        let s = scene(&extra);
-        let image = splat_image(&setup(&s, &field, Shading::Post), &field, &s.transfer);
-        errors.push((slab, rmse(&image.pixels, &reference)));
-    }
+    let field = scene(&["reconstruction.method=\"gaussian\""])
+        .field(|_| {})
+        .expect("field");
+    let errors = sheet_convergence(&field, &common, &[1.0, 0.5, 0.25, 0.125]);
     eprintln!(
         "post-shaded RMSE against the ray-cast Gaussian field, by sheet thickness: {errors:?}"
     );

@@ -6,13 +6,10 @@ mod common;
 
 use common::splat::*;
 use common::*;
-use std::path::Path;
-use vmls::data::dataset::{DataArray, Dataset, Location};
 use vmls::render::camera::Projection;
 use vmls::render::raycast::raycast_image;
 use vmls::render::renderer::{Renderer, View};
 use vmls::render::{Field, RenderError};
-use vmls::samples::{SampleSet, SampleSettings};
 use vmls::scene::Scene;
 use vmls::splat::accumulate::splat_image;
 use vmls::splat::project::{Cull, Kernel, splat_project};
@@ -124,42 +121,7 @@ fn the_eye_inside_the_volume_renders_finite_images_on_the_gpu() {
 #[test]
 fn irregular_data_splats_on_the_gpu_as_on_the_cpu() {
     let (ctx, _) = gpu();
-    let geometry = tet_torus(24, 3);
-    let values = (0..geometry.point_count())
-        .map(|i| {
-            let p = geometry.point(i);
-            (0.5 + 0.4 * (3.0 * p[0]).sin() * p[2].cos()) as f32
-        })
-        .collect();
-    let d = Dataset {
-        geometry,
-        arrays: vec![DataArray {
-            name: "f".into(),
-            location: Location::Point,
-            components: 1,
-            values,
-        }],
-    };
-    let set = SampleSet::from_dataset(
-        &d,
-        Path::new("torus"),
-        None,
-        &SampleSettings {
-            support: 2.4,
-            knn_support: vmls::samples::KNN_SUPPORT,
-            knn: 8,
-            anisotropic: None,
-        },
-    )
-    .expect("sample set");
-    let s0 = scene(&["camera.eye=[2.2,-1.8,1.9]"]);
-    let field = Field::from_samples(
-        set,
-        s0.reconstruction,
-        &vmls::recon::OctreeSettings::default(),
-        |_| {},
-    )
-    .expect("field");
+    let field = field_of(torus_samples(), &scene(&[]));
     let mut renderer = Renderer::new(&ctx, field.clone()).expect("renderer");
     for method in ["splat", "splat-post"] {
         let m = format!("render.method=\"{method}\"");
@@ -321,36 +283,7 @@ fn surface_splats_draw_the_isosurface_the_ray_caster_draws() {
 fn post_shaded_sheets_over_a_hull_converge_to_the_ray_cast_gaussian_field() {
     // The transfer function is not transparent at 0, so fog outside the torus but inside its
     // box would show: sheets must integrate inside the hull only, as the ray caster does.
-    let geometry = tet_torus(24, 3);
-    let values = (0..geometry.point_count())
-        .map(|i| {
-            let p = geometry.point(i);
-            (0.5 + 0.4 * (3.0 * p[0]).sin() * p[2].cos()) as f32
-        })
-        .collect();
-    let d = Dataset {
-        geometry,
-        arrays: vec![DataArray {
-            name: "f".into(),
-            location: Location::Point,
-            components: 1,
-            values,
-        }],
-    };
-    let set = SampleSet::from_dataset(
-        &d,
-        Path::new("torus"),
-        None,
-        &SampleSettings {
-            support: 2.4,
-            knn_support: vmls::samples::KNN_SUPPORT,
-            knn: 8,
-            anisotropic: None,
-        },
-    )
-    .expect("sample set");
     let common = [
-        "reconstruction.method=\"gaussian\"",
         "render.early_termination=0.99999",
         "splat.antialias=\"none\"",
         "splat.cutoff=4.0",
@@ -359,34 +292,12 @@ fn post_shaded_sheets_over_a_hull_converge_to_the_ray_cast_gaussian_field() {
         "camera.eye=[2.2,-1.8,1.9]",
         "transfer.points=[[0.0,0.2,0.2,0.6,1.0],[0.5,0.2,0.5,1.0,2.0],[1.0,1.0,0.5,0.2,5.0]]",
     ];
-    let mut extra = common.to_vec();
-    extra.extend([
-        "render.method=\"reference\"",
-        "render.reference_step=0.0625",
-    ]);
-    let rs = scene(&extra);
-    let field = Field::from_samples(
-        set,
-        rs.reconstruction,
-        &vmls::recon::OctreeSettings::default(),
-        |_| {},
-    )
-    .expect("field");
+    let field = field_of(
+        torus_samples(),
+        &scene(&["reconstruction.method=\"gaussian\""]),
+    );
     assert!(field.hull.is_some());
-    let setup_r = rs.ray_setup(&field).expect("ray setup");
-    let reference: Vec<[f64; 4]> = raycast_image(&setup_r, &field, &rs.transfer, None)
-        .iter()
-        .map(|p| p.rgba)
-        .collect();
-    let mut errors = Vec::new();
-    for slab in [1.0, 0.5, 0.25] {
-        let mut extra = common.to_vec();
-        let key = format!("splat.slab={slab}");
-        extra.extend(["render.method=\"splat-post\"", key.as_str()]);
-        let s = scene(&extra);
-        let image = splat_image(&setup(&s, &field, Shading::Post), &field, &s.transfer);
-        errors.push((slab, rmse(&image.pixels, &reference)));
-    }
+    let errors = sheet_convergence(&field, &common, &[1.0, 0.5, 0.25]);
     eprintln!("post-shaded over a hull, RMSE by sheet thickness: {errors:?}");
     for w in errors.windows(2) {
         assert!(

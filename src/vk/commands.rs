@@ -73,18 +73,62 @@ impl Recorder<'_> {
         groups: [u32; 3],
         label: &str,
     ) -> Result<(), VkError> {
+        let max = self.shared.info.max_workgroup_count;
+        if groups.iter().zip(max.iter()).any(|(g, m)| g > m) || groups.contains(&0) {
+            return Err(VkError::Usage(format!(
+                "dispatch '{label}': {groups:?} workgroups (each must be in 1..={max:?}, maxComputeWorkGroupCount)"
+            )));
+        }
+        self.record_dispatch(pipeline, bind_group, push, label, |device, cmd| {
+            // SAFETY: called by `record_dispatch` with the pipeline and set bound on a
+            // recording command buffer; the group counts were checked against the limits.
+            unsafe { device.cmd_dispatch(cmd, groups[0], groups[1], groups[2]) }
+        })
+    }
+
+    /// Records an indirect dispatch: the workgroup counts are three `u32` at byte `offset` of
+    /// `args`, written before this submission or by an earlier command in it.
+    pub fn dispatch_indirect(
+        &mut self,
+        pipeline: &ComputePipeline,
+        bind_group: &BindGroup<'_>,
+        push: &[u8],
+        args: &Buffer,
+        offset: u64,
+        label: &str,
+    ) -> Result<(), VkError> {
+        if !offset.is_multiple_of(4) || offset + 12 > args.size() {
+            return Err(VkError::Usage(format!(
+                "dispatch '{label}': indirect arguments at byte {offset} of '{}' ({} bytes)",
+                args.name(),
+                args.size()
+            )));
+        }
+        let handle = args.handle;
+        self.record_dispatch(pipeline, bind_group, push, label, |device, cmd| {
+            // SAFETY: as for `cmd_dispatch`; `args` is live with INDIRECT_BUFFER usage (every
+            // storage buffer has it) and holds 12 bytes at the 4-aligned `offset` (checked
+            // above). The global barrier also covers INDIRECT_COMMAND_READ (see `barrier`).
+            unsafe { device.cmd_dispatch_indirect(cmd, handle, offset) }
+        })
+    }
+
+    /// Barrier, timestamps, pipeline, descriptor set and push constants around `dispatch`,
+    /// which records the dispatch command itself.
+    fn record_dispatch(
+        &mut self,
+        pipeline: &ComputePipeline,
+        bind_group: &BindGroup<'_>,
+        push: &[u8],
+        label: &str,
+        dispatch: impl FnOnce(&ash::Device, vk::CommandBuffer),
+    ) -> Result<(), VkError> {
         if push.len() != pipeline.push_size as usize {
             return Err(VkError::Usage(format!(
                 "dispatch '{label}': {} bytes of push constants for pipeline '{}' which declares {}",
                 push.len(),
                 pipeline.name(),
                 pipeline.push_size
-            )));
-        }
-        let max = self.shared.info.max_workgroup_count;
-        if groups.iter().zip(max.iter()).any(|(g, m)| g > m) || groups.contains(&0) {
-            return Err(VkError::Usage(format!(
-                "dispatch '{label}': {groups:?} workgroups (each must be in 1..={max:?}, maxComputeWorkGroupCount)"
             )));
         }
         self.barrier();
@@ -120,89 +164,18 @@ impl Recorder<'_> {
                     push,
                 );
             }
-            device.cmd_dispatch(self.cmd, groups[0], groups[1], groups[2]);
-            if let Some(pool) = timed {
+        }
+        dispatch(device, self.cmd);
+        if let Some(pool) = timed {
+            // SAFETY: as above; the query index is within the pool (index < MAX_TIMED).
+            unsafe {
                 device.cmd_write_timestamp(
                     self.cmd,
                     vk::PipelineStageFlags::BOTTOM_OF_PIPE,
                     pool,
                     2 * index + 1,
-                );
-            }
-        }
-        self.labels.push(label.to_string());
-        Ok(())
-    }
-
-    /// Records an indirect dispatch: the workgroup counts are three `u32` at byte `offset` of
-    /// `args`, written before this submission or by an earlier command in it.
-    pub fn dispatch_indirect(
-        &mut self,
-        pipeline: &ComputePipeline,
-        bind_group: &BindGroup<'_>,
-        push: &[u8],
-        args: &Buffer,
-        offset: u64,
-        label: &str,
-    ) -> Result<(), VkError> {
-        if push.len() != pipeline.push_size as usize {
-            return Err(VkError::Usage(format!(
-                "dispatch '{label}': {} bytes of push constants for pipeline '{}' which declares {}",
-                push.len(),
-                pipeline.name(),
-                pipeline.push_size
-            )));
-        }
-        if !offset.is_multiple_of(4) || offset + 12 > args.size() {
-            return Err(VkError::Usage(format!(
-                "dispatch '{label}': indirect arguments at byte {offset} of '{}' ({} bytes)",
-                args.name(),
-                args.size()
-            )));
-        }
-        self.barrier();
-        let device = &self.shared.device;
-        let index = u32::try_from(self.labels.len()).unwrap_or(u32::MAX);
-        let timed = self.queries.filter(|_| index < MAX_TIMED_DISPATCHES);
-        // SAFETY: as in `dispatch`; `args` is live with INDIRECT_BUFFER usage (every storage
-        // buffer has it) and holds 12 bytes at the 4-aligned `offset` (checked above). The
-        // global barrier also covers INDIRECT_COMMAND_READ (see `barrier`).
-        unsafe {
-            if let Some(pool) = timed {
-                device.cmd_write_timestamp(
-                    self.cmd,
-                    vk::PipelineStageFlags::TOP_OF_PIPE,
-                    pool,
-                    2 * index,
-                );
-            }
-            device.cmd_bind_pipeline(self.cmd, vk::PipelineBindPoint::COMPUTE, pipeline.pipeline);
-            device.cmd_bind_descriptor_sets(
-                self.cmd,
-                vk::PipelineBindPoint::COMPUTE,
-                pipeline.layout,
-                0,
-                &[bind_group.set],
-                &[],
-            );
-            if !push.is_empty() {
-                device.cmd_push_constants(
-                    self.cmd,
-                    pipeline.layout,
-                    vk::ShaderStageFlags::COMPUTE,
-                    0,
-                    push,
-                );
-            }
-            device.cmd_dispatch_indirect(self.cmd, args.handle, offset);
-            if let Some(pool) = timed {
-                device.cmd_write_timestamp(
-                    self.cmd,
-                    vk::PipelineStageFlags::BOTTOM_OF_PIPE,
-                    pool,
-                    2 * index + 1,
-                );
-            }
+                )
+            };
         }
         self.labels.push(label.to_string());
         Ok(())

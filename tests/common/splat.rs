@@ -2,10 +2,16 @@
 #![allow(dead_code)]
 
 use glam::DVec3;
+use std::path::Path;
+use vmls::data::dataset::{DataArray, Dataset, Location};
+use vmls::recon::OctreeSettings;
 use vmls::render::Field;
+use vmls::render::raycast::raycast_image;
 use vmls::render::renderer::{Renderer, SplatReport, View};
 use vmls::samples::Metric;
+use vmls::samples::{SampleSet, SampleSettings};
 use vmls::scene::Scene;
+use vmls::splat::accumulate::splat_image;
 use vmls::splat::{Shading, SplatSetup};
 
 pub fn scene(extra: &[&str]) -> Scene {
@@ -83,4 +89,77 @@ pub fn rmse(a: &[[f64; 4]], b: &[[f64; 4]]) -> f64 {
         .sum::<f64>()
         / n)
         .sqrt()
+}
+
+/// The sample set of point data `d` (support 2.4, 8 neighbours).
+pub fn point_samples(d: &Dataset, anisotropic: Option<bool>) -> SampleSet {
+    SampleSet::from_dataset(
+        d,
+        Path::new("test"),
+        None,
+        &SampleSettings {
+            support: 2.4,
+            knn_support: vmls::samples::KNN_SUPPORT,
+            knn: 8,
+            anisotropic,
+        },
+    )
+    .expect("sample set")
+}
+
+/// Point data `f` on `geometry`.
+pub fn point_data(geometry: vmls::data::dataset::Geometry, f: impl Fn([f64; 3]) -> f64) -> Dataset {
+    let values = (0..geometry.point_count())
+        .map(|i| f(geometry.point(i)) as f32)
+        .collect();
+    Dataset {
+        geometry,
+        arrays: vec![DataArray {
+            name: "f".into(),
+            location: Location::Point,
+            components: 1,
+            values,
+        }],
+    }
+}
+
+/// The small tetrahedral torus of `tests/common` with f = 0.5 + 0.4 sin 3x cos z.
+pub fn torus_samples() -> SampleSet {
+    let d = point_data(super::tet_torus(24, 3), |p| {
+        0.5 + 0.4 * (3.0 * p[0]).sin() * p[2].cos()
+    });
+    point_samples(&d, None)
+}
+
+/// A field of a sample set with a scene's reconstruction.
+pub fn field_of(set: SampleSet, s: &Scene) -> Field {
+    Field::from_samples(set, s.reconstruction, &OctreeSettings::default(), |_| {}).expect("field")
+}
+
+/// Post-shaded RMSE against the ray-cast Gaussian field (reference step 1/16), per sheet
+/// thickness; `common` are the scene keys both share.
+pub fn sheet_convergence(field: &Field, common: &[&str], slabs: &[f64]) -> Vec<(f64, f64)> {
+    let mut extra = common.to_vec();
+    extra.extend([
+        "reconstruction.method=\"gaussian\"",
+        "render.method=\"reference\"",
+        "render.reference_step=0.0625",
+    ]);
+    let rs = scene(&extra);
+    let setup_r = rs.ray_setup(field).expect("ray setup");
+    let reference: Vec<[f64; 4]> = raycast_image(&setup_r, field, &rs.transfer, None)
+        .iter()
+        .map(|p| p.rgba)
+        .collect();
+    slabs
+        .iter()
+        .map(|slab| {
+            let mut extra = common.to_vec();
+            let key = format!("splat.slab={slab}");
+            extra.extend(["render.method=\"splat-post\"", key.as_str()]);
+            let s = scene(&extra);
+            let image = splat_image(&setup(&s, field, Shading::Post), field, &s.transfer);
+            (*slab, rmse(&image.pixels, &reference))
+        })
+        .collect()
 }
