@@ -72,6 +72,8 @@ pub struct Field {
     full_metric: bool,
     /// Gaussian kernel volumes, computed at first use (Gaussian field, splatting).
     volumes: std::sync::OnceLock<KernelVolumes>,
+    /// Box of every sample's support (frame-relative): where kernels can reach.
+    support_box: (DVec3, DVec3),
 }
 
 impl Field {
@@ -126,6 +128,7 @@ impl Field {
                 (l.min(f64::from(v)), h.max(f64::from(v)))
             });
         let full_metric = samples.has_full_metric();
+        let (slo, shi) = samples.support_box();
         let mut field = Self {
             frame_origin: centre,
             samples,
@@ -135,6 +138,7 @@ impl Field {
             range,
             full_metric,
             volumes: std::sync::OnceLock::new(),
+            support_box: (DVec3::from(slo), DVec3::from(shi)),
         };
         if let Domain::Hull(h) = &field.samples.domain {
             field.hull = Some(HullBvh::build(h));
@@ -224,6 +228,12 @@ impl Field {
     pub fn bounds(&self) -> (DVec3, DVec3) {
         let (lo, hi) = self.samples.domain_box();
         (DVec3::from(lo), DVec3::from(hi))
+    }
+
+    /// Frame-relative box of every sample's support: where kernels can reach (splatting's
+    /// depth range).
+    pub fn support_box(&self) -> (DVec3, DVec3) {
+        self.support_box
     }
 
     /// The unit of `render.step` ([`SampleSet::spacing`]).

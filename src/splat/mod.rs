@@ -168,14 +168,8 @@ impl SplatSetup {
         let eye = DVec3::from(camera.eye) - frame_origin;
         let (w, h) = (f64::from(camera.width), f64::from(camera.height));
         let (box_lo, box_hi) = field.bounds();
-        // Kernels reach past the domain by at most their support (ρ = 1).
-        let reach = (0..field.samples.len())
-            .map(|i| field.samples.support_extent(i))
-            .fold([0.0f64; 3], |m, e| {
-                [m[0].max(e[0]), m[1].max(e[1]), m[2].max(e[2])]
-            });
-        let lo = box_lo - DVec3::from(reach);
-        let hi = box_hi + DVec3::from(reach);
+        // Kernels reach no further than their supports (ρ = 1).
+        let (lo, hi) = field.support_box();
         let corners = (0..8).map(|c| {
             DVec3::new(
                 if c & 1 == 0 { lo.x } else { hi.x },
