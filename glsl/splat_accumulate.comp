@@ -88,7 +88,7 @@ void main() {
                 }
 #endif
                 float g = splat_footprint(s, cutoff, vec2(x, y), ta, tb);
-                if (g > 0.0) {
+                if (g != 0.0) {
 #if SPLAT_POST == 1
                     sheet_add((k % 5u) * pixels + p, g);
 #elif SPLAT_SURFACES == 1

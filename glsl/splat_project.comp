@@ -34,6 +34,8 @@ const uint CULL_NEAR = 1u;
 const uint CULL_OUTSIDE = 2u;
 const uint CULL_DEGENERATE = 3u;
 const uint CULL_EMPTY = 4u;
+// SplatCounts::oversized (slots 5 to 7 belong to other stages).
+const uint CULL_OVERSIZED = 8u;
 
 const float MIN_VARIANCE = 1e-6;
 
@@ -194,13 +196,11 @@ Splat project(Sample k) {
     float amplitude = weight * abs(determinant(at)) / (6.283185307179586 * sqrt(det_f));
     vec3 conic = vec3(vf.z, -vf.y, vf.x) / det_f;
 #if SPLAT_EXACT == 0
-    const float widen = 1.0;
     float checks_exact = 0.0;
     vec4 box = vec4(centre, cutoff * sqrt(vf.x), cutoff * sqrt(vf.z));
 #else
     // Perspective-exact footprint: the filtered covariance in object space ([EWA]'s screen
     // low-pass pulled back through A), its precision and adjugate in the camera frame.
-    const float widen = 1.1;
     mat3 a_mat = transpose(at);
 #if SPLAT_ANTIALIAS == 0
     mat3 ai = inverse(a_mat);
@@ -234,7 +234,14 @@ Splat project(Sample k) {
         int(max(min(floor(box.y + box.w), h - 1.0), -1.0)));
     float spread = slope.x * (vf.x * slope.x + vf.y * slope.y)
                  + slope.y * (vf.y * slope.x + vf.z * slope.y);
-    float depth_reach = cutoff * (sqrt(max(spread, 0.0)) + sqrt(cond)) * widen;
+    float depth_reach = cutoff * (sqrt(max(spread, 0.0)) + sqrt(cond));
+#if SPLAT_EXACT == 1
+    // The affine reach does not bound off-centre rays near the eye; the kernel's cutoff
+    // ellipsoid does (lambda_max bounded by the largest Gershgorin row sum).
+    vec3 one = vec3(1.0);
+    float gershgorin = max(max(dot(abs(v_f[0]), one), dot(abs(v_f[1]), one)), dot(abs(v_f[2]), one));
+    depth_reach = max(depth_reach, cutoff * sqrt(gershgorin));
+#endif
     float slab0 = params.box_min.w, slab = params.box_max.w;
     float first = floor((t - depth_reach - slab0) / slab);
     float last = floor((t + depth_reach - slab0) / slab);
@@ -245,6 +252,14 @@ Splat project(Sample k) {
     }
     if (bbox.x > bbox.z || bbox.y > bbox.w || last < 0.0 || first >= float(params.slabs)) {
         return culled(CULL_OUTSIDE);
+    }
+    uint bx = uint(bbox.z - bbox.x) / uint(SPLAT_BLOCK) + 1u;
+    uint by = uint(bbox.w - bbox.y) / uint(SPLAT_BLOCK) + 1u;
+    uint s0 = uint(max(first, 0.0));
+    uint s1 = uint(min(last, float(params.slabs - 1u)));
+    // splat_bin writes a kernel's entries in one invocation: bounded (src/splat/mod.rs).
+    if (float(s1 - s0 + 1u) * float(bx * by) > float(SPLAT_MAX_KERNEL_ENTRIES)) {
+        return culled(CULL_OVERSIZED);
     }
     Splat s;
 #if SPLAT_EXACT == 0
@@ -260,9 +275,7 @@ Splat project(Sample k) {
 #endif
     s.color = vec4(color, opacity);
     s.bbox = bbox;
-    uint bx = uint(bbox.z - bbox.x) / uint(SPLAT_BLOCK) + 1u;
-    uint by = uint(bbox.w - bbox.y) / uint(SPLAT_BLOCK) + 1u;
-    s.slabs = uvec4(uint(max(first, 0.0)), uint(min(last, float(params.slabs - 1u))), bx, bx * by);
+    s.slabs = uvec4(s0, s1, bx, bx * by);
     return s;
 }
 

@@ -349,9 +349,9 @@ const _: () = assert!(std::mem::size_of::<SplatParams>() == 192);
 
 /// One projected kernel (splat_project's output). GLSL twin: `Splat`. The footprint words
 /// depend on the projection (`splat::project::Splat` names them):
-/// - orthographic (affine footprint): centre x, y, t, depth σ | conic xx, xy, yy, peak |
-///   depth slope x, y, 0, 0 | unused;
-/// - perspective (per-pixel ray integral): Q xx, xy, yy, xz | Q yz, zz, r.x, r.y |
+/// - affine footprint (orthographic, or `splat.footprint = "affine"`): centre x, y, t, depth σ |
+///   conic xx, xy, yy, peak | depth slope x, y, 0, 0 | unused;
+/// - perspective, exact (per-pixel ray integral): Q xx, xy, yy, xz | Q yz, zz, r.x, r.y |
 ///   adj(P) xx, xy, yy, xz | adj(P) yz, zz, r.z, w·√det P/(2π).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]

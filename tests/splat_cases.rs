@@ -178,6 +178,28 @@ fn pre_shaded_isosurfaces_and_bad_splat_keys_are_refused_by_name() {
             .to_string();
         assert!(e.contains(key), "{set}: {e}");
     }
+    let wide = scene(&["splat.cutoff=5.0"]);
+    let err = SplatSetup::new(
+        Shading::Pre,
+        &wide.render.splat,
+        &wide.camera,
+        0.99,
+        [0.0; 3],
+        &[],
+        &wide.lighting,
+        &field,
+    )
+    .expect_err("cutoff past the supports");
+    assert!(
+        matches!(
+            err,
+            RenderError::Setting {
+                key: "splat.cutoff",
+                ..
+            }
+        ),
+        "{err}"
+    );
     let post = scene(&["render.method=\"splat-post\"", "splat.surface=true"]);
     let err = SplatSetup::new(
         Shading::Post,
@@ -348,4 +370,52 @@ fn a_new_camera_reuses_the_splatting_kernels_pipelines_and_buffers() {
     assert!(diff < GPU_TOLERANCE, "turned camera: GPU vs CPU {diff:.3e}");
     drop(renderer);
     finish(ctx);
+}
+
+#[test]
+fn negative_data_and_oversized_kernels() {
+    // Post-shaded weights carry the data's sign: a field of −0.6 is classified at −0.6, not
+    // dropped (a transfer function opaque only for negative values shows it).
+    let volume = volume_from([9; 3], [0.25; 3], [-1.0; 3], |_| -0.6);
+    let s = scene(&[
+        "render.method=\"splat-post\"",
+        "transfer.points=[[-1.0,1.0,0.2,0.2,8.0],[0.0,0.0,0.0,0.0,0.0]]",
+        "camera.width=16",
+        "camera.height=16",
+    ]);
+    let field = Field::new(
+        volume,
+        s.reconstruction,
+        &vmls::recon::OctreeSettings::default(),
+        |_| {},
+    )
+    .expect("field");
+    let image = splat_image(&setup(&s, &field, Shading::Post), &field, &s.transfer);
+    let centre = image.pixels[8 * 16 + 8];
+    assert!(
+        centre[3] > 0.5 && centre[0] > 0.3,
+        "negative field lost: {centre:?}"
+    );
+
+    // A kernel filling a 2048² image across hundreds of sheets would need more entries than
+    // one invocation may write: culled as oversized, which fails the frame on the GPU.
+    let big = scene(&[
+        "camera.width=2048",
+        "camera.height=2048",
+        "splat.slab=0.05",
+        "camera.eye=[0.0,-1.2,0.0]",
+    ]);
+    let field = big.field(|_| {}).expect("field");
+    let setup = setup(&big, &field, Shading::Pre);
+    let k = Kernel {
+        position: [0.0, 0.0, 0.0],
+        value: 0.5,
+        metric: rotated_metric([0.5; 3], 0.0),
+        volume: 1e-3,
+        kind: KernelKind::Volume,
+    };
+    assert_eq!(
+        splat_project(&setup, &big.transfer, &k),
+        Err(Cull::Oversized)
+    );
 }

@@ -4,9 +4,8 @@
 #ifndef VMLS_SPLAT_GLSL
 #define VMLS_SPLAT_GLSL
 
-// Pixel blocks per binned entry and occlusion tiles, in pixels (src/splat/mod.rs).
-const int SPLAT_BLOCK = 32;
-const int SPLAT_TILE = 8;
+// SPLAT_BLOCK (pixel blocks per binned entry), SPLAT_TILE (occlusion tiles) and
+// SPLAT_MAX_KERNEL_ENTRIES come from src/splat/mod.rs as macros.
 
 // erfc(x) for x >= 0, Abramowitz & Stegun 7.1.26 (|error| <= 1.5e-7).
 float erfc_pos(float x) {

@@ -199,7 +199,8 @@ fn splat_accumulate(
                     continue;
                 }
                 let g = splat_footprint(s, setup, f64::from(x), f64::from(y), ta, tb);
-                if g <= 0.0 {
+                // Post-shaded weights carry the data's sign: only zero is nothing.
+                if g == 0.0 {
                     continue;
                 }
                 match setup.shading {
@@ -257,7 +258,8 @@ fn splat_composite(frame: &mut Frame<'_>, tf: &TransferFunction, k: u32) {
                     }
                     frame.transmittance[p] *= 1.0 - e[5] * cover;
                 }
-                if e[0] <= 0.0 {
+                // A surface may have made the pixel opaque (as the kernel re-checks).
+                if e[0] <= 0.0 || frame.done(p) {
                     continue;
                 }
                 let alpha = 1.0 - (-e[0]).exp();

@@ -22,7 +22,7 @@ const SLABS_PER_SUBMISSION: u32 = 1024;
 /// Invocations per workgroup of the one-dimensional kernels.
 const GROUP: u32 = 64;
 /// `SplatCounts` counters in the stats buffer.
-const STATS: usize = 8;
+const STATS: usize = 9;
 
 /// The kernels uploaded once per dataset: one `Sample` each, volume in `metric_off.z`.
 pub struct GpuKernels {
@@ -75,11 +75,6 @@ impl GpuKernels {
                 .iter()
                 .zip(isosurfaces)
                 .all(|(v, i)| *v == i.value)
-    }
-
-    /// Bytes on the device.
-    pub fn bytes(&self) -> u64 {
-        self.buffer.size()
     }
 }
 
@@ -135,6 +130,12 @@ impl SplatVariant {
             ("SPLAT_ISOSURFACES".into(), flag(self.isosurfaces)),
             ("SPLAT_SURFACES".into(), flag(self.surfaces)),
             ("SPLAT_HULL".into(), flag(self.hull)),
+            ("SPLAT_BLOCK".into(), super::BLOCK.to_string()),
+            ("SPLAT_TILE".into(), super::TILE.to_string()),
+            (
+                "SPLAT_MAX_KERNEL_ENTRIES".into(),
+                super::MAX_KERNEL_ENTRIES.to_string(),
+            ),
             ("SPLAT_SEGMENTS".into(), super::PIXEL_SEGMENTS.to_string()),
         ]);
         d
@@ -517,6 +518,14 @@ pub fn splat_frame(
         }
     }
     sum_ms(&timings, &mut stage_ms);
+    let oversized = t.stats.read::<u32>(ctx)?.get(8).copied().unwrap_or(0);
+    if oversized > 0 {
+        return Err(VkError::Usage(format!(
+            "splatting: {oversized} kernels cover more than {} sheet × block entries each (one \
+             invocation writes them); raise splat.slab or lower the image size",
+            super::MAX_KERNEL_ENTRIES
+        )));
+    }
     let counts: Vec<u32> = t.counts.read(ctx)?;
     let mut offsets = Vec::with_capacity(counts.len());
     let mut args = Vec::with_capacity(3 * counts.len());
@@ -667,6 +676,7 @@ pub fn splat_frame(
             entries: total,
             skipped_occluded: s(6),
             accumulated: s(7),
+            oversized: s(8),
         },
         stage_ms,
         submissions,

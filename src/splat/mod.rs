@@ -2,8 +2,10 @@
 //! ([BLUR]): the second renderer. It reads the same sample set as ray casting.
 //!
 //! Every sample becomes a Gaussian kernel of covariance `V_i = σ² M_i⁻¹` and weight `v_i`
-//! (`recon::gaussian`: the splatted extinction or density is exactly the Gaussian-sum field
-//! that `reconstruction.method = "gaussian"` ray casts). A frame runs these stages, each with
+//! (`recon::gaussian`: the splatted extinction or density is the Gaussian-sum field that
+//! `reconstruction.method = "gaussian"` ray casts, up to where each is cut: the field at ρ = 1,
+//! i.e. 1/σ standard deviations in 3D, a footprint at `splat.cutoff` deviations across the ray
+//! and not along it). A frame runs these stages, each with
 //! an f64 CPU twin here and a GLSL kernel of the same name:
 //! - `splat_setup` (host, [`SplatSetup::new`]): camera frame, focal length in pixels, and the
 //!   sheets: slabs of thickness Δs = `splat.slab` × spacing in the distance t from the eye
@@ -23,7 +25,7 @@ pub mod project;
 pub mod surface;
 
 use crate::render::camera::{Camera, Projection, ViewBasis};
-use crate::render::shading::{Isosurface, Lighting};
+use crate::render::shading::{Isosurface, Lighting, MAX_ISOSURFACES};
 use crate::render::{Field, RenderError};
 use glam::DVec3;
 
@@ -33,6 +35,10 @@ use glam::DVec3;
 pub const BLOCK: u32 = 32;
 /// Occlusion-map tiles are this many pixels on a side.
 pub const TILE: u32 = 8;
+/// At most this many (sheet × block) entries per kernel: `splat_bin` writes them in one
+/// invocation's loops, which llvmpipe ends after 65 535 iterations. More is an error naming
+/// `splat.slab` and the image size, never a silently truncated list.
+pub const MAX_KERNEL_ENTRIES: u64 = 60_000;
 /// At most this many sheets per frame.
 pub const MAX_SLABS: u32 = 16_384;
 /// 3DGS's guard: the Jacobian's lateral terms are evaluated at most this far outside the view
@@ -155,6 +161,26 @@ impl SplatSetup {
                     .into(),
             });
         }
+        if isosurfaces.len() > MAX_ISOSURFACES {
+            return Err(RenderError::Setting {
+                key: "transfer.isosurfaces",
+                message: format!(
+                    "{} isosurfaces; at most {MAX_ISOSURFACES}",
+                    isosurfaces.len()
+                ),
+            });
+        }
+        let sigma = field.reconstruction.sigma;
+        if settings.cutoff * sigma > 1.0 + 1e-12 {
+            return Err(RenderError::Setting {
+                key: "splat.cutoff",
+                message: format!(
+                    "splat.cutoff × reconstruction.sigma = {} × {sigma} reaches past the kernels' \
+                     supports, where the Gaussian field ends: at most 1",
+                    settings.cutoff
+                ),
+            });
+        }
         if shading == Shading::Post && settings.surface {
             return Err(RenderError::Setting {
                 key: "splat.surface",
@@ -168,7 +194,7 @@ impl SplatSetup {
         let eye = DVec3::from(camera.eye) - frame_origin;
         let (w, h) = (f64::from(camera.width), f64::from(camera.height));
         let (box_lo, box_hi) = field.bounds();
-        // Kernels reach no further than their supports (ρ = 1).
+        // Kernels reach no further than their supports (ρ = 1 ≥ cutoff·σ, checked above).
         let (lo, hi) = field.support_box();
         let corners = (0..8).map(|c| {
             DVec3::new(
@@ -281,6 +307,8 @@ pub struct SplatCounts {
     pub skipped_occluded: u64,
     /// Entries accumulated into a sheet.
     pub accumulated: u64,
+    /// Kernels with more than `MAX_KERNEL_ENTRIES` entries (the frame fails).
+    pub oversized: u64,
 }
 
 impl SplatCounts {
@@ -291,5 +319,6 @@ impl SplatCounts {
             - self.culled_outside
             - self.culled_degenerate
             - self.culled_empty
+            - self.oversized
     }
 }

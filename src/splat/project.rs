@@ -12,8 +12,8 @@
 //!   s² = V_tt − V_x̂tᵀV̂⁻¹V_x̂t (the conditional of the ray-space Gaussian); a sheet's share of
 //!   the footprint is Φ((t_b − m)/s) − Φ((t_a − m)/s), which slices the kernel exactly instead
 //!   of [BLUR]'s pre-integrated kernel sections;
-//! - the bounding box and the sheet range cover the cutoff ellipse exactly: the conditional mean
-//!   varies by at most cutoff·√(bᵀV̂_f b) over it, plus cutoff·s.
+//! - the bounding box and the sheet range cover the affine cutoff ellipse exactly: the conditional
+//!   mean varies by at most cutoff·√(bᵀV̂_f b) over it, plus cutoff·s.
 //!
 //! Perspective-exact footprints: the affine footprint above errs by up to ~6·10⁻³ of its peak for
 //! a 16:1 needle at a few hundred pixels (tests/splat.rs), so for a perspective camera the
@@ -89,6 +89,8 @@ pub enum Cull {
     Outside,
     Degenerate,
     Empty,
+    /// More binned entries than one invocation may write (`MAX_KERNEL_ENTRIES`): an error.
+    Oversized,
 }
 
 impl Cull {
@@ -99,30 +101,20 @@ impl Cull {
             Cull::Outside => counts.culled_outside += 1,
             Cull::Degenerate => counts.culled_degenerate += 1,
             Cull::Empty => counts.culled_empty += 1,
+            Cull::Oversized => counts.oversized += 1,
         }
     }
 }
 
-/// M⁻¹ of a symmetric metric as a row-major 3×3 matrix; `None` when singular.
+/// M⁻¹ of a symmetric metric as a row-major 3×3 matrix; `None` unless M is positive definite
+/// and finite.
 pub fn metric_inverse(m: &Metric) -> Option<[[f64; 3]; 3]> {
-    let (a, b, c, d, e, f) = (m[0], m[1], m[2], m[3], m[4], m[5]);
-    // Adjugate of [[a, d, e], [d, b, f], [e, f, c]].
-    let c00 = b * c - f * f;
-    let c01 = e * f - d * c;
-    let c02 = d * f - b * e;
-    let c11 = a * c - e * e;
-    let c12 = d * e - a * f;
-    let c22 = a * b - d * d;
-    let det = a * c00 + d * c01 + e * c02;
-    if det <= 0.0 || !det.is_finite() {
+    let det = crate::recon::gaussian::metric_det(m);
+    if det <= 0.0 || !det.is_finite() || m[0] <= 0.0 || m[0] * m[1] - m[3] * m[3] <= 0.0 {
         return None;
     }
-    let i = 1.0 / det;
-    Some([
-        [c00 * i, c01 * i, c02 * i],
-        [c01 * i, c11 * i, c12 * i],
-        [c02 * i, c12 * i, c22 * i],
-    ])
+    let v = crate::samples::supports::inverse(m);
+    Some([[v[0], v[3], v[4]], [v[3], v[1], v[5]], [v[4], v[5], v[2]]])
 }
 
 fn mul(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
@@ -232,6 +224,80 @@ pub fn filtered(v: [f64; 3], antialias: Antialias, lowpass: f64) -> [f64; 3] {
     }
 }
 
+/// The per-pixel ray integral's constants (`Splat::precision` … `ray_amplitude`) and a
+/// rigorous depth reach: the filtered kernel's cutoff ellipsoid lies within
+/// cutoff·√λ_max(V″_f) of its centre, λ_max bounded by the largest Gershgorin row sum.
+struct Exact {
+    precision: [f64; 6],
+    adjugate: [f64; 6],
+    eye_offset: [f64; 3],
+    ray_amplitude: f64,
+    reach: f64,
+}
+
+fn exact_footprint(
+    setup: &SplatSetup,
+    a: &[[f64; 3]; 3],
+    v_obj: &[[f64; 3]; 3],
+    vhat: [f64; 3],
+    vf: [f64; 3],
+    u: DVec3,
+    weight: f64,
+) -> Option<Exact> {
+    // The object-space filtered covariance: [EWA]'s screen low-pass pulled back through A.
+    let lowpass = setup.settings.lowpass;
+    let v_f = match setup.settings.antialias {
+        Antialias::Ewa => {
+            let ai = inverse(a)?;
+            let mut lp = [[0.0; 3]; 3];
+            for (i, row) in lp.iter_mut().enumerate() {
+                for (j, x) in row.iter_mut().enumerate() {
+                    *x = lowpass * (ai[i][0] * ai[j][0] + ai[i][1] * ai[j][1]);
+                }
+            }
+            add(v_obj, &lp)
+        }
+        Antialias::Swan => {
+            let k = vf[0] / vhat[0].max(MIN_VARIANCE);
+            v_obj.map(|r| r.map(|x| x * k))
+        }
+        Antialias::None => *v_obj,
+    };
+    let p_obj = inverse(&v_f)?;
+    let det_p = det3(&p_obj);
+    if det_p <= 0.0 || !det_p.is_finite() {
+        return None;
+    }
+    let b = &setup.basis;
+    let e = [b.right, b.up, b.forward].map(|v| v.to_array());
+    let frame = |m: &[[f64; 3]; 3], i: usize, j: usize| -> f64 {
+        (0..3)
+            .map(|k| (0..3).map(|l| e[i][k] * m[k][l] * e[j][l]).sum::<f64>())
+            .sum()
+    };
+    let sym = |m: &[[f64; 3]; 3], s: f64| {
+        [(0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2)].map(|(i, j)| s * frame(m, i, j))
+    };
+    let gershgorin = v_f
+        .iter()
+        .map(|r| r.iter().map(|x| x.abs()).sum::<f64>())
+        .fold(0.0, f64::max);
+    let out = Exact {
+        precision: sym(&p_obj, 1.0),
+        adjugate: sym(&v_f, det_p),
+        eye_offset: [-u.x, -u.y, -u.z],
+        ray_amplitude: weight * det_p.sqrt() / (2.0 * std::f64::consts::PI),
+        reach: setup.settings.cutoff * gershgorin.sqrt(),
+    };
+    let finite = out
+        .precision
+        .iter()
+        .chain(&out.adjugate)
+        .chain(&[out.ray_amplitude, out.reach])
+        .all(|x| x.is_finite());
+    finite.then_some(out)
+}
+
 /// Projects one kernel; `Err` says why it is culled.
 pub fn splat_project(
     setup: &SplatSetup,
@@ -293,74 +359,21 @@ pub fn splat_project(
         (vhat[2] * vxt[0] - vhat[1] * vxt[1]) / det_hat,
         (vhat[0] * vxt[1] - vhat[1] * vxt[0]) / det_hat,
     ];
-    // Object-space filtered covariance for the perspective-exact footprint.
-    let lowpass = setup.settings.lowpass;
-    let v_f = match setup.settings.antialias {
-        Antialias::Ewa => {
-            let Some(ai) = inverse(&a) else {
-                return Err(Cull::Degenerate);
-            };
-            let mut lp = [[0.0; 3]; 3];
-            for (i, row) in lp.iter_mut().enumerate() {
-                for (j, x) in row.iter_mut().enumerate() {
-                    *x = lowpass * (ai[i][0] * ai[j][0] + ai[i][1] * ai[j][1]);
-                }
-            }
-            add(&v_obj, &lp)
-        }
-        Antialias::Swan => {
-            let k = vf[0] / vhat[0].max(MIN_VARIANCE);
-            v_obj.map(|r| r.map(|x| x * k))
-        }
-        Antialias::None => v_obj,
-    };
-    let Some(p_obj) = inverse(&v_f) else {
-        return Err(Cull::Degenerate);
-    };
-    let e = [b.right, b.up, b.forward].map(|v| v.to_array());
-    let q = |i: usize, j: usize| -> f64 {
-        (0..3)
-            .map(|k| (0..3).map(|l| e[i][k] * p_obj[k][l] * e[j][l]).sum::<f64>())
-            .sum()
-    };
-    let precision = [q(0, 0), q(0, 1), q(1, 1), q(0, 2), q(1, 2), q(2, 2)];
-    let det_p = det3(&p_obj);
-    if det_p <= 0.0 || !det_p.is_finite() {
-        return Err(Cull::Degenerate);
-    }
-    let cov = |i: usize, j: usize| -> f64 {
-        det_p
-            * (0..3)
-                .map(|k| (0..3).map(|l| e[i][k] * v_f[k][l] * e[j][l]).sum::<f64>())
-                .sum::<f64>()
-    };
-    let adjugate = [
-        cov(0, 0),
-        cov(0, 1),
-        cov(1, 1),
-        cov(0, 2),
-        cov(1, 2),
-        cov(2, 2),
-    ];
-    let eye_offset = [-u.x, -u.y, -u.z];
-    let ray_amplitude = weight * det_p.sqrt() / (2.0 * std::f64::consts::PI);
+    let exact = setup
+        .exact_footprints()
+        .then(|| exact_footprint(setup, &a, &v_obj, vhat, vf, u, weight).ok_or(Cull::Degenerate));
+    let exact = exact.transpose()?;
     let cond = (vtt - slope[0] * vxt[0] - slope[1] * vxt[1]).max(1e-12 * vtt);
     let amplitude = weight * det3(&a).abs() / (2.0 * std::f64::consts::PI * det_f.sqrt());
     let conic = [vf[2] / det_f, -vf[1] / det_f, vf[0] / det_f];
     let cut = setup.settings.cutoff;
     let (w, h) = (setup.camera.width as i32, setup.camera.height as i32);
-    // The pixel-space box of the cutoff region: the affine ellipse (orthographic), or the exact
-    // conic of rays within `cutoff` of the centre (perspective, `cutoff_conic`).
-    let (widen, (bx, by, rx, ry)) = if !setup.exact_footprints() {
-        (
-            1.0,
-            (centre[0], centre[1], cut * vf[0].sqrt(), cut * vf[2].sqrt()),
-        )
-    } else {
-        let Some(b) = cutoff_conic(setup, &precision, &adjugate, eye_offset, cut) else {
-            return Err(Cull::Degenerate);
-        };
-        (1.1, b)
+    // The pixel-space box of the cutoff region: the affine ellipse, or the exact conic of rays
+    // within `cutoff` of the centre (`cutoff_conic`).
+    let (bx, by, rx, ry) = match &exact {
+        None => (centre[0], centre[1], cut * vf[0].sqrt(), cut * vf[2].sqrt()),
+        Some(x) => cutoff_conic(setup, &x.precision, &x.adjugate, x.eye_offset, cut)
+            .ok_or(Cull::Degenerate)?,
     };
     let bbox = [
         ((bx - rx).ceil().max(0.0).min(f64::from(w))) as i32,
@@ -370,24 +383,38 @@ pub fn splat_project(
     ];
     let spread = slope[0] * (vf[0] * slope[0] + vf[1] * slope[1])
         + slope[1] * (vf[1] * slope[0] + vf[2] * slope[1]);
-    let depth_reach = cut * (spread.max(0.0).sqrt() + cond.sqrt()) * widen;
+    let affine_reach = cut * (spread.max(0.0).sqrt() + cond.sqrt());
+    // Exact footprints: the affine reach does not bound off-centre rays near the eye; the
+    // kernel's cutoff ellipsoid does.
+    let depth_reach = exact
+        .as_ref()
+        .map_or(affine_reach, |x| affine_reach.max(x.reach));
     let first = ((t - depth_reach - setup.slab0) / setup.slab).floor();
     let last = ((t + depth_reach - setup.slab0) / setup.slab).floor();
     let values = [
         amplitude, conic[0], conic[1], conic[2], slope[0], slope[1], t, cond,
     ];
-    if values
-        .iter()
-        .chain(&precision)
-        .chain(&adjugate)
-        .chain(&[ray_amplitude])
-        .any(|x| !x.is_finite())
-    {
+    if values.iter().any(|x| !x.is_finite()) {
         return Err(Cull::Degenerate);
     }
     if bbox[0] > bbox[2] || bbox[1] > bbox[3] || last < 0.0 || first >= f64::from(setup.slabs) {
         return Err(Cull::Outside);
     }
+    let slabs = [
+        first.max(0.0) as u32,
+        last.min(f64::from(setup.slabs - 1)) as u32,
+    ];
+    let (bx, by) = super::blocks(bbox);
+    if u64::from(slabs[1] - slabs[0] + 1) * u64::from(bx * by) > super::MAX_KERNEL_ENTRIES {
+        return Err(Cull::Oversized);
+    }
+    let x = exact.unwrap_or(Exact {
+        precision: [0.0; 6],
+        adjugate: [0.0; 6],
+        eye_offset: [0.0; 3],
+        ray_amplitude: 0.0,
+        reach: 0.0,
+    });
     Ok(Splat {
         centre,
         conic,
@@ -395,17 +422,14 @@ pub fn splat_project(
         depth: t,
         slope,
         depth_sigma: cond.sqrt(),
-        precision,
-        adjugate,
-        eye_offset,
-        ray_amplitude,
+        precision: x.precision,
+        adjugate: x.adjugate,
+        eye_offset: x.eye_offset,
+        ray_amplitude: x.ray_amplitude,
         color,
         opacity,
         bbox,
-        slabs: [
-            first.max(0.0) as u32,
-            last.min(f64::from(setup.slabs - 1)) as u32,
-        ],
+        slabs,
     })
 }
 
