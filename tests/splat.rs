@@ -7,7 +7,6 @@ mod common;
 use common::splat::*;
 use common::*;
 use glam::DVec3;
-use vmls::render::Field;
 use vmls::render::camera::Projection;
 use vmls::render::renderer::Renderer;
 use vmls::samples::Metric;
@@ -290,13 +289,7 @@ fn post_shaded_edges_are_crisper_than_pre_shaded() {
         "camera.height=64",
         "transfer.points=[[0.0,0.0,0.0,0.0,0.0],[0.45,0.0,0.0,0.0,0.0],[0.55,1.0,1.0,1.0,400.0],[1.0,1.0,1.0,1.0,400.0]]",
     ]);
-    let field = Field::new(
-        volume,
-        s.reconstruction,
-        &vmls::recon::OctreeSettings::default(),
-        |_| {},
-    )
-    .expect("field");
+    let field = grid_field(volume, &s);
     let mut widths = Vec::new();
     for shading in [Shading::Pre, Shading::Post] {
         let image = splat_image(&setup(&s, &field, shading), &field, &s.transfer);
@@ -351,13 +344,7 @@ fn zebra(antialias: &str, scale: u32) -> (Vec<[f64; 4]>, u32, u32) {
         "splat.slab=32.0",
         "transfer.points=[[0.0,0.0,0.0,0.0,50.0],[1.0,1.0,1.0,1.0,50.0]]",
     ]);
-    let field = Field::new(
-        volume,
-        s.reconstruction,
-        &vmls::recon::OctreeSettings::default(),
-        |_| {},
-    )
-    .expect("field");
+    let field = grid_field(volume, &s);
     let image = splat_image(&setup(&s, &field, Shading::Pre), &field, &s.transfer);
     (image.pixels, w, h)
 }

@@ -256,13 +256,7 @@ fn sphere_scene(method: &str) -> (Scene, Field) {
     let volume = volume_from([33; 3], [1.0 / 16.0; 3], [-1.0; 3], |p| {
         (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt()
     });
-    let field = Field::new(
-        volume,
-        s.reconstruction,
-        &vmls::recon::OctreeSettings::default(),
-        |_| {},
-    )
-    .expect("field");
+    let field = grid_field(volume, &s);
     (s, field)
 }
 
@@ -383,13 +377,7 @@ fn negative_data_and_oversized_kernels() {
         "camera.width=16",
         "camera.height=16",
     ]);
-    let field = Field::new(
-        volume,
-        s.reconstruction,
-        &vmls::recon::OctreeSettings::default(),
-        |_| {},
-    )
-    .expect("field");
+    let field = grid_field(volume, &s);
     let image = splat_image(&setup(&s, &field, Shading::Post), &field, &s.transfer);
     let centre = image.pixels[8 * 16 + 8];
     assert!(

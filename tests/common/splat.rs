@@ -163,3 +163,8 @@ pub fn sheet_convergence(field: &Field, common: &[&str], slabs: &[f64]) -> Vec<(
         })
         .collect()
 }
+
+/// A regular-grid field with a scene's reconstruction.
+pub fn grid_field(volume: vmls::data::Volume, s: &Scene) -> Field {
+    Field::new(volume, s.reconstruction, &OctreeSettings::default(), |_| {}).expect("field")
+}
