@@ -11,7 +11,7 @@ use vmls::recon::{OctreeSettings, ReconMethod};
 use vmls::render::Field;
 use vmls::render::gpu::{GpuField, evaluate};
 use vmls::render::raycast::raycast_image;
-use vmls::render::renderer::{Renderer, View};
+use vmls::render::renderer::Renderer;
 use vmls::scene::Scene;
 
 fn gaussian_scene(extra: &[&str]) -> Scene {
@@ -33,7 +33,7 @@ fn scattered_field() -> Field {
     let points: Vec<[f64; 3]> = (0..3000)
         .map(|_| [rng.next_f64(), rng.next_f64(), rng.next_f64()])
         .collect();
-    let d = splat::point_data(Geometry::Points { points }, |p| {
+    let d = point_data(Geometry::Points { points }, |p| {
         0.5 + 0.3 * (4.0 * p[0]).sin() * p[1]
     });
     splat::field_of(splat::point_samples(&d, Some(true)), &gaussian_scene(&[]))
@@ -133,18 +133,7 @@ fn gpu_ray_casting_of_the_gaussian_field_matches_the_cpu_reference() {
     let setup = s.ray_setup(&field).expect("setup");
     let cpu = raycast_image(&setup, &field, &s.transfer, None);
     let mut renderer = Renderer::new(&ctx, field).expect("renderer");
-    let (gpu, _) = renderer
-        .render(
-            &View {
-                camera: &s.camera,
-                settings: &s.render,
-                transfer: &s.transfer,
-                isosurfaces: &s.isosurfaces,
-                lighting: &s.lighting,
-            },
-            |_| {},
-        )
-        .expect("frame");
+    let gpu = splat::scene_frame(&mut renderer, &s);
     assert!(gpu.variant.contains("gaussian"), "{}", gpu.variant);
     let diff = gpu
         .pixels

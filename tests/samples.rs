@@ -24,21 +24,6 @@ fn linear(p: [f64; 3]) -> f64 {
     LINEAR[0] + LINEAR[1] * p[0] + LINEAR[2] * p[1] + LINEAR[3] * p[2]
 }
 
-fn point_data(geometry: Geometry, f: impl Fn([f64; 3]) -> f64) -> Dataset {
-    let values = (0..geometry.point_count())
-        .map(|i| f(geometry.point(i)) as f32)
-        .collect();
-    Dataset {
-        geometry,
-        arrays: vec![DataArray {
-            name: "f".into(),
-            location: Location::Point,
-            components: 1,
-            values,
-        }],
-    }
-}
-
 fn samples(d: &Dataset, support: f64, knn: usize, anisotropic: Option<bool>) -> SampleSet {
     d.validate(Path::new("test")).expect("valid dataset");
     SampleSet::from_dataset(

@@ -131,3 +131,19 @@ pub fn tet_torus(around: usize, across: usize) -> Geometry {
     }
     Geometry::Unstructured { points, cells }
 }
+
+/// Point data "f" = `f` at the points of `geometry`.
+pub fn point_data(geometry: Geometry, f: impl Fn([f64; 3]) -> f64) -> vmls::data::dataset::Dataset {
+    let values = (0..geometry.point_count())
+        .map(|i| f(geometry.point(i)) as f32)
+        .collect();
+    vmls::data::dataset::Dataset {
+        geometry,
+        arrays: vec![vmls::data::dataset::DataArray {
+            name: "f".into(),
+            location: vmls::data::dataset::Location::Point,
+            components: 1,
+            values,
+        }],
+    }
+}

@@ -3,11 +3,11 @@
 
 use glam::DVec3;
 use std::path::Path;
-use vmls::data::dataset::{DataArray, Dataset, Location};
+use vmls::data::dataset::Dataset;
 use vmls::recon::OctreeSettings;
 use vmls::render::Field;
 use vmls::render::raycast::raycast_image;
-use vmls::render::renderer::{Renderer, SplatReport, View};
+use vmls::render::renderer::{GpuImage, Renderer, SplatReport, View};
 use vmls::samples::Metric;
 use vmls::samples::{SampleSet, SampleSettings};
 use vmls::scene::Scene;
@@ -60,7 +60,8 @@ pub fn max_diff(a: &[[f32; 4]], b: &[[f64; 4]]) -> f64 {
         .fold(0.0, f64::max)
 }
 
-pub fn gpu_frame(renderer: &mut Renderer, s: &Scene) -> (Vec<[f32; 4]>, SplatReport) {
+/// One frame of a scene's camera, settings, transfer function, isosurfaces and lighting.
+pub fn scene_frame(renderer: &mut Renderer, s: &Scene) -> GpuImage {
     let (image, _) = renderer
         .render(
             &View {
@@ -72,7 +73,12 @@ pub fn gpu_frame(renderer: &mut Renderer, s: &Scene) -> (Vec<[f32; 4]>, SplatRep
             },
             |_| {},
         )
-        .expect("splat frame");
+        .expect("frame");
+    image
+}
+
+pub fn gpu_frame(renderer: &mut Renderer, s: &Scene) -> (Vec<[f32; 4]>, SplatReport) {
+    let image = scene_frame(renderer, s);
     assert!(image.pixels.iter().flatten().all(|v| v.is_finite()));
     (image.pixels, image.splat.expect("splat report"))
 }
@@ -107,25 +113,9 @@ pub fn point_samples(d: &Dataset, anisotropic: Option<bool>) -> SampleSet {
     .expect("sample set")
 }
 
-/// Point data `f` on `geometry`.
-pub fn point_data(geometry: vmls::data::dataset::Geometry, f: impl Fn([f64; 3]) -> f64) -> Dataset {
-    let values = (0..geometry.point_count())
-        .map(|i| f(geometry.point(i)) as f32)
-        .collect();
-    Dataset {
-        geometry,
-        arrays: vec![DataArray {
-            name: "f".into(),
-            location: Location::Point,
-            components: 1,
-            values,
-        }],
-    }
-}
-
 /// The small tetrahedral torus of `tests/common` with f = 0.5 + 0.4 sin 3x cos z.
 pub fn torus_samples() -> SampleSet {
-    let d = point_data(super::tet_torus(24, 3), |p| {
+    let d = super::point_data(super::tet_torus(24, 3), |p| {
         0.5 + 0.4 * (3.0 * p[0]).sin() * p[2].cos()
     });
     point_samples(&d, None)
