@@ -12,6 +12,7 @@
 //!   the GPU driver).
 //! - [`scene`]: the TOML scene contract.
 
+pub mod bench;
 pub mod data;
 pub mod gpu_types;
 pub mod info;

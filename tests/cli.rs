@@ -1,48 +1,9 @@
 //! The `vmls` binary end to end, with validation on: the contract of `render`, `--stats`,
 //! `--set`, and one clear error line plus a non-zero exit (and no image) for every bad input.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
-fn vmls(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vmls"))
-        .args(args)
-        .env("VMLS_VALIDATION", "1")
-        .env_remove("VMLS_DEVICE")
-        .output()
-        .expect("run vmls")
-}
-
-fn dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("vmls-cli-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("temp dir");
-    d
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 path")
-}
-
-/// Asserts failure with exactly one stderr line containing every `needle`, and no image.
-fn assert_fails(out: &Output, needles: &[&str], image: &Path) {
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(
-        out.status.code(),
-        Some(1),
-        "expected exit 1, stderr: {stderr}"
-    );
-    assert_eq!(
-        stderr.trim_end().lines().count(),
-        1,
-        "expected one error line, got: {stderr}"
-    );
-    assert!(stderr.starts_with("vmls: error: "), "{stderr}");
-    for n in needles {
-        assert!(stderr.contains(n), "error line lacks '{n}': {stderr}");
-    }
-    assert!(!image.exists(), "an image was written despite the error");
-}
+use common::cli::{assert_fails, dir, s, vmls};
 
 #[test]
 fn default_scene_renders_png_with_stats() {
@@ -303,7 +264,7 @@ fn compare_reports_rmse_and_rejects_size_mismatch() {
     let same = vmls(&["compare", s(&a), s(&a)]);
     assert_eq!(
         String::from_utf8_lossy(&same.stdout).trim(),
-        "rmse 0.000000 max 0.000000 at (0, 0)"
+        "rmse 0.000000 max 0.000000 at (0, 0) psnr inf dB"
     );
     // The red background shows through transmittance T in the red channel only.
     let heat = d.join("diff.png");

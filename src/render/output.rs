@@ -79,3 +79,20 @@ pub fn write_image(
         err(format!("cannot write image: {e}"))
     })
 }
+
+/// Reads a `.png` or `.exr` image as linear RGBA floats (PNG bytes / 255, no gamma), row 0 at
+/// the top: the inverse of [`write_image`].
+pub fn read_image(path: &Path) -> Result<(u32, u32, Vec<[f32; 4]>), RenderError> {
+    let img = image::open(path).map_err(|e| RenderError::Output {
+        path: path.display().to_string(),
+        message: format!("cannot read image: {e}"),
+    })?;
+    let rgba = img.to_rgba32f();
+    let (w, h) = rgba.dimensions();
+    let pixels = rgba
+        .as_raw()
+        .chunks_exact(4)
+        .map(|c| [c[0], c[1], c[2], c[3]])
+        .collect();
+    Ok((w, h, pixels))
+}

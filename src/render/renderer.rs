@@ -44,6 +44,9 @@ pub struct GpuImage {
     /// Submissions (bands × chunks).
     pub bands: u32,
     pub variant: String,
+    /// The kernels the frame ran: GLSL file and macro definitions, in dispatch order (what
+    /// `vmls bench --variant` prints and `--dump-spirv` compiles).
+    pub shaders: Vec<(&'static str, Vec<(String, String)>)>,
     /// What splatting did (the splatting methods only).
     pub splat: Option<SplatReport>,
 }
@@ -374,6 +377,7 @@ pub fn render(
         gpu_ms,
         bands,
         variant: variant.name("raycast"),
+        shaders: vec![("raycast.comp", variant.defines())],
         splat: None,
     })
 }
@@ -547,6 +551,7 @@ impl Renderer {
                 gpu_ms,
                 bands,
                 variant: variant.name("raycast"),
+                shaders: vec![("raycast.comp", variant.defines())],
                 splat: None,
             },
             FrameStats {
@@ -637,6 +642,11 @@ impl Renderer {
                 gpu_ms,
                 bands: image.submissions,
                 variant: image.variant,
+                shaders: variant
+                    .kernels()
+                    .into_iter()
+                    .map(|k| (k, variant.defines()))
+                    .collect(),
                 splat: Some(SplatReport {
                     counts: image.counts,
                     stage_ms: image.stage_ms,

@@ -141,6 +141,21 @@ impl SplatVariant {
         d
     }
 
+    /// The GLSL files a frame of this variant runs, in dispatch order.
+    pub fn kernels(&self) -> Vec<&'static str> {
+        let mut k = Vec::new();
+        if self.hull {
+            k.push("splat_segments.comp");
+        }
+        k.extend([
+            "splat_project.comp",
+            "splat_bin.comp",
+            "splat_accumulate.comp",
+            "splat_composite.comp",
+        ]);
+        k
+    }
+
     /// Human-readable name for `--stats`.
     pub fn name(&self) -> String {
         format!(

@@ -162,6 +162,9 @@ impl Buffer {
                 self.size
             )));
         }
+        self.shared
+            .bytes_uploaded
+            .fetch_add(bytes.len() as u64, Ordering::Relaxed);
         if self.mapped() {
             let ptr = self.mapped_ptr()?;
             // SAFETY: the mapping covers `size` ≥ bytes.len() bytes; no GPU work uses the buffer

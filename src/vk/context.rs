@@ -68,6 +68,8 @@ pub(crate) struct Shared {
     pub(crate) force_staging: bool,
     pub(crate) debug_names: Option<ash::ext::debug_utils::Device>,
     pub(crate) live_allocations: AtomicUsize,
+    /// Bytes written from the host into buffers (`Buffer::write`), for benchmarks.
+    pub(crate) bytes_uploaded: std::sync::atomic::AtomicU64,
     allocator: ManuallyDrop<Mutex<Allocator>>,
     messenger: Option<Messenger>,
     validation: Box<ValidationState>,
@@ -496,6 +498,7 @@ impl Context {
                 force_staging,
                 debug_names,
                 live_allocations: AtomicUsize::new(0),
+                bytes_uploaded: std::sync::atomic::AtomicU64::new(0),
                 allocator: ManuallyDrop::new(Mutex::new(allocator)),
                 messenger,
                 validation,
@@ -544,6 +547,11 @@ impl Context {
     /// Validation errors reported so far (always 0 when validation is off).
     pub fn validation_errors(&self) -> u32 {
         self.shared.validation.errors.load(Ordering::SeqCst)
+    }
+
+    /// Bytes written from the host into buffers so far (mapped copies and staged uploads alike).
+    pub fn bytes_uploaded(&self) -> u64 {
+        self.shared.bytes_uploaded.load(Ordering::SeqCst)
     }
 
     /// Buffers currently allocated from this context.

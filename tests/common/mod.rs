@@ -2,6 +2,7 @@
 //! any validation error or leaked allocation.
 #![allow(dead_code)]
 
+pub mod cli;
 pub mod splat;
 
 use vmls::data::dataset::{CellType, Cells, Geometry};

@@ -1,0 +1,172 @@
+//! `speed_error.svg` / `.png`: error against frame time, log–log, one series per renderer and
+//! method, the Pareto front marked and its points labelled with their settings.
+//!
+//! Time is the median GPU time from timestamp queries where a row has it, else its wall time
+//! (peers without timestamps); error is the RMSE against the run's reference. Text is drawn
+//! with DejaVu Sans embedded in the binary, so plots look the same on a bare machine.
+
+use super::BenchError;
+use super::results::{Row, pareto_front};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use std::path::Path;
+
+/// Smallest error drawn: a row identical to the reference sits on the bottom edge.
+const ERROR_FLOOR: f64 = 1e-7;
+
+/// Registers the embedded font under the family name the charts ask for (once per process).
+pub fn register_fonts() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        // A font that fails to parse leaves text undrawn; the plot itself still works.
+        let _ = plotters::style::register_font(
+            "sans-serif",
+            FontStyle::Normal,
+            dejavu::sans::regular(),
+        );
+    });
+}
+
+/// The (time, error) a row is drawn at, if it has both.
+fn point(r: &Row) -> Option<(f64, f64)> {
+    let t = r.gpu_ms.unwrap_or(r.wall_ms);
+    let e = r.rmse?;
+    (t.is_finite() && t > 0.0 && e.is_finite()).then_some((t, e.max(ERROR_FLOOR)))
+}
+
+/// The series a row belongs to.
+fn series_name(r: &Row) -> String {
+    if r.source == "vmls" {
+        r.method.clone()
+    } else {
+        format!("{} ({})", r.method, r.source)
+    }
+}
+
+fn draw<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
+    rows: &[Row],
+    title: &str,
+) -> Result<(), String> {
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    root.fill(&WHITE).map_err(err)?;
+    let points: Vec<(f64, f64)> = rows.iter().filter_map(point).collect();
+    let bounds = |f: fn(&(f64, f64)) -> f64| {
+        let lo = points.iter().map(f).fold(f64::INFINITY, f64::min);
+        let hi = points.iter().map(f).fold(0.0, f64::max);
+        if lo.is_finite() && hi > 0.0 {
+            (lo * 0.6, hi * 1.7)
+        } else {
+            (1e-3, 1.0)
+        }
+    };
+    let (t0, t1) = bounds(|p| p.0);
+    let (e0, e1) = bounds(|p| p.1);
+    let mut chart = ChartBuilder::on(&root)
+        .margin(16)
+        .caption(title, ("sans-serif", 20))
+        .x_label_area_size(44)
+        .y_label_area_size(64)
+        .build_cartesian_2d((t0..t1).log_scale(), (e0..e1).log_scale())
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("frame time, ms (GPU timestamps; wall time for peers without them)")
+        .y_desc("RMSE against the reference")
+        .x_label_formatter(&|v| format!("{v}"))
+        .y_label_formatter(&|v| format!("{v:.1e}"))
+        .label_style(("sans-serif", 13))
+        .draw()
+        .map_err(err)?;
+    let mut names: Vec<String> = rows.iter().map(series_name).collect();
+    names.sort();
+    names.dedup();
+    for (k, name) in names.iter().enumerate() {
+        let color = Palette99::pick(k).to_rgba();
+        let pts: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(|r| series_name(r) == *name)
+            .filter_map(point)
+            .collect();
+        let peer = rows
+            .iter()
+            .any(|r| series_name(r) == *name && r.source != "vmls");
+        let anno = if peer {
+            chart.draw_series(
+                pts.iter()
+                    .map(|&p| TriangleMarker::new(p, 7, color.filled()).into_dyn()),
+            )
+        } else {
+            chart.draw_series(
+                pts.iter()
+                    .map(|&p| Circle::new(p, 5, color.filled()).into_dyn()),
+            )
+        }
+        .map_err(err)?;
+        anno.label(name.as_str())
+            .legend(move |(x, y)| Circle::new((x + 8, y), 5, color.filled()));
+    }
+    let front: Vec<(f64, f64)> = pareto_front(rows)
+        .into_iter()
+        .filter_map(|i| point(&rows[i]))
+        .collect();
+    chart
+        .draw_series(LineSeries::new(
+            front.iter().copied(),
+            BLACK.stroke_width(1),
+        ))
+        .map_err(err)?
+        .label("Pareto front")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLACK));
+    chart
+        .draw_series(
+            front
+                .iter()
+                .map(|&p| Circle::new(p, 8, BLACK.stroke_width(1))),
+        )
+        .map_err(err)?;
+    for i in pareto_front(rows) {
+        if let Some(p) = point(&rows[i]) {
+            let text = format!("  {} {}", series_name(&rows[i]), rows[i].short_settings());
+            chart
+                .draw_series(std::iter::once(Text::new(
+                    text,
+                    p,
+                    ("sans-serif", 11).into_font().color(&BLACK),
+                )))
+                .map_err(err)?;
+        }
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 13))
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(err)?;
+    root.present().map_err(err)
+}
+
+/// Writes the plot as `stem.svg` and `stem.png` (1100×750).
+pub fn write_speed_error(stem: &Path, rows: &[Row], title: &str) -> Result<(), BenchError> {
+    register_fonts();
+    let size = (1100, 750);
+    let svg = stem.with_extension("svg");
+    draw(SVGBackend::new(&svg, size).into_drawing_area(), rows, title).map_err(|message| {
+        BenchError::Io {
+            path: svg.display().to_string(),
+            message,
+        }
+    })?;
+    let png = stem.with_extension("png");
+    draw(
+        BitMapBackend::new(&png, size).into_drawing_area(),
+        rows,
+        title,
+    )
+    .map_err(|message| BenchError::Io {
+        path: png.display().to_string(),
+        message,
+    })
+}

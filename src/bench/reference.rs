@@ -1,0 +1,170 @@
+//! The reference image a bench run measures error against, rendered once and cached on disk.
+//!
+//! The reference is the scene as written (with the run's `--set` and `--reference-set`
+//! overrides, but none of the swept settings) rendered by the `reference` integrator: midpoint
+//! steps of `render.reference_step` with the transfer function applied directly — the most
+//! exact image vmls can make of the scene's field. Swept reconstruction settings are therefore
+//! measured against the scene's own field, so their error includes the reconstruction change.
+//! (An analytic reference for generated volumes is issue 11's `reconstruction.method = "exact"`;
+//! once it exists, `--reference-set reconstruction.method="exact"` selects it.)
+//!
+//! The cache key is a SHA-256 over everything the image depends on: the validated reference
+//! scene, the bytes of its data file, the vmls version and commit, and where it was rendered (the
+//! device and driver, or the f64 CPU twins). A changed key renders anew; stale files are never
+//! read.
+
+use super::BenchError;
+use crate::render::output::{read_image, write_image};
+use crate::render::renderer::{Renderer, View};
+use crate::scene::{Scene, VolumeSource};
+use crate::vk::Context;
+use sha2::{Digest, Sha256};
+use std::path::{Path, PathBuf};
+
+/// Where the reference is rendered.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ReferenceMode {
+    /// The `reference` integrator on the bench's Vulkan device (f32).
+    Gpu,
+    /// The f64 CPU twin of the `reference` integrator (slow; independent of the device).
+    Cpu,
+}
+
+/// A reference image and how it was made.
+#[derive(Debug, Clone)]
+pub struct Reference {
+    pub pixels: Vec<[f32; 4]>,
+    pub width: u32,
+    pub height: u32,
+    /// One line for the CSV's `reference` column.
+    pub description: String,
+    /// Whether it came from the cache.
+    pub cached: bool,
+    /// Where it is stored (when a cache directory was given).
+    pub path: Option<PathBuf>,
+}
+
+/// The cache key of a reference scene rendered in `mode` on `ctx`'s device.
+pub fn reference_key(
+    scene: &Scene,
+    mode: ReferenceMode,
+    ctx: &Context,
+    commit: &str,
+) -> Result<String, BenchError> {
+    let mut h = Sha256::new();
+    h.update(b"vmls reference v1\n");
+    h.update(env!("CARGO_PKG_VERSION").as_bytes());
+    h.update(commit.as_bytes());
+    h.update(format!("{scene:?}").as_bytes());
+    if let VolumeSource::File { path, .. } = &scene.volume {
+        let bytes = std::fs::read(path).map_err(|e| BenchError::Io {
+            path: path.display().to_string(),
+            message: format!("cannot read the data file to key the reference: {e}"),
+        })?;
+        h.update(Sha256::digest(&bytes));
+    }
+    match mode {
+        ReferenceMode::Gpu => {
+            h.update(b"gpu");
+            h.update(ctx.info().name.as_bytes());
+            h.update(ctx.info().driver.as_bytes());
+        }
+        ReferenceMode::Cpu => h.update(b"cpu f64"),
+    }
+    Ok(h.finalize().iter().map(|b| format!("{b:02x}")).collect())
+}
+
+fn describe(scene: &Scene, mode: ReferenceMode, ctx: &Context) -> String {
+    format!(
+        "reference integrator, step {} spacings, {:?} {:?} reconstruction, on {}",
+        scene.render.reference_step,
+        scene.reconstruction.method,
+        scene.reconstruction.basis,
+        match mode {
+            ReferenceMode::Gpu => ctx.info().name.clone(),
+            ReferenceMode::Cpu => "the CPU (f64 twins)".into(),
+        }
+    )
+}
+
+/// Renders `scene` with the reference integrator (the caller has set `render.method`).
+fn render(scene: &Scene, mode: ReferenceMode, ctx: &Context) -> Result<Vec<[f32; 4]>, BenchError> {
+    let field = scene.field(|_| {})?;
+    match mode {
+        ReferenceMode::Gpu => {
+            let mut renderer = Renderer::new(ctx, field)?;
+            let view = View {
+                camera: &scene.camera,
+                settings: &scene.render,
+                transfer: &scene.transfer,
+                isosurfaces: &scene.isosurfaces,
+                lighting: &scene.lighting,
+            };
+            Ok(renderer.render(&view, |_| {})?.0.pixels)
+        }
+        ReferenceMode::Cpu => {
+            let setup = scene.ray_setup(&field)?;
+            let image =
+                crate::render::raycast::raycast_image(&setup, &field, &scene.transfer, None);
+            Ok(image.iter().map(|p| p.rgba.map(|c| c as f32)).collect())
+        }
+    }
+}
+
+/// The reference of `scene` (already set to the `reference` method), from `cache` when a file
+/// with its key is there, else rendered and stored there.
+pub fn reference_image(
+    scene: &Scene,
+    mode: ReferenceMode,
+    ctx: &Context,
+    commit: &str,
+    cache: Option<&Path>,
+) -> Result<Reference, BenchError> {
+    let (width, height) = (scene.camera.width, scene.camera.height);
+    let description = describe(scene, mode, ctx);
+    let path = match cache {
+        Some(dir) => {
+            let key = reference_key(scene, mode, ctx, commit)?;
+            Some(dir.join(format!("{key}.exr")))
+        }
+        None => None,
+    };
+    if let Some(p) = path.as_ref().filter(|p| p.is_file()) {
+        let (w, h, pixels) = read_image(p)?;
+        if (w, h) == (width, height) {
+            return Ok(Reference {
+                pixels,
+                width,
+                height,
+                description,
+                cached: true,
+                path: path.clone(),
+            });
+        }
+    }
+    let pixels = render(scene, mode, ctx)?;
+    if let Some(p) = &path {
+        if let Some(dir) = p.parent() {
+            std::fs::create_dir_all(dir).map_err(|e| BenchError::Io {
+                path: dir.display().to_string(),
+                message: format!("cannot create the reference cache: {e}"),
+            })?;
+        }
+        write_image(p, width, height, &pixels)?;
+        let note = p.with_extension("txt");
+        std::fs::write(&note, format!("{description}\n{scene:#?}\n")).map_err(|e| {
+            BenchError::Io {
+                path: note.display().to_string(),
+                message: e.to_string(),
+            }
+        })?;
+    }
+    Ok(Reference {
+        pixels,
+        width,
+        height,
+        description,
+        cached: false,
+        path,
+    })
+}

@@ -1,0 +1,230 @@
+//! `vmls bench`: the CLI over `vmls::bench` — a progress bar, a terminal table as rows arrive,
+//! and the result files.
+
+use crate::{CliError, DeviceArgs, context};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use vmls::bench::reference::ReferenceMode;
+use vmls::bench::results::{Row, read_csv, write_csv, write_json};
+use vmls::bench::{BenchOptions, Event, Sweep, plot, run, run_context, variant_defines};
+
+#[derive(clap::Args)]
+pub struct BenchArgs {
+    /// Scene file (TOML); the built-in Marschner–Lobb scene when none is given.
+    scene: Option<PathBuf>,
+    /// Methods to measure, comma-separated (fixed, adaptive, riemann, reference, splat,
+    /// splat-post); default: the scene's.
+    #[arg(long, value_delimiter = ',')]
+    methods: Vec<String>,
+    /// Sweep a scene key over values: section.key=v1,v2,… (repeatable; every combination runs).
+    #[arg(long = "sweep", value_name = "SECTION.KEY=V1,V2,…")]
+    sweep: Vec<String>,
+    /// Override a scene key for every configuration and the reference (repeatable).
+    #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
+    set: Vec<String>,
+    /// Override a scene key for the reference only, e.g. render.reference_step=0.01.
+    #[arg(long = "reference-set", value_name = "SECTION.KEY=VALUE")]
+    reference_set: Vec<String>,
+    /// Render the reference with the f64 CPU twins instead of the GPU (slow, device-independent).
+    #[arg(long)]
+    reference_cpu: bool,
+    /// Reference cache directory (default: $XDG_CACHE_HOME/vmls/references or
+    /// ~/.cache/vmls/references); --no-cache renders it every run.
+    #[arg(long)]
+    cache: Option<PathBuf>,
+    #[arg(long)]
+    no_cache: bool,
+    /// Timed frames per configuration.
+    #[arg(long, default_value_t = 5)]
+    repeat: u32,
+    /// Frames rendered and discarded after the first one, before timing.
+    #[arg(long, default_value_t = 1)]
+    warmup: u32,
+    /// Output directory: results.csv, results.json, speed_error.svg/.png, images/.
+    #[arg(long, default_value = "bench-out/bench")]
+    out: PathBuf,
+    /// Merge rows measured elsewhere (another device, a peer) into the table and plot
+    /// (repeatable; the CSV columns of results.csv).
+    #[arg(long)]
+    import: Vec<PathBuf>,
+    /// Print each configuration's shader variant: its kernels and macro definitions.
+    #[arg(long)]
+    variant: bool,
+    /// Write each configuration's SPIR-V (NNN-kernel.spv) to this directory.
+    #[arg(long)]
+    dump_spirv: Option<PathBuf>,
+    #[command(flatten)]
+    device: DeviceArgs,
+}
+
+fn cache_dir(args: &BenchArgs) -> Option<PathBuf> {
+    if args.no_cache {
+        return None;
+    }
+    if let Some(c) = &args.cache {
+        return Some(c.clone());
+    }
+    let base = std::env::var_os("XDG_CACHE_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))?;
+    Some(base.join("vmls").join("references"))
+}
+
+fn opt(v: Option<f64>, digits: usize) -> String {
+    v.map_or("-".into(), |x| format!("{x:.digits$}"))
+}
+
+fn header() -> String {
+    format!(
+        "{:<3} {:<10} {:<38} {:>10} {:>17} {:>10} {:>11} {:>9} {:>9} {:>7}",
+        "#",
+        "method",
+        "settings",
+        "gpu ms",
+        "[min, max]",
+        "first ms",
+        "evals",
+        "rmse",
+        "max",
+        "psnr"
+    )
+}
+
+fn line(i: usize, r: &Row) -> String {
+    let mut settings = r.short_settings();
+    if settings.len() > 38 {
+        settings.truncate(35);
+        settings.push_str("...");
+    }
+    format!(
+        "{:<3} {:<10} {:<38} {:>10} {:>17} {:>10.1} {:>11} {:>9} {:>9} {:>7}{}",
+        i,
+        r.method,
+        settings,
+        opt(r.gpu_ms, 2),
+        format!("[{}, {}]", opt(r.gpu_ms_min, 1), opt(r.gpu_ms_max, 1)),
+        r.first_frame_wall_ms,
+        r.evaluations.map_or("-".into(), |e| e.to_string()),
+        opt(r.rmse, 5),
+        opt(r.max_abs, 4),
+        opt(r.psnr, 1),
+        match r.non_finite {
+            Some(n) if n > 0 => format!("  {n} NON-FINITE"),
+            _ => String::new(),
+        }
+    )
+}
+
+pub fn bench(args: &BenchArgs) -> Result<(), CliError> {
+    let sweeps = args
+        .sweep
+        .iter()
+        .map(|s| Sweep::parse(s))
+        .collect::<Result<Vec<_>, _>>()?;
+    // Imports are read first: a bad file fails before minutes of measurement.
+    let mut imported = Vec::new();
+    for path in &args.import {
+        imported.extend(read_csv(path)?);
+    }
+    let opts = BenchOptions {
+        scene: args.scene.clone(),
+        set: args.set.clone(),
+        methods: args.methods.clone(),
+        sweeps,
+        repeat: args.repeat,
+        warmup: args.warmup,
+        out: args.out.clone(),
+        reference: if args.reference_cpu {
+            ReferenceMode::Cpu
+        } else {
+            ReferenceMode::Gpu
+        },
+        reference_set: args.reference_set.clone(),
+        cache: cache_dir(args),
+        print_variant: args.variant,
+        dump_spirv: args.dump_spirv.clone(),
+    };
+    let ctx = context(&args.device)?;
+    println!("device: {} ({})", ctx.info().name, ctx.info().driver);
+    let bar = if std::io::stderr().is_terminal() {
+        ProgressBar::new(1)
+    } else {
+        ProgressBar::hidden()
+    };
+    if let Ok(style) = ProgressStyle::with_template("{msg:>10} [{bar:30}] {pos}/{len} {elapsed}") {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar.set_message("reference");
+    // A hidden bar drops its println; the table still goes to stdout.
+    let say = |text: String| {
+        if bar.is_hidden() {
+            println!("{text}");
+        } else {
+            bar.println(text);
+        }
+    };
+    let (mut rows, reference) = run(&ctx, &opts, |event| match event {
+        Event::Reference(r) => {
+            say(format!(
+                "reference: {}{}",
+                r.description,
+                if r.cached { " (cached)" } else { "" }
+            ));
+            say(header());
+        }
+        Event::Start { index, total, .. } => {
+            bar.set_length(total as u64);
+            bar.set_position(index as u64);
+            bar.set_message("measuring");
+        }
+        Event::Variant { name, kernels } => {
+            say(format!("    variant {name}"));
+            for (k, defines) in kernels {
+                let d: Vec<String> = variant_defines(defines)
+                    .iter()
+                    .map(|(n, v)| format!("{n}={v}"))
+                    .collect();
+                say(format!("      {k}: {}", d.join(" ")));
+            }
+        }
+        Event::Row(r) => {
+            bar.inc(1);
+            say(line(bar.position() as usize - 1, r));
+        }
+    })?;
+    bar.finish_and_clear();
+    for (i, r) in imported.iter().enumerate() {
+        println!("{} (imported from {})", line(rows.len() + i, r), r.source);
+    }
+    rows.extend(imported);
+    let csv = args.out.join("results.csv");
+    write_csv(&csv, &rows)?;
+    write_json(
+        &args.out.join("results.json"),
+        &run_context(&ctx, &opts, &reference),
+        &rows,
+    )?;
+    let title = format!(
+        "{} on {}",
+        args.scene
+            .as_ref()
+            .map_or("built-in scene".into(), |p| p.display().to_string()),
+        ctx.info().name
+    );
+    plot::write_speed_error(&args.out.join("speed_error"), &rows, &title)?;
+    let front = vmls::bench::results::pareto_front(&rows);
+    println!(
+        "Pareto front: {}",
+        front
+            .iter()
+            .map(|&i| format!("#{i}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    println!(
+        "wrote {} (and results.json, speed_error.svg/.png, images/)",
+        csv.display()
+    );
+    Ok(())
+}

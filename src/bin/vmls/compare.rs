@@ -1,0 +1,60 @@
+//! `vmls compare`: the error of one image against another, as `vmls bench` measures it.
+
+use crate::CliError;
+use std::path::Path;
+use vmls::bench::metrics::image_error;
+use vmls::render::RenderError;
+use vmls::render::output::{format_of, read_image, write_image};
+
+pub fn compare(image: &Path, reference: &Path, diff: Option<&Path>) -> Result<(), CliError> {
+    if let Some(d) = diff {
+        format_of(d)?;
+    }
+    let (w, h, a) = read_image(image)?;
+    let (rw, rh, b) = read_image(reference)?;
+    let Some(e) = image_error(&a, &b, w).filter(|_| (w, h) == (rw, rh)) else {
+        return Err(RenderError::Output {
+            path: image.display().to_string(),
+            message: format!("size ({w}, {h}) differs from the reference's ({rw}, {rh})"),
+        }
+        .into());
+    };
+    println!(
+        "rmse {:.6} max {:.6} at ({}, {}) psnr {:.2} dB",
+        e.rmse, e.max_abs, e.max_x, e.max_y, e.psnr
+    );
+    if e.non_finite > 0 {
+        return Err(CliError::Usage(format!(
+            "{} pixel(s) with a non-finite channel in {} or {} (left out of the error above)",
+            e.non_finite,
+            image.display(),
+            reference.display()
+        )));
+    }
+    if let Some(path) = diff {
+        let per_pixel: Vec<f64> = a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| {
+                (0..3)
+                    .map(|c| f64::from((x[c] - y[c]).abs()))
+                    .fold(0.0, f64::max)
+            })
+            .collect();
+        let scale = if e.max_abs > 0.0 {
+            1.0 / e.max_abs
+        } else {
+            0.0
+        };
+        let heat: Vec<[f32; 4]> = per_pixel
+            .iter()
+            .map(|&d| {
+                let [r, g, b] =
+                    vmls::render::evalmap::ramp(d * scale).map(|v| f32::from(v) / 255.0);
+                [r, g, b, 1.0]
+            })
+            .collect();
+        write_image(path, w, h, &heat)?;
+    }
+    Ok(())
+}

@@ -1,0 +1,277 @@
+//! The `vmls` command line: `render`, `info`, `devices`, `probe`, `compare`, `bench`.
+//!
+//! Errors print one line (`vmls: error: …`, with the cause chain) and exit with status 1; usage
+//! errors exit with clap's status 2. Progress bars appear only when stderr is a terminal.
+
+mod bench;
+mod compare;
+mod probe;
+mod render;
+
+use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use vmls::render::RenderError;
+use vmls::scene::{Scene, SceneError};
+use vmls::vk::{Context, ContextOptions};
+
+#[derive(Parser)]
+#[command(
+    name = "vmls",
+    version,
+    about = "Volume MLS ray casting on Vulkan compute"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(clap::Args)]
+struct DeviceArgs {
+    /// Device index or name substring (default: $VMLS_DEVICE, else discrete > integrated > CPU).
+    #[arg(long)]
+    device: Option<String>,
+    /// Enable the Khronos validation layer (also: VMLS_VALIDATION=1).
+    #[arg(long)]
+    validation: bool,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a scene (the built-in Marschner–Lobb scene when none is given).
+    Render {
+        /// Scene file (TOML).
+        scene: Option<PathBuf>,
+        /// Output image: .png (8-bit RGBA, clamped, no gamma) or .exr (32-bit float RGBA).
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Write statistics as JSON.
+        #[arg(long)]
+        stats: Option<PathBuf>,
+        /// Write the per-pixel count of MLS evaluations as a heat map with a legend (.png).
+        #[arg(long)]
+        eval_map: Option<PathBuf>,
+        /// Override a scene key: section.key=value (repeatable).
+        #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
+        set: Vec<String>,
+        /// Render this many frames with one persistent renderer, turning the camera 10° about
+        /// its up axis each frame; the last is written, `--stats` lists every frame's cost.
+        #[arg(long, default_value_t = 1)]
+        frames: u32,
+        /// Render with the f64 CPU twins of the kernels instead of the GPU: slow, for ground
+        /// truth (e.g. reconstruction.method = "gaussian" with render.method = "reference", the
+        /// exact image splatting approximates).
+        #[arg(long)]
+        cpu: bool,
+        #[command(flatten)]
+        device: DeviceArgs,
+    },
+    /// List Vulkan devices (* marks the default choice).
+    Devices,
+    /// Describe a data file: kind, counts, bounds, arrays and their ranges, and the supports
+    /// and octree vmls would derive.
+    Info {
+        /// Data file (.vtk, .vti, .vtr, .vts, .vtu, .vtp, .csv, .ply, .nrrd, .nii, .nii.gz).
+        file: PathBuf,
+        /// Array to sample (default: the first point array).
+        #[arg(long)]
+        array: Option<String>,
+        /// Override a scene key (reconstruction.support, .knn, .anisotropic, octree.*).
+        #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
+        set: Vec<String>,
+    },
+    /// RMSE and largest difference of the RGB channels of two images of the same size, and
+    /// the pixel where the largest one is.
+    Compare {
+        /// Image under test (.png or .exr).
+        image: PathBuf,
+        /// Reference image (.png or .exr).
+        reference: PathBuf,
+        /// Write the per-pixel largest |difference| as a heat map (.png or .exr), scaled so
+        /// that the largest difference is white.
+        #[arg(long)]
+        diff: Option<PathBuf>,
+    },
+    /// Sweep methods and settings over a scene: GPU time, error against a cached reference,
+    /// `results.csv`/`.json` and the speed–error plot `speed_error.svg`/`.png`.
+    Bench(bench::BenchArgs),
+    /// Measure the FMA ceiling and MLS evaluation throughput side by side.
+    Probe {
+        /// Marschner–Lobb resolution of the probe field.
+        #[arg(long, default_value_t = 41)]
+        resolution: usize,
+        /// Evaluation points per dispatch.
+        #[arg(long, default_value_t = 65536)]
+        points: usize,
+        /// Timed repetitions (after one warm-up).
+        #[arg(long, default_value_t = 5)]
+        repeats: u32,
+        /// Write the results as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// Probe this data file's octree path instead of Marschner–Lobb's grid and octree:
+        /// octree statistics, then evaluations at random points of the domain's box.
+        #[arg(long)]
+        file: Option<PathBuf>,
+        /// With --file: override a scene key (reconstruction.*, octree.*, volume.scalars).
+        #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
+        set: Vec<String>,
+        #[command(flatten)]
+        device: DeviceArgs,
+    },
+}
+
+/// Everything a command can fail with: the scene file, or anything below it.
+#[derive(Debug, thiserror::Error)]
+enum CliError {
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error(transparent)]
+    Render(#[from] RenderError),
+    #[error(transparent)]
+    Bench(#[from] vmls::bench::BenchError),
+    #[error("{0}")]
+    Usage(String),
+}
+
+impl From<vmls::vk::VkError> for CliError {
+    fn from(e: vmls::vk::VkError) -> Self {
+        CliError::Render(e.into())
+    }
+}
+
+impl From<vmls::data::DataError> for CliError {
+    fn from(e: vmls::data::DataError) -> Self {
+        CliError::Render(e.into())
+    }
+}
+
+impl From<vmls::recon::ReconError> for CliError {
+    fn from(e: vmls::recon::ReconError) -> Self {
+        CliError::Render(e.into())
+    }
+}
+
+fn context(args: &DeviceArgs) -> Result<Context, RenderError> {
+    Ok(Context::new(&ContextOptions {
+        validation: args.validation.then_some(true),
+        device: args.device.clone(),
+        force_staging: false,
+    })?)
+}
+
+fn progress_bar(message: &'static str) -> ProgressBar {
+    if !std::io::stderr().is_terminal() {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(1000);
+    if let Ok(style) = ProgressStyle::with_template("{msg:>12} [{bar:40}] {percent:>3}% {elapsed}")
+    {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar.set_message(message);
+    bar
+}
+
+fn write_json(path: &Path, value: &serde_json::Value) -> Result<(), RenderError> {
+    let text = serde_json::to_string_pretty(value).unwrap_or_default();
+    std::fs::write(path, text + "\n").map_err(|e| RenderError::Output {
+        path: path.display().to_string(),
+        message: format!("cannot write: {e}"),
+    })
+}
+
+fn report(error: &dyn std::error::Error) -> String {
+    let mut line = error.to_string();
+    let mut source = error.source();
+    while let Some(s) = source {
+        let text = s.to_string();
+        if !line.contains(&text) {
+            line.push_str(": ");
+            line.push_str(&text);
+        }
+        source = s.source();
+    }
+    line
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let result = match &cli.command {
+        Command::Render {
+            scene,
+            output,
+            stats,
+            eval_map,
+            set,
+            frames,
+            cpu: true,
+            device: _,
+        } => {
+            if eval_map.is_some() || *frames != 1 {
+                Err(CliError::Usage(
+                    "--cpu renders one frame without evaluation counts: drop --eval-map and \
+                     --frames"
+                        .into(),
+                ))
+            } else {
+                render::run_render_cpu(scene.as_deref(), output, stats.as_deref(), set)
+            }
+        }
+        Command::Render {
+            scene,
+            output,
+            stats,
+            eval_map,
+            set,
+            frames,
+            cpu: false,
+            device,
+        } => render::run_render(
+            scene.as_deref(),
+            output,
+            stats.as_deref(),
+            eval_map.as_deref(),
+            set,
+            *frames,
+            device,
+        ),
+        Command::Bench(args) => bench::bench(args),
+        Command::Compare {
+            image,
+            reference,
+            diff,
+        } => compare::compare(image, reference, diff.as_deref()),
+        Command::Info { file, array, set } => Scene::load(None, set)
+            .map_err(CliError::from)
+            .and_then(|scene| {
+                Ok(vmls::info::describe(
+                    file,
+                    array.as_deref(),
+                    &scene.samples,
+                    &scene.octree,
+                )?)
+            })
+            .map(|text| print!("{text}")),
+        Command::Devices => Context::list_devices()
+            .map(|lines| lines.iter().for_each(|l| println!("{l}")))
+            .map_err(|e| CliError::from(RenderError::from(e))),
+        Command::Probe {
+            resolution,
+            points,
+            repeats,
+            json,
+            file,
+            set,
+            device,
+        } => match file {
+            Some(f) => probe::run_file_probe(f, set, *points, *repeats, json.as_deref(), device),
+            None => probe::run_probe(*resolution, *points, *repeats, json.as_deref(), device),
+        },
+    };
+    if let Err(e) = result {
+        eprintln!("vmls: error: {}", report(&e));
+        std::process::exit(1);
+    }
+}

@@ -1,0 +1,173 @@
+//! `vmls probe`: the device's ceilings and MLS evaluation throughput, side by side.
+
+use crate::{CliError, DeviceArgs, context, write_json};
+use std::path::Path;
+use vmls::probe::{coherent_order, fma_probe, median, mls_probe, random_points};
+use vmls::render::Field;
+use vmls::scene::{NeighbourMode, Scene, load_volume};
+use vmls::vk::ShaderCompiler;
+
+pub fn octree_json(s: &vmls::recon::OctreeStats) -> serde_json::Value {
+    serde_json::json!({
+        "nodes": s.nodes,
+        "leaves": s.leaves,
+        "references": s.references,
+        "redundancy": s.redundancy,
+        "depth": s.depth,
+        "bytes": s.bytes,
+        "build_ms": s.build_ms,
+    })
+}
+
+pub fn run_file_probe(
+    file: &Path,
+    set: &[String],
+    points: usize,
+    repeats: u32,
+    json: Option<&Path>,
+    device: &DeviceArgs,
+) -> Result<(), CliError> {
+    let mut overrides = vec![format!(
+        "volume.file={}",
+        toml::Value::String(file.display().to_string())
+    )];
+    overrides.extend(set.iter().cloned());
+    // An empty scene, not the built-in one: its generator would conflict with volume.file.
+    let scene = Scene::parse("", "vmls probe --file", Path::new("."), &overrides)?;
+    let field = scene.field(|_| {})?;
+    let stats = field
+        .octree
+        .as_ref()
+        .map(|o| o.stats(std::mem::size_of::<vmls::gpu_types::Sample>() as u64));
+    let ctx = context(device)?;
+    let compiler = ShaderCompiler::new()?;
+    println!("device: {} ({})", ctx.info().name, ctx.info().driver);
+    println!(
+        "{}: {} samples ({})",
+        file.display(),
+        field.samples.len(),
+        field.samples.provenance.kind
+    );
+    if let Some(s) = &stats {
+        println!(
+            "octree: {} nodes, {} references ({:.2} per sample), depth {}, {:.1} MiB, built in {:.0} ms",
+            s.nodes,
+            s.references,
+            s.redundancy,
+            s.depth,
+            s.bytes as f64 / (1 << 20) as f64,
+            s.build_ms
+        );
+    }
+    let random = random_points(&field, points, 0.0, 7);
+    let coherent = coherent_order(&field, random.clone());
+    let mut rows = Vec::new();
+    for (order, pts) in [("random", random), ("coherent", coherent)] {
+        let m = mls_probe(&ctx, &compiler, &field, &pts, repeats)?;
+        println!(
+            "{} ({order} points): {:.3} M evaluations/s median, {:.1} neighbours/evaluation",
+            m.variant,
+            m.evaluations_per_s * 1e-6,
+            m.mean_neighbours
+        );
+        rows.push(serde_json::json!({
+            "variant": m.variant,
+            "order": order,
+            "gpu_ms": m.gpu_ms,
+            "evaluations_per_s": m.evaluations_per_s,
+            "mean_neighbours": m.mean_neighbours,
+        }));
+    }
+    if let Some(path) = json {
+        write_json(
+            path,
+            &serde_json::json!({
+                "device": ctx.info().name,
+                "file": file.display().to_string(),
+                "samples": field.samples.len(),
+                "octree": stats.as_ref().map(octree_json),
+                "mls": rows,
+            }),
+        )?;
+    }
+    Ok(())
+}
+
+pub fn run_probe(
+    resolution: usize,
+    points: usize,
+    repeats: u32,
+    json: Option<&Path>,
+    device: &DeviceArgs,
+) -> Result<(), CliError> {
+    let ctx = context(device)?;
+    let compiler = ShaderCompiler::new()?;
+    println!("device: {} ({})", ctx.info().name, ctx.info().driver);
+    let fma = fma_probe(&ctx, &compiler, 16384, 4096, repeats)?;
+    println!(
+        "probe_fma: {:.1} GFLOP/s (median of {} dispatches, {:.2} ms each)",
+        fma.gflops,
+        fma.gpu_ms.len(),
+        median(&fma.gpu_ms)
+    );
+    let mut rows = Vec::new();
+    for mode in [NeighbourMode::Grid, NeighbourMode::Octree] {
+        let scene = Scene::load(
+            None,
+            &[
+                format!("volume.resolution={resolution}"),
+                format!(
+                    "reconstruction.neighbours=\"{}\"",
+                    if mode == NeighbourMode::Grid {
+                        "grid"
+                    } else {
+                        "octree"
+                    }
+                ),
+            ],
+        )?;
+        let field = Field::new(
+            load_volume(&scene)?,
+            scene.reconstruction,
+            &scene.octree,
+            |_| {},
+        )?;
+        let random = random_points(&field, points, 0.0, 7);
+        let coherent = coherent_order(&field, random.clone());
+        for (order, pts) in [("random", random), ("coherent", coherent)] {
+            let m = mls_probe(&ctx, &compiler, &field, &pts, repeats)?;
+            let best =
+                pts.len() as f64 / (m.gpu_ms.iter().copied().fold(f64::INFINITY, f64::min) * 1e-3);
+            println!(
+                "{} ({order} points): {:.2} M evaluations/s median ({:.2} best), {:.1} neighbours/evaluation, {:.1} GFLOP/s (39k+56) = {:.1}% of probe_fma",
+                m.variant,
+                m.evaluations_per_s * 1e-6,
+                best * 1e-6,
+                m.mean_neighbours,
+                m.gflops,
+                100.0 * m.gflops / fma.gflops.max(1e-9)
+            );
+            rows.push(serde_json::json!({
+                "variant": m.variant,
+                "order": order,
+                "points": m.points,
+                "gpu_ms": m.gpu_ms,
+                "evaluations_per_s": m.evaluations_per_s,
+                "mean_neighbours": m.mean_neighbours,
+                "gflops": m.gflops,
+                "fraction_of_fma": m.gflops / fma.gflops.max(1e-9),
+            }));
+        }
+    }
+    if let Some(path) = json {
+        write_json(
+            path,
+            &serde_json::json!({
+                "device": ctx.info().name,
+                "fma": { "gflops": fma.gflops, "gpu_ms": fma.gpu_ms },
+                "mls": rows,
+            }),
+        )?;
+    }
+    Ok(())
+}

@@ -1,0 +1,238 @@
+//! `vmls render`: one scene to an image on the GPU (or with the f64 CPU twins), with statistics.
+
+use crate::probe::octree_json;
+use crate::{CliError, DeviceArgs, context, progress_bar, write_json};
+use std::path::Path;
+use std::time::Instant;
+use vmls::data::dataset::Location;
+use vmls::render::RenderError;
+use vmls::render::evalmap::{check_path, write_eval_map};
+use vmls::render::output::{format_of, write_image};
+use vmls::render::renderer::{Renderer, View};
+use vmls::scene::Scene;
+
+pub fn run_render(
+    scene_path: Option<&Path>,
+    output: &Path,
+    stats: Option<&Path>,
+    eval_map: Option<&Path>,
+    set: &[String],
+    frames_wanted: u32,
+    device: &DeviceArgs,
+) -> Result<(), CliError> {
+    let start = Instant::now();
+    format_of(output)?;
+    if let Some(map) = eval_map {
+        check_path(map)?;
+    }
+    let scene = Scene::load(scene_path, set)?;
+    if eval_map.is_some() && scene.render.method.splat_shading().is_some() {
+        return Err(CliError::Usage(format!(
+            "--eval-map counts MLS evaluations per ray; render.method = \"{}\" splats and \
+             evaluates none (its counts are in --stats)",
+            scene.render.method.name()
+        )));
+    }
+    let bar = progress_bar("octree");
+    let field = scene.field(|f| bar.set_position((f * 1000.0) as u64))?;
+    bar.finish_and_clear();
+    let ctx = context(device)?;
+    let step_world = match scene.render.method.splat_shading() {
+        None => Some(scene.ray_setup(&field)?.step),
+        Some(_) => None,
+    };
+    let upload_start = Instant::now();
+    let mut renderer = Renderer::new(&ctx, field)?;
+    let upload_ms = upload_start.elapsed().as_secs_f64() * 1e3;
+    // Frame k turns the camera by 10°·k about its up axis through the target: later frames
+    // show what a new camera costs with everything else kept on the GPU.
+    let mut frames = Vec::new();
+    let mut image = None;
+    for k in 0..frames_wanted.max(1) {
+        let camera = scene.camera.orbited((10.0 * k as f64).to_radians());
+        let view = View {
+            camera: &camera,
+            settings: &scene.render,
+            transfer: &scene.transfer,
+            isosurfaces: &scene.isosurfaces,
+            lighting: &scene.lighting,
+        };
+        let bar = progress_bar("render");
+        let (img, frame) = renderer.render(&view, |f| bar.set_position((f * 1000.0) as u64))?;
+        bar.finish_and_clear();
+        frames.push(frame);
+        image = Some(img);
+    }
+    let (Some(image), Some(first)) = (image, frames.first().cloned()) else {
+        return Err(RenderError::Output {
+            path: output.display().to_string(),
+            message: "no frame rendered".into(),
+        }
+        .into());
+    };
+    let field = renderer.field();
+    let tables = renderer.tables();
+    let table_ms = first.table_ms;
+    let errors = ctx.validation_errors();
+    if errors > 0 {
+        return Err(RenderError::Output {
+            path: output.display().to_string(),
+            message: format!(
+                "{errors} Vulkan validation error(s) during the render; no image written"
+            ),
+        }
+        .into());
+    }
+    write_image(
+        output,
+        scene.camera.width,
+        scene.camera.height,
+        &image.pixels,
+    )?;
+    if let Some(map) = eval_map {
+        write_eval_map(map, scene.camera.width, scene.camera.height, &image.counts)?;
+    }
+    if let Some(stats) = stats {
+        let evaluations: u64 = image.counts.iter().map(|&c| u64::from(c)).sum();
+        let rays = image.counts.len() as u64;
+        let value = serde_json::json!({
+            "device": ctx.info().name,
+            "device_type": ctx.info().device_type,
+            "driver": ctx.info().driver,
+            "variant": image.variant,
+            "width": scene.camera.width,
+            "height": scene.camera.height,
+            "method": scene.render.method.name(),
+            "step_world": step_world,
+            "neighbours": if field.uses_octree() { "octree" } else { "grid" },
+            "gpu_ms": match &image.splat {
+                None => serde_json::json!({ "raycast": first.gpu_ms }),
+                Some(r) => serde_json::json!({
+                    "splat_project": r.stage_ms[0],
+                    "splat_bin": r.stage_ms[1],
+                    "splat_accumulate": r.stage_ms[2],
+                    "splat_composite": r.stage_ms[3],
+                }),
+            },
+            "splat": image.splat.as_ref().map(|r| serde_json::json!({
+                "sheets": r.slabs,
+                "sheet_thickness_world": r.slab,
+                "kernels_projected": r.counts.projected,
+                "kernels_culled_near": r.counts.culled_near,
+                "kernels_culled_outside": r.counts.culled_outside,
+                "kernels_culled_degenerate": r.counts.culled_degenerate,
+                "kernels_culled_empty": r.counts.culled_empty,
+                "kernels_kept": r.counts.kept(),
+                "footprints_binned": r.counts.entries,
+                "footprints_skipped_by_occlusion": r.counts.skipped_occluded,
+                "footprints_accumulated": r.counts.accumulated,
+                "gpu_ms_per_kernel": {
+                    "splat_project": r.stage_ms[0] / r.counts.projected.max(1) as f64,
+                    "splat_bin": r.stage_ms[1] / r.counts.kept().max(1) as f64,
+                    "splat_accumulate": r.stage_ms[2] / r.counts.kept().max(1) as f64,
+                    "splat_composite": r.stage_ms[3] / r.counts.kept().max(1) as f64,
+                },
+            })),
+            "upload_ms": upload_ms,
+            "frames": frames.iter().map(|f| serde_json::json!({
+                "gpu_ms": f.gpu_ms,
+                "wall_ms": f.wall_ms,
+                "tables_built": f.tables_built,
+                "table_ms": f.table_ms,
+                "pipeline_built": f.pipeline_built,
+                "buffers_allocated": f.targets_allocated,
+            })).collect::<Vec<_>>(),
+            "bands": image.bands,
+            "wall_ms": start.elapsed().as_secs_f64() * 1e3,
+            "function_evaluations": evaluations,
+            "rays": rays,
+            "evaluations_per_ray": evaluations as f64 / rays.max(1) as f64,
+            "table_build_ms_cpu": tables.map(|_| table_ms),
+            "table_lengths_world": tables.map(|t| t.lengths.clone()),
+            "table_resolution": tables.map(|t| t.resolution),
+            "octree_nodes": field.octree.as_ref().map(|o| o.nodes.len()),
+            "octree_references": field.octree.as_ref().map(|o| o.indices.len()),
+            "octree": field.octree.as_ref().map(|o| octree_json(&o.stats(std::mem::size_of::<vmls::gpu_types::Sample>() as u64))),
+            "data": {
+                "kind": field.samples.provenance.kind,
+                "array": field.samples.provenance.array,
+                "sampled_at": match field.samples.provenance.location {
+                    Location::Point => "points",
+                    Location::Cell => "cell centroids",
+                },
+                "samples": field.samples.len(),
+                "merged_duplicates": field.samples.provenance.merged,
+                "inverted_cells": field.samples.provenance.inverted_cells,
+                "supports": field.samples.provenance.support_kind,
+            },
+        });
+        write_json(stats, &value)?;
+    }
+    Ok(())
+}
+
+/// `vmls render --cpu`: the f64 CPU twins, rows over all cores.
+pub fn run_render_cpu(
+    scene_path: Option<&Path>,
+    output: &Path,
+    stats: Option<&Path>,
+    set: &[String],
+) -> Result<(), CliError> {
+    let start = Instant::now();
+    format_of(output)?;
+    let scene = Scene::load(scene_path, set)?;
+    let field = scene.field(|_| {})?;
+    let (pixels, splat): (Vec<[f64; 4]>, _) = match scene.render.method.splat_shading() {
+        Some(shading) => {
+            let setup = vmls::splat::SplatSetup::new(
+                shading,
+                &scene.render.splat,
+                &scene.camera,
+                scene.render.early_termination,
+                scene.render.background,
+                &scene.isosurfaces,
+                &scene.lighting,
+                &field,
+            )?;
+            let image = vmls::splat::accumulate::splat_image(&setup, &field, &scene.transfer);
+            (image.pixels, Some(image.counts))
+        }
+        None => {
+            let setup = scene.ray_setup(&field)?;
+            let tables = vmls::render::build_tables(
+                &setup,
+                &field,
+                &scene.transfer,
+                scene.render.table_resolution,
+                |_| {},
+            );
+            let image = vmls::render::raycast::raycast_image(
+                &setup,
+                &field,
+                &scene.transfer,
+                tables.as_ref(),
+            );
+            (image.iter().map(|p| p.rgba).collect(), None)
+        }
+    };
+    let rgba: Vec<[f32; 4]> = pixels.iter().map(|p| p.map(|c| c as f32)).collect();
+    write_image(output, scene.camera.width, scene.camera.height, &rgba)?;
+    if let Some(stats) = stats {
+        let value = serde_json::json!({
+            "device": "cpu (f64 reference twins)",
+            "method": scene.render.method.name(),
+            "width": scene.camera.width,
+            "height": scene.camera.height,
+            "wall_ms": start.elapsed().as_secs_f64() * 1e3,
+            "splat": splat.map(|c| serde_json::json!({
+                "kernels_projected": c.projected,
+                "kernels_kept": c.kept(),
+                "footprints_binned": c.entries,
+                "footprints_skipped_by_occlusion": c.skipped_occluded,
+                "footprints_accumulated": c.accumulated,
+            })),
+        });
+        write_json(stats, &value)?;
+    }
+    Ok(())
+}

@@ -1,0 +1,44 @@
+//! Running the `vmls` binary with validation on, and checking how it fails.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+pub fn vmls(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_vmls"))
+        .args(args)
+        .env("VMLS_VALIDATION", "1")
+        .env_remove("VMLS_DEVICE")
+        .output()
+        .expect("run vmls")
+}
+
+pub fn dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("vmls-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("temp dir");
+    d
+}
+
+pub fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+/// Asserts failure with exactly one stderr line containing every `needle`, and no image.
+pub fn assert_fails(out: &Output, needles: &[&str], image: &Path) {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "expected exit 1, stderr: {stderr}"
+    );
+    assert_eq!(
+        stderr.trim_end().lines().count(),
+        1,
+        "expected one error line, got: {stderr}"
+    );
+    assert!(stderr.starts_with("vmls: error: "), "{stderr}");
+    for n in needles {
+        assert!(stderr.contains(n), "error line lacks '{n}': {stderr}");
+    }
+    assert!(!image.exists(), "an image was written despite the error");
+}
