@@ -65,6 +65,10 @@ pub mod binding {
     /// Post-shaded splatting over a hull: each pixel's inside segments, `SPLAT_SEGMENTS` ×
     /// `vec2(t_in, t_out)` per pixel (written by splat_segments).
     pub const PIXEL_SEGMENTS: u32 = 25;
+    /// probe_memory: the words it reads, as a storage buffer.
+    pub const PROBE_SOURCE: u32 = 26;
+    /// probe_memory: the same words through a `r32ui` texel-buffer view.
+    pub const PROBE_TEXELS: u32 = 27;
 
     /// How kernels read a binding: the octree's samples, nodes and references through
     /// texel-buffer views (one AVX2 gather per 8 lanes on llvmpipe instead of a per-lane loop;
@@ -74,13 +78,13 @@ pub mod binding {
         match b {
             SAMPLES => BindingKind::TexelRgba32Float,
             NODES => BindingKind::TexelRgba32Uint,
-            INDICES => BindingKind::TexelR32Uint,
+            INDICES | PROBE_TEXELS => BindingKind::TexelR32Uint,
             _ => BindingKind::Storage,
         }
     }
 
     /// Every binding with its macro name.
-    pub const ALL: [(&str, u32); 26] = [
+    pub const ALL: [(&str, u32); 28] = [
         ("BINDING_PARAMS", PARAMS),
         ("BINDING_GRID", GRID),
         ("BINDING_SAMPLES", SAMPLES),
@@ -107,6 +111,8 @@ pub mod binding {
         ("BINDING_OCCLUSION", OCCLUSION),
         ("BINDING_SPLAT_STATS", SPLAT_STATS),
         ("BINDING_PIXEL_SEGMENTS", PIXEL_SEGMENTS),
+        ("BINDING_PROBE_SOURCE", PROBE_SOURCE),
+        ("BINDING_PROBE_TEXELS", PROBE_TEXELS),
     ];
 }
 
@@ -290,7 +296,8 @@ pub struct RayPush {
 }
 const _: () = assert!(std::mem::size_of::<RayPush>() == 16);
 
-/// Push constants of mls_eval.comp and probe_fma.comp. GLSL twin: `CountPush`.
+/// Push constants of mls_eval.comp, probe_fma.comp and probe_memory.comp. GLSL twin:
+/// `CountPush`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
 pub struct CountPush {

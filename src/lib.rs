@@ -13,6 +13,7 @@
 //! - [`scene`]: the TOML scene contract.
 
 pub mod bench;
+pub mod check;
 pub mod data;
 pub mod gpu_types;
 pub mod info;

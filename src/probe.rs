@@ -3,6 +3,8 @@
 //!
 //! Flop counts: `probe_fma` does 256 flops per invocation and iteration; an MLS evaluation with
 //! the linear basis and k weighted neighbours is counted as 39k + 56 flops ([MLS] Table 2).
+//! `probe_memory` measures the two other ceilings a kernel may meet: random 32-bit gathers per
+//! second (through a storage buffer and through a texel-buffer view) and streaming bandwidth.
 
 use crate::gpu_types::{CountPush, binding, binding_defines};
 use crate::render::Field;
@@ -115,6 +117,201 @@ pub fn fma_probe(
         gflops: if ms > 0.0 { flops / (ms * 1e6) } else { 0.0 },
         gpu_ms,
         output,
+    })
+}
+
+/// Words read by `probe_memory` (64 MiB: beyond any CPU cache, within every storage-buffer
+/// limit we know).
+pub const PROBE_WORDS: u32 = 1 << 24;
+
+/// What `probe_memory` measures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MemoryMode {
+    /// 32-bit storage-buffer gathers at a random index per lane.
+    Gather,
+    /// The same through a texel-buffer view.
+    TexelGather,
+    /// Consecutive vec4 loads.
+    Stream,
+}
+
+impl MemoryMode {
+    pub fn name(self) -> &'static str {
+        match self {
+            MemoryMode::Gather => "probe_memory:gather",
+            MemoryMode::TexelGather => "probe_memory:texel-gather",
+            MemoryMode::Stream => "probe_memory:stream",
+        }
+    }
+
+    fn define(self) -> &'static str {
+        match self {
+            MemoryMode::Gather => "0",
+            MemoryMode::TexelGather => "1",
+            MemoryMode::Stream => "2",
+        }
+    }
+}
+
+/// The word `probe_memory` reads at index i.
+pub fn probe_word(i: u32) -> u32 {
+    i.wrapping_mul(2_654_435_761)
+}
+
+/// Wellons' lowbias32 hash, twin of `probe_hash` in `glsl/probe_memory.comp`.
+pub fn probe_hash(mut x: u32) -> u32 {
+    x ^= x >> 16;
+    x = x.wrapping_mul(0x7feb_352d);
+    x ^= x >> 15;
+    x = x.wrapping_mul(0x846c_a68b);
+    x ^= x >> 16;
+    x
+}
+
+/// CPU twin of `glsl/probe_memory.comp` for invocation `id`: the wrapping sum of its loads.
+pub fn memory_reference(mode: MemoryMode, id: u32, count: u32, iterations: u32) -> u32 {
+    let mut sum = 0u32;
+    for it in 0..iterations {
+        match mode {
+            MemoryMode::Stream => {
+                let v = (it.wrapping_mul(count).wrapping_add(id)) & (PROBE_WORDS / 4 - 1);
+                for k in 0..4 {
+                    sum = sum.wrapping_add(probe_word(4 * v + k));
+                }
+            }
+            MemoryMode::Gather | MemoryMode::TexelGather => {
+                let i =
+                    probe_hash(id.wrapping_mul(iterations).wrapping_add(it)) & (PROBE_WORDS - 1);
+                sum = sum.wrapping_add(probe_word(i));
+            }
+        }
+    }
+    sum
+}
+
+/// Result of a memory probe.
+#[derive(Debug, Clone)]
+pub struct MemoryProbe {
+    pub mode: MemoryMode,
+    pub gpu_ms: Vec<f64>,
+    /// Load instructions per second (32-bit for gathers, vec4 for the stream), median.
+    pub loads_per_s: f64,
+    /// Bytes read per second, median.
+    pub bytes_per_s: f64,
+    /// Each invocation's sum, for comparison with [`memory_reference`].
+    pub output: Vec<u32>,
+}
+
+/// Runs `probe_memory` in `mode` `repeats + 1` times over `invocations` × `iterations` loads and
+/// reports the median rate of the last `repeats`.
+pub fn memory_probe(
+    ctx: &Context,
+    compiler: &ShaderCompiler,
+    mode: MemoryMode,
+    invocations: u32,
+    iterations: u32,
+    repeats: u32,
+) -> Result<MemoryProbe, VkError> {
+    let mut defines = binding_defines();
+    defines.push(("PROBE_MODE".into(), mode.define().into()));
+    defines.push(("PROBE_WORDS".into(), format!("{PROBE_WORDS}u")));
+    let spirv = compiler.compile(ShaderSource::File("probe_memory.comp"), &defines)?;
+    let source_binding = match mode {
+        MemoryMode::TexelGather => binding::PROBE_TEXELS,
+        _ => binding::PROBE_SOURCE,
+    };
+    let kinds = [
+        (binding::PROBE, binding::kind(binding::PROBE)),
+        (source_binding, binding::kind(source_binding)),
+    ];
+    let pipeline = ComputePipeline::with_kinds(
+        ctx,
+        mode.name(),
+        &spirv,
+        &kinds,
+        std::mem::size_of::<CountPush>() as u32,
+    )?;
+    let words: Vec<u32> = (0..PROBE_WORDS).map(probe_word).collect();
+    let source = Buffer::from_slice(ctx, "probe words", &words)?;
+    drop(words);
+    let out = Buffer::new(
+        ctx,
+        "probe output",
+        u64::from(invocations) * 16,
+        BufferUsage::Storage,
+    )?;
+    let group = BindGroup::new(
+        ctx,
+        &pipeline,
+        &[(binding::PROBE, &out), (source_binding, &source)],
+    )?;
+    let push = CountPush {
+        count: invocations,
+        iterations,
+        _pad: [0; 2],
+    };
+    let mut gpu_ms = Vec::new();
+    for i in 0..=repeats {
+        let t = ctx.submit(|rec| {
+            rec.dispatch(
+                &pipeline,
+                &group,
+                bytemuck::bytes_of(&push),
+                [invocations.div_ceil(64), 1, 1],
+                mode.name(),
+            )
+        })?;
+        if i > 0 {
+            gpu_ms.extend(t.iter().filter_map(|t| t.gpu_ms));
+        }
+    }
+    let ms = median(&gpu_ms);
+    let loads = f64::from(invocations) * f64::from(iterations);
+    let bytes_per_load = if mode == MemoryMode::Stream {
+        16.0
+    } else {
+        4.0
+    };
+    let rate = |n: f64| if ms > 0.0 { n / (ms * 1e-3) } else { 0.0 };
+    let output: Vec<[u32; 4]> = out.read(ctx)?;
+    Ok(MemoryProbe {
+        mode,
+        loads_per_s: rate(loads),
+        bytes_per_s: rate(loads * bytes_per_load),
+        gpu_ms,
+        output: output
+            .iter()
+            .take(invocations as usize)
+            .map(|o| o[0])
+            .collect(),
+    })
+}
+
+/// Every ceiling a kernel may be bound by, measured side by side.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Ceilings {
+    pub fma_gflops: f64,
+    /// 32-bit random gathers per second: storage buffer, texel-buffer view.
+    pub gathers_per_s: f64,
+    pub texel_gathers_per_s: f64,
+    /// Streaming read bandwidth, bytes per second.
+    pub stream_bytes_per_s: f64,
+}
+
+/// Measures [`Ceilings`]: `probe_fma`, then `probe_memory` in its three modes, each the median
+/// of `repeats` dispatches after a warm-up.
+pub fn ceilings(
+    ctx: &Context,
+    compiler: &ShaderCompiler,
+    repeats: u32,
+) -> Result<Ceilings, VkError> {
+    let fma = fma_probe(ctx, compiler, 16384, 4096, repeats)?;
+    let run = |mode| memory_probe(ctx, compiler, mode, 16384, 256, repeats);
+    Ok(Ceilings {
+        fma_gflops: fma.gflops,
+        gathers_per_s: run(MemoryMode::Gather)?.loads_per_s,
+        texel_gathers_per_s: run(MemoryMode::TexelGather)?.loads_per_s,
+        stream_bytes_per_s: run(MemoryMode::Stream)?.bytes_per_s,
     })
 }
 

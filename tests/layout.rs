@@ -214,3 +214,28 @@ fn fma_probe_matches_its_cpu_twin() {
     assert!(probe.gflops > 0.0);
     finish(ctx);
 }
+
+#[test]
+fn memory_probes_match_their_cpu_twin() {
+    use vmls::probe::{MemoryMode, memory_probe, memory_reference};
+    let (ctx, compiler) = gpu();
+    for mode in [
+        MemoryMode::Gather,
+        MemoryMode::TexelGather,
+        MemoryMode::Stream,
+    ] {
+        let (count, iterations) = (300, 17);
+        let probe = memory_probe(&ctx, &compiler, mode, count, iterations, 1).expect("probe");
+        assert_eq!(probe.output.len(), count as usize);
+        for (id, &got) in probe.output.iter().enumerate() {
+            // Integer sums: bit-exact.
+            assert_eq!(
+                got,
+                memory_reference(mode, id as u32, count, iterations),
+                "{mode:?} {id}"
+            );
+        }
+        assert!(probe.loads_per_s > 0.0 && probe.bytes_per_s > probe.loads_per_s);
+    }
+    finish(ctx);
+}

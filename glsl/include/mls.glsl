@@ -10,7 +10,7 @@
 // Index of A[i][j], j <= i, in the packed lower triangle.
 #define TRI(i, j) ((i) * ((i) + 1) / 2 + (j))
 
-const float PIVOT_TOLERANCE = 1e-4;
+const float PIVOT_TOLERANCE = 1e-2;
 const float QUADRATIC_PIVOT_TOLERANCE = 1e-2;
 const float RHO_MIN = 1e-6;
 

@@ -14,6 +14,7 @@
 //! - This module sits above `scene`; nothing below imports it.
 
 pub mod metrics;
+pub mod peer;
 pub mod plot;
 pub mod reference;
 pub mod results;
@@ -51,6 +52,12 @@ pub enum BenchError {
 
 impl From<crate::vk::VkError> for BenchError {
     fn from(e: crate::vk::VkError) -> Self {
+        BenchError::Render(e.into())
+    }
+}
+
+impl From<crate::recon::ReconError> for BenchError {
+    fn from(e: crate::recon::ReconError) -> Self {
         BenchError::Render(e.into())
     }
 }

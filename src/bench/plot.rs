@@ -14,19 +14,6 @@ use std::path::Path;
 /// Smallest error drawn: a row identical to the reference sits on the bottom edge.
 const ERROR_FLOOR: f64 = 1e-7;
 
-/// Registers the embedded font under the family name the charts ask for (once per process).
-pub fn register_fonts() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    ONCE.call_once(|| {
-        // A font that fails to parse leaves text undrawn; the plot itself still works.
-        let _ = plotters::style::register_font(
-            "sans-serif",
-            FontStyle::Normal,
-            dejavu::sans::regular(),
-        );
-    });
-}
-
 /// The (time, error) a row is drawn at, if it has both.
 fn point(r: &Row) -> Option<(f64, f64)> {
     let t = r.gpu_ms.unwrap_or(r.wall_ms);
@@ -150,7 +137,7 @@ fn draw<DB: DrawingBackend>(
 
 /// Writes the plot as `stem.svg` and `stem.png` (1100×750).
 pub fn write_speed_error(stem: &Path, rows: &[Row], title: &str) -> Result<(), BenchError> {
-    register_fonts();
+    crate::render::output::register_fonts();
     let size = (1100, 750);
     let svg = stem.with_extension("svg");
     draw(SVGBackend::new(&svg, size).into_drawing_area(), rows, title).map_err(|message| {

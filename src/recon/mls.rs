@@ -29,7 +29,11 @@ use crate::samples::{Metric, metric_apply, metric_rho2};
 /// Largest number of basis terms (quadratic).
 pub const MAX_TERMS: usize = 10;
 /// Relative pivot `d_k / A_kk` below which a constant or linear term counts as undetermined.
-pub const PIVOT_TOLERANCE: f64 = 1e-4;
+/// At 1e-4 (until `vmls check`'s mls-singular case) scattered points with 4–5 neighbours near
+/// the domain's edge passed the test with systems whose pivots compound: the f32 solve erred by
+/// up to 5× the data range where the f64 twin reproduced the linear data exactly; at 1e-3 the
+/// worst error was 3e-3 of the range, at 1e-2 it is 1e-5.
+pub const PIVOT_TOLERANCE: f64 = 1e-2;
 /// The same for the six second-order terms. A pivot of t amplifies rounding by about 1/t, and
 /// f32 rounding (6e-8) at the 1e-4 level gave 7e-4 errors near grid boundaries, where the
 /// quadratic system is nearly singular; at 1e-2 those points fall back to the linear basis.

@@ -1,6 +1,7 @@
 //! `--eval-map`: the per-pixel count of MLS evaluations as a heat map (a viridis-like ramp from
 //! 0 to the largest count), with a legend strip below the image: the colour bar and its end
-//! values, drawn with a built-in 3×5 digit font (there is no font file to rely on).
+//! values, drawn by plotters with the DejaVu Sans font embedded in the binary (no font file on
+//! the machine is needed).
 
 use super::RenderError;
 use std::path::Path;
@@ -15,20 +16,6 @@ const RAMP: [[f64; 3]; 5] = [
     [94.0, 201.0, 98.0],
     [253.0, 231.0, 37.0],
 ];
-/// 3×5 glyphs of the digits 0–9, one row per 3 bits (most significant = left).
-const DIGITS: [[u8; 5]; 10] = [
-    [7, 5, 5, 5, 7],
-    [2, 6, 2, 2, 7],
-    [7, 1, 7, 4, 7],
-    [7, 1, 7, 1, 7],
-    [5, 5, 7, 1, 1],
-    [7, 4, 7, 1, 7],
-    [7, 4, 7, 5, 7],
-    [7, 1, 1, 1, 1],
-    [7, 5, 7, 5, 7],
-    [7, 5, 7, 1, 7],
-];
-
 /// Ramp colour at u ∈ [0, 1].
 pub fn ramp(u: f64) -> [u8; 3] {
     let x = u.clamp(0.0, 1.0) * (RAMP.len() - 1) as f64;
@@ -37,33 +24,26 @@ pub fn ramp(u: f64) -> [u8; 3] {
     [0, 1, 2].map(|k| (RAMP[i][k] + (RAMP[i + 1][k] - RAMP[i][k]) * f).round() as u8)
 }
 
-fn draw_number(img: &mut image::RgbImage, value: u32, x0: u32, y0: u32, right_aligned: bool) {
-    let text = value.to_string();
-    let scale = 2;
-    let width = text.len() as u32 * 4 * scale;
-    let x0 = if right_aligned {
-        x0.saturating_sub(width)
-    } else {
-        x0
-    };
-    for (n, ch) in text.bytes().enumerate() {
-        let glyph = DIGITS[(ch - b'0') as usize];
-        for (row, bits) in glyph.iter().enumerate() {
-            for col in 0..3 {
-                if bits >> (2 - col) & 1 == 1 {
-                    for dy in 0..scale {
-                        for dx in 0..scale {
-                            let x = x0 + (n as u32 * 4 + col) * scale + dx;
-                            let y = y0 + row as u32 * scale + dy;
-                            if x < img.width() && y < img.height() {
-                                img.put_pixel(x, y, image::Rgb([255, 255, 255]));
-                            }
-                        }
-                    }
-                }
-            }
-        }
-    }
+/// Writes the legend's end values into the strip below the image (rows `top..`), in white.
+fn draw_legend(img: &mut image::RgbImage, top: u32, max: u32) -> Result<(), String> {
+    use plotters::prelude::*;
+    super::output::register_fonts();
+    let (w, h) = img.dimensions();
+    let buffer: &mut [u8] = img;
+    let root = BitMapBackend::with_buffer(buffer, (w, h)).into_drawing_area();
+    let style = ("sans-serif", 11).into_font().color(&WHITE);
+    let e = |e: DrawingAreaErrorKind<_>| e.to_string();
+    root.draw(&Text::new("0".to_string(), (1, top as i32), style.clone()))
+        .map_err(e)?;
+    let label = max.to_string();
+    let (tw, _) = root.estimate_text_size(&label, &style).map_err(e)?;
+    root.draw(&Text::new(
+        label,
+        ((w as i32 - 1 - tw as i32).max(0), top as i32),
+        style,
+    ))
+    .map_err(e)?;
+    root.present().map_err(e)
 }
 
 /// Checks that `path` names a PNG file (the only format of the map).
@@ -106,8 +86,8 @@ pub fn write_eval_map(
             img.put_pixel(x, y, colour);
         }
     }
-    draw_number(&mut img, 0, 1, bar_top + 8, false);
-    draw_number(&mut img, max, width.saturating_sub(1), bar_top + 8, true);
+    draw_legend(&mut img, bar_top + 7, max)
+        .map_err(|e| err(format!("cannot draw the legend: {e}")))?;
     let file_name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())

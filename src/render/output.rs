@@ -96,3 +96,17 @@ pub fn read_image(path: &Path) -> Result<(u32, u32, Vec<[f32; 4]>), RenderError>
         .collect();
     Ok((w, h, pixels))
 }
+
+/// Registers the DejaVu Sans font embedded in the binary as plotters' "sans-serif" (once per
+/// process), so that plots and legends draw text on machines without fonts.
+pub fn register_fonts() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        // A font that fails to parse leaves text undrawn; the picture itself still works.
+        let _ = plotters::style::register_font(
+            "sans-serif",
+            plotters::style::FontStyle::Normal,
+            dejavu::sans::regular(),
+        );
+    });
+}

@@ -39,6 +39,7 @@ static SOURCES: &[(&str, &str)] = embed![
     "splat_segments.comp",
     "mls_eval.comp",
     "probe_fma.comp",
+    "probe_memory.comp",
     "layout_probe.comp",
 ];
 

@@ -48,6 +48,10 @@ pub struct BenchArgs {
     /// (repeatable; the CSV columns of results.csv).
     #[arg(long)]
     import: Vec<PathBuf>,
+    /// Run a peer renderer on the same scene in the same run and plot it on the same axes
+    /// (vtk: tools/peer-vtk, VTK's GPU ray caster; never in CI).
+    #[arg(long)]
+    peer: Vec<String>,
     /// Print each configuration's shader variant: its kernels and macro definitions.
     #[arg(long)]
     variant: bool,
@@ -76,6 +80,7 @@ fn opt(v: Option<f64>, digits: usize) -> String {
 }
 
 fn header() -> String {
+    // A row without GPU timestamps (a peer) shows its wall time, marked w.
     format!(
         "{:<3} {:<10} {:<38} {:>10} {:>17} {:>10} {:>11} {:>9} {:>9} {:>7}",
         "#",
@@ -102,7 +107,8 @@ fn line(i: usize, r: &Row) -> String {
         i,
         r.method,
         settings,
-        opt(r.gpu_ms, 2),
+        r.gpu_ms
+            .map_or(format!("{:.2}w", r.wall_ms), |g| format!("{g:.2}")),
         format!("[{}, {}]", opt(r.gpu_ms_min, 1), opt(r.gpu_ms_max, 1)),
         r.first_frame_wall_ms,
         r.evaluations.map_or("-".into(), |e| e.to_string()),
@@ -122,6 +128,16 @@ pub fn bench(args: &BenchArgs) -> Result<(), CliError> {
         .iter()
         .map(|s| Sweep::parse(s))
         .collect::<Result<Vec<_>, _>>()?;
+    if let Some(bad) = args
+        .peer
+        .iter()
+        .find(|p| !vmls::bench::peer::PEERS.contains(&p.as_str()))
+    {
+        return Err(CliError::Usage(format!(
+            "--peer {bad}: unknown peer (known: {})",
+            vmls::bench::peer::PEERS.join(", ")
+        )));
+    }
     // Imports are read first: a bad file fails before minutes of measurement.
     let mut imported = Vec::new();
     for path in &args.import {
@@ -194,6 +210,13 @@ pub fn bench(args: &BenchArgs) -> Result<(), CliError> {
         }
     })?;
     bar.finish_and_clear();
+    for name in &args.peer {
+        let peer_rows = vmls::bench::peer::run_peer(name, &opts, &reference)?;
+        for r in &peer_rows {
+            println!("{} (peer {name})", line(rows.len(), r));
+            rows.push(r.clone());
+        }
+    }
     for (i, r) in imported.iter().enumerate() {
         println!("{} (imported from {})", line(rows.len() + i, r), r.source);
     }

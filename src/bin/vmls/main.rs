@@ -1,9 +1,10 @@
-//! The `vmls` command line: `render`, `info`, `devices`, `probe`, `compare`, `bench`.
+//! The `vmls` command line: `render`, `info`, `devices`, `probe`, `compare`, `bench`, `check`.
 //!
 //! Errors print one line (`vmls: error: …`, with the cause chain) and exit with status 1; usage
 //! errors exit with clap's status 2. Progress bars appear only when stderr is a terminal.
 
 mod bench;
+mod check;
 mod compare;
 mod probe;
 mod render;
@@ -96,6 +97,9 @@ enum Command {
     /// Sweep methods and settings over a scene: GPU time, error against a cached reference,
     /// `results.csv`/`.json` and the speed–error plot `speed_error.svg`/`.png`.
     Bench(bench::BenchArgs),
+    /// Run the numerical hard cases and convergence orders, each against a stated bound;
+    /// exits non-zero when any fails.
+    Check(check::CheckArgs),
     /// Measure the FMA ceiling and MLS evaluation throughput side by side.
     Probe {
         /// Marschner–Lobb resolution of the probe field.
@@ -238,6 +242,7 @@ fn main() {
             device,
         ),
         Command::Bench(args) => bench::bench(args),
+        Command::Check(args) => check::check(args),
         Command::Compare {
             image,
             reference,

@@ -2,7 +2,9 @@
 
 use crate::{CliError, DeviceArgs, context, write_json};
 use std::path::Path;
-use vmls::probe::{coherent_order, fma_probe, median, mls_probe, random_points};
+use vmls::probe::{
+    MemoryMode, coherent_order, fma_probe, median, memory_probe, mls_probe, random_points,
+};
 use vmls::render::Field;
 use vmls::scene::{NeighbourMode, Scene, load_volume};
 use vmls::vk::ShaderCompiler;
@@ -110,6 +112,27 @@ pub fn run_probe(
         fma.gpu_ms.len(),
         median(&fma.gpu_ms)
     );
+    let mut memory = Vec::new();
+    for mode in [
+        MemoryMode::Gather,
+        MemoryMode::TexelGather,
+        MemoryMode::Stream,
+    ] {
+        let m = memory_probe(&ctx, &compiler, mode, 16384, 256, repeats)?;
+        println!(
+            "{}: {:.3} G loads/s, {:.2} GB/s (median of {} dispatches)",
+            mode.name(),
+            m.loads_per_s * 1e-9,
+            m.bytes_per_s * 1e-9,
+            m.gpu_ms.len()
+        );
+        memory.push(serde_json::json!({
+            "kernel": mode.name(),
+            "gpu_ms": m.gpu_ms,
+            "loads_per_s": m.loads_per_s,
+            "bytes_per_s": m.bytes_per_s,
+        }));
+    }
     let mut rows = Vec::new();
     for mode in [NeighbourMode::Grid, NeighbourMode::Octree] {
         let scene = Scene::load(
@@ -165,6 +188,7 @@ pub fn run_probe(
             &serde_json::json!({
                 "device": ctx.info().name,
                 "fma": { "gflops": fma.gflops, "gpu_ms": fma.gpu_ms },
+                "memory": memory,
                 "mls": rows,
             }),
         )?;

@@ -1,0 +1,53 @@
+#version 450
+// Memory ceiling probes (stage `probe_memory`), one mode per variant:
+//   PROBE_MODE 0: 32-bit gathers from a storage buffer at a random index per lane and load,
+//   PROBE_MODE 1: the same gathers through a storage texel buffer (`imageLoad` of r32ui),
+//   PROBE_MODE 2: streaming vec4 loads, consecutive lanes at consecutive addresses.
+// Every invocation makes `iterations` independent loads from PROBE_WORDS words (a power of two)
+// and sums them (wrapping) so that none is dead. Twin: probe::memory_reference.
+
+layout(local_size_x = 64) in;
+
+#include "types.glsl"
+
+layout(std430, binding = BINDING_PROBE) writeonly buffer ProbeBuf { uvec4 probe_out[]; };
+#if PROBE_MODE == 1
+layout(binding = BINDING_PROBE_TEXELS, r32ui) uniform readonly uimageBuffer probe_texels;
+#elif PROBE_MODE == 2
+layout(std430, binding = BINDING_PROBE_SOURCE) readonly buffer SourceBuf { uvec4 probe_vec4s[]; };
+#else
+layout(std430, binding = BINDING_PROBE_SOURCE) readonly buffer SourceBuf { uint probe_words[]; };
+#endif
+layout(push_constant) uniform Push { CountPush push; };
+
+// A 32-bit integer hash (Wellons' lowbias32): uncorrelated indices for neighbouring lanes.
+uint probe_hash(uint x) {
+    x ^= x >> 16;
+    x *= 0x7feb352du;
+    x ^= x >> 15;
+    x *= 0x846ca68bu;
+    x ^= x >> 16;
+    return x;
+}
+
+void main() {
+    uint id = gl_GlobalInvocationID.x;
+    if (id >= push.count) {
+        return;
+    }
+    uint sum = 0u;
+    for (uint it = 0u; it < push.iterations; ++it) {
+#if PROBE_MODE == 2
+        uvec4 v = probe_vec4s[(it * push.count + id) & (PROBE_WORDS / 4u - 1u)];
+        sum += v.x + v.y + v.z + v.w;
+#else
+        uint i = probe_hash(id * push.iterations + it) & (PROBE_WORDS - 1u);
+#if PROBE_MODE == 1
+        sum += imageLoad(probe_texels, int(i)).x;
+#else
+        sum += probe_words[i];
+#endif
+#endif
+    }
+    probe_out[id] = uvec4(sum, 0u, 0u, 0u);
+}
