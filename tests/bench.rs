@@ -43,6 +43,8 @@ fn sweep_writes_rows_plot_and_caches_the_reference() {
         "--cache",
         s(&cache),
         "--variant",
+        // Against the scene's own field, so that the integrators' error is what converges.
+        "--own-reference",
     ];
     args.extend(SMALL);
     let stdout = run_ok(&args);
@@ -74,6 +76,13 @@ fn sweep_writes_rows_plot_and_caches_the_reference() {
         );
         assert!(first > next && next > 0, "{first} {next}");
         assert_eq!(r.non_finite, Some(0));
+        // Linear MLS on grid neighbours: both ceiling shares by the stated model.
+        let (fma, gather) = (finite(r.fma_share), finite(r.gather_share));
+        assert!(
+            fma > 0.0 && gather > 0.0 && fma < 10.0 && gather < 10.0,
+            "{r:?}"
+        );
+        assert_eq!(r.bound_by, if fma >= gather { "fma" } else { "gather" });
         assert!(finite(r.rmse) < 0.05, "{r:?}");
         assert!(finite(r.max_abs) >= finite(r.rmse));
     }
@@ -105,6 +114,8 @@ fn sweep_writes_rows_plot_and_caches_the_reference() {
         s(&out2),
         "--cache",
         s(&cache),
+        "--no-ceilings",
+        "--own-reference",
         "--import",
     ];
     let first_csv = out.join("results.csv");
@@ -112,12 +123,43 @@ fn sweep_writes_rows_plot_and_caches_the_reference() {
     args.extend(SMALL);
     let stdout = run_ok(&args);
     assert!(stdout.contains("(cached)"), "{stdout}");
+    assert!(
+        !stdout.contains("ceilings:"),
+        "--no-ceilings skips the probes"
+    );
     let merged: Vec<Row> = read_csv(&out2.join("results.csv")).expect("merged");
     assert_eq!(merged.len(), 5);
     assert_eq!(merged[1..], rows[..]);
     // The same configuration against the same reference: the same error.
     assert_eq!(merged[0].settings, rows[0].settings);
     assert!((finite(merged[0].rmse) - finite(rows[0].rmse)).abs() < 1e-6);
+
+    // By default a generated volume is measured against its analytic field: a new reference,
+    // and the error now includes the reconstruction's.
+    let out3 = d.join("out3");
+    let mut args = vec![
+        "bench",
+        "--methods",
+        "fixed",
+        "--sweep",
+        "render.step=1",
+        "--repeat",
+        "1",
+        "--no-ceilings",
+        "--out",
+        s(&out3),
+        "--cache",
+        s(&cache),
+    ];
+    args.extend(SMALL);
+    let stdout = run_ok(&args);
+    assert!(
+        stdout.contains("the analytic field") && !stdout.contains("(cached)"),
+        "{stdout}"
+    );
+    let truth: Vec<Row> = read_csv(&out3.join("results.csv")).expect("rows");
+    assert!(truth[0].reference.contains("analytic"), "{:?}", truth[0]);
+    assert!(finite(truth[0].rmse) > finite(rows[0].rmse), "{truth:?}");
 }
 
 #[test]

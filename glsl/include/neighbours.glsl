@@ -281,8 +281,32 @@ MlsResult gaussian_evaluate(vec3 x) {
 }
 #endif
 
+#if MLS_EXACT == 1
+// Stage `exact_evaluate` (twin: the Exact arm of Field::evaluate): the Marschner–Lobb function
+// and its analytic gradient (data::marschner_lobb::rho, rho_gradient). The generator's grid
+// starts at world (-1,-1,-1), so world = x + (-1,-1,-1) - grid_origin (frame-relative).
+MlsResult exact_evaluate(vec3 x) {
+    const float PI = 3.14159265358979;
+    vec3 w = x - vec3(1.0) - params.grid_origin.xyz;
+    float r = length(w.xy);
+    float scale = 1.0 / (2.0 * (1.0 + ML_ALPHA));
+    float phase = 2.0 * PI * ML_F_M * cos(PI * r / 2.0);
+    float value = (1.0 - sin(PI * w.z / 2.0) + ML_ALPHA * (1.0 + cos(phase))) * scale;
+    vec2 dxy = vec2(0.0);
+    if (r > 1e-12) {
+        float d_rho_r = 2.0 * PI * ML_F_M * sin(phase) * sin(PI * r / 2.0) * (PI / 2.0);
+        dxy = ML_ALPHA * scale * d_rho_r / r * w.xy;
+    }
+    vec3 grad = vec3(dxy, -(PI / 2.0) * cos(PI * w.z / 2.0) * scale);
+    return MlsResult(value, grad, 1u, 1u);
+}
+#endif
+
 // f(x), ∇f(x); terms == 0 where no sample has weight (the field is undefined there).
 MlsResult mls_evaluate(vec3 x) {
+#if MLS_EXACT == 1
+    return exact_evaluate(x);
+#endif
 #if MLS_GAUSSIAN == 1
     return gaussian_evaluate(x);
 #endif

@@ -154,18 +154,25 @@ pub struct BenchOptions {
     pub reference: ReferenceMode,
     /// Overrides for the reference only (e.g. `render.reference_step=0.01`).
     pub reference_set: Vec<String>,
+    /// For generated volumes, render the reference from the analytic field
+    /// (`reconstruction.method = "exact"`) rather than from the scene's own reconstruction.
+    pub analytic_reference: bool,
     /// Reference cache directory (`None`: render the reference every run).
     pub cache: Option<PathBuf>,
     /// Print each configuration's shader variant (its macro definitions).
     pub print_variant: bool,
     /// Write each configuration's SPIR-V here.
     pub dump_spirv: Option<PathBuf>,
+    /// Measure the device's ceilings first and report each row's share of them.
+    pub ceilings: bool,
 }
 
 /// What a run reports while it works.
 pub enum Event<'a> {
     /// The reference is ready.
     Reference(&'a Reference),
+    /// The device's ceilings are measured.
+    Ceilings(&'a crate::probe::Ceilings),
     /// Configuration `index` of `total` is starting.
     Start {
         index: usize,
@@ -256,6 +263,13 @@ pub fn run(
     }
     let mut ref_set = opts.set.clone();
     ref_set.push("render.method=\"reference\"".into());
+    let generated = matches!(
+        Scene::load(opts.scene.as_deref(), &opts.set)?.volume,
+        crate::scene::VolumeSource::MarschnerLobb { .. }
+    );
+    if generated && opts.analytic_reference {
+        ref_set.push("reconstruction.method=\"exact\"".into());
+    }
     ref_set.extend(opts.reference_set.iter().cloned());
     let ref_scene = Scene::load(opts.scene.as_deref(), &ref_set)?;
     std::fs::create_dir_all(opts.out.join("images")).map_err(|e| io_err(&opts.out, e))?;
@@ -271,6 +285,13 @@ pub fn run(
     )?;
     observe(Event::Reference(&reference));
     let compiler = ShaderCompiler::new()?;
+    let ceilings = if opts.ceilings {
+        let c = crate::probe::ceilings(ctx, &compiler, 3)?;
+        observe(Event::Ceilings(&c));
+        Some(c)
+    } else {
+        None
+    };
     let mut prepared: Option<(String, crate::render::Field, f64)> = None;
     let mut rows = Vec::with_capacity(configs.len());
     for (index, (config, scene)) in configs.iter().zip(&scenes).enumerate() {
@@ -363,7 +384,17 @@ pub fn run(
                 &image.pixels,
             )?;
         }
+        let shares = ceilings
+            .as_ref()
+            .and_then(|c| ceiling_shares(c, scene, raycast, evaluations, gpu_med, field));
         let row = Row {
+            fma_share: shares.map(|s| s.0),
+            gather_share: shares.map(|s| s.1),
+            bound_by: match shares {
+                Some((f, g)) if f >= g => "fma".into(),
+                Some(_) => "gather".into(),
+                None => String::new(),
+            },
             source: "vmls".into(),
             method: scene.render.method.name().into(),
             settings,
@@ -401,8 +432,41 @@ pub fn run(
     Ok((rows, reference))
 }
 
+/// Shares of the FMA and gather ceilings a ray-casting frame reached, by the model documented
+/// on [`Row::fma_share`]: only for linear MLS on grid neighbours.
+fn ceiling_shares(
+    c: &crate::probe::Ceilings,
+    scene: &Scene,
+    raycast: bool,
+    evaluations: u64,
+    gpu_ms: f64,
+    field: &crate::render::Field,
+) -> Option<(f64, f64)> {
+    use crate::recon::{Basis, ReconMethod};
+    let r = &scene.reconstruction;
+    let grid = !field.uses_octree();
+    if !raycast || !grid || r.basis != Basis::Linear || r.method != ReconMethod::Mls {
+        return None;
+    }
+    let seconds = gpu_ms * 1e-3;
+    let k = 4.0 / 3.0 * std::f64::consts::PI * r.support.powi(3);
+    let flops = evaluations as f64 * (39.0 * k + 56.0);
+    let bx = (2.0 * r.support).floor() + 1.0;
+    let window = ((bx + 3.0) / 4.0).ceil();
+    let loads = evaluations as f64 * bx * bx * window;
+    Some((
+        flops / seconds / (c.fma_gflops * 1e9),
+        loads / seconds / c.gathers_per_s,
+    ))
+}
+
 /// The run's context for `results.json`.
-pub fn run_context(ctx: &Context, opts: &BenchOptions, reference: &Reference) -> serde_json::Value {
+pub fn run_context(
+    ctx: &Context,
+    opts: &BenchOptions,
+    reference: &Reference,
+    ceilings: Option<&crate::probe::Ceilings>,
+) -> serde_json::Value {
     serde_json::json!({
         "device": ctx.info().name,
         "device_type": ctx.info().device_type,
@@ -416,6 +480,7 @@ pub fn run_context(ctx: &Context, opts: &BenchOptions, reference: &Reference) ->
         "sweeps": opts.sweeps.iter().map(|s| serde_json::json!({"key": s.key, "values": s.values})).collect::<Vec<_>>(),
         "repeat": opts.repeat,
         "warmup": opts.warmup,
+        "ceilings": ceilings,
         "reference": {
             "description": reference.description,
             "cached": reference.cached,

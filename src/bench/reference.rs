@@ -2,11 +2,11 @@
 //!
 //! The reference is the scene as written (with the run's `--set` and `--reference-set`
 //! overrides, but none of the swept settings) rendered by the `reference` integrator: midpoint
-//! steps of `render.reference_step` with the transfer function applied directly — the most
-//! exact image vmls can make of the scene's field. Swept reconstruction settings are therefore
-//! measured against the scene's own field, so their error includes the reconstruction change.
-//! (An analytic reference for generated volumes is issue 11's `reconstruction.method = "exact"`;
-//! once it exists, `--reference-set reconstruction.method="exact"` selects it.)
+//! steps of `render.reference_step` with the transfer function applied directly. For a
+//! generated volume it integrates the analytic field (`reconstruction.method = "exact"`), the
+//! true image; otherwise the scene's own reconstruction, the most exact image vmls can make of
+//! it — then swept reconstruction settings are measured against the scene's field, and their
+//! error includes the reconstruction change.
 //!
 //! The cache key is a SHA-256 over everything the image depends on: the validated reference
 //! scene, the bytes of its data file, the vmls version and commit, and where it was rendered (the
@@ -75,11 +75,13 @@ pub fn reference_key(
 }
 
 fn describe(scene: &Scene, mode: ReferenceMode, ctx: &Context) -> String {
+    let field = match scene.reconstruction.method {
+        crate::recon::ReconMethod::Exact => "the analytic field".to_string(),
+        m => format!("{m:?} {:?} reconstruction", scene.reconstruction.basis),
+    };
     format!(
-        "reference integrator, step {} spacings, {:?} {:?} reconstruction, on {}",
+        "reference integrator, step {} spacings, {field}, on {}",
         scene.render.reference_step,
-        scene.reconstruction.method,
-        scene.reconstruction.basis,
         match mode {
             ReferenceMode::Gpu => ctx.info().name.clone(),
             ReferenceMode::Cpu => "the CPU (f64 twins)".into(),

@@ -55,6 +55,15 @@ pub struct Row {
     pub max_y: Option<u32>,
     pub psnr: Option<f64>,
     pub non_finite: Option<u64>,
+    /// Share of the device's ceilings the frame's ray-casting kernel reached (`vmls probe`'s
+    /// `probe_fma` and `probe_memory:gather`, measured in the same run), by a stated model:
+    /// [MLS] Table 2's 39k + 56 flops per linear evaluation with k = (4/3)π·support³
+    /// neighbours, and MLS_GRID_BOX² rows × MLS_GRID_WINDOW vec4 loads per grid evaluation.
+    /// Empty where the model does not apply (splatting, octree neighbours, other bases).
+    pub fma_share: Option<f64>,
+    pub gather_share: Option<f64>,
+    /// The larger of the two: `fma` or `gather`.
+    pub bound_by: String,
     /// What the error was measured against.
     pub reference: String,
     /// The shader variant's name.
@@ -176,6 +185,9 @@ mod tests {
             max_y: Some(0),
             psnr: Some(-20.0 * rmse.log10()),
             non_finite: Some(0),
+            fma_share: Some(0.1),
+            gather_share: None,
+            bound_by: "fma".into(),
             reference: "r".into(),
             variant: "x".into(),
         }

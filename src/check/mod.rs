@@ -20,27 +20,17 @@ use crate::render::renderer::{GpuImage, Renderer, View};
 use crate::scene::Scene;
 use crate::vk::Context;
 
-/// The scene most cases start from: Marschner–Lobb 41³ with two smooth emission bands (the
-/// transfer function of issue 11's `tests/scenes/ml-emission.toml`), no isosurface.
-pub const CHECK_SCENE: &str = r#"
-[volume]
-generator = "marschner-lobb"
-resolution = 41
-[transfer]
-points = [[0.00,0.0,0.0,0.0,0.0],[0.22,1.0,0.55,0.15,0.0],[0.30,1.0,0.55,0.15,4.0],[0.38,1.0,0.55,0.15,0.0],
-          [0.62,0.2,0.5,1.0,0.0],[0.70,0.2,0.5,1.0,6.0],[0.78,0.2,0.5,1.0,0.0],[1.00,0.0,0.0,0.0,0.0]]
-[camera]
-eye = [2.9, -2.4, 2.5]
-target = [0.0, 0.0, 0.0]
-up = [0.0, 0.0, 1.0]
-fov_y = 30.0
-width = 48
-height = 48
-[render]
-method = "fixed"
-step = 0.5
-background = [0.0, 0.0, 0.0]
-"#;
+/// The scene most cases start from: Marschner–Lobb 41³ with two smooth emission bands, no
+/// isosurface (issue 11's `tests/scenes/ml-emission.toml`), at [`CHECK_SET`].
+pub const CHECK_SCENE: &str = include_str!("../../tests/scenes/ml-emission.toml");
+
+/// The check scene's size and integrator: 48², preintegrated, half a spacing per step.
+pub const CHECK_SET: [&str; 4] = [
+    "camera.width=48",
+    "camera.height=48",
+    "render.method=\"fixed\"",
+    "render.step=0.5",
+];
 
 /// What a measured number must satisfy.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -115,7 +105,7 @@ pub struct Env<'a> {
 impl Env<'_> {
     /// The check scene with overrides.
     pub fn scene(&self, set: &[&str]) -> Result<Scene, BenchError> {
-        let set: Vec<String> = set.iter().map(|s| s.to_string()).collect();
+        let set: Vec<String> = CHECK_SET.iter().chain(set).map(|s| s.to_string()).collect();
         Ok(Scene::parse(
             CHECK_SCENE,
             "vmls check scene",

@@ -27,6 +27,9 @@ pub enum ReconMethod {
     Mls,
     /// The Gaussian sum that splatting integrates ([`gaussian`]).
     Gaussian,
+    /// The analytic function a generated volume samples, with its analytic gradient (ground
+    /// truth; the scene accepts it only for `volume.generator`).
+    Exact,
 }
 
 /// Reconstruction settings (scene section `[reconstruction]`).

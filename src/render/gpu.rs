@@ -46,6 +46,8 @@ pub struct Variant {
     pub hull: bool,
     /// The Gaussian-sum field instead of MLS (`reconstruction.method = "gaussian"`).
     pub gaussian: bool,
+    /// The generator's analytic field instead of a reconstruction (`"exact"`).
+    pub exact: bool,
 }
 
 impl Variant {
@@ -65,6 +67,7 @@ impl Variant {
             full_metric: field.has_full_metric(),
             hull: false,
             gaussian: r.method == crate::recon::ReconMethod::Gaussian,
+            exact: r.method == crate::recon::ReconMethod::Exact,
             method: None,
             adaptive_levels: 1,
             isosurfaces: 0,
@@ -113,6 +116,16 @@ impl Variant {
         ));
         d.push(("MLS_FULL_METRIC".into(), flag(self.full_metric)));
         d.push(("MLS_GAUSSIAN".into(), flag(self.gaussian)));
+        d.push(("MLS_EXACT".into(), flag(self.exact)));
+        // The analytic field's constants, from the generator (one copy of each number).
+        d.push((
+            "ML_F_M".into(),
+            format!("{:?}", crate::data::marschner_lobb::F_M),
+        ));
+        d.push((
+            "ML_ALPHA".into(),
+            format!("{:?}", crate::data::marschner_lobb::ALPHA),
+        ));
         d.push(("HULL".into(), flag(self.hull)));
         let ray_method = match self.method {
             Some(Method::Fixed) => 1,
@@ -133,6 +146,7 @@ impl Variant {
         format!(
             "{kernel}:{}-{}-{}-{}{}",
             match (self.gaussian, self.basis) {
+                _ if self.exact => "exact",
                 (true, _) => "gaussian",
                 (false, Basis::Constant) => "constant",
                 (false, Basis::Linear) => "linear",

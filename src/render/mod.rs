@@ -207,6 +207,16 @@ impl Field {
                 neighbours,
                 x,
             ),
+            ReconMethod::Exact => {
+                // Stage `exact_evaluate`: the generator's function at the world position.
+                let [wx, wy, wz] = (DVec3::from(x) + self.frame_origin).to_array();
+                Some(MlsValue {
+                    value: crate::data::marschner_lobb::rho(wx, wy, wz),
+                    gradient: crate::data::marschner_lobb::rho_gradient(wx, wy, wz),
+                    neighbours: 1,
+                    terms: 1,
+                })
+            }
         }
     }
 

@@ -501,6 +501,7 @@ impl Scene {
                 &[
                     ("mls", ReconMethod::Mls),
                     ("gaussian", ReconMethod::Gaussian),
+                    ("exact", ReconMethod::Exact),
                 ],
             )?,
             sigma: rec.float(
@@ -545,6 +546,18 @@ impl Scene {
             )?,
         };
 
+        if reconstruction.method == ReconMethod::Exact
+            && let VolumeSource::File { path, .. } = &volume
+        {
+            return Err(SceneError::Key {
+                origin: origin.into(),
+                key: "reconstruction.method".into(),
+                expected: "\"mls\" or \"gaussian\" for a data file (\"exact\", the analytic \
+                           field, exists only for volume.generator)"
+                    .into(),
+                found: format!("\"exact\" with volume.file = {}", path.display()),
+            });
+        }
         let explicit_support = rec.get("support").is_some();
         let samples = SampleSettings {
             support: reconstruction.support,

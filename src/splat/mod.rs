@@ -153,6 +153,14 @@ impl SplatSetup {
         lighting: &Lighting,
         field: &Field,
     ) -> Result<Self, RenderError> {
+        if field.reconstruction.method == crate::recon::ReconMethod::Exact {
+            return Err(RenderError::Setting {
+                key: "reconstruction.method",
+                message: "\"exact\" is the analytic field, a ray-casting reference; splatting \
+                          integrates the samples' Gaussian kernels (use \"mls\" or \"gaussian\")"
+                    .into(),
+            });
+        }
         if shading == Shading::Pre && !isosurfaces.is_empty() && !settings.surface {
             return Err(RenderError::Setting {
                 key: "transfer.isosurfaces",

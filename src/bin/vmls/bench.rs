@@ -29,6 +29,10 @@ pub struct BenchArgs {
     /// Render the reference with the f64 CPU twins instead of the GPU (slow, device-independent).
     #[arg(long)]
     reference_cpu: bool,
+    /// For a generated volume, measure error against the scene's own reconstruction instead of
+    /// the analytic field.
+    #[arg(long)]
+    own_reference: bool,
     /// Reference cache directory (default: $XDG_CACHE_HOME/vmls/references or
     /// ~/.cache/vmls/references); --no-cache renders it every run.
     #[arg(long)]
@@ -58,6 +62,9 @@ pub struct BenchArgs {
     /// Write each configuration's SPIR-V (NNN-kernel.spv) to this directory.
     #[arg(long)]
     dump_spirv: Option<PathBuf>,
+    /// Skip measuring the device's ceilings (FMA, gathers) and each row's share of them.
+    #[arg(long)]
+    no_ceilings: bool,
     #[command(flatten)]
     device: DeviceArgs,
 }
@@ -103,7 +110,7 @@ fn line(i: usize, r: &Row) -> String {
         settings.push_str("...");
     }
     format!(
-        "{:<3} {:<10} {:<38} {:>10} {:>17} {:>10.1} {:>11} {:>9} {:>9} {:>7}{}",
+        "{:<3} {:<10} {:<38} {:>10} {:>17} {:>10.1} {:>11} {:>9} {:>9} {:>7}  {}{}",
         i,
         r.method,
         settings,
@@ -115,6 +122,13 @@ fn line(i: usize, r: &Row) -> String {
         opt(r.rmse, 5),
         opt(r.max_abs, 4),
         opt(r.psnr, 1),
+        match (
+            r.bound_by.as_str(),
+            r.fma_share.zip(r.gather_share).map(|(f, g)| f.max(g))
+        ) {
+            ("", _) | (_, None) => "-".to_string(),
+            (b, Some(x)) => format!("{b} {:.0}%", 100.0 * x),
+        },
         match r.non_finite {
             Some(n) if n > 0 => format!("  {n} NON-FINITE"),
             _ => String::new(),
@@ -157,10 +171,13 @@ pub fn bench(args: &BenchArgs) -> Result<(), CliError> {
             ReferenceMode::Gpu
         },
         reference_set: args.reference_set.clone(),
+        analytic_reference: !args.own_reference,
         cache: cache_dir(args),
         print_variant: args.variant,
         dump_spirv: args.dump_spirv.clone(),
+        ceilings: !args.no_ceilings,
     };
+    let mut measured_ceilings = None;
     let ctx = context(&args.device)?;
     println!("device: {} ({})", ctx.info().name, ctx.info().driver);
     let bar = if std::io::stderr().is_terminal() {
@@ -188,6 +205,17 @@ pub fn bench(args: &BenchArgs) -> Result<(), CliError> {
                 if r.cached { " (cached)" } else { "" }
             ));
             say(header());
+        }
+        Event::Ceilings(c) => {
+            measured_ceilings = Some(*c);
+            say(format!(
+                "ceilings: probe_fma {:.1} GFLOP/s, gathers {:.1} M/s (texel view {:.1} M/s), \
+                 stream {:.2} GB/s",
+                c.fma_gflops,
+                c.gathers_per_s * 1e-6,
+                c.texel_gathers_per_s * 1e-6,
+                c.stream_bytes_per_s * 1e-9
+            ));
         }
         Event::Start { index, total, .. } => {
             bar.set_length(total as u64);
@@ -225,7 +253,7 @@ pub fn bench(args: &BenchArgs) -> Result<(), CliError> {
     write_csv(&csv, &rows)?;
     write_json(
         &args.out.join("results.json"),
-        &run_context(&ctx, &opts, &reference),
+        &run_context(&ctx, &opts, &reference, measured_ceilings.as_ref()),
         &rows,
     )?;
     let title = format!(
