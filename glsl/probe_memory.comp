@@ -2,7 +2,9 @@
 // Memory ceiling probes (stage `probe_memory`), one mode per variant:
 //   PROBE_MODE 0: 32-bit gathers from a storage buffer at a random index per lane and load,
 //   PROBE_MODE 1: the same gathers through a storage texel buffer (`imageLoad` of r32ui),
-//   PROBE_MODE 2: streaming vec4 loads, consecutive lanes at consecutive addresses.
+//   PROBE_MODE 2: streaming vec4 loads, consecutive lanes at consecutive addresses,
+//   PROBE_MODE 3: float adds by compare-and-swap loops (as splat_accumulate's sheet_add) at a
+//   random one of PROBE_ATOMIC_WORDS words (a 512² image's four channels).
 // Every invocation makes `iterations` independent loads from PROBE_WORDS words (a power of two)
 // and sums them (wrapping) so that none is dead. Twin: probe::memory_reference.
 
@@ -15,6 +17,8 @@ layout(std430, binding = BINDING_PROBE) writeonly buffer ProbeBuf { uvec4 probe_
 layout(binding = BINDING_PROBE_TEXELS, r32ui) uniform readonly uimageBuffer probe_texels;
 #elif PROBE_MODE == 2
 layout(std430, binding = BINDING_PROBE_SOURCE) readonly buffer SourceBuf { uvec4 probe_vec4s[]; };
+#elif PROBE_MODE == 3
+layout(std430, binding = BINDING_PROBE_SOURCE) buffer AtomicBuf { uint probe_atomic[]; };
 #else
 layout(std430, binding = BINDING_PROBE_SOURCE) readonly buffer SourceBuf { uint probe_words[]; };
 #endif
@@ -40,6 +44,17 @@ void main() {
 #if PROBE_MODE == 2
         uvec4 v = probe_vec4s[(it * push.count + id) & (PROBE_WORDS / 4u - 1u)];
         sum += v.x + v.y + v.z + v.w;
+#elif PROBE_MODE == 3
+        uint a = probe_hash(id * push.iterations + it) & (PROBE_ATOMIC_WORDS - 1u);
+        uint old = probe_atomic[a];
+        while (true) {
+            uint seen = atomicCompSwap(probe_atomic[a], old, floatBitsToUint(uintBitsToFloat(old) + 1.0));
+            if (seen == old) {
+                break;
+            }
+            old = seen;
+        }
+        sum += 1u;
 #else
         uint i = probe_hash(id * push.iterations + it) & (PROBE_WORDS - 1u);
 #if PROBE_MODE == 1

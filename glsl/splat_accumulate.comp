@@ -27,6 +27,10 @@ layout(std430, binding = BINDING_SPLAT_STATS) buffer StatsBuf { uint stats[]; };
 
 const uint STAT_SKIPPED = 6u;
 const uint STAT_ACCUMULATED = 7u;
+// Pixels whose footprint was evaluated, and sheet updates (compare-and-swap adds): the work
+// `vmls bench` divides by the FMA and atomic ceilings.
+const uint STAT_EVALUATED = 9u;
+const uint STAT_UPDATES = 10u;
 
 void sheet_add(uint index, float v) {
     uint old = sheets[index];
@@ -79,6 +83,8 @@ void main() {
         }
 #endif
         atomicAdd(stats[STAT_ACCUMULATED], 1u);
+        uint evaluated = 0u;
+        uint updates = 0u;
         for (int y = bb.y; y <= bb.w; ++y) {
             for (int x = bb.x; x <= bb.z; ++x) {
                 uint p = uint(y) * params.width + uint(x);
@@ -88,10 +94,13 @@ void main() {
                 }
 #endif
                 float g = splat_footprint(s, cutoff, vec2(x, y), ta, tb);
+                evaluated += 1u;
                 if (g != 0.0) {
 #if SPLAT_POST == 1
+                    updates += 1u;
                     sheet_add((k % 5u) * pixels + p, g);
 #elif SPLAT_SURFACES == 1
+                    updates += s.color.w > 0.0 ? 5u : 4u;
                     if (s.color.w > 0.0) {
                         sheet_add(9u * p + 4u, g);
                         sheet_add(9u * p + 5u, g * s.color.w);
@@ -105,6 +114,7 @@ void main() {
                         sheet_add(9u * p + 3u, g * s.color.b);
                     }
 #else
+                    updates += 4u;
                     sheet_add(4u * p, g);
                     sheet_add(4u * p + 1u, g * s.color.r);
                     sheet_add(4u * p + 2u, g * s.color.g);
@@ -113,5 +123,7 @@ void main() {
                 }
             }
         }
+        atomicAdd(stats[STAT_EVALUATED], evaluated);
+        atomicAdd(stats[STAT_UPDATES], updates);
     }
 }

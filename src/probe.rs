@@ -53,6 +53,39 @@ pub fn median(values: &[f64]) -> f64 {
     }
 }
 
+/// Dispatches a probe `repeats + 1` times (64 invocations per group) and returns the GPU
+/// milliseconds of all but the first, which pays for compilation and first touches.
+fn timed_dispatches(
+    ctx: &Context,
+    pipeline: &ComputePipeline,
+    group: &BindGroup,
+    invocations: u32,
+    iterations: u32,
+    repeats: u32,
+) -> Result<Vec<f64>, VkError> {
+    let push = CountPush {
+        count: invocations,
+        iterations,
+        _pad: [0; 2],
+    };
+    let mut gpu_ms = Vec::new();
+    for i in 0..=repeats {
+        let t = ctx.submit(|rec| {
+            rec.dispatch(
+                pipeline,
+                group,
+                bytemuck::bytes_of(&push),
+                [invocations.div_ceil(64), 1, 1],
+                pipeline.name(),
+            )
+        })?;
+        if i > 0 {
+            gpu_ms.extend(t.iter().filter_map(|t| t.gpu_ms));
+        }
+    }
+    Ok(gpu_ms)
+}
+
 /// Result of the FMA probe.
 #[derive(Debug, Clone)]
 pub struct FmaProbe {
@@ -87,26 +120,7 @@ pub fn fma_probe(
         BufferUsage::Storage,
     )?;
     let group = BindGroup::new(ctx, &pipeline, &[(binding::PROBE, &out)])?;
-    let push = CountPush {
-        count: invocations,
-        iterations,
-        _pad: [0; 2],
-    };
-    let mut gpu_ms = Vec::new();
-    for i in 0..=repeats {
-        let t = ctx.submit(|rec| {
-            rec.dispatch(
-                &pipeline,
-                &group,
-                bytemuck::bytes_of(&push),
-                [invocations.div_ceil(64), 1, 1],
-                "probe_fma",
-            )
-        })?;
-        if i > 0 {
-            gpu_ms.extend(t.iter().filter_map(|t| t.gpu_ms));
-        }
-    }
+    let gpu_ms = timed_dispatches(ctx, &pipeline, &group, invocations, iterations, repeats)?;
     let ms = median(&gpu_ms);
     let flops = f64::from(invocations) * f64::from(iterations) * FMA_FLOPS_PER_ITERATION;
     let mut output: Vec<[f32; 4]> = out.read(ctx)?;
@@ -124,6 +138,9 @@ pub fn fma_probe(
 /// limit we know).
 pub const PROBE_WORDS: u32 = 1 << 24;
 
+/// Words `probe_memory`'s atomic mode adds to: a 512² image's four channels.
+pub const PROBE_ATOMIC_WORDS: u32 = 1 << 20;
+
 /// What `probe_memory` measures.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum MemoryMode {
@@ -133,6 +150,8 @@ pub enum MemoryMode {
     TexelGather,
     /// Consecutive vec4 loads.
     Stream,
+    /// Float adds by compare-and-swap loops at random words (splat_accumulate's sheet_add).
+    Atomic,
 }
 
 impl MemoryMode {
@@ -141,6 +160,7 @@ impl MemoryMode {
             MemoryMode::Gather => "probe_memory:gather",
             MemoryMode::TexelGather => "probe_memory:texel-gather",
             MemoryMode::Stream => "probe_memory:stream",
+            MemoryMode::Atomic => "probe_memory:atomic-add",
         }
     }
 
@@ -149,6 +169,7 @@ impl MemoryMode {
             MemoryMode::Gather => "0",
             MemoryMode::TexelGather => "1",
             MemoryMode::Stream => "2",
+            MemoryMode::Atomic => "3",
         }
     }
 }
@@ -168,7 +189,8 @@ pub fn probe_hash(mut x: u32) -> u32 {
     x
 }
 
-/// CPU twin of `glsl/probe_memory.comp` for invocation `id`: the wrapping sum of its loads.
+/// CPU twin of `glsl/probe_memory.comp` for invocation `id`: the wrapping sum of its loads
+/// (the atomic mode: its count of adds; [`atomic_reference`] is what they leave behind).
 pub fn memory_reference(mode: MemoryMode, id: u32, count: u32, iterations: u32) -> u32 {
     let mut sum = 0u32;
     for it in 0..iterations {
@@ -179,6 +201,7 @@ pub fn memory_reference(mode: MemoryMode, id: u32, count: u32, iterations: u32) 
                     sum = sum.wrapping_add(probe_word(4 * v + k));
                 }
             }
+            MemoryMode::Atomic => sum = sum.wrapping_add(1),
             MemoryMode::Gather | MemoryMode::TexelGather => {
                 let i =
                     probe_hash(id.wrapping_mul(iterations).wrapping_add(it)) & (PROBE_WORDS - 1);
@@ -187,6 +210,20 @@ pub fn memory_reference(mode: MemoryMode, id: u32, count: u32, iterations: u32) 
         }
     }
     sum
+}
+
+/// CPU twin of the atomic mode's target after `dispatches` dispatches: how many adds each
+/// word received.
+pub fn atomic_reference(count: u32, iterations: u32, dispatches: u32) -> Vec<f32> {
+    let mut words = vec![0.0f32; PROBE_ATOMIC_WORDS as usize];
+    for id in 0..count {
+        for it in 0..iterations {
+            let a =
+                probe_hash(id.wrapping_mul(iterations).wrapping_add(it)) & (PROBE_ATOMIC_WORDS - 1);
+            words[a as usize] += dispatches as f32;
+        }
+    }
+    words
 }
 
 /// Result of a memory probe.
@@ -200,6 +237,8 @@ pub struct MemoryProbe {
     pub bytes_per_s: f64,
     /// Each invocation's sum, for comparison with [`memory_reference`].
     pub output: Vec<u32>,
+    /// The atomic mode's target words afterwards (empty for the other modes).
+    pub atomic_words: Vec<f32>,
 }
 
 /// Runs `probe_memory` in `mode` `repeats + 1` times over `invocations` × `iterations` loads and
@@ -215,6 +254,10 @@ pub fn memory_probe(
     let mut defines = binding_defines();
     defines.push(("PROBE_MODE".into(), mode.define().into()));
     defines.push(("PROBE_WORDS".into(), format!("{PROBE_WORDS}u")));
+    defines.push((
+        "PROBE_ATOMIC_WORDS".into(),
+        format!("{PROBE_ATOMIC_WORDS}u"),
+    ));
     let spirv = compiler.compile(ShaderSource::File("probe_memory.comp"), &defines)?;
     let source_binding = match mode {
         MemoryMode::TexelGather => binding::PROBE_TEXELS,
@@ -231,7 +274,11 @@ pub fn memory_probe(
         &kinds,
         std::mem::size_of::<CountPush>() as u32,
     )?;
-    let words: Vec<u32> = (0..PROBE_WORDS).map(probe_word).collect();
+    let words: Vec<u32> = if mode == MemoryMode::Atomic {
+        vec![0; PROBE_ATOMIC_WORDS as usize]
+    } else {
+        (0..PROBE_WORDS).map(probe_word).collect()
+    };
     let source = Buffer::from_slice(ctx, "probe words", &words)?;
     drop(words);
     let out = Buffer::new(
@@ -245,32 +292,13 @@ pub fn memory_probe(
         &pipeline,
         &[(binding::PROBE, &out), (source_binding, &source)],
     )?;
-    let push = CountPush {
-        count: invocations,
-        iterations,
-        _pad: [0; 2],
-    };
-    let mut gpu_ms = Vec::new();
-    for i in 0..=repeats {
-        let t = ctx.submit(|rec| {
-            rec.dispatch(
-                &pipeline,
-                &group,
-                bytemuck::bytes_of(&push),
-                [invocations.div_ceil(64), 1, 1],
-                mode.name(),
-            )
-        })?;
-        if i > 0 {
-            gpu_ms.extend(t.iter().filter_map(|t| t.gpu_ms));
-        }
-    }
+    let gpu_ms = timed_dispatches(ctx, &pipeline, &group, invocations, iterations, repeats)?;
     let ms = median(&gpu_ms);
     let loads = f64::from(invocations) * f64::from(iterations);
-    let bytes_per_load = if mode == MemoryMode::Stream {
-        16.0
-    } else {
-        4.0
+    let bytes_per_load = match mode {
+        MemoryMode::Stream => 16.0,
+        MemoryMode::Atomic => 8.0,
+        _ => 4.0,
     };
     let rate = |n: f64| if ms > 0.0 { n / (ms * 1e-3) } else { 0.0 };
     let output: Vec<[u32; 4]> = out.read(ctx)?;
@@ -284,6 +312,11 @@ pub fn memory_probe(
             .take(invocations as usize)
             .map(|o| o[0])
             .collect(),
+        atomic_words: if mode == MemoryMode::Atomic {
+            source.read(ctx)?
+        } else {
+            Vec::new()
+        },
     })
 }
 
@@ -296,9 +329,11 @@ pub struct Ceilings {
     pub texel_gathers_per_s: f64,
     /// Streaming read bandwidth, bytes per second.
     pub stream_bytes_per_s: f64,
+    /// Float adds by compare-and-swap per second, at random words of a 4 MiB buffer.
+    pub atomic_adds_per_s: f64,
 }
 
-/// Measures [`Ceilings`]: `probe_fma`, then `probe_memory` in its three modes, each the median
+/// Measures [`Ceilings`]: `probe_fma`, then `probe_memory` in its four modes, each the median
 /// of `repeats` dispatches after a warm-up.
 pub fn ceilings(
     ctx: &Context,
@@ -312,6 +347,7 @@ pub fn ceilings(
         gathers_per_s: run(MemoryMode::Gather)?.loads_per_s,
         texel_gathers_per_s: run(MemoryMode::TexelGather)?.loads_per_s,
         stream_bytes_per_s: run(MemoryMode::Stream)?.bytes_per_s,
+        atomic_adds_per_s: run(MemoryMode::Atomic)?.loads_per_s,
     })
 }
 

@@ -77,7 +77,7 @@ fn sweep_writes_rows_plot_and_caches_the_reference() {
         assert!(first > next && next > 0, "{first} {next}");
         assert_eq!(r.non_finite, Some(0));
         // Linear MLS on grid neighbours: both ceiling shares by the stated model.
-        let (fma, gather) = (finite(r.fma_share), finite(r.gather_share));
+        let (fma, gather) = (finite(r.fma_share), finite(r.memory_share));
         assert!(
             fma > 0.0 && gather > 0.0 && fma < 10.0 && gather < 10.0,
             "{r:?}"
@@ -160,6 +160,36 @@ fn sweep_writes_rows_plot_and_caches_the_reference() {
     let truth: Vec<Row> = read_csv(&out3.join("results.csv")).expect("rows");
     assert!(truth[0].reference.contains("analytic"), "{:?}", truth[0]);
     assert!(finite(truth[0].rmse) > finite(rows[0].rmse), "{truth:?}");
+
+    // Splatting rows are measured on splat_accumulate against the FMA and atomic ceilings.
+    let out4 = d.join("out4");
+    let mut args = vec![
+        "bench",
+        "--methods",
+        "splat",
+        "--repeat",
+        "1",
+        "--warmup",
+        "0",
+        "--out",
+        s(&out4),
+        "--cache",
+        s(&cache),
+    ];
+    args.extend(SMALL);
+    run_ok(&args);
+    let splat: Vec<Row> = read_csv(&out4.join("results.csv")).expect("rows");
+    let r = &splat[0];
+    assert!(
+        r.kernel_ms.contains("splat_accumulate=") && r.evaluations.is_none(),
+        "{r:?}"
+    );
+    let (fma, atomic) = (finite(r.fma_share), finite(r.memory_share));
+    assert!(
+        fma > 0.0 && atomic > 0.0 && fma < 10.0 && atomic < 10.0,
+        "{r:?}"
+    );
+    assert_eq!(r.bound_by, if fma >= atomic { "fma" } else { "atomic" });
 }
 
 #[test]

@@ -111,16 +111,8 @@ fn exact_needs_a_generated_volume_and_ray_casting() {
     )
     .expect("scene");
     let field = scene.field(|_| {}).expect("field");
-    let err = vmls::splat::SplatSetup::new(
-        vmls::splat::Shading::Pre,
-        &scene.render.splat,
-        &scene.camera,
-        scene.render.early_termination,
-        scene.render.background,
-        &scene.isosurfaces,
-        &scene.lighting,
-        &field,
-    )
-    .expect_err("splatting has no exact field");
+    let err = scene
+        .splat_setup(vmls::splat::Shading::Pre, &field)
+        .expect_err("splatting has no exact field");
     assert!(err.to_string().contains("reconstruction.method"), "{err}");
 }

@@ -223,6 +223,7 @@ fn memory_probes_match_their_cpu_twin() {
         MemoryMode::Gather,
         MemoryMode::TexelGather,
         MemoryMode::Stream,
+        MemoryMode::Atomic,
     ] {
         let (count, iterations) = (300, 17);
         let probe = memory_probe(&ctx, &compiler, mode, count, iterations, 1).expect("probe");
@@ -236,6 +237,11 @@ fn memory_probes_match_their_cpu_twin() {
             );
         }
         assert!(probe.loads_per_s > 0.0 && probe.bytes_per_s > probe.loads_per_s);
+        if mode == MemoryMode::Atomic {
+            // Two dispatches (a warm-up and one timed): every add counted, none lost.
+            let want = vmls::probe::atomic_reference(count, iterations, 2);
+            assert_eq!(probe.atomic_words, want);
+        }
     }
     finish(ctx);
 }

@@ -5,7 +5,7 @@ mod common;
 
 use common::*;
 use vmls::render::gpu::{GpuField, render};
-use vmls::render::renderer::{Renderer, View};
+use vmls::render::renderer::Renderer;
 use vmls::scene::Scene;
 
 fn scene(extra: &[&str]) -> Scene {
@@ -30,17 +30,7 @@ fn later_frames_rebuild_only_what_changed() {
     let field = base.field(|_| {}).expect("field");
     let mut renderer = Renderer::new(&ctx, field.clone()).expect("renderer");
     let frame = |r: &mut Renderer, s: &Scene, camera: &vmls::render::camera::Camera| {
-        r.render(
-            &View {
-                camera,
-                settings: &s.render,
-                transfer: &s.transfer,
-                isosurfaces: &s.isosurfaces,
-                lighting: &s.lighting,
-            },
-            |_| {},
-        )
-        .expect("frame")
+        r.render(&s.view_with(camera), |_| {}).expect("frame")
     };
     let (_, first) = frame(&mut renderer, &base, &base.camera);
     assert!(first.tables_built && first.pipeline_built && first.targets_allocated);

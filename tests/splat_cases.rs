@@ -8,7 +8,7 @@ use common::splat::*;
 use common::*;
 use vmls::render::camera::Projection;
 use vmls::render::raycast::raycast_image;
-use vmls::render::renderer::{Renderer, View};
+use vmls::render::renderer::Renderer;
 use vmls::render::{Field, RenderError};
 use vmls::scene::Scene;
 use vmls::splat::accumulate::splat_image;
@@ -332,16 +332,7 @@ fn a_new_camera_reuses_the_splatting_kernels_pipelines_and_buffers() {
     let mut renderer = Renderer::new(&ctx, field.clone()).expect("renderer");
     let mut frame = |camera: &vmls::render::camera::Camera| {
         renderer
-            .render(
-                &View {
-                    camera,
-                    settings: &s.render,
-                    transfer: &s.transfer,
-                    isosurfaces: &s.isosurfaces,
-                    lighting: &s.lighting,
-                },
-                |_| {},
-            )
+            .render(&s.view_with(camera), |_| {})
             .expect("frame")
     };
     let (_, first) = frame(&s.camera);

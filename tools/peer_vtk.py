@@ -32,7 +32,8 @@ COLUMNS = ["source", "method", "settings", "device", "driver", "vmls_version", "
            "height", "frames", "gpu_ms", "gpu_ms_min", "gpu_ms_max", "kernel_ms", "wall_ms",
            "first_frame_wall_ms", "first_frame_gpu_ms", "prepare_ms", "evaluations",
            "evaluations_per_s", "bytes_uploaded_first", "bytes_uploaded_next", "rmse", "max_abs",
-           "max_x", "max_y", "psnr", "non_finite", "reference", "variant"]
+           "max_x", "max_y", "psnr", "non_finite", "fma_share", "memory_share", "bound_by",
+           "reference", "variant"]
 
 
 def apply_set(scene, arg):
@@ -181,7 +182,7 @@ def main():
             "first_frame_gpu_ms": "", "prepare_ms": 0.0, "evaluations": "",
             "evaluations_per_s": "", "bytes_uploaded_first": "", "bytes_uploaded_next": "",
             "rmse": "", "max_abs": "", "max_x": "", "max_y": "", "psnr": "", "non_finite": "",
-            "reference": "", "variant": f"image={image_path}",
+            "fma_share": "", "memory_share": "", "bound_by": "", "reference": "", "variant": f"image={image_path}",
         })
     with open(os.path.join(a.out, "results.csv"), "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=COLUMNS)

@@ -13,6 +13,7 @@
 //!   device, driver, vmls version and commit) and the plot `speed_error.svg`/`.png`.
 //! - This module sits above `scene`; nothing below imports it.
 
+pub mod ceiling;
 pub mod metrics;
 pub mod peer;
 pub mod plot;
@@ -21,7 +22,7 @@ pub mod results;
 
 use crate::render::RenderError;
 use crate::render::output::write_image;
-use crate::render::renderer::{GpuImage, Renderer, View};
+use crate::render::renderer::{GpuImage, Renderer};
 use crate::scene::{Scene, SceneError};
 use crate::vk::{Context, ShaderCompiler, ShaderSource};
 use reference::{Reference, ReferenceMode, reference_image};
@@ -310,13 +311,7 @@ pub fn run(
         let Some((_, field, prepare_ms)) = prepared.as_ref() else {
             return Err(BenchError::Usage("no field prepared".into()));
         };
-        let view = View {
-            camera: &scene.camera,
-            settings: &scene.render,
-            transfer: &scene.transfer,
-            isosurfaces: &scene.isosurfaces,
-            lighting: &scene.lighting,
-        };
+        let view = scene.view();
         let bytes0 = ctx.bytes_uploaded();
         let first_start = Instant::now();
         let mut renderer = Renderer::new(ctx, field.clone())?;
@@ -384,14 +379,30 @@ pub fn run(
                 &image.pixels,
             )?;
         }
-        let shares = ceilings
-            .as_ref()
-            .and_then(|c| ceiling_shares(c, scene, raycast, evaluations, gpu_med, field));
+        let shares = match (&ceilings, &image.splat) {
+            (Some(c), None) => {
+                // k, the model's one measured input: mean weighted neighbours at random points.
+                let points = crate::probe::random_points(field, 4096, 0.0, 7);
+                let k = crate::probe::mls_probe(ctx, &compiler, field, &points, 0)?.mean_neighbours;
+                let cost = ceiling::evaluation_cost(field, k);
+                Some(ceiling::shares(c, cost, evaluations, gpu_med))
+            }
+            (Some(c), Some(report)) => {
+                let exact = image
+                    .shaders
+                    .iter()
+                    .any(|(_, d)| d.contains(&("SPLAT_EXACT".into(), "1".into())));
+                Some(ceiling::splat_shares(c, report, exact))
+            }
+            _ => None,
+        };
         let row = Row {
             fma_share: shares.map(|s| s.0),
-            gather_share: shares.map(|s| s.1),
+            memory_share: shares.map(|s| s.1),
             bound_by: match shares {
                 Some((f, g)) if f >= g => "fma".into(),
+                Some(_) if !raycast => "atomic".into(),
+                Some(_) if field.uses_octree() => "texel-gather".into(),
                 Some(_) => "gather".into(),
                 None => String::new(),
             },
@@ -430,34 +441,6 @@ pub fn run(
         rows.push(row);
     }
     Ok((rows, reference))
-}
-
-/// Shares of the FMA and gather ceilings a ray-casting frame reached, by the model documented
-/// on [`Row::fma_share`]: only for linear MLS on grid neighbours.
-fn ceiling_shares(
-    c: &crate::probe::Ceilings,
-    scene: &Scene,
-    raycast: bool,
-    evaluations: u64,
-    gpu_ms: f64,
-    field: &crate::render::Field,
-) -> Option<(f64, f64)> {
-    use crate::recon::{Basis, ReconMethod};
-    let r = &scene.reconstruction;
-    let grid = !field.uses_octree();
-    if !raycast || !grid || r.basis != Basis::Linear || r.method != ReconMethod::Mls {
-        return None;
-    }
-    let seconds = gpu_ms * 1e-3;
-    let k = 4.0 / 3.0 * std::f64::consts::PI * r.support.powi(3);
-    let flops = evaluations as f64 * (39.0 * k + 56.0);
-    let bx = (2.0 * r.support).floor() + 1.0;
-    let window = ((bx + 3.0) / 4.0).ceil();
-    let loads = evaluations as f64 * bx * bx * window;
-    Some((
-        flops / seconds / (c.fma_gflops * 1e9),
-        loads / seconds / c.gathers_per_s,
-    ))
 }
 
 /// The run's context for `results.json`.

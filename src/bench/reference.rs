@@ -15,7 +15,7 @@
 
 use super::BenchError;
 use crate::render::output::{read_image, write_image};
-use crate::render::renderer::{Renderer, View};
+use crate::render::renderer::Renderer;
 use crate::scene::{Scene, VolumeSource};
 use crate::vk::Context;
 use sha2::{Digest, Sha256};
@@ -95,14 +95,7 @@ fn render(scene: &Scene, mode: ReferenceMode, ctx: &Context) -> Result<Vec<[f32;
     match mode {
         ReferenceMode::Gpu => {
             let mut renderer = Renderer::new(ctx, field)?;
-            let view = View {
-                camera: &scene.camera,
-                settings: &scene.render,
-                transfer: &scene.transfer,
-                isosurfaces: &scene.isosurfaces,
-                lighting: &scene.lighting,
-            };
-            Ok(renderer.render(&view, |_| {})?.0.pixels)
+            Ok(renderer.render(&scene.view(), |_| {})?.0.pixels)
         }
         ReferenceMode::Cpu => {
             let setup = scene.ray_setup(&field)?;

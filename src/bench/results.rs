@@ -55,14 +55,19 @@ pub struct Row {
     pub max_y: Option<u32>,
     pub psnr: Option<f64>,
     pub non_finite: Option<u64>,
-    /// Share of the device's ceilings the frame's ray-casting kernel reached (`vmls probe`'s
-    /// `probe_fma` and `probe_memory:gather`, measured in the same run), by a stated model:
-    /// [MLS] Table 2's 39k + 56 flops per linear evaluation with k = (4/3)π·support³
-    /// neighbours, and MLS_GRID_BOX² rows × MLS_GRID_WINDOW vec4 loads per grid evaluation.
-    /// Empty where the model does not apply (splatting, octree neighbours, other bases).
+    /// Share of the device's ceilings the frame's ray-casting kernel reached, by the cost model
+    /// of [`super::ceiling`] against `probe_fma` and the gather ceiling of its loads
+    /// (`probe_memory:gather`, or `:texel-gather` on the octree path), measured in the same run.
+    /// Splatting rows: `splat_accumulate`'s shares of the FMA and atomic-add ceilings.
+    /// `bound_by` names the larger (`fma`, `gather`, `texel-gather`, `atomic`); all three are
+    /// empty when the run skipped the ceilings.
+    /// These three columns may be missing from imported files (rows written before them).
+    #[serde(default)]
     pub fma_share: Option<f64>,
-    pub gather_share: Option<f64>,
+    #[serde(default)]
+    pub memory_share: Option<f64>,
     /// The larger of the two: `fma` or `gather`.
+    #[serde(default)]
     pub bound_by: String,
     /// What the error was measured against.
     pub reference: String,
@@ -186,7 +191,7 @@ mod tests {
             psnr: Some(-20.0 * rmse.log10()),
             non_finite: Some(0),
             fma_share: Some(0.1),
-            gather_share: None,
+            memory_share: None,
             bound_by: "fma".into(),
             reference: "r".into(),
             variant: "x".into(),

@@ -311,23 +311,7 @@ fn tf_spike(env: &Env<'_>) -> Result<Vec<Outcome>, BenchError> {
 
 fn tangent_rays(env: &Env<'_>) -> Result<Vec<Outcome>, BenchError> {
     let size = if env.quick { 64 } else { 128 };
-    let n = 33;
-    let h = 2.0 / (n - 1) as f64;
-    let mut values = Vec::with_capacity(n * n * n);
-    for k in 0..n {
-        for j in 0..n {
-            for i in 0..n {
-                let p = [i, j, k].map(|c| -1.0 + c as f64 * h);
-                values.push((p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() as f32);
-            }
-        }
-    }
-    let volume = Volume {
-        dims: [n; 3],
-        origin: [-1.0; 3],
-        spacing: [h; 3],
-        values,
-    };
+    let volume = super::grid_volume(33, |p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt());
     let (radius, distance, fov) = (0.6f64, 4.0f64, 24.0f64);
     let w = size.to_string();
     let mut out = Vec::new();

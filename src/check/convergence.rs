@@ -15,9 +15,8 @@
 //!
 //! The observed order is the least-squares slope of log error against log refinement.
 
-use super::{Bound, Case, Env, Outcome, rmse};
+use super::{Bound, Case, Env, Outcome, grid_volume, rmse};
 use crate::bench::BenchError;
-use crate::data::Volume;
 use crate::probe::Lcg;
 use crate::render::Field;
 
@@ -164,20 +163,7 @@ fn spacing(env: &Env<'_>) -> Result<Vec<Outcome>, BenchError> {
         let mut hs = Vec::new();
         for &n in sizes {
             let h = 2.0 / (n - 1) as f64;
-            let mut values = Vec::with_capacity(n * n * n);
-            for k in 0..n {
-                for j in 0..n {
-                    for i in 0..n {
-                        values.push(smooth([i, j, k].map(|c| -1.0 + c as f64 * h)) as f32);
-                    }
-                }
-            }
-            let volume = Volume {
-                dims: [n; 3],
-                origin: [-1.0; 3],
-                spacing: [h; 3],
-                values,
-            };
+            let volume = grid_volume(n, smooth);
             let field = Field::new(volume, scene.reconstruction, &scene.octree, |_| {})?;
             let neighbours = field.neighbours();
             let mut rng = Lcg::new(17);
@@ -216,20 +202,7 @@ fn shepard_centroid(env: &Env<'_>, sizes: &[usize]) -> Result<Outcome, BenchErro
     let scene = env.scene(&["reconstruction.basis=\"constant\""])?;
     let n = sizes[0];
     let h = 2.0 / (n - 1) as f64;
-    let mut values = Vec::with_capacity(n * n * n);
-    for _k in 0..n {
-        for _j in 0..n {
-            for i in 0..n {
-                values.push((-1.0 + i as f64 * h) as f32);
-            }
-        }
-    }
-    let volume = Volume {
-        dims: [n; 3],
-        origin: [-1.0; 3],
-        spacing: [h; 3],
-        values,
-    };
+    let volume = grid_volume(n, |p| p[0]);
     let field = Field::new(volume, scene.reconstruction, &scene.octree, |_| {})?;
     let neighbours = field.neighbours();
     let mut rng = Lcg::new(23);

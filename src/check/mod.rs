@@ -16,7 +16,7 @@ pub mod convergence;
 use crate::bench::BenchError;
 use crate::bench::metrics::image_error;
 use crate::render::Field;
-use crate::render::renderer::{GpuImage, Renderer, View};
+use crate::render::renderer::{GpuImage, Renderer};
 use crate::scene::Scene;
 use crate::vk::Context;
 
@@ -117,14 +117,7 @@ impl Env<'_> {
     /// Renders `field` as `scene` describes on the GPU with a fresh renderer.
     pub fn render(&self, field: Field, scene: &Scene) -> Result<GpuImage, BenchError> {
         let mut renderer = Renderer::new(self.ctx, field)?;
-        let view = View {
-            camera: &scene.camera,
-            settings: &scene.render,
-            transfer: &scene.transfer,
-            isosurfaces: &scene.isosurfaces,
-            lighting: &scene.lighting,
-        };
-        let (image, _) = renderer.render(&view, |_| {})?;
+        let (image, _) = renderer.render(&scene.view(), |_| {})?;
         if self.ctx.validation_errors() > 0 {
             return Err(BenchError::Usage(format!(
                 "{} Vulkan validation error(s)",
@@ -137,6 +130,25 @@ impl Env<'_> {
     /// Renders the scene's own field.
     pub fn render_scene(&self, scene: &Scene) -> Result<GpuImage, BenchError> {
         self.render(scene.field(|_| {})?, scene)
+    }
+}
+
+/// An n³ grid over [-1, 1]³ sampling `f`.
+pub fn grid_volume(n: usize, f: impl Fn([f64; 3]) -> f64) -> crate::data::Volume {
+    let h = 2.0 / (n - 1) as f64;
+    let mut values = Vec::with_capacity(n * n * n);
+    for k in 0..n {
+        for j in 0..n {
+            for i in 0..n {
+                values.push(f([i, j, k].map(|c| -1.0 + c as f64 * h)) as f32);
+            }
+        }
+    }
+    crate::data::Volume {
+        dims: [n; 3],
+        origin: [-1.0; 3],
+        spacing: [h; 3],
+        values,
     }
 }
 

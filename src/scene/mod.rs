@@ -722,6 +722,40 @@ impl Scene {
         }
     }
 
+    /// What the persistent renderer draws for this scene: its camera and everything else.
+    pub fn view(&self) -> crate::render::renderer::View<'_> {
+        self.view_with(&self.camera)
+    }
+
+    /// As [`Scene::view`] with another camera (an orbit, a nudged eye).
+    pub fn view_with<'a>(&'a self, camera: &'a Camera) -> crate::render::renderer::View<'a> {
+        crate::render::renderer::View {
+            camera,
+            settings: &self.render,
+            transfer: &self.transfer,
+            isosurfaces: &self.isosurfaces,
+            lighting: &self.lighting,
+        }
+    }
+
+    /// The splatting setup of this scene's camera and settings for a field.
+    pub fn splat_setup(
+        &self,
+        shading: crate::splat::Shading,
+        field: &Field,
+    ) -> Result<crate::splat::SplatSetup, RenderError> {
+        crate::splat::SplatSetup::new(
+            shading,
+            &self.render.splat,
+            &self.camera,
+            self.render.early_termination,
+            self.render.background,
+            &self.isosurfaces,
+            &self.lighting,
+            field,
+        )
+    }
+
     /// The ray setup of this scene's camera, integrator, isosurfaces and lighting for a field.
     pub fn ray_setup(&self, field: &Field) -> Result<RaySetup, RenderError> {
         RaySetup::new(

@@ -199,10 +199,16 @@ fn splat_accumulate(
                     continue;
                 }
                 let g = splat_footprint(s, setup, f64::from(x), f64::from(y), ta, tb);
+                counts.evaluated += 1;
                 // Post-shaded weights carry the data's sign: only zero is nothing.
                 if g == 0.0 {
                     continue;
                 }
+                counts.updates += match setup.shading {
+                    Shading::Post => 1,
+                    Shading::Pre if s.opacity > 0.0 => 5,
+                    Shading::Pre => 4,
+                };
                 match setup.shading {
                     Shading::Pre if s.opacity > 0.0 => {
                         let e = &mut frame.sheet[p];

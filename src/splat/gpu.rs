@@ -22,7 +22,7 @@ const SLABS_PER_SUBMISSION: u32 = 1024;
 /// Invocations per workgroup of the one-dimensional kernels.
 const GROUP: u32 = 64;
 /// `SplatCounts` counters in the stats buffer.
-const STATS: usize = 9;
+const STATS: usize = 11;
 
 /// The kernels uploaded once per dataset: one `Sample` each, volume in `metric_off.z`.
 pub struct GpuKernels {
@@ -692,6 +692,8 @@ pub fn splat_frame(
             skipped_occluded: s(6),
             accumulated: s(7),
             oversized: s(8),
+            evaluated: s(9),
+            updates: s(10),
         },
         stage_ms,
         submissions,

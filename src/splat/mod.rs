@@ -317,6 +317,10 @@ pub struct SplatCounts {
     pub accumulated: u64,
     /// Kernels with more than `MAX_KERNEL_ENTRIES` entries (the frame fails).
     pub oversized: u64,
+    /// Pixels whose footprint `splat_accumulate` evaluated.
+    pub evaluated: u64,
+    /// Sheet values it added to (one compare-and-swap loop each).
+    pub updates: u64,
 }
 
 impl SplatCounts {

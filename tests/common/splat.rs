@@ -7,7 +7,7 @@ use vmls::data::dataset::Dataset;
 use vmls::recon::OctreeSettings;
 use vmls::render::Field;
 use vmls::render::raycast::raycast_image;
-use vmls::render::renderer::{GpuImage, Renderer, SplatReport, View};
+use vmls::render::renderer::{GpuImage, Renderer, SplatReport};
 use vmls::samples::Metric;
 use vmls::samples::{SampleSet, SampleSettings};
 use vmls::scene::Scene;
@@ -29,17 +29,7 @@ pub fn scene(extra: &[&str]) -> Scene {
 }
 
 pub fn setup(s: &Scene, field: &Field, shading: Shading) -> SplatSetup {
-    SplatSetup::new(
-        shading,
-        &s.render.splat,
-        &s.camera,
-        s.render.early_termination,
-        s.render.background,
-        &s.isosurfaces,
-        &s.lighting,
-        field,
-    )
-    .expect("splat setup")
+    s.splat_setup(shading, field).expect("splat setup")
 }
 
 /// A metric with axes `radii` rotated by `angle` about (1, 1, 1)/√3.
@@ -62,18 +52,7 @@ pub fn max_diff(a: &[[f32; 4]], b: &[[f64; 4]]) -> f64 {
 
 /// One frame of a scene's camera, settings, transfer function, isosurfaces and lighting.
 pub fn scene_frame(renderer: &mut Renderer, s: &Scene) -> GpuImage {
-    let (image, _) = renderer
-        .render(
-            &View {
-                camera: &s.camera,
-                settings: &s.render,
-                transfer: &s.transfer,
-                isosurfaces: &s.isosurfaces,
-                lighting: &s.lighting,
-            },
-            |_| {},
-        )
-        .expect("frame");
+    let (image, _) = renderer.render(&s.view(), |_| {}).expect("frame");
     image
 }
 

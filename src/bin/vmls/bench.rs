@@ -124,7 +124,7 @@ fn line(i: usize, r: &Row) -> String {
         opt(r.psnr, 1),
         match (
             r.bound_by.as_str(),
-            r.fma_share.zip(r.gather_share).map(|(f, g)| f.max(g))
+            r.fma_share.zip(r.memory_share).map(|(f, g)| f.max(g))
         ) {
             ("", _) | (_, None) => "-".to_string(),
             (b, Some(x)) => format!("{b} {:.0}%", 100.0 * x),
@@ -238,18 +238,27 @@ pub fn bench(args: &BenchArgs) -> Result<(), CliError> {
         }
     })?;
     bar.finish_and_clear();
+    let csv = args.out.join("results.csv");
     for name in &args.peer {
-        let peer_rows = vmls::bench::peer::run_peer(name, &opts, &reference)?;
-        for r in &peer_rows {
-            println!("{} (peer {name})", line(rows.len(), r));
-            rows.push(r.clone());
+        match vmls::bench::peer::run_peer(name, &opts, &reference) {
+            Ok(peer_rows) => {
+                for r in peer_rows {
+                    println!("{} (peer {name})", line(rows.len(), &r));
+                    rows.push(r);
+                }
+            }
+            Err(e) => {
+                // Keep what vmls measured: minutes of work.
+                write_csv(&csv, &rows)?;
+                eprintln!("vmls: wrote {} before the peer failed", csv.display());
+                return Err(e.into());
+            }
         }
     }
     for (i, r) in imported.iter().enumerate() {
         println!("{} (imported from {})", line(rows.len() + i, r), r.source);
     }
     rows.extend(imported);
-    let csv = args.out.join("results.csv");
     write_csv(&csv, &rows)?;
     write_json(
         &args.out.join("results.json"),

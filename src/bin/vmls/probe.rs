@@ -117,10 +117,11 @@ pub fn run_probe(
         MemoryMode::Gather,
         MemoryMode::TexelGather,
         MemoryMode::Stream,
+        MemoryMode::Atomic,
     ] {
         let m = memory_probe(&ctx, &compiler, mode, 16384, 256, repeats)?;
         println!(
-            "{}: {:.3} G loads/s, {:.2} GB/s (median of {} dispatches)",
+            "{}: {:.3} G operations/s, {:.2} GB/s (median of {} dispatches)",
             mode.name(),
             m.loads_per_s * 1e-9,
             m.bytes_per_s * 1e-9,

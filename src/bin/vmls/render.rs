@@ -8,7 +8,7 @@ use vmls::data::dataset::Location;
 use vmls::render::RenderError;
 use vmls::render::evalmap::{check_path, write_eval_map};
 use vmls::render::output::{format_of, write_image};
-use vmls::render::renderer::{Renderer, View};
+use vmls::render::renderer::Renderer;
 use vmls::scene::Scene;
 
 pub fn run_render(
@@ -50,13 +50,7 @@ pub fn run_render(
     let mut image = None;
     for k in 0..frames_wanted.max(1) {
         let camera = scene.camera.orbited((10.0 * k as f64).to_radians());
-        let view = View {
-            camera: &camera,
-            settings: &scene.render,
-            transfer: &scene.transfer,
-            isosurfaces: &scene.isosurfaces,
-            lighting: &scene.lighting,
-        };
+        let view = scene.view_with(&camera);
         let bar = progress_bar("render");
         let (img, frame) = renderer.render(&view, |f| bar.set_position((f * 1000.0) as u64))?;
         bar.finish_and_clear();
@@ -184,16 +178,7 @@ pub fn run_render_cpu(
     let field = scene.field(|_| {})?;
     let (pixels, splat): (Vec<[f64; 4]>, _) = match scene.render.method.splat_shading() {
         Some(shading) => {
-            let setup = vmls::splat::SplatSetup::new(
-                shading,
-                &scene.render.splat,
-                &scene.camera,
-                scene.render.early_termination,
-                scene.render.background,
-                &scene.isosurfaces,
-                &scene.lighting,
-                &field,
-            )?;
+            let setup = scene.splat_setup(shading, &field)?;
             let image = vmls::splat::accumulate::splat_image(&setup, &field, &scene.transfer);
             (image.pixels, Some(image.counts))
         }

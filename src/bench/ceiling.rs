@@ -1,0 +1,143 @@
+//! Which ceiling a frame's main kernel is bound by, and how close it came: a cost model per
+//! evaluation (or per splat footprint) divided by the rate `vmls probe` measured in the same run.
+//!
+//! The model counts the work the kernels do, by path (`glsl/include/neighbours.glsl`):
+//! - Flops of an MLS evaluation with T basis terms and k weighted neighbours:
+//!   k·(2·(T(T+1)/2 + T) + 11) for the normal equations and weights, plus 2T³/3 + 13 for the
+//!   solve — 39k + 56 for the linear basis, [MLS] Table 2's count. The Gaussian sum: 25 per
+//!   neighbour (a weight, an exp, a gradient); the analytic field: 60 per evaluation. Candidate
+//!   tests that find no weight are not counted, so the FMA share is a lower bound.
+//! - Loads: the grid's row path (constant and linear bases) reads π·s² rows of
+//!   MLS_GRID_WINDOW vec4s (s = support in spacings); the generic grid path one 32-bit value per
+//!   weighted neighbour (again for an analytic-gradient pass), against the storage-gather
+//!   ceiling. The octree path reads depth node texels and, per reference of the leaf
+//!   (references / leaves on average), an index and 2 or 3 sample texels, against the
+//!   texel-gather ceiling.
+//! - k is measured, not modelled: the mean weighted neighbours of `mls_eval` at random points
+//!   of the domain (`probe::mls_probe`).
+//!
+//! - Splatting rows are measured on `splat_accumulate`, nine tenths of a splatting frame: per
+//!   pixel whose footprint it evaluates, 110 flops for exact footprints and 65 for affine ones
+//!   (the operations of `splat_footprint`, a transcendental function counted as 10), against
+//!   `probe_fma`; per sheet update one compare-and-swap add, against
+//!   `probe_memory:atomic-add`. Both counts come from the kernel's own counters.
+
+use crate::probe::Ceilings;
+use crate::recon::{Basis, GradientMode, ReconMethod};
+use crate::render::Field;
+
+/// Work of one evaluation, by the model above.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EvaluationCost {
+    pub flops: f64,
+    /// Load instructions, and whether they go through texel views.
+    pub loads: f64,
+    pub texel_loads: bool,
+}
+
+/// The model's cost of one evaluation of `field` with `k` weighted neighbours on average.
+pub fn evaluation_cost(field: &Field, k: f64) -> EvaluationCost {
+    let r = &field.reconstruction;
+    let t = r.basis.terms() as f64;
+    let flops = match r.method {
+        ReconMethod::Exact => 60.0,
+        ReconMethod::Gaussian => 25.0 * k + 10.0,
+        ReconMethod::Mls => {
+            k * (2.0 * (t * (t + 1.0) / 2.0 + t) + 11.0) + 2.0 * t.powi(3) / 3.0 + 13.0
+        }
+    };
+    let gradient_pass = if r.gradient == GradientMode::Analytic {
+        k
+    } else {
+        0.0
+    };
+    let (loads, texel_loads) = match (&field.octree, r.method) {
+        (_, ReconMethod::Exact) => (0.0, false),
+        (None, ReconMethod::Mls) if r.basis != Basis::Quadratic => {
+            let s = r.support;
+            let bx = (2.0 * s).floor() + 1.0;
+            let window = ((bx + 3.0) / 4.0).ceil();
+            (std::f64::consts::PI * s * s * window + gradient_pass, false)
+        }
+        (None, _) => (k + gradient_pass, false),
+        (Some(o), _) => {
+            let stats = o.stats(0);
+            let per_leaf = stats.references as f64 / stats.leaves.max(1) as f64;
+            let texels = if field.has_full_metric() { 4.0 } else { 3.0 };
+            let depth = f64::from(stats.depth);
+            (
+                depth + per_leaf * texels * (1.0 + gradient_pass.min(1.0)),
+                true,
+            )
+        }
+    };
+    EvaluationCost {
+        flops,
+        loads,
+        texel_loads,
+    }
+}
+
+/// Flops of one `splat_footprint` evaluation, exact or affine.
+pub fn footprint_flops(exact: bool) -> f64 {
+    if exact { 110.0 } else { 65.0 }
+}
+
+/// (FMA share, atomic share) of a splatting frame's `splat_accumulate`.
+pub fn splat_shares(
+    c: &Ceilings,
+    report: &crate::render::renderer::SplatReport,
+    exact: bool,
+) -> (f64, f64) {
+    let seconds = report.stage_ms[2] * 1e-3;
+    (
+        report.counts.evaluated as f64 * footprint_flops(exact) / seconds / (c.fma_gflops * 1e9),
+        report.counts.updates as f64 / seconds / c.atomic_adds_per_s,
+    )
+}
+
+/// (FMA share, load share) of a frame that made `evaluations` in `gpu_ms`.
+pub fn shares(c: &Ceilings, cost: EvaluationCost, evaluations: u64, gpu_ms: f64) -> (f64, f64) {
+    let per_s = evaluations as f64 / (gpu_ms * 1e-3);
+    let load_ceiling = if cost.texel_loads {
+        c.texel_gathers_per_s
+    } else {
+        c.gathers_per_s
+    };
+    (
+        per_s * cost.flops / (c.fma_gflops * 1e9),
+        per_s * cost.loads / load_ceiling,
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn linear_flops_are_the_papers_count() {
+        let t = Basis::Linear.terms() as f64;
+        let k = 56.0;
+        let flops = k * (2.0 * (t * (t + 1.0) / 2.0 + t) + 11.0) + 2.0 * t.powi(3) / 3.0 + 13.0;
+        assert!((flops - (39.0 * k + 56.0)).abs() < 0.7, "{flops}");
+    }
+
+    #[test]
+    fn shares_divide_rates_by_ceilings() {
+        let c = Ceilings {
+            fma_gflops: 100.0,
+            gathers_per_s: 1e8,
+            texel_gathers_per_s: 2e8,
+            stream_bytes_per_s: 1e9,
+            atomic_adds_per_s: 1e7,
+        };
+        let cost = EvaluationCost {
+            flops: 2000.0,
+            loads: 50.0,
+            texel_loads: true,
+        };
+        // 1e6 evaluations in 1 s: 2 GFLOP/s of 100, 5e7 texel loads/s of 2e8.
+        let (f, l) = shares(&c, cost, 1_000_000, 1000.0);
+        assert!((f - 0.02).abs() < 1e-12 && (l - 0.25).abs() < 1e-12);
+    }
+}
