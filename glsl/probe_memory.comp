@@ -3,6 +3,9 @@
 //   PROBE_MODE 0: 32-bit gathers from a storage buffer at a random index per lane and load,
 //   PROBE_MODE 1: the same gathers through a storage texel buffer (`imageLoad` of r32ui),
 //   PROBE_MODE 2: streaming vec4 loads, consecutive lanes at consecutive addresses,
+//   PROBE_COHERENT 1 (modes 0 and 1): each group of 8 consecutive invocations (one SIMD row on
+//   llvmpipe) reads 8 consecutive words at a random base, as neighbouring rays read one octree
+//   leaf or nearby grid rows,
 //   PROBE_MODE 3: float adds by compare-and-swap loops (as splat_accumulate's sheet_add) at a
 //   random one of PROBE_ATOMIC_WORDS words (a 512² image's four channels).
 // Every invocation makes `iterations` independent loads from PROBE_WORDS words (a power of two)
@@ -56,7 +59,11 @@ void main() {
         }
         sum += 1u;
 #else
+#if PROBE_COHERENT == 1
+        uint i = (probe_hash((id >> 3u) * push.iterations + it) & (PROBE_WORDS - 1u) & ~7u) | (id & 7u);
+#else
         uint i = probe_hash(id * push.iterations + it) & (PROBE_WORDS - 1u);
+#endif
 #if PROBE_MODE == 1
         sum += imageLoad(probe_texels, int(i)).x;
 #else

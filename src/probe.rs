@@ -148,6 +148,11 @@ pub enum MemoryMode {
     Gather,
     /// The same through a texel-buffer view.
     TexelGather,
+    /// Gathers where each group of 8 invocations reads 8 consecutive words at a random base
+    /// (neighbouring rays reading one octree leaf or nearby grid rows), storage buffer.
+    CoherentGather,
+    /// The same through a texel-buffer view.
+    CoherentTexelGather,
     /// Consecutive vec4 loads.
     Stream,
     /// Float adds by compare-and-swap loops at random words (splat_accumulate's sheet_add).
@@ -159,6 +164,8 @@ impl MemoryMode {
         match self {
             MemoryMode::Gather => "probe_memory:gather",
             MemoryMode::TexelGather => "probe_memory:texel-gather",
+            MemoryMode::CoherentGather => "probe_memory:coherent-gather",
+            MemoryMode::CoherentTexelGather => "probe_memory:coherent-texel-gather",
             MemoryMode::Stream => "probe_memory:stream",
             MemoryMode::Atomic => "probe_memory:atomic-add",
         }
@@ -166,8 +173,8 @@ impl MemoryMode {
 
     fn define(self) -> &'static str {
         match self {
-            MemoryMode::Gather => "0",
-            MemoryMode::TexelGather => "1",
+            MemoryMode::Gather | MemoryMode::CoherentGather => "0",
+            MemoryMode::TexelGather | MemoryMode::CoherentTexelGather => "1",
             MemoryMode::Stream => "2",
             MemoryMode::Atomic => "3",
         }
@@ -202,6 +209,11 @@ pub fn memory_reference(mode: MemoryMode, id: u32, count: u32, iterations: u32) 
                 }
             }
             MemoryMode::Atomic => sum = sum.wrapping_add(1),
+            MemoryMode::CoherentGather | MemoryMode::CoherentTexelGather => {
+                let base = probe_hash((id >> 3).wrapping_mul(iterations).wrapping_add(it));
+                let i = (base & (PROBE_WORDS - 1) & !7) | (id & 7);
+                sum = sum.wrapping_add(probe_word(i));
+            }
             MemoryMode::Gather | MemoryMode::TexelGather => {
                 let i =
                     probe_hash(id.wrapping_mul(iterations).wrapping_add(it)) & (PROBE_WORDS - 1);
@@ -253,6 +265,14 @@ pub fn memory_probe(
 ) -> Result<MemoryProbe, VkError> {
     let mut defines = binding_defines();
     defines.push(("PROBE_MODE".into(), mode.define().into()));
+    let coherent = matches!(
+        mode,
+        MemoryMode::CoherentGather | MemoryMode::CoherentTexelGather
+    );
+    defines.push((
+        "PROBE_COHERENT".into(),
+        if coherent { "1" } else { "0" }.into(),
+    ));
     defines.push(("PROBE_WORDS".into(), format!("{PROBE_WORDS}u")));
     defines.push((
         "PROBE_ATOMIC_WORDS".into(),
@@ -260,7 +280,7 @@ pub fn memory_probe(
     ));
     let spirv = compiler.compile(ShaderSource::File("probe_memory.comp"), &defines)?;
     let source_binding = match mode {
-        MemoryMode::TexelGather => binding::PROBE_TEXELS,
+        MemoryMode::TexelGather | MemoryMode::CoherentTexelGather => binding::PROBE_TEXELS,
         _ => binding::PROBE_SOURCE,
     };
     let kinds = [
@@ -327,13 +347,16 @@ pub struct Ceilings {
     /// 32-bit random gathers per second: storage buffer, texel-buffer view.
     pub gathers_per_s: f64,
     pub texel_gathers_per_s: f64,
+    /// The same when each 8 invocations read 8 consecutive words at a random base.
+    pub coherent_gathers_per_s: f64,
+    pub coherent_texel_gathers_per_s: f64,
     /// Streaming read bandwidth, bytes per second.
     pub stream_bytes_per_s: f64,
     /// Float adds by compare-and-swap per second, at random words of a 4 MiB buffer.
     pub atomic_adds_per_s: f64,
 }
 
-/// Measures [`Ceilings`]: `probe_fma`, then `probe_memory` in its four modes, each the median
+/// Measures [`Ceilings`]: `probe_fma`, then `probe_memory` in its six modes, each the median
 /// of `repeats` dispatches after a warm-up.
 pub fn ceilings(
     ctx: &Context,
@@ -346,6 +369,8 @@ pub fn ceilings(
         fma_gflops: fma.gflops,
         gathers_per_s: run(MemoryMode::Gather)?.loads_per_s,
         texel_gathers_per_s: run(MemoryMode::TexelGather)?.loads_per_s,
+        coherent_gathers_per_s: run(MemoryMode::CoherentGather)?.loads_per_s,
+        coherent_texel_gathers_per_s: run(MemoryMode::CoherentTexelGather)?.loads_per_s,
         stream_bytes_per_s: run(MemoryMode::Stream)?.bytes_per_s,
         atomic_adds_per_s: run(MemoryMode::Atomic)?.loads_per_s,
     })

@@ -222,6 +222,8 @@ fn memory_probes_match_their_cpu_twin() {
     for mode in [
         MemoryMode::Gather,
         MemoryMode::TexelGather,
+        MemoryMode::CoherentGather,
+        MemoryMode::CoherentTexelGather,
         MemoryMode::Stream,
         MemoryMode::Atomic,
     ] {

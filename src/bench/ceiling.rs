@@ -9,10 +9,11 @@
 //!   tests that find no weight are not counted, so the FMA share is a lower bound.
 //! - Loads: the grid's row path (constant and linear bases) reads π·s² rows of
 //!   MLS_GRID_WINDOW vec4s (s = support in spacings); the generic grid path one 32-bit value per
-//!   weighted neighbour (again for an analytic-gradient pass), against the storage-gather
-//!   ceiling. The octree path reads depth node texels and, per reference of the leaf
-//!   (references / leaves on average), an index and 2 or 3 sample texels, against the
-//!   texel-gather ceiling.
+//!   weighted neighbour (again for an analytic-gradient pass), against the coherent
+//!   storage-gather ceiling. The octree path reads depth node texels and, per reference of the
+//!   leaf (references / leaves on average), an index and 2 or 3 sample texels, against the
+//!   coherent texel-gather ceiling. Coherent, because neighbouring rays of a SIMD row read the
+//!   same leaf or nearby grid rows.
 //! - k is measured, not modelled: the mean weighted neighbours of `mls_eval` at random points
 //!   of the domain (`probe::mls_probe`).
 //!
@@ -99,10 +100,11 @@ pub fn splat_shares(
 /// (FMA share, load share) of a frame that made `evaluations` in `gpu_ms`.
 pub fn shares(c: &Ceilings, cost: EvaluationCost, evaluations: u64, gpu_ms: f64) -> (f64, f64) {
     let per_s = evaluations as f64 / (gpu_ms * 1e-3);
+    // Neighbouring rays read the same leaf or nearby grid rows: the coherent ceilings.
     let load_ceiling = if cost.texel_loads {
-        c.texel_gathers_per_s
+        c.coherent_texel_gathers_per_s
     } else {
-        c.gathers_per_s
+        c.coherent_gathers_per_s
     };
     (
         per_s * cost.flops / (c.fma_gflops * 1e9),
@@ -127,7 +129,9 @@ mod tests {
         let c = Ceilings {
             fma_gflops: 100.0,
             gathers_per_s: 1e8,
-            texel_gathers_per_s: 2e8,
+            texel_gathers_per_s: 1e8,
+            coherent_gathers_per_s: 1e8,
+            coherent_texel_gathers_per_s: 2e8,
             stream_bytes_per_s: 1e9,
             atomic_adds_per_s: 1e7,
         };

@@ -116,6 +116,8 @@ pub fn run_probe(
     for mode in [
         MemoryMode::Gather,
         MemoryMode::TexelGather,
+        MemoryMode::CoherentGather,
+        MemoryMode::CoherentTexelGather,
         MemoryMode::Stream,
         MemoryMode::Atomic,
     ] {
