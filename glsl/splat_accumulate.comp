@@ -28,9 +28,16 @@ layout(std430, binding = BINDING_SPLAT_STATS) buffer StatsBuf { uint stats[]; };
 const uint STAT_SKIPPED = 6u;
 const uint STAT_ACCUMULATED = 7u;
 // Pixels whose footprint was evaluated, and sheet updates (compare-and-swap adds): the work
-// `vmls bench` divides by the FMA and atomic ceilings.
+// `vmls bench` divides by the FMA and atomic ceilings. 64-bit: the high words sit 2 slots on.
 const uint STAT_EVALUATED = 9u;
 const uint STAT_UPDATES = 10u;
+
+void stat_add64(uint low, uint v) {
+    uint old = atomicAdd(stats[low], v);
+    if (old + v < old) {
+        atomicAdd(stats[low + 2u], 1u);
+    }
+}
 
 void sheet_add(uint index, float v) {
     uint old = sheets[index];
@@ -123,7 +130,7 @@ void main() {
                 }
             }
         }
-        atomicAdd(stats[STAT_EVALUATED], evaluated);
-        atomicAdd(stats[STAT_UPDATES], updates);
+        stat_add64(STAT_EVALUATED, evaluated);
+        stat_add64(STAT_UPDATES, updates);
     }
 }

@@ -199,7 +199,7 @@ fn bad_bench_arguments_fail_before_any_work() {
     let csv = out.join("results.csv");
     let bad_csv = d.join("bad.csv");
     std::fs::write(&bad_csv, "source,method\nvmls,fixed\n").expect("write");
-    let cases: [(&[&str], &[&str]); 5] = [
+    let cases: [(&[&str], &[&str]); 6] = [
         (
             &["--sweep", "render.step"],
             &["--sweep render.step", "section.key=value1"],
@@ -207,6 +207,10 @@ fn bad_bench_arguments_fail_before_any_work() {
         (&["--sweep", "render.step=1,-2"], &["render.step"]),
         (&["--methods", "fast"], &["render.method", "fast"]),
         (&["--repeat", "0"], &["--repeat"]),
+        (
+            &["--sweep", "camera.width=10,20"],
+            &["--sweep camera.width=10,20", "one reference"],
+        ),
         (&["--import", s(&bad_csv)], &["bad.csv", "line 2"]),
     ];
     for (extra, needles) in cases {

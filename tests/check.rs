@@ -54,9 +54,6 @@ fn unknown_case_is_an_error() {
         "--json",
         s(&json),
     ]);
-    assert_fails(
-        &out,
-        &["no case matches 'no-such-case'", "--list"],
-        &d.join("nothing"),
-    );
+    // Refused before any work: no JSON either.
+    assert_fails(&out, &["no case matches 'no-such-case'", "--list"], &json);
 }

@@ -32,7 +32,7 @@ fn gpu_exact_field_matches_the_analytic_function() {
         let neighbours_cpu = field.neighbours();
         let (mut worst_v, mut worst_g) = (0.0f64, 0.0f64);
         for (g, p) in out.iter().zip(&points) {
-            // The ML generator's frame is centred on the origin: frame = world coordinates.
+            // The ML generator's frame is centred on its grid: frame = the function's coordinates.
             let w = (glam::DVec3::from(*p) + field.frame_origin).to_array();
             let (v, grad) = (rho(w[0], w[1], w[2]), rho_gradient(w[0], w[1], w[2]));
             let cpu = field
@@ -55,6 +55,63 @@ fn gpu_exact_field_matches_the_analytic_function() {
         assert!(
             worst_g < 1e-4,
             "{neighbours:?}: gradient error {worst_g:.2e}"
+        );
+    }
+}
+
+#[test]
+fn exact_field_follows_a_moved_grid_on_both_twins() {
+    // The same generated grid placed at 1e3: the field moves with it, on the CPU and the GPU.
+    let mut r = recon(
+        Basis::Linear,
+        Weight::Wendland,
+        GradientMode::Local,
+        NeighbourMode::Grid,
+        2.4,
+    );
+    r.method = ReconMethod::Exact;
+    let mut volume = vmls::data::marschner_lobb::generate(9);
+    volume.origin = volume.origin.map(|o| o + 1e3);
+    let field = vmls::render::Field::new(
+        volume.clone(),
+        r,
+        &vmls::recon::OctreeSettings::default(),
+        |_| {},
+    )
+    .expect("field");
+    // At the grid points the field is the sample values (ρ at the function's own grid).
+    let points: Vec<[f64; 3]> = [[0usize, 0, 0], [3, 5, 7], [8, 8, 8]]
+        .iter()
+        .map(|&[i, j, k]| {
+            let p = volume.position(i, j, k);
+            (glam::DVec3::from(p) - field.frame_origin).to_array()
+        })
+        .collect();
+    let (ctx, compiler) = gpu();
+    let gpu_field = GpuField::upload(&ctx, &field).expect("upload");
+    let (out, _) = evaluate(&ctx, &compiler, &field, &gpu_field, &points, 1).expect("eval");
+    drop(gpu_field);
+    finish(ctx);
+    let neighbours = field.neighbours();
+    for (n, ((g, p), ijk)) in out
+        .iter()
+        .zip(&points)
+        .zip([[0, 0, 0], [3, 5, 7], [8, 8, 8]])
+        .enumerate()
+    {
+        let sample = f64::from(volume.values[volume.index(ijk[0], ijk[1], ijk[2])]);
+        let cpu = field
+            .evaluate(neighbours.as_ref(), *p)
+            .expect("defined")
+            .value;
+        assert!(
+            (cpu - sample).abs() < 1e-6,
+            "point {n}: CPU {cpu} vs sample {sample}"
+        );
+        assert!(
+            (f64::from(g.value) - sample).abs() < 1e-5,
+            "point {n}: GPU {} vs {sample}",
+            g.value
         );
     }
 }

@@ -72,6 +72,8 @@ def load_volume(scene, base):
         reader.SetFileName(path)
         reader.Update()
         img = reader.GetOutput()
+        if "scalars" in vol:
+            img.GetPointData().SetActiveScalars(vol["scalars"])
         return img, min(img.GetSpacing())
     return ml_volume(int(vol.get("resolution", 41)))
 
@@ -134,14 +136,15 @@ def main():
     win.SetSize(width, height)
     win.AddRenderer(ren)
     camera = ren.GetActiveCamera()
-    camera.SetPosition(*cam.get("eye", [3.6, 2.4, 2.9]))
+    # vmls's defaults (src/scene/mod.rs) where the scene leaves a key out.
+    camera.SetPosition(*cam.get("eye", [3.0, 2.0, 2.5]))
     camera.SetFocalPoint(*cam.get("target", [0.0, 0.0, 0.0]))
     camera.SetViewUp(*cam.get("up", [0.0, 0.0, 1.0]))
-    if "view_height" in cam:
+    if cam.get("projection", "perspective") == "orthographic":
         camera.ParallelProjectionOn()
-        camera.SetParallelScale(cam["view_height"] / 2)
+        camera.SetParallelScale(cam.get("view_height", 2.0) / 2)
     else:
-        camera.SetViewAngle(cam.get("fov_y", 32.0))
+        camera.SetViewAngle(cam.get("fov_y", 30.0))
     grab = vtk.vtkWindowToImageFilter()
     grab.SetInput(win)
     grab.SetInputBufferTypeToRGBA()

@@ -283,8 +283,8 @@ MlsResult gaussian_evaluate(vec3 x) {
 
 #if MLS_EXACT == 1
 // Stage `exact_evaluate` (twin: the Exact arm of Field::evaluate): the Marschner–Lobb function
-// and its analytic gradient (data::marschner_lobb::rho, rho_gradient). The generator's grid
-// starts at world (-1,-1,-1), so world = x + (-1,-1,-1) - grid_origin (frame-relative).
+// and its analytic gradient (data::marschner_lobb::rho, rho_gradient) at x's position relative
+// to the generated grid, whose first sample is the function's (-1,-1,-1).
 MlsResult exact_evaluate(vec3 x) {
     const float PI = 3.14159265358979;
     vec3 w = x - vec3(1.0) - params.grid_origin.xyz;

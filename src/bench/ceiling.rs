@@ -118,10 +118,25 @@ mod tests {
 
     #[test]
     fn linear_flops_are_the_papers_count() {
-        let t = Basis::Linear.terms() as f64;
+        let r = crate::scene::Scene::load(None, &[])
+            .expect("scene")
+            .reconstruction;
+        let field = Field::new(
+            crate::data::marschner_lobb::generate(9),
+            r,
+            &crate::recon::OctreeSettings::default(),
+            |_| {},
+        )
+        .expect("field");
         let k = 56.0;
-        let flops = k * (2.0 * (t * (t + 1.0) / 2.0 + t) + 11.0) + 2.0 * t.powi(3) / 3.0 + 13.0;
-        assert!((flops - (39.0 * k + 56.0)).abs() < 0.7, "{flops}");
+        let cost = evaluation_cost(&field, k);
+        assert!((cost.flops - (39.0 * k + 56.0)).abs() < 0.7, "{cost:?}");
+        // Grid rows: π·2.4² rows of two vec4s, storage loads.
+        let rows = std::f64::consts::PI * 2.4 * 2.4 * 2.0;
+        assert!(
+            (cost.loads - rows).abs() < 1e-9 && !cost.texel_loads,
+            "{cost:?}"
+        );
     }
 
     #[test]

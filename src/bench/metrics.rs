@@ -24,7 +24,7 @@ pub struct ImageError {
 }
 
 /// The error of `image` against `reference`, both RGBA rows from the top, `width` wide.
-/// `None` when the sizes differ.
+/// `None` when the pixel counts differ (callers compare the dimensions too).
 pub fn image_error(image: &[[f32; 4]], reference: &[[f32; 4]], width: u32) -> Option<ImageError> {
     if image.len() != reference.len() || width == 0 {
         return None;
@@ -48,7 +48,12 @@ pub fn image_error(image: &[[f32; 4]], reference: &[[f32; 4]], width: u32) -> Op
         }
         channels += 3;
     }
-    let rmse = (sum / channels.max(1) as f64).sqrt();
+    // No finite pixel: no error to speak of (NaN), not a perfect match.
+    let rmse = if channels == 0 {
+        f64::NAN
+    } else {
+        (sum / channels as f64).sqrt()
+    };
     let w = width as usize;
     Some(ImageError {
         rmse,

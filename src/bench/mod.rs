@@ -253,6 +253,27 @@ pub fn run(
             "--repeat must be at least 1 (timed frames per configuration)".into(),
         ));
     }
+    // One reference serves every configuration: keys that change the picture itself cannot be
+    // swept (run them as separate benches).
+    if let Some(s) = opts.sweeps.iter().find(|s| {
+        [
+            "volume.",
+            "camera.",
+            "transfer.",
+            "lighting.",
+            "render.background",
+        ]
+        .iter()
+        .any(|p| s.key.starts_with(p))
+    }) {
+        return Err(BenchError::Sweep {
+            arg: format!("{}={}", s.key, s.values.join(",")),
+            message: "every configuration is compared with one reference image, so keys of \
+                      [volume], [camera], [transfer], [lighting] and render.background cannot \
+                      be swept: run one bench per value (--set)"
+                .into(),
+        });
+    }
     let commit = commit();
     let configs = configurations(&opts.methods, &opts.sweeps);
     // Validate every configuration before any GPU work, so a bad value fails fast.
@@ -273,7 +294,12 @@ pub fn run(
     }
     ref_set.extend(opts.reference_set.iter().cloned());
     let ref_scene = Scene::load(opts.scene.as_deref(), &ref_set)?;
-    std::fs::create_dir_all(opts.out.join("images")).map_err(|e| io_err(&opts.out, e))?;
+    // Images of an earlier run in the same directory must not pass for this run's.
+    let images = opts.out.join("images");
+    if images.is_dir() {
+        std::fs::remove_dir_all(&images).map_err(|e| io_err(&images, e))?;
+    }
+    std::fs::create_dir_all(&images).map_err(|e| io_err(&opts.out, e))?;
     if let Some(dir) = &opts.dump_spirv {
         std::fs::create_dir_all(dir).map_err(|e| io_err(dir, e))?;
     }
@@ -369,7 +395,10 @@ pub fn run(
         let (gpu_med, gpu_min, gpu_max) = metrics::spread(&gpu);
         let raycast = image.splat.is_none();
         let evaluations: u64 = image.counts.iter().map(|&c| u64::from(c)).sum();
-        let error = metrics::image_error(&image.pixels, &reference.pixels, scene.camera.width);
+        let same_size =
+            (scene.camera.width, scene.camera.height) == (reference.width, reference.height);
+        let error = metrics::image_error(&image.pixels, &reference.pixels, scene.camera.width)
+            .filter(|_| same_size);
         let image_path = opts.out.join("images").join(format!("{index:03}.exr"));
         if image.pixels.iter().all(|p| p.iter().all(|v| v.is_finite())) {
             write_image(

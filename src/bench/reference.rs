@@ -9,9 +9,9 @@
 //! error includes the reconstruction change.
 //!
 //! The cache key is a SHA-256 over everything the image depends on: the validated reference
-//! scene, the bytes of its data file, the vmls version and commit, and where it was rendered (the
-//! device and driver, or the f64 CPU twins). A changed key renders anew; stale files are never
-//! read.
+//! scene, the bytes of its data file, the vmls version, commit and executable, and where it was
+//! rendered (the device and driver, or the f64 CPU twins). A changed key renders anew; a cache
+//! file that cannot be read, or has another size, is a miss and is rendered over.
 
 use super::BenchError;
 use crate::render::output::{read_image, write_image};
@@ -55,6 +55,11 @@ pub fn reference_key(
     h.update(b"vmls reference v1\n");
     h.update(env!("CARGO_PKG_VERSION").as_bytes());
     h.update(commit.as_bytes());
+    // The binary itself: a dirty tree keeps its `git describe` name across edits, the bytes
+    // of the executable do not.
+    if let Ok(exe) = std::env::current_exe().and_then(std::fs::read) {
+        h.update(Sha256::digest(&exe));
+    }
     h.update(format!("{scene:?}").as_bytes());
     if let VolumeSource::File { path, .. } = &scene.volume {
         let bytes = std::fs::read(path).map_err(|e| BenchError::Io {
@@ -124,18 +129,18 @@ pub fn reference_image(
         }
         None => None,
     };
-    if let Some(p) = path.as_ref().filter(|p| p.is_file()) {
-        let (w, h, pixels) = read_image(p)?;
-        if (w, h) == (width, height) {
-            return Ok(Reference {
-                pixels,
-                width,
-                height,
-                description,
-                cached: true,
-                path: path.clone(),
-            });
-        }
+    if let Some(p) = path.as_ref().filter(|p| p.is_file())
+        && let Ok((w, h, pixels)) = read_image(p)
+        && (w, h) == (width, height)
+    {
+        return Ok(Reference {
+            pixels,
+            width,
+            height,
+            description,
+            cached: true,
+            path: path.clone(),
+        });
     }
     let pixels = render(scene, mode, ctx)?;
     if let Some(p) = &path {

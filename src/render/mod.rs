@@ -208,8 +208,11 @@ impl Field {
                 x,
             ),
             ReconMethod::Exact => {
-                // Stage `exact_evaluate`: the generator's function at the world position.
-                let [wx, wy, wz] = (DVec3::from(x) + self.frame_origin).to_array();
+                // Stage `exact_evaluate`: the generator's function at x's position relative to
+                // the generated grid, whose first sample is the function's (-1, -1, -1) — as
+                // the GPU twin computes it, wherever the grid was placed.
+                let origin = self.grid()?.origin;
+                let [wx, wy, wz] = std::array::from_fn(|a| x[a] - origin[a] - 1.0);
                 Some(MlsValue {
                     value: crate::data::marschner_lobb::rho(wx, wy, wz),
                     gradient: crate::data::marschner_lobb::rho_gradient(wx, wy, wz),

@@ -22,7 +22,8 @@ const SLABS_PER_SUBMISSION: u32 = 1024;
 /// Invocations per workgroup of the one-dimensional kernels.
 const GROUP: u32 = 64;
 /// `SplatCounts` counters in the stats buffer.
-const STATS: usize = 11;
+/// Counter slots: 0–8 one word each, 9–10 the low and 11–12 the high words of two 64-bit ones.
+const STATS: usize = 13;
 
 /// The kernels uploaded once per dataset: one `Sample` each, volume in `metric_off.z`.
 pub struct GpuKernels {
@@ -692,8 +693,8 @@ pub fn splat_frame(
             skipped_occluded: s(6),
             accumulated: s(7),
             oversized: s(8),
-            evaluated: s(9),
-            updates: s(10),
+            evaluated: s(9) | s(11) << 32,
+            updates: s(10) | s(12) << 32,
         },
         stage_ms,
         submissions,

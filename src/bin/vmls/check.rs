@@ -28,6 +28,15 @@ pub fn check(args: &CheckArgs) -> Result<(), CliError> {
         }
         return Ok(());
     }
+    if let Some(f) = &args.case
+        && !vmls::check::all_cases()
+            .iter()
+            .any(|c| c.name.contains(f.as_str()))
+    {
+        return Err(CliError::Usage(format!(
+            "no case matches '{f}' (vmls check --list names them)"
+        )));
+    }
     let ctx = context(&args.device)?;
     println!("device: {} ({})", ctx.info().name, ctx.info().driver);
     let outcomes = vmls::check::run(&ctx, args.quick, args.case.as_deref(), |o| {
@@ -52,12 +61,6 @@ pub fn check(args: &CheckArgs) -> Result<(), CliError> {
                 "outcomes": outcomes,
             }),
         )?;
-    }
-    if outcomes.is_empty() {
-        return Err(CliError::Usage(format!(
-            "no case matches '{}' (vmls check --list names them)",
-            args.case.as_deref().unwrap_or("")
-        )));
     }
     let failed = outcomes.iter().filter(|o| !o.passed).count();
     if failed > 0 {
