@@ -160,6 +160,16 @@ pub enum MemoryMode {
 }
 
 impl MemoryMode {
+    /// Every mode, in the order `vmls probe` prints them.
+    pub const ALL: [MemoryMode; 6] = [
+        MemoryMode::Gather,
+        MemoryMode::TexelGather,
+        MemoryMode::CoherentGather,
+        MemoryMode::CoherentTexelGather,
+        MemoryMode::Stream,
+        MemoryMode::Atomic,
+    ];
+
     pub fn name(self) -> &'static str {
         match self {
             MemoryMode::Gather => "probe_memory:gather",

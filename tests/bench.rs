@@ -18,6 +18,27 @@ fn run_ok(args: &[&str]) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
+/// `vmls bench` of one fixed-step configuration (step 1) at the small size, into `out`, with
+/// the reference cache `cache` and `extra` arguments.
+fn one_fixed(out: &std::path::Path, cache: &std::path::Path, extra: &[&str]) -> String {
+    let mut args = vec![
+        "bench",
+        "--methods",
+        "fixed",
+        "--sweep",
+        "render.step=1",
+        "--repeat",
+        "1",
+        "--out",
+        s(out),
+        "--cache",
+        s(cache),
+    ];
+    args.extend(extra);
+    args.extend(SMALL);
+    run_ok(&args)
+}
+
 fn finite(v: Option<f64>) -> f64 {
     let x = v.expect("value present");
     assert!(x.is_finite(), "{x}");
@@ -102,26 +123,17 @@ fn sweep_writes_rows_plot_and_caches_the_reference() {
 
     // Second run: the reference comes from the cache, and imported rows join the table.
     let out2 = d.join("out2");
-    let mut args = vec![
-        "bench",
-        "--methods",
-        "fixed",
-        "--sweep",
-        "render.step=1",
-        "--repeat",
-        "1",
-        "--out",
-        s(&out2),
-        "--cache",
-        s(&cache),
-        "--no-ceilings",
-        "--own-reference",
-        "--import",
-    ];
     let first_csv = out.join("results.csv");
-    args.push(s(&first_csv));
-    args.extend(SMALL);
-    let stdout = run_ok(&args);
+    let stdout = one_fixed(
+        &out2,
+        &cache,
+        &[
+            "--no-ceilings",
+            "--own-reference",
+            "--import",
+            s(&first_csv),
+        ],
+    );
     assert!(stdout.contains("(cached)"), "{stdout}");
     assert!(
         !stdout.contains("ceilings:"),
@@ -137,22 +149,7 @@ fn sweep_writes_rows_plot_and_caches_the_reference() {
     // By default a generated volume is measured against its analytic field: a new reference,
     // and the error now includes the reconstruction's.
     let out3 = d.join("out3");
-    let mut args = vec![
-        "bench",
-        "--methods",
-        "fixed",
-        "--sweep",
-        "render.step=1",
-        "--repeat",
-        "1",
-        "--no-ceilings",
-        "--out",
-        s(&out3),
-        "--cache",
-        s(&cache),
-    ];
-    args.extend(SMALL);
-    let stdout = run_ok(&args);
+    let stdout = one_fixed(&out3, &cache, &["--no-ceilings"]);
     assert!(
         stdout.contains("the analytic field") && !stdout.contains("(cached)"),
         "{stdout}"

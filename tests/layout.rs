@@ -219,14 +219,7 @@ fn fma_probe_matches_its_cpu_twin() {
 fn memory_probes_match_their_cpu_twin() {
     use vmls::probe::{MemoryMode, memory_probe, memory_reference};
     let (ctx, compiler) = gpu();
-    for mode in [
-        MemoryMode::Gather,
-        MemoryMode::TexelGather,
-        MemoryMode::CoherentGather,
-        MemoryMode::CoherentTexelGather,
-        MemoryMode::Stream,
-        MemoryMode::Atomic,
-    ] {
+    for mode in MemoryMode::ALL {
         let (count, iterations) = (300, 17);
         let probe = memory_probe(&ctx, &compiler, mode, count, iterations, 1).expect("probe");
         assert_eq!(probe.output.len(), count as usize);

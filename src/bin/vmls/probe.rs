@@ -113,14 +113,7 @@ pub fn run_probe(
         median(&fma.gpu_ms)
     );
     let mut memory = Vec::new();
-    for mode in [
-        MemoryMode::Gather,
-        MemoryMode::TexelGather,
-        MemoryMode::CoherentGather,
-        MemoryMode::CoherentTexelGather,
-        MemoryMode::Stream,
-        MemoryMode::Atomic,
-    ] {
+    for mode in MemoryMode::ALL {
         let m = memory_probe(&ctx, &compiler, mode, 16384, 256, repeats)?;
         println!(
             "{}: {:.3} G operations/s, {:.2} GB/s (median of {} dispatches)",
