@@ -320,6 +320,8 @@ pub fn run(
         None
     };
     let mut prepared: Option<(String, crate::render::Field, f64)> = None;
+    // The cost model's k per prepared field: measured once, not per configuration.
+    let mut neighbours: Option<(String, f64)> = None;
     let mut rows = Vec::with_capacity(configs.len());
     for (index, (config, scene)) in configs.iter().zip(&scenes).enumerate() {
         let settings = config.join(";");
@@ -411,8 +413,16 @@ pub fn run(
         let shares = match (&ceilings, &image.splat) {
             (Some(c), None) => {
                 // k, the model's one measured input: mean weighted neighbours at random points.
-                let points = crate::probe::random_points(field, 4096, 0.0, 7);
-                let k = crate::probe::mls_probe(ctx, &compiler, field, &points, 0)?.mean_neighbours;
+                let k = match &neighbours {
+                    Some((key, k)) if *key == field_key(scene) => *k,
+                    _ => {
+                        let points = crate::probe::random_points(field, 4096, 0.0, 7);
+                        let k = crate::probe::mls_probe(ctx, &compiler, field, &points, 0)?
+                            .mean_neighbours;
+                        neighbours = Some((field_key(scene), k));
+                        k
+                    }
+                };
                 let cost = ceiling::evaluation_cost(field, k);
                 Some(ceiling::shares(c, cost, evaluations, gpu_med))
             }
