@@ -76,7 +76,7 @@ pub mod binding {
     pub fn kind(b: u32) -> crate::vk::BindingKind {
         use crate::vk::BindingKind;
         match b {
-            SAMPLES => BindingKind::TexelRgba32Float,
+            SAMPLES | GRID => BindingKind::TexelRgba32Float,
             NODES => BindingKind::TexelRgba32Uint,
             INDICES | PROBE_TEXELS => BindingKind::TexelR32Uint,
             _ => BindingKind::Storage,

@@ -9,8 +9,13 @@
 
 #if MLS_NEIGHBOURS == 0
 // The grid, GRID_PAD zeros first; the same buffer is also read as vec4s (descriptor aliasing).
-layout(std430, binding = BINDING_GRID) readonly buffer GridBuf { float grid[]; };
-layout(std430, binding = BINDING_GRID) readonly buffer GridVec4Buf { vec4 grid4[]; };
+layout(binding = BINDING_GRID, rgba32f) uniform readonly imageBuffer grid_texels;
+#define grid4(i) imageLoad(grid_texels, int(i))
+float grid_value(int i) {
+    vec4 v = imageLoad(grid_texels, i >> 2);
+    int c = i & 3;
+    return c == 0 ? v.x : c == 1 ? v.y : c == 2 ? v.z : v.w;
+}
 #else
 // Texel-buffer views (binding::kind): imageLoad compiles to one gather per 8 lanes on llvmpipe,
 // where a storage-buffer load with a per-lane index is a loop over the lanes. `Sample` i is the
@@ -91,7 +96,7 @@ void mls_gather_rows(vec3 x, inout MlsSystem s) {
             int o = start - 4 * q;
             float win[4 * MLS_GRID_WINDOW];
             [[unroll]] for (int v = 0; v < MLS_GRID_WINDOW; ++v) {
-                vec4 g4 = grid4[q + v];
+                vec4 g4 = grid4(q + v);
                 win[4 * v] = g4.x;
                 win[4 * v + 1] = g4.y;
                 win[4 * v + 2] = g4.z;
@@ -160,7 +165,7 @@ void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float
                 vec3 y = vec3((float(i) - gp.x) * inv_sc, yy, yz);
                 float rho2 = dot(y, y);
                 if (rho2 < 1.0) {
-                    float f = grid[GRID_PAD + row + i];
+                    float f = grid_value(GRID_PAD + row + i);
                     if (pass == 0u) {
                         mls_accumulate(s, y, rho2, f);
                     } else {
@@ -250,7 +255,7 @@ MlsResult gaussian_evaluate(vec3 x) {
                 vec3 y = (vec3(i, j, kk) - gp) * inv_sc;
                 float rho2 = dot(y, y);
                 if (rho2 < 1.0) {
-                    float wf = params.gauss_weight * grid[GRID_PAD + row + i] * exp(k * rho2);
+                    float wf = params.gauss_weight * grid_value(GRID_PAD + row + i) * exp(k * rho2);
                     value += wf;
                     // M d = d / h^2 = y / h.
                     grad += wf * (y * inv_h);
