@@ -70,9 +70,9 @@ pub mod binding {
     /// probe_memory: the same words through a `r32ui` texel-buffer view.
     pub const PROBE_TEXELS: u32 = 27;
 
-    /// How kernels read a binding: the octree's samples, nodes and references through
-    /// texel-buffer views (one AVX2 gather per 8 lanes on llvmpipe instead of a per-lane loop;
-    /// LAVAPIPE.md "Read paths"), everything else as storage buffers.
+    /// How kernels read a binding: the grid and the octree's samples, nodes and references
+    /// through texel-buffer views (one AVX2 gather per 8 lanes on llvmpipe instead of a per-lane
+    /// loop; LAVAPIPE.md "Read paths"), everything else as storage buffers.
     pub fn kind(b: u32) -> crate::vk::BindingKind {
         use crate::vk::BindingKind;
         match b {

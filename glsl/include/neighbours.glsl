@@ -8,7 +8,10 @@
 #include "mls.glsl"
 
 #if MLS_NEIGHBOURS == 0
-// The grid, GRID_PAD zeros first; the same buffer is also read as vec4s (descriptor aliasing).
+// The grid, GRID_PAD zeros first, through an rgba32f texel-buffer view (binding::kind): on
+// llvmpipe an imageLoad is one gather per 8 lanes where a storage-buffer load with a per-lane
+// index is a loop over the lanes; the linear ray caster ran 3× faster for it (BENCHMARKS.md).
+// Row windows read whole vec4s; single values pick their component.
 layout(binding = BINDING_GRID, rgba32f) uniform readonly imageBuffer grid_texels;
 #define grid4(i) imageLoad(grid_texels, int(i))
 float grid_value(int i) {
