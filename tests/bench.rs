@@ -103,7 +103,10 @@ fn sweep_writes_rows_plot_and_caches_the_reference() {
             fma > 0.0 && gather > 0.0 && fma < 10.0 && gather < 10.0,
             "{r:?}"
         );
-        assert_eq!(r.bound_by, if fma >= gather { "fma" } else { "gather" });
+        assert_eq!(
+            r.bound_by,
+            if fma >= gather { "fma" } else { "texel-gather" }
+        );
         assert!(finite(r.rmse) < 0.05, "{r:?}");
         assert!(finite(r.max_abs) >= finite(r.rmse));
     }

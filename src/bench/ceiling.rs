@@ -7,13 +7,12 @@
 //!   solve — 39k + 56 for the linear basis, [MLS] Table 2's count. The Gaussian sum: 25 per
 //!   neighbour (a weight, an exp, a gradient); the analytic field: 60 per evaluation. Candidate
 //!   tests that find no weight are not counted, so the FMA share is a lower bound.
-//! - Loads: the grid's row path (constant and linear bases) reads π·s² rows of
-//!   MLS_GRID_WINDOW vec4s (s = support in spacings); the generic grid path one 32-bit value per
-//!   weighted neighbour (again for an analytic-gradient pass), against the coherent
-//!   storage-gather ceiling. The octree path reads depth node texels and, per reference of the
-//!   leaf (references / leaves on average), an index and 2 or 3 sample texels, against the
-//!   coherent texel-gather ceiling. Coherent, because neighbouring rays of a SIMD row read the
-//!   same leaf or nearby grid rows.
+//! - Loads, all through texel-buffer views, against the coherent texel-gather ceiling
+//!   (neighbouring rays of a SIMD row read nearby grid rows or one leaf): the grid's row path
+//!   (constant and linear bases) reads π·s² rows of MLS_GRID_WINDOW vec4s (s = support in
+//!   spacings); the generic grid path one texel per weighted neighbour (again for an
+//!   analytic-gradient pass); the octree path depth node texels and, per reference of the leaf
+//!   (references / leaves on average), an index and 2 or 3 sample texels.
 //! - k is measured, not modelled: the mean weighted neighbours of `mls_eval` at random points
 //!   of the domain (`probe::mls_probe`).
 //!
@@ -58,9 +57,9 @@ pub fn evaluation_cost(field: &Field, k: f64) -> EvaluationCost {
             let s = r.support;
             let bx = (2.0 * s).floor() + 1.0;
             let window = ((bx + 3.0) / 4.0).ceil();
-            (std::f64::consts::PI * s * s * window + gradient_pass, false)
+            (std::f64::consts::PI * s * s * window + gradient_pass, true)
         }
-        (None, _) => (k + gradient_pass, false),
+        (None, _) => (k + gradient_pass, true),
         (Some(o), _) => {
             let stats = o.stats(0);
             let per_leaf = stats.references as f64 / stats.leaves.max(1) as f64;
@@ -131,10 +130,10 @@ mod tests {
         let k = 56.0;
         let cost = evaluation_cost(&field, k);
         assert!((cost.flops - (39.0 * k + 56.0)).abs() < 0.7, "{cost:?}");
-        // Grid rows: π·2.4² rows of two vec4s, storage loads.
+        // Grid rows: π·2.4² rows of two vec4s, through the grid's texel view.
         let rows = std::f64::consts::PI * 2.4 * 2.4 * 2.0;
         assert!(
-            (cost.loads - rows).abs() < 1e-9 && !cost.texel_loads,
+            (cost.loads - rows).abs() < 1e-9 && cost.texel_loads,
             "{cost:?}"
         );
     }

@@ -441,8 +441,7 @@ pub fn run(
             bound_by: match shares {
                 Some((f, g)) if f >= g => "fma".into(),
                 Some(_) if !raycast => "atomic".into(),
-                Some(_) if field.uses_octree() => "texel-gather".into(),
-                Some(_) => "gather".into(),
+                Some(_) => "texel-gather".into(),
                 None => String::new(),
             },
             source: "vmls".into(),

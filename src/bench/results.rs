@@ -56,9 +56,8 @@ pub struct Row {
     pub psnr: Option<f64>,
     pub non_finite: Option<u64>,
     /// Share of the device's ceilings the frame's ray-casting kernel reached, by the cost model
-    /// of [`super::ceiling`] against `probe_fma` and the coherent gather ceiling of its loads
-    /// (`probe_memory:coherent-gather`, or `:coherent-texel-gather` on the octree path),
-    /// measured in the same run.
+    /// of [`super::ceiling`] against `probe_fma` and the coherent texel-gather ceiling of its
+    /// loads (`probe_memory:coherent-texel-gather`), measured in the same run.
     /// Splatting rows: `splat_accumulate`'s shares of the FMA and atomic-add ceilings.
     /// `bound_by` names the larger (`fma`, `gather`, `texel-gather`, `atomic`); all three are
     /// empty when the run skipped the ceilings.
@@ -67,7 +66,7 @@ pub struct Row {
     pub fma_share: Option<f64>,
     #[serde(default)]
     pub memory_share: Option<f64>,
-    /// Which of the two is larger: `fma`, `gather`, `texel-gather` or `atomic`.
+    /// Which of the two is larger: `fma`, `texel-gather` or `atomic`.
     #[serde(default)]
     pub bound_by: String,
     /// What the error was measured against.
