@@ -53,6 +53,16 @@ pub fn median(values: &[f64]) -> f64 {
     }
 }
 
+/// The output buffer of a probe: one 16-byte result per invocation.
+fn probe_output(ctx: &Context, invocations: u32) -> Result<Buffer, VkError> {
+    Buffer::new(
+        ctx,
+        "probe output",
+        u64::from(invocations) * 16,
+        BufferUsage::Storage,
+    )
+}
+
 /// Dispatches a probe `repeats + 1` times (64 invocations per group) and returns the GPU
 /// milliseconds of all but the first, which pays for compilation and first touches.
 fn timed_dispatches(
@@ -113,12 +123,7 @@ pub fn fma_probe(
         &[binding::PROBE],
         std::mem::size_of::<CountPush>() as u32,
     )?;
-    let out = Buffer::new(
-        ctx,
-        "probe output",
-        u64::from(invocations) * 16,
-        BufferUsage::Storage,
-    )?;
+    let out = probe_output(ctx, invocations)?;
     let group = BindGroup::new(ctx, &pipeline, &[(binding::PROBE, &out)])?;
     let gpu_ms = timed_dispatches(ctx, &pipeline, &group, invocations, iterations, repeats)?;
     let ms = median(&gpu_ms);
@@ -311,12 +316,7 @@ pub fn memory_probe(
     };
     let source = Buffer::from_slice(ctx, "probe words", &words)?;
     drop(words);
-    let out = Buffer::new(
-        ctx,
-        "probe output",
-        u64::from(invocations) * 16,
-        BufferUsage::Storage,
-    )?;
+    let out = probe_output(ctx, invocations)?;
     let group = BindGroup::new(
         ctx,
         &pipeline,

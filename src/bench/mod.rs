@@ -285,10 +285,10 @@ pub fn run(
     }
     let mut ref_set = opts.set.clone();
     ref_set.push("render.method=\"reference\"".into());
-    let generated = matches!(
-        Scene::load(opts.scene.as_deref(), &opts.set)?.volume,
-        crate::scene::VolumeSource::MarschnerLobb { .. }
-    );
+    // [volume] cannot be swept, so every configuration has the base scene's volume.
+    let generated = scenes
+        .first()
+        .is_some_and(|s| matches!(s.volume, crate::scene::VolumeSource::MarschnerLobb { .. }));
     if generated && opts.analytic_reference {
         ref_set.push("reconstruction.method=\"exact\"".into());
     }

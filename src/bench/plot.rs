@@ -93,10 +93,11 @@ fn draw<DB: DrawingBackend>(
         anno.label(name.as_str())
             .legend(move |(x, y)| Circle::new((x + 8, y), 5, color.filled()));
     }
-    let front: Vec<(f64, f64)> = pareto_front(rows)
+    let front_rows: Vec<(&Row, (f64, f64))> = pareto_front(rows)
         .into_iter()
-        .filter_map(|i| point(&rows[i]))
+        .filter_map(|i| point(&rows[i]).map(|p| (&rows[i], p)))
         .collect();
+    let front: Vec<(f64, f64)> = front_rows.iter().map(|(_, p)| *p).collect();
     chart
         .draw_series(LineSeries::new(
             front.iter().copied(),
@@ -112,17 +113,15 @@ fn draw<DB: DrawingBackend>(
                 .map(|&p| Circle::new(p, 8, BLACK.stroke_width(1))),
         )
         .map_err(err)?;
-    for i in pareto_front(rows) {
-        if let Some(p) = point(&rows[i]) {
-            let text = format!("  {} {}", series_name(&rows[i]), rows[i].short_settings());
-            chart
-                .draw_series(std::iter::once(Text::new(
-                    text,
-                    p,
-                    ("sans-serif", 11).into_font().color(&BLACK),
-                )))
-                .map_err(err)?;
-        }
+    for (row, p) in front_rows {
+        let text = format!("  {} {}", series_name(row), row.short_settings());
+        chart
+            .draw_series(std::iter::once(Text::new(
+                text,
+                p,
+                ("sans-serif", 11).into_font().color(&BLACK),
+            )))
+            .map_err(err)?;
     }
     chart
         .configure_series_labels()

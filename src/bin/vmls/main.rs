@@ -210,37 +210,31 @@ fn main() {
             eval_map,
             set,
             frames,
-            cpu: true,
-            device: _,
+            cpu,
+            device,
         } => {
-            if eval_map.is_some() || *frames != 1 {
-                Err(CliError::Usage(
-                    "--cpu renders one frame without evaluation counts: drop --eval-map and \
+            if *cpu {
+                if eval_map.is_some() || *frames != 1 {
+                    Err(CliError::Usage(
+                        "--cpu renders one frame without evaluation counts: drop --eval-map and \
                      --frames"
-                        .into(),
-                ))
+                            .into(),
+                    ))
+                } else {
+                    render::run_render_cpu(scene.as_deref(), output, stats.as_deref(), set)
+                }
             } else {
-                render::run_render_cpu(scene.as_deref(), output, stats.as_deref(), set)
+                render::run_render(
+                    scene.as_deref(),
+                    output,
+                    stats.as_deref(),
+                    eval_map.as_deref(),
+                    set,
+                    *frames,
+                    device,
+                )
             }
         }
-        Command::Render {
-            scene,
-            output,
-            stats,
-            eval_map,
-            set,
-            frames,
-            cpu: false,
-            device,
-        } => render::run_render(
-            scene.as_deref(),
-            output,
-            stats.as_deref(),
-            eval_map.as_deref(),
-            set,
-            *frames,
-            device,
-        ),
         Command::Bench(args) => bench::bench(args),
         Command::Check(args) => check::check(args),
         Command::Compare {
