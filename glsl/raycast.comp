@@ -38,20 +38,24 @@ layout(push_constant) uniform Push { RayPush band; };
 
 #include "interval.glsl"
 
+#if SKIP == 1
+#include "skip.glsl"
+#endif
+
 #if HULL == 1
 #include "hull.glsl"
 #endif
 
 // Outcome of integrating one chunk of a ray.
 const uint CHUNK_DONE = 0u;      // reached last_step, more to do in this segment
-const uint CHUNK_FINISHED = 1u;  // the segment is complete (exit or termination)
+const uint CHUNK_FINISHED = 1u;  // the segment is complete (t_exit or termination)
 const uint CHUNK_TRUNCATED = 2u; // a loop ended early: the driver's loop limit
 
 #if RAY_METHOD == 0
 // Midpoint rule (riemann, reference): steps first .. last_step of n = ⌈L/δ⌉; isosurfaces
 // crossed between consecutive samples are composited before the later sample's step. `prev`
 // is the previous sample (w = 0 before the first). With isosurfaces, f is also evaluated at the
-// entry and the exit, so that a surface in the half step before the first sample or after the
+// entry and the t_exit, so that a surface in the half step before the first sample or after the
 // last is not missed.
 uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, inout vec4 prev,
                inout vec3 color, inout float transmittance, inout uint evaluations) {
@@ -63,6 +67,9 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
     uint last = min(last_step, steps);
     uint i = first;
     bool exited = false;
+#if SKIP == 1
+    float occupied_until = -3.0e38;
+#endif
     for (; i < last; ++i) {
         float ta = t0 + float(i) * params.step;
         float dt = min(params.step, t1 - ta);
@@ -70,6 +77,25 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
             exited = true;
             break;
         }
+#if SKIP == 1
+        // A midpoint in an empty block adds nothing: resume at the first midpoint past the
+        // block (twin of skip in integrate_riemann). With isosurfaces, the knot at the t_exit
+        // stands in for the skipped samples (no crossing inside an empty block).
+        float tm = ta + 0.5 * dt;
+        if (tm >= occupied_until) {
+            float t_exit;
+            if (skip_block(o, d, tm, t_exit)) {
+                uint j = min(resume_interval(t0 - 0.5 * params.step, params.step, t_exit, i + 1u), last);
+                if (isos) {
+                    prev = knot(o, d, min(t_exit, t1), evaluations);
+                }
+                i = j - 1u;
+                continue;
+            } else {
+                occupied_until = t_exit;
+            }
+        }
+#endif
         vec4 k = knot(o, d, ta + 0.5 * dt, evaluations);
         emit_crossings(o, d, prev, k, color, transmittance, evaluations);
         prev = k;
@@ -106,12 +132,35 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
     }
     uint last = min(last_step, steps);
     uint i = first;
+#if SKIP == 1
+    float occupied_until = -3.0e38;
+#endif
     for (; i < last; ++i) {
         float ta = t0 + float(i) * l;
         float tb = min(ta + l, t1);
         if (tb <= ta) {
             return CHUNK_FINISHED;
         }
+#if SKIP == 1
+        // Intervals inside an empty block are skipped; the first one reaching past it starts
+        // from a fresh knot (twin of skip in integrate_fixed).
+        if (ta >= occupied_until) {
+            float t_exit;
+            if (skip_block(o, d, ta, t_exit)) {
+                uint j = min(resume_interval(t0, l, t_exit, i), last);
+                if (j >= steps) {
+                    return CHUNK_FINISHED;
+                }
+                if (j > i) {
+                    prev = knot(o, d, t0 + float(j) * l, evaluations);
+                    i = j - 1u;
+                    continue;
+                }
+            } else {
+                occupied_until = t_exit;
+            }
+        }
+#endif
         vec4 next = knot(o, d, tb, evaluations);
         vec4 plain = knot_segment(prev, next, tb - ta, i + 1u < steps, 0u);
         emit_interval(o, d, prev, next, tb - ta, plain, color, transmittance, evaluations);

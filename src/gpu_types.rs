@@ -69,6 +69,14 @@ pub mod binding {
     pub const PROBE_SOURCE: u32 = 26;
     /// probe_memory: the same words through a `r32ui` texel-buffer view.
     pub const PROBE_TEXELS: u32 = 27;
+    /// The fast path's fine grid, (f, ∇f) per point, as the ray caster reads it (read-only).
+    pub const RESAMPLED: u32 = 28;
+    /// The same buffer as recon_resample writes it.
+    pub const RESAMPLE_TARGET: u32 = 29;
+    /// Empty-space skipping: the fast field's range per block, `vec4(min, max, 0, 0)`.
+    pub const SKIP_BLOCKS: u32 = 30;
+    /// Empty-space skipping: the frame's skip table (`SkipTable::gpu_words`).
+    pub const SKIP_TABLE: u32 = 31;
 
     /// How kernels read a binding: the grid and the octree's samples, nodes and references
     /// through texel-buffer views (one AVX2 gather per 8 lanes on llvmpipe instead of a per-lane
@@ -76,15 +84,17 @@ pub mod binding {
     pub fn kind(b: u32) -> crate::vk::BindingKind {
         use crate::vk::BindingKind;
         match b {
-            SAMPLES | GRID => BindingKind::TexelRgba32Float,
+            SAMPLES | GRID | RESAMPLED | RESAMPLE_TARGET | PREINT | SKIP_BLOCKS => {
+                BindingKind::TexelRgba32Float
+            }
             NODES => BindingKind::TexelRgba32Uint,
-            INDICES | PROBE_TEXELS => BindingKind::TexelR32Uint,
+            INDICES | PROBE_TEXELS | SKIP_TABLE => BindingKind::TexelR32Uint,
             _ => BindingKind::Storage,
         }
     }
 
     /// Every binding with its macro name.
-    pub const ALL: [(&str, u32); 28] = [
+    pub const ALL: [(&str, u32); 32] = [
         ("BINDING_PARAMS", PARAMS),
         ("BINDING_GRID", GRID),
         ("BINDING_SAMPLES", SAMPLES),
@@ -113,6 +123,10 @@ pub mod binding {
         ("BINDING_PIXEL_SEGMENTS", PIXEL_SEGMENTS),
         ("BINDING_PROBE_SOURCE", PROBE_SOURCE),
         ("BINDING_PROBE_TEXELS", PROBE_TEXELS),
+        ("BINDING_RESAMPLED", RESAMPLED),
+        ("BINDING_RESAMPLE_TARGET", RESAMPLE_TARGET),
+        ("BINDING_SKIP_BLOCKS", SKIP_BLOCKS),
+        ("BINDING_SKIP_TABLE", SKIP_TABLE),
     ];
 }
 

@@ -101,6 +101,7 @@ fn wraps_an_application_device() {
                     gradient: GradientMode::Local,
                     support: 2.4,
                     neighbours: NeighbourMode::Grid,
+                    resample: 0,
                 },
                 &OctreeSettings::default(),
                 |_| {},

@@ -310,8 +310,42 @@ MlsResult exact_evaluate(vec3 x) {
 }
 #endif
 
+#if MLS_RESAMPLED > 0
+// The fast path's fine grid (recon_resample.comp): (f, ∇f) at MLS_RESAMPLED points per
+// spacing, x fastest.
+layout(binding = BINDING_RESAMPLED, rgba32f) uniform readonly imageBuffer resampled;
+
+// Stage `resample_evaluate` (twin: ResampledGrid::evaluate in src/recon/resample.rs): x clamped
+// into the box; from the fine cell around it (8 texel reads), f = Σ w_c (f_c + ½ ∇f_c·(x − x_c))
+// with trilinear weights w_c (exact for quadratics) and ∇f interpolated trilinearly.
+MlsResult resampled_evaluate(vec3 x) {
+    ivec3 dims = (params.grid_dims.xyz - 1) * MLS_RESAMPLED + 1;
+    vec3 h = 1.0 / (params.grid_inv_spacing.xyz * float(MLS_RESAMPLED));
+    vec3 g = (x - params.grid_origin.xyz) * params.grid_inv_spacing.xyz * float(MLS_RESAMPLED);
+    g = clamp(g, vec3(0.0), vec3(dims - 1));
+    ivec3 cell = min(ivec3(g), max(dims - 2, ivec3(0)));
+    vec3 u = g - vec3(cell);
+    ivec3 next = ivec3(dims.x > 1 ? 1 : 0, dims.y > 1 ? dims.x : 0, dims.z > 1 ? dims.x * dims.y : 0);
+    int base = cell.x + dims.x * (cell.y + dims.y * cell.z);
+    float value = 0.0;
+    vec3 gradient = vec3(0.0);
+    [[unroll]] for (int c = 0; c < 8; ++c) {
+        vec3 b = vec3(c & 1, (c >> 1) & 1, c >> 2);
+        vec3 wa = mix(1.0 - u, u, b);
+        float w = wa.x * wa.y * wa.z;
+        vec4 v = imageLoad(resampled, base + (c & 1) * next.x + ((c >> 1) & 1) * next.y + (c >> 2) * next.z);
+        value += w * (v.x + 0.5 * dot(v.yzw, (u - b) * h));
+        gradient += w * v.yzw;
+    }
+    return MlsResult(value, gradient, 8u, 1u);
+}
+#endif
+
 // f(x), ∇f(x); terms == 0 where no sample has weight (the field is undefined there).
 MlsResult mls_evaluate(vec3 x) {
+#if MLS_RESAMPLED > 0
+    return resampled_evaluate(x);
+#endif
 #if MLS_EXACT == 1
     return exact_evaluate(x);
 #endif

@@ -5,7 +5,10 @@
 #ifndef VMLS_PREINT_GLSL
 #define VMLS_PREINT_GLSL
 
-layout(std430, binding = BINDING_PREINT) readonly buffer PreintBuf { vec4 preint[]; };
+// Through an rgba32f texel-buffer view (binding::kind): a lookup's four per-lane gathers are then
+// single gathers on llvmpipe instead of loops over the lanes.
+layout(binding = BINDING_PREINT, rgba32f) uniform readonly imageBuffer preint;
+#define preint_at(i) imageLoad(preint, int(i))
 
 // Bilinear lookup of table k at (s_f, s_b), clamped to the table's scalar range.
 vec4 preint_lookup(uint k, float s_f, float s_b) {
@@ -19,8 +22,8 @@ vec4 preint_lookup(uint k, float s_f, float s_b) {
     float fx = x - float(x0);
     float fy = y - float(y0);
     uint base = k * n * n + x0 + n * y0;
-    vec4 a = mix(preint[base], preint[base + 1u], fx);
-    vec4 b = mix(preint[base + n], preint[base + n + 1u], fx);
+    vec4 a = mix(preint_at(base), preint_at(base + 1u), fx);
+    vec4 b = mix(preint_at(base + n), preint_at(base + n + 1u), fx);
     return mix(a, b, fy);
 }
 

@@ -6,6 +6,7 @@
 pub mod gaussian;
 pub mod mls;
 pub mod octree;
+pub mod resample;
 
 pub use mls::{Basis, GradientMode, MlsSettings, MlsValue, Neighbours, Weight, mls_evaluate};
 pub use octree::{Octree, OctreeSettings, OctreeStats, SamplePoint};
@@ -44,6 +45,9 @@ pub struct Reconstruction {
     /// h = support × sample spacing, per axis.
     pub support: f64,
     pub neighbours: NeighbourMode,
+    /// The regular-grid fast path: the field resampled `resample` times finer and interpolated
+    /// ([`resample`]); 0 evaluates the general path everywhere.
+    pub resample: u32,
 }
 
 /// Errors of the reconstruction layer.

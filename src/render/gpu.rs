@@ -48,6 +48,13 @@ pub struct Variant {
     pub gaussian: bool,
     /// The generator's analytic field instead of a reconstruction (`"exact"`).
     pub exact: bool,
+    /// The fast path's refinement factor (`reconstruction.resample`; 0: none).
+    pub resample: u32,
+    /// Whether the kernel evaluates the fast path (the ray caster, mls_eval) or the general one
+    /// (recon_resample, which computes the fine grid from it).
+    pub resampled: bool,
+    /// Empty-space skipping in the ray caster ([`super::skip`]).
+    pub skip: bool,
 }
 
 impl Variant {
@@ -68,6 +75,9 @@ impl Variant {
             hull: false,
             gaussian: r.method == crate::recon::ReconMethod::Gaussian,
             exact: r.method == crate::recon::ReconMethod::Exact,
+            resample: r.resample,
+            resampled: r.resample > 0,
+            skip: false,
             method: None,
             adaptive_levels: 1,
             isosurfaces: 0,
@@ -81,6 +91,8 @@ impl Variant {
             adaptive_levels: adaptive::stack_size(setup.l_max, setup.l_min),
             isosurfaces: setup.isosurfaces.len(),
             hull: field.hull.is_some(),
+            // The adaptive integrator does not skip yet.
+            skip: setup.skip && setup.method != Method::Adaptive,
             ..Self::of(field)
         }
     }
@@ -117,6 +129,13 @@ impl Variant {
         d.push(("MLS_FULL_METRIC".into(), flag(self.full_metric)));
         d.push(("MLS_GAUSSIAN".into(), flag(self.gaussian)));
         d.push(("MLS_EXACT".into(), flag(self.exact)));
+        d.push((
+            "MLS_RESAMPLED".into(),
+            if self.resampled { self.resample } else { 0 }.to_string(),
+        ));
+        d.push(("RESAMPLE_FACTOR".into(), self.resample.max(1).to_string()));
+        d.push(("SKIP".into(), flag(self.skip)));
+        d.push(("SKIP_BLOCK".into(), super::skip::SKIP_BLOCK.to_string()));
         // The analytic field's constants, from the generator (one copy of each number).
         d.push((
             "ML_F_M".into(),
@@ -169,6 +188,12 @@ impl Variant {
                 .map(|m| format!("-{}", m.name()))
                 .unwrap_or_default()
         ) + if self.hull { "-hull" } else { "" }
+            + &if self.resampled {
+                format!("-resample{}", self.resample)
+            } else {
+                String::new()
+            }
+            + if self.skip { "-skip" } else { "" }
             + &if self.isosurfaces > 0 {
                 format!("-iso{}", self.isosurfaces)
             } else {
@@ -257,6 +282,12 @@ pub(super) fn table_params(p: &mut RenderParams, tables: &PreintegrationTables) 
 /// The field's data on the GPU: grid values, or samples + octree.
 pub struct GpuField {
     grid: Option<Buffer>,
+    /// The fast path's fine grid (`reconstruction.resample`), computed on the GPU at upload.
+    resampled: Option<Buffer>,
+    /// GPU milliseconds recon_resample took.
+    pub resample_ms: f64,
+    /// The fast field's range per skipping block, `vec4(min, max, 0, 0)`.
+    blocks: Option<Buffer>,
     octree: Option<[Buffer; 3]>,
     hull: Option<[Buffer; 2]>,
 }
@@ -303,8 +334,18 @@ impl GpuField {
                 let mut padded = vec![0.0f32; GRID_PAD];
                 padded.extend_from_slice(&field.samples.values);
                 padded.resize((padded.len() + 2 * GRID_PAD).next_multiple_of(4), 0.0);
+                let grid = Buffer::from_slice(ctx, "grid", &padded)?;
+                let fine = super::resample::resample_grid(ctx, field, &grid)?;
+                let resample_ms = fine.as_ref().map_or(0.0, |f| f.1);
+                let blocks = match &fine {
+                    Some((buffer, _)) => Some(super::resample::block_buffer(ctx, field, buffer)?),
+                    None => None,
+                };
                 Ok(Self {
-                    grid: Some(Buffer::from_slice(ctx, "grid", &padded)?),
+                    grid: Some(grid),
+                    resampled: fine.map(|f| f.0),
+                    resample_ms,
+                    blocks,
                     octree: None,
                     hull: None,
                 })
@@ -332,6 +373,9 @@ impl GpuField {
                     .collect();
                 Ok(Self {
                     grid: None,
+                    resampled: None,
+                    resample_ms: 0.0,
+                    blocks: None,
                     octree: Some([
                         Buffer::from_slice(ctx, "octree samples", &samples)?,
                         Buffer::from_slice(ctx, "octree nodes", &o.nodes)?,
@@ -349,12 +393,23 @@ impl GpuField {
         if let Some(g) = &self.grid {
             b.push((binding::GRID, g));
         }
+        if let Some(r) = &self.resampled {
+            b.push((binding::RESAMPLED, r));
+        }
         if let Some([s, n, i]) = &self.octree {
             b.push((binding::SAMPLES, s));
             b.push((binding::NODES, n));
             b.push((binding::INDICES, i));
         }
         b
+    }
+
+    /// The skipping blocks with their binding (none without the fast path).
+    pub(super) fn skip_bindings(&self) -> Vec<(u32, &Buffer)> {
+        self.blocks
+            .iter()
+            .map(|b| (binding::SKIP_BLOCKS, b))
+            .collect()
     }
 
     /// The hull's BVH buffers with their bindings (none for a box domain).

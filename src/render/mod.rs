@@ -12,14 +12,17 @@ pub mod output;
 pub mod preintegration;
 pub mod raycast;
 pub mod renderer;
+pub mod resample;
 pub mod settings;
 pub mod shading;
+pub mod skip;
 pub mod transfer;
 
 use crate::data::{DataError, Volume};
 use crate::recon::ReconMethod;
 use crate::recon::gaussian::{KernelVolumes, gaussian_evaluate};
 use crate::recon::mls::{MlsSettings, MlsValue, Neighbours, Visit, mls_evaluate};
+use crate::recon::resample::{MAX_POINTS, ResampledGrid, fine_points};
 use crate::recon::{GridNeighbours, Octree, OctreeSettings, ReconError};
 use crate::recon::{NeighbourMode, Reconstruction};
 use crate::samples::bvh::HullBvh;
@@ -74,6 +77,11 @@ pub struct Field {
     volumes: std::sync::OnceLock<KernelVolumes>,
     /// Box of every sample's support (frame-relative): where kernels can reach.
     support_box: (DVec3, DVec3),
+    /// The fast path's fine grid, built at first CPU use (`reconstruction.resample`; the GPU
+    /// builds its own).
+    resampled: std::sync::OnceLock<ResampledGrid>,
+    /// Block ranges of the CPU fine grid, for empty-space skipping.
+    blocks: std::sync::OnceLock<skip::Blocks>,
 }
 
 impl Field {
@@ -139,12 +147,17 @@ impl Field {
             full_metric,
             volumes: std::sync::OnceLock::new(),
             support_box: (DVec3::from(slo), DVec3::from(shi)),
+            resampled: std::sync::OnceLock::new(),
+            blocks: std::sync::OnceLock::new(),
         };
         if let Domain::Hull(h) = &field.samples.domain {
             field.hull = Some(HullBvh::build(h));
         }
         if !grid || reconstruction.neighbours == NeighbourMode::Octree {
             field.octree = Some(Octree::from_samples(&field.samples, octree, progress)?);
+        }
+        if reconstruction.resample > 0 {
+            field.check_resample()?;
         }
         Ok(field)
     }
@@ -196,9 +209,76 @@ impl Field {
         })
     }
 
+    /// The fast path needs implicit grid neighbours (a regular grid, `neighbours = "grid"`) and
+    /// a fine grid of at most [`MAX_POINTS`] points.
+    fn check_resample(&self) -> Result<(), ReconError> {
+        let factor = self.reconstruction.resample;
+        let Some(g) = self.grid().filter(|_| self.octree.is_none()) else {
+            return Err(ReconError::Setting {
+                key: "reconstruction.resample",
+                value: factor.to_string(),
+                expected: "0 for this data (the fast path needs a regular grid with \
+                           reconstruction.neighbours = \"grid\")",
+            });
+        };
+        let points = fine_points(g.dims, factor);
+        if points > MAX_POINTS {
+            return Err(ReconError::Setting {
+                key: "reconstruction.resample",
+                value: format!(
+                    "{factor} ({points} fine points for a {}x{}x{} grid)",
+                    g.dims[0], g.dims[1], g.dims[2]
+                ),
+                expected: "a factor giving at most 2^27 fine points (2 GiB)",
+            });
+        }
+        Ok(())
+    }
+
+    /// The fast path's fine grid (`None` unless `reconstruction.resample` > 0): the general
+    /// path at every fine point, computed here in f64 at first use (stage `recon_resample`).
+    pub fn resampled(&self) -> Option<&ResampledGrid> {
+        let factor = self.reconstruction.resample;
+        let g = self
+            .grid()
+            .filter(|_| factor > 0 && self.octree.is_none())?;
+        // The fine points store the field's own derivative (the analytic gradient): the fast
+        // path's interpolation needs ∇f, not the local fit's slope.
+        let mls = MlsSettings {
+            gradient: crate::recon::GradientMode::Analytic,
+            ..self.mls()
+        };
+        Some(self.resampled.get_or_init(|| {
+            ResampledGrid::build(g.dims, g.origin, g.spacing, factor, |x| {
+                match self.reconstruction.method {
+                    ReconMethod::Mls => mls_evaluate(&mls, &g, x),
+                    _ => self.evaluate_direct(&g, x),
+                }
+            })
+        }))
+    }
+
+    /// Value ranges of the fast field per skipping block (`None` without the fast path).
+    pub fn blocks(&self) -> Option<&skip::Blocks> {
+        let grid = self.resampled()?;
+        Some(
+            self.blocks
+                .get_or_init(|| skip::Blocks::from_resampled(grid)),
+        )
+    }
+
     /// The reconstructed field and its gradient at x (frame-relative), by the scene's method;
-    /// `None` where it is undefined.
+    /// `None` where it is undefined. With `reconstruction.resample` it is the fast path's
+    /// interpolation of the fine grid (stage `resample_evaluate`), defined everywhere.
     pub fn evaluate(&self, neighbours: &dyn Neighbours, x: [f64; 3]) -> Option<MlsValue> {
+        if let Some(r) = self.resampled() {
+            return Some(r.evaluate(x));
+        }
+        self.evaluate_direct(neighbours, x)
+    }
+
+    /// The general path: the scene's method solved at x.
+    pub fn evaluate_direct(&self, neighbours: &dyn Neighbours, x: [f64; 3]) -> Option<MlsValue> {
         match self.reconstruction.method {
             ReconMethod::Mls => mls_evaluate(&self.mls(), neighbours, x),
             ReconMethod::Gaussian => gaussian_evaluate(
@@ -303,6 +383,8 @@ pub struct RaySetup {
     pub epsilon: f64,
     /// Preintegrated methods stop at this opacity.
     pub early_termination: f64,
+    /// Empty-space skipping: `render.skip` with the fast path ([`skip`]).
+    pub skip: bool,
     pub background: [f64; 3],
     /// Riemann and reference methods stop below this transmittance.
     pub min_transmittance: f64,
@@ -350,6 +432,7 @@ impl RaySetup {
             l_max: render.l_max * unit,
             epsilon: render.epsilon,
             early_termination: render.early_termination,
+            skip: render.skip && field.reconstruction.resample > 0,
             background: render.background,
             min_transmittance: render.min_transmittance,
             isosurfaces: isosurfaces.to_vec(),
@@ -460,7 +543,7 @@ impl TableCache {
 }
 
 /// The tables' scalar range: the data range with a 5% margin each side.
-fn scalar_range(field: &Field) -> (f64, f64) {
+pub fn scalar_range(field: &Field) -> (f64, f64) {
     let (lo, hi) = field.value_range();
     let margin = 0.05 * (hi - lo).max(1e-6);
     (lo - margin, hi + margin)

@@ -15,6 +15,7 @@ mod interval;
 
 use super::camera::clip_box;
 use super::preintegration::PreintegrationTables;
+use super::skip::{Blocks, SkipTable, resume_interval};
 use super::transfer::TransferFunction;
 use super::{Field, RaySetup};
 use crate::recon::mls::Neighbours;
@@ -34,12 +35,27 @@ pub struct PixelResult {
     pub hull_overflow: bool,
 }
 
+/// Empty-space skipping's data for one frame: the field's block ranges and the frame's table.
+#[derive(Debug, Clone, Copy)]
+pub struct Skip<'a> {
+    pub blocks: &'a Blocks,
+    pub table: &'a SkipTable,
+}
+
+impl Skip<'_> {
+    /// Stage `skip_block`.
+    fn lookup(&self, o: DVec3, d: DVec3, t: f64) -> (bool, f64) {
+        self.blocks.lookup(self.table, o, d, t)
+    }
+}
+
 /// Front-to-back accumulation along one ray.
 struct Ray<'a> {
     o: DVec3,
     d: DVec3,
     field: &'a Field,
     neighbours: &'a dyn Neighbours,
+    skip: Option<Skip<'a>>,
     color: [f64; 3],
     transmittance: f64,
     evaluations: u32,
@@ -63,13 +79,31 @@ fn integrate_riemann(ray: &mut Ray<'_>, setup: &RaySetup, tf: &TransferFunction,
     let steps = ((t1 - t0) / setup.step).ceil() as u64;
     let isos = !setup.isosurfaces.is_empty();
     let mut prev: Option<Knot> = isos.then(|| knot(ray, t0));
-    for i in 0..steps {
+    let mut occupied_until = f64::NEG_INFINITY;
+    let mut i = 0;
+    while i < steps {
         let ta = t0 + i as f64 * setup.step;
         let dt = setup.step.min(t1 - ta);
         if dt <= 0.0 {
             break;
         }
-        let k = knot(ray, ta + 0.5 * dt);
+        let tm = ta + 0.5 * dt;
+        // A midpoint in an empty block adds nothing: resume at the first midpoint past the
+        // block; with isosurfaces the knot at the exit stands in for the skipped samples.
+        if let Some(skip) = ray.skip.filter(|_| tm >= occupied_until) {
+            let (empty, exit) = skip.lookup(ray.o, ray.d, tm);
+            if empty {
+                let j = resume_interval(t0 - 0.5 * setup.step, setup.step, exit, i + 1);
+                if isos {
+                    prev = Some(knot(ray, exit.min(t1)));
+                }
+                i = j;
+                continue;
+            }
+            occupied_until = exit;
+        }
+        i += 1;
+        let k = knot(ray, tm);
         if let Some(p) = prev.filter(|_| isos) {
             emit_crossings(ray, setup, &p, &k);
         }
@@ -102,11 +136,31 @@ fn integrate_fixed(
     let l = setup.step;
     let steps = ((t1 - t0) / l).ceil() as u64;
     let mut prev = knot(ray, t0);
-    for i in 0..steps {
+    let mut occupied_until = f64::NEG_INFINITY;
+    let mut i = 0;
+    while i < steps {
         let ta = t0 + i as f64 * l;
         let tb = (ta + l).min(t1);
         if tb <= ta {
             break;
+        }
+        // Intervals inside an empty block are skipped; the first one reaching past it starts
+        // from a fresh knot.
+        if let Some(skip) = ray.skip.filter(|_| ta >= occupied_until) {
+            let (empty, exit) = skip.lookup(ray.o, ray.d, ta);
+            if empty {
+                let j = resume_interval(t0, l, exit, i);
+                if j >= steps {
+                    break;
+                }
+                if j > i {
+                    prev = knot(ray, t0 + j as f64 * l);
+                    i = j;
+                    continue;
+                }
+            } else {
+                occupied_until = exit;
+            }
         }
         let next = knot(ray, tb);
         let level = (i + 1 < steps).then_some(0);
@@ -116,17 +170,21 @@ fn integrate_fixed(
         if 1.0 - ray.transmittance > setup.early_termination {
             break;
         }
+        i += 1;
     }
 }
 
 /// Integrates the ray through pixel (px, py) with the setup's method. `tables` must be the
-/// setup's preintegration tables for the preintegrated methods.
+/// setup's preintegration tables for the preintegrated methods; `skip`, the frame's
+/// empty-space skipping data when the setup skips.
+#[allow(clippy::too_many_arguments)]
 pub fn raycast(
     setup: &RaySetup,
     field: &Field,
     neighbours: &dyn Neighbours,
     tf: &TransferFunction,
     tables: Option<&PreintegrationTables>,
+    skip: Option<Skip<'_>>,
     px: u32,
     py: u32,
 ) -> PixelResult {
@@ -136,6 +194,7 @@ pub fn raycast(
         d,
         field,
         neighbours,
+        skip,
         color: [0.0; 3],
         transmittance: 1.0,
         evaluations: 0,
@@ -198,6 +257,13 @@ pub fn raycast_image(
         };
         w * h
     ];
+    let table = setup
+        .skip
+        .then(|| SkipTable::build(tf, &setup.isosurfaces, super::scalar_range(field)));
+    let skip = match (&table, field.blocks()) {
+        (Some(table), Some(blocks)) => Some(Skip { blocks, table }),
+        _ => None,
+    };
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let rows_per = h.div_ceil(threads).max(1);
     std::thread::scope(|scope| {
@@ -212,6 +278,7 @@ pub fn raycast_image(
                         neighbours.as_ref(),
                         tf,
                         tables,
+                        skip,
                         (index % w) as u32,
                         (index / w) as u32,
                     );

@@ -17,6 +17,7 @@
 use super::gpu::{GpuField, Variant, pipeline_for, render_params, table_params};
 use super::preintegration::PreintegrationTables;
 use super::shading::{Isosurface, Lighting};
+use super::skip::SkipTable;
 use super::transfer::TransferFunction;
 use super::{Field, Method, RaySetup, RenderError, RenderSettings, TableCache};
 use crate::gpu_types::{IsoSurface, RayPush, binding, ray_count};
@@ -91,8 +92,16 @@ pub fn default_chunk(setup: &RaySetup) -> u32 {
 }
 
 /// Binding numbers of the ray caster for a field and setup.
-fn frame_bindings(gpu_field: &GpuField, setup: &RaySetup, with_tables: bool) -> Vec<u32> {
+fn frame_bindings(
+    gpu_field: &GpuField,
+    setup: &RaySetup,
+    with_tables: bool,
+    skip: bool,
+) -> Vec<u32> {
     let mut ids: Vec<u32> = gpu_field.bindings().iter().map(|(b, _)| *b).collect();
+    if skip {
+        ids.extend([binding::SKIP_BLOCKS, binding::SKIP_TABLE]);
+    }
     ids.extend(gpu_field.hull_bindings().iter().map(|(b, _)| *b));
     ids.extend([
         binding::TRANSFER,
@@ -138,11 +147,13 @@ fn table_buffer(ctx: &Context, tables: &PreintegrationTables) -> Result<Buffer, 
     Buffer::from_slice(ctx, "preintegration tables", &data)
 }
 
-/// Per-frame constants: kernel parameters, transfer function, isosurfaces.
+/// Per-frame constants: kernel parameters, transfer function, isosurfaces, skip table.
 struct FrameConstants {
     params: Buffer,
     tf: Buffer,
     iso: Buffer,
+    /// The frame's [`SkipTable`] (with empty-space skipping).
+    skip: Option<Buffer>,
 }
 
 fn frame_constants(
@@ -151,8 +162,16 @@ fn frame_constants(
     setup: &RaySetup,
     tf: &TransferFunction,
     tables: Option<&PreintegrationTables>,
+    skip: bool,
 ) -> Result<FrameConstants, VkError> {
     let gpu_tf = tf.to_gpu();
+    let skip = match skip {
+        true => {
+            let table = SkipTable::build(tf, &setup.isosurfaces, super::scalar_range(field));
+            Some(Buffer::from_slice(ctx, "skip table", &table.gpu_words())?)
+        }
+        false => None,
+    };
     let mut params = render_params(field, Some(setup), gpu_tf.len() as u32);
     if let Some(t) = tables {
         table_params(&mut params, t);
@@ -162,6 +181,7 @@ fn frame_constants(
         params: Buffer::from_slice(ctx, "render params", &[params])?,
         tf: Buffer::from_slice(ctx, "transfer function", &gpu_tf)?,
         iso: Buffer::from_slice(ctx, "isosurfaces", &isos)?,
+        skip,
     })
 }
 
@@ -230,6 +250,10 @@ fn run_bands(
     }
     if let Some(t) = table {
         all.push((binding::PREINT, t));
+    }
+    if let Some(t) = &constants.skip {
+        all.extend(gpu_field.skip_bindings());
+        all.push((binding::SKIP_TABLE, t));
     }
     let group = BindGroup::new(ctx, pipeline, &all)?;
     let (w, h) = (setup.camera.width, setup.camera.height);
@@ -354,10 +378,10 @@ pub fn render(
         ctx,
         compiler,
         &variant,
-        &frame_bindings(gpu_field, setup, tables.is_some()),
+        &frame_bindings(gpu_field, setup, tables.is_some(), variant.skip),
     )?;
     let table = tables.map(|t| table_buffer(ctx, t)).transpose()?;
-    let constants = frame_constants(ctx, field, setup, tf, tables)?;
+    let constants = frame_constants(ctx, field, setup, tf, tables, variant.skip)?;
     let (w, h) = (setup.camera.width, setup.camera.height);
     let targets = frame_targets(ctx, u64::from(w) * u64::from(h))?;
     let (gpu_ms, bands) = run_bands(
@@ -504,7 +528,7 @@ impl Renderer {
         }
         let variant = Variant::for_render(&self.field, &setup);
         let defines = variant.defines();
-        let bindings = frame_bindings(&self.gpu_field, &setup, tables.is_some());
+        let bindings = frame_bindings(&self.gpu_field, &setup, tables.is_some(), variant.skip);
         let cached = self
             .pipelines
             .iter()
@@ -524,7 +548,14 @@ impl Renderer {
             self.targets = None;
             self.targets = Some(frame_targets(&self.ctx, pixels)?);
         }
-        let constants = frame_constants(&self.ctx, &self.field, &setup, view.transfer, tables)?;
+        let constants = frame_constants(
+            &self.ctx,
+            &self.field,
+            &setup,
+            view.transfer,
+            tables,
+            variant.skip,
+        )?;
         let Some(targets) = self.targets.as_ref() else {
             return Err(VkError::Usage("frame buffers missing".into()).into());
         };

@@ -64,6 +64,10 @@ pub struct RenderSettings {
     pub epsilon: f64,
     /// Preintegrated methods stop a ray once its opacity exceeds this ([MLS]: 0.99).
     pub early_termination: f64,
+    /// Empty-space skipping (`render.skip`, off by default: on Marschner–Lobb it saved about 1%
+    /// of the evaluations and cost 25–40% more time, BENCHMARKS.md); it needs the fast path
+    /// (`reconstruction.resample`), whose field has exact block bounds ([`super::skip`]).
+    pub skip: bool,
     /// Preintegration table resolution per scalar axis.
     pub table_resolution: usize,
     /// Splatting settings (scene section `[splat]`).

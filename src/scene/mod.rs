@@ -14,7 +14,7 @@
 
 mod splat;
 
-use crate::recon::{Basis, GradientMode, OctreeSettings, ReconMethod, Weight};
+use crate::recon::{Basis, GradientMode, OctreeSettings, ReconMethod, Weight, resample};
 use crate::render::camera::{Camera, Projection};
 use crate::render::shading::{Isosurface, Lighting, MAX_ISOSURFACES};
 use crate::render::transfer::TransferFunction;
@@ -97,6 +97,7 @@ const KNOWN: &[(&str, &[&str])] = &[
             "support",
             "gradient",
             "neighbours",
+            "resample",
             "knn",
             "anisotropic",
         ],
@@ -133,6 +134,7 @@ const KNOWN: &[(&str, &[&str])] = &[
             "l_max",
             "epsilon",
             "early_termination",
+            "skip",
             "table_resolution",
         ],
     ),
@@ -544,6 +546,7 @@ impl Scene {
                     ("octree", NeighbourMode::Octree),
                 ],
             )?,
+            resample: rec.int("resample", 0, 0, i64::from(resample::MAX_FACTOR))? as u32,
         };
 
         if reconstruction.method == ReconMethod::Exact
@@ -672,9 +675,36 @@ impl Scene {
             l_max: ren.positive("l_max", 2.6, 1e3)?,
             epsilon: ren.float("epsilon", 0.03, 0.0, 1e3)?,
             early_termination: ren.float("early_termination", 0.99, 0.0, 1.0)?,
+            skip: match ren.get("skip") {
+                None => false,
+                Some(Value::Boolean(b)) => *b,
+                Some(v) => return Err(ren.err("skip", "true or false", v)),
+            },
             table_resolution: ren.int("table_resolution", 512, 2, 4096)? as usize,
             splat: splat::parse(&section("splat"))?,
         };
+        if reconstruction.resample > 0 {
+            let why = if reconstruction.neighbours == NeighbourMode::Octree {
+                Some(
+                    "0 with reconstruction.neighbours = \"octree\" (the fast path reads implicit grid neighbours)",
+                )
+            } else if reconstruction.support < 1.0 {
+                Some(
+                    "0 with reconstruction.support below 1 (the fast path needs the field defined everywhere in the box)",
+                )
+            } else if render.method.splat_shading().is_some() {
+                Some("0 with a splatting method (the fast path serves ray casting)")
+            } else {
+                None
+            };
+            if let Some(expected) = why {
+                return Err(rec.err(
+                    "resample",
+                    expected,
+                    &Value::Integer(i64::from(reconstruction.resample)),
+                ));
+            }
+        }
         if render.l_min > render.l_max {
             return Err(ren.err(
                 "l_min",

@@ -16,6 +16,9 @@ pub enum BufferUsage {
     Storage,
     /// Host-visible staging memory for transfers.
     Staging,
+    /// Read and written by kernels through texel-buffer views only (`BindingKind::Texel*`):
+    /// bounded by maxTexelBufferElements when a view is made, not by maxStorageBufferRange.
+    Texel,
 }
 
 /// A Vulkan buffer with its memory. Freed on drop.
@@ -52,9 +55,14 @@ impl Buffer {
             BufferUsage::Staging => {
                 vk::BufferUsageFlags::TRANSFER_SRC | vk::BufferUsageFlags::TRANSFER_DST
             }
+            BufferUsage::Texel => {
+                vk::BufferUsageFlags::STORAGE_TEXEL_BUFFER
+                    | vk::BufferUsageFlags::TRANSFER_DST
+                    | vk::BufferUsageFlags::TRANSFER_SRC
+            }
         };
         let location = match usage {
-            BufferUsage::Storage => MemoryLocation::GpuOnly,
+            BufferUsage::Storage | BufferUsage::Texel => MemoryLocation::GpuOnly,
             BufferUsage::Staging => MemoryLocation::GpuToCpu,
         };
         let info = vk::BufferCreateInfo::default()

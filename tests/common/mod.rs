@@ -49,6 +49,7 @@ pub fn recon(
         gradient,
         support,
         neighbours,
+        resample: 0,
     }
 }
 

@@ -1,0 +1,52 @@
+// Empty-space skipping (issue 11 §2): f32 twin of src/render/skip.rs. Blocks of SKIP_BLOCK³ grid
+// cells carry the fast field's value range (exact bounds: the field is trilinear per fine
+// cell); the skip table marks the scalar bins with extinction or an isosurface, as prefix
+// counts. Needs `params` and the fast path (MLS_RESAMPLED > 0).
+#ifndef VMLS_SKIP_GLSL
+#define VMLS_SKIP_GLSL
+
+// vec4(min, max, 0, 0) per block, x fastest.
+layout(binding = BINDING_SKIP_BLOCKS, rgba32f) uniform readonly imageBuffer skip_blocks;
+// lo (f32 bits), 1/width (f32 bits), bins, then bins + 1 prefix counts.
+layout(binding = BINDING_SKIP_TABLE, r32ui) uniform readonly uimageBuffer skip_table;
+
+// Bin of a value widened by `widen` bins, clamped (twin of SkipTable::bin).
+int skip_bin(float v, int widen) {
+    float lo = uintBitsToFloat(imageLoad(skip_table, 0).x);
+    float inv_width = uintBitsToFloat(imageLoad(skip_table, 1).x);
+    int bins = int(imageLoad(skip_table, 2).x);
+    float b = clamp(floor((v - lo) * inv_width), -1.0, 1e9);
+    return clamp(int(b) + widen, 0, bins - 1);
+}
+
+// Stage `skip_block` (twin of Blocks::lookup): whether the block holding o + t·d (clamped into
+// the grid) is empty, and the ray parameter where the ray leaves it.
+bool skip_block(vec3 o, vec3 d, float t, out float t_exit) {
+    vec3 size = float(SKIP_BLOCK) / params.grid_inv_spacing.xyz;
+    ivec3 blocks = max((params.grid_dims.xyz - 1 + SKIP_BLOCK - 1) / SKIP_BLOCK, ivec3(1));
+    vec3 g = (o + d * t - params.grid_origin.xyz) / size;
+    ivec3 b = min(ivec3(max(floor(g), vec3(0.0))), blocks - 1);
+    vec3 lo = params.grid_origin.xyz + vec3(b) * size;
+    vec3 hi = lo + size;
+    t_exit = 3.0e38;
+    [[unroll]] for (int a = 0; a < 3; ++a) {
+        if (d[a] > 0.0) {
+            t_exit = min(t_exit, (hi[a] - o[a]) / d[a]);
+        } else if (d[a] < 0.0) {
+            t_exit = min(t_exit, (lo[a] - o[a]) / d[a]);
+        }
+    }
+    vec4 r = imageLoad(skip_blocks, b.x + blocks.x * (b.y + blocks.y * b.z));
+    int b0 = skip_bin(r.x, -1);
+    int b1 = skip_bin(r.y, 1);
+    return imageLoad(skip_table, 3 + b1 + 1).x == imageLoad(skip_table, 3 + b0).x;
+}
+
+// Twin of skip::resume_interval: the first interval of length l from t0 that reaches past
+// `t_exit`, no earlier than `next`.
+uint resume_interval(float t0, float l, float t_exit, uint next) {
+    float j = floor((t_exit - t0) / l);
+    return j > float(next) ? uint(min(j, 4.0e9)) : next;
+}
+
+#endif

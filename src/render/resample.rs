@@ -1,0 +1,123 @@
+//! GPU driver of stage `recon_resample` (`glsl/recon_resample.comp`; CPU twin
+//! [`crate::recon::resample::ResampledGrid::build`]): computes the fast path's fine grid from the
+//! uploaded coarse grid once per dataset, when the persistent renderer uploads the field.
+
+use super::Field;
+use super::gpu::{Variant, pipeline_for, render_params};
+use crate::gpu_types::{CountPush, binding};
+use crate::recon::resample;
+use crate::vk::{BindGroup, Buffer, BufferUsage, Context, ShaderCompiler, VkError};
+
+/// Invocations per workgroup of recon_resample.comp.
+const GROUP: u32 = 64;
+
+/// The fine grid of a field with `reconstruction.resample` > 0, computed on the GPU from the
+/// uploaded `grid` (binding GRID), as `vec4(f, ∇f)` per fine point; `None` without the fast
+/// path. Returns the buffer and the GPU milliseconds it took.
+pub fn resample_grid(
+    ctx: &Context,
+    field: &Field,
+    grid: &Buffer,
+) -> Result<Option<(Buffer, f64)>, VkError> {
+    let factor = field.reconstruction.resample;
+    let Some(g) = field.grid().filter(|_| factor > 0) else {
+        return Ok(None);
+    };
+    let points = resample::fine_points(g.dims, factor);
+    let count = u32::try_from(points)
+        .map_err(|_| VkError::Usage(format!("{points} fine points exceed 2^32")))?;
+    let compiler = ShaderCompiler::new()?;
+    // The general path, with the field's own derivative at every fine point (the fast path's
+    // interpolation needs ∇f, not the local fit's slope).
+    let variant = Variant {
+        resampled: false,
+        gradient: crate::recon::GradientMode::Analytic,
+        ..Variant::of(field)
+    };
+    let ids = [binding::GRID, binding::RESAMPLE_TARGET];
+    let pipeline = pipeline_for(
+        ctx,
+        &compiler,
+        "recon_resample.comp",
+        &variant,
+        &ids,
+        std::mem::size_of::<CountPush>() as u32,
+    )?;
+    let params = Buffer::from_slice(ctx, "resample params", &[render_params(field, None, 0)])?;
+    let fine = Buffer::new(ctx, "resampled grid", points * 16, BufferUsage::Texel)?;
+    let group = BindGroup::new(
+        ctx,
+        &pipeline,
+        &[
+            (binding::GRID, grid),
+            (binding::RESAMPLE_TARGET, &fine),
+            (binding::PARAMS, &params),
+        ],
+    )?;
+    // One dispatch covers every point (2D when the groups exceed a dimension's limit): one
+    // evaluation per invocation, at most 2^27 of them (resample::MAX_POINTS).
+    let groups = count.div_ceil(GROUP);
+    let (gx, gy) = if groups > 65535 {
+        (65535, groups.div_ceil(65535))
+    } else {
+        (groups.max(1), 1)
+    };
+    let push = CountPush {
+        count,
+        iterations: 0,
+        _pad: [0; 2],
+    };
+    let times = ctx.submit(|rec| {
+        rec.dispatch(
+            &pipeline,
+            &group,
+            bytemuck::bytes_of(&push),
+            [gx, gy, 1],
+            "recon_resample",
+        )
+    })?;
+    let ms = times.iter().filter_map(|t| t.gpu_ms).sum();
+    drop(group);
+    Ok(Some((fine, ms)))
+}
+
+/// The skipping blocks of the GPU's fine grid ([`crate::render::skip::Blocks`]), as
+/// `vec4(min, max, 0, 0)` per block: the fine grid is read back once and reduced on the host by
+/// the same function as the CPU twin's.
+pub fn block_buffer(ctx: &Context, field: &Field, fine: &Buffer) -> Result<Buffer, VkError> {
+    let Some(g) = field.grid() else {
+        return Err(VkError::Usage("skipping blocks need a grid".into()));
+    };
+    let factor = field.reconstruction.resample;
+    let dims = resample::fine_dims(g.dims, factor);
+    let data: Vec<[f32; 4]> = fine.read(ctx)?;
+    let h = g.spacing.map(|s| s / f64::from(factor));
+    let (_, ranges) = resample::block_ranges(
+        dims,
+        factor as usize * crate::render::skip::SKIP_BLOCK,
+        |i| resample::point_bounds(data[i].map(f64::from), h),
+    );
+    // Rounded outwards to f32, so that the kernel's ranges contain the f64 ones.
+    let texels: Vec<[f32; 4]> = ranges
+        .iter()
+        .map(|r| {
+            [
+                next_down(r[0] as f32, r[0]),
+                next_up(r[1] as f32, r[1]),
+                0.0,
+                0.0,
+            ]
+        })
+        .collect();
+    Buffer::from_slice(ctx, "skipping blocks", &texels)
+}
+
+/// The largest f32 not above v (given v rounded to nearest as `x`).
+fn next_down(x: f32, v: f64) -> f32 {
+    if f64::from(x) > v { x.next_down() } else { x }
+}
+
+/// The smallest f32 not below v (given v rounded to nearest as `x`).
+fn next_up(x: f32, v: f64) -> f32 {
+    if f64::from(x) < v { x.next_up() } else { x }
+}

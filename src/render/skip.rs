@@ -1,0 +1,213 @@
+//! Empty-space skipping (issue 11 §2, DESIGN §4 "Empty-space skipping"): f64 twin of
+//! `glsl/include/skip.glsl`.
+//!
+//! Two parts:
+//! - per dataset, [`Blocks`]: a value range of the fast path's field (`reconstruction.resample`)
+//!   over blocks of `SKIP_BLOCK` × `SKIP_BLOCK` × `SKIP_BLOCK` grid cells. The fast field is a
+//!   convex combination of its fine points' first-order Taylor terms, so their values widened
+//!   by half a gradient step bound it *rigorously* over the block
+//!   ([`crate::recon::resample::point_bounds`]); the general path has no such bound (linear and
+//!   quadratic MLS overshoot their neighbours), so skipping is offered with the fast path only.
+//! - per transfer function and isosurface set, [`SkipTable`] (stage `skip_table`): the scalar
+//!   axis cut into bins; a bin is occupied when τ > 0 anywhere in it or an isosurface value lies
+//!   in it; `prefix[k]` counts occupied bins below k, so a range [a, b] can contribute only if
+//!   `prefix[bin(b) + 1] − prefix[bin(a)] > 0` — a range-max query of the extinction in two reads.
+//!   The first and last bins reach to −∞ and +∞ with the transfer function's clamped end values,
+//!   and a range is widened by one bin each side, so rounding in the bin index never hides
+//!   extinction.
+//!
+//! Integrators (stage `skip_block`): at an interval start t in a block not yet known to be
+//! occupied, look the block up; if empty, every interval (midpoint step, top interval) that lies
+//! inside [t, exit] is skipped and the integration resumes at the first one that reaches past the
+//! block's exit, with one evaluation for its start knot. Midpoint steps in an empty block add
+//! nothing, so the midpoint rule gives the same image with and without skipping; preintegrated
+//! intervals inside an empty block would add the table's value for a straight line between their
+//! end values, which may cross extinction the field never reaches, so skipping changes those
+//! images — towards the field (tests bound the change).
+
+use super::shading::Isosurface;
+use super::transfer::TransferFunction;
+use crate::recon::resample::ResampledGrid;
+use glam::DVec3;
+
+/// Grid cells per block edge.
+pub const SKIP_BLOCK: usize = 2;
+/// Bins of the scalar axis in a [`SkipTable`].
+pub const SKIP_BINS: usize = 1024;
+
+/// Occupied bins of the scalar axis for one transfer function and isosurface set.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SkipTable {
+    pub lo: f64,
+    pub inv_width: f64,
+    /// prefix[k] = occupied bins among 0..k; `SKIP_BINS + 1` entries.
+    pub prefix: Vec<u32>,
+}
+
+impl SkipTable {
+    /// Stage `skip_table` over the scalar range [lo, hi] (the preintegration tables' range).
+    pub fn build(tf: &TransferFunction, isos: &[Isosurface], range: (f64, f64)) -> Self {
+        let (lo, hi) = range;
+        let width = (hi - lo).max(1e-30) / SKIP_BINS as f64;
+        let edge = |k: usize| match k {
+            0 => f64::NEG_INFINITY,
+            k if k >= SKIP_BINS => f64::INFINITY,
+            k => lo + k as f64 * width,
+        };
+        let points = tf.points();
+        let tau_at = |s: f64| tf.lookup(s).1;
+        let mut prefix = Vec::with_capacity(SKIP_BINS + 1);
+        let mut count = 0u32;
+        prefix.push(0);
+        for k in 0..SKIP_BINS {
+            let (a, b) = (edge(k), edge(k + 1));
+            // τ is piecewise linear: its maximum over [a, b] is at an end or a control point.
+            let inner = points.iter().filter(|p| p[0] > a && p[0] < b);
+            let tau = inner.map(|p| p[4]).fold(tau_at(a).max(tau_at(b)), f64::max);
+            let iso = isos.iter().any(|i| i.value >= a && i.value <= b);
+            if tau > 0.0 || iso {
+                count += 1;
+            }
+            prefix.push(count);
+        }
+        Self {
+            lo,
+            inv_width: 1.0 / width,
+            prefix,
+        }
+    }
+
+    /// Bin of a value, widened by `widen` bins and clamped.
+    fn bin(&self, v: f64, widen: i64) -> usize {
+        let b = ((v - self.lo) * self.inv_width).floor();
+        let b = if b.is_nan() {
+            0
+        } else {
+            b.clamp(-1.0, 1e9) as i64
+        };
+        (b + widen).clamp(0, SKIP_BINS as i64 - 1) as usize
+    }
+
+    /// Whether no value in [a, b] has extinction or an isosurface.
+    pub fn empty(&self, a: f64, b: f64) -> bool {
+        let (b0, b1) = (self.bin(a, -1), self.bin(b, 1));
+        self.prefix[b1 + 1] == self.prefix[b0]
+    }
+
+    /// The table as the kernel reads it (binding `SKIP_TABLE`, r32ui): lo and 1/width as f32
+    /// bits, the bin count, then the prefix counts.
+    pub fn gpu_words(&self) -> Vec<u32> {
+        let mut w = vec![
+            (self.lo as f32).to_bits(),
+            (self.inv_width as f32).to_bits(),
+            SKIP_BINS as u32,
+        ];
+        w.extend(&self.prefix);
+        w
+    }
+}
+
+/// Value ranges of the fast field over blocks of `SKIP_BLOCK`³ grid cells (frame-relative).
+#[derive(Debug, Clone)]
+pub struct Blocks {
+    pub dims: [usize; 3],
+    pub origin: DVec3,
+    /// Block edge lengths (world units).
+    pub size: DVec3,
+    pub ranges: Vec<[f64; 2]>,
+}
+
+impl Blocks {
+    /// The blocks of a fine grid (its `factor` × `SKIP_BLOCK` fine cells per block edge).
+    pub fn from_resampled(grid: &ResampledGrid) -> Self {
+        let (dims, ranges) = grid.block_ranges(grid.factor as usize * SKIP_BLOCK);
+        Self {
+            dims,
+            origin: DVec3::from(grid.origin),
+            size: DVec3::from(grid.spacing) * SKIP_BLOCK as f64,
+            ranges,
+        }
+    }
+
+    /// Block counts per axis for a grid of `dims` points (the kernel derives them the same way).
+    pub fn count(dims: [usize; 3]) -> [usize; 3] {
+        dims.map(|d| d.saturating_sub(1).max(1).div_ceil(SKIP_BLOCK))
+    }
+
+    /// Stage `skip_block`: the block holding o + t·d (clamped into the grid), whether it is
+    /// empty for `table`, and the ray parameter where the ray leaves it.
+    pub fn lookup(&self, table: &SkipTable, o: DVec3, d: DVec3, t: f64) -> (bool, f64) {
+        let g = (o + d * t - self.origin) / self.size;
+        let b: [usize; 3] =
+            std::array::from_fn(|a| (g[a].floor().max(0.0) as usize).min(self.dims[a] - 1));
+        let lo = self.origin + DVec3::new(b[0] as f64, b[1] as f64, b[2] as f64) * self.size;
+        let hi = lo + self.size;
+        let mut exit = f64::INFINITY;
+        for a in 0..3 {
+            let ta = if d[a] > 0.0 {
+                (hi[a] - o[a]) / d[a]
+            } else if d[a] < 0.0 {
+                (lo[a] - o[a]) / d[a]
+            } else {
+                f64::INFINITY
+            };
+            exit = exit.min(ta);
+        }
+        let r = self.ranges[b[0] + self.dims[0] * (b[1] + self.dims[1] * b[2])];
+        (table.empty(r[0], r[1]), exit)
+    }
+}
+
+/// Where the integrators resume after an empty block: the first of the intervals of length `l`
+/// starting at t0 (numbered from 0) that reaches past `exit`, no earlier than `next`.
+pub fn resume_interval(t0: f64, l: f64, exit: f64, next: u64) -> u64 {
+    let j = ((exit - t0) / l).floor();
+    if j.is_finite() && j > next as f64 {
+        j.min(u32::MAX as f64) as u64
+    } else {
+        next
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tf() -> TransferFunction {
+        TransferFunction::new(vec![
+            [0.0, 0.0, 0.0, 0.0, 0.0],
+            [0.3, 1.0, 0.0, 0.0, 0.0],
+            [0.4, 1.0, 0.0, 0.0, 5.0],
+            [0.5, 1.0, 0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0, 0.0, 0.0],
+        ])
+    }
+
+    #[test]
+    fn ranges_are_empty_exactly_where_the_extinction_is_zero() {
+        let t = SkipTable::build(&tf(), &[], (0.0, 1.0));
+        assert!(t.empty(0.0, 0.29));
+        assert!(t.empty(0.51, 0.99));
+        assert!(t.empty(-5.0, -1.0), "below the table: τ of the first point");
+        assert!(!t.empty(0.29, 0.31), "τ rises right after 0.3");
+        assert!(!t.empty(0.0, 1.0));
+        assert!(!t.empty(0.45, 0.46));
+        // A range inside one bin between the points that carry the spike.
+        assert!(!t.empty(0.4, 0.4));
+        let iso = Isosurface {
+            value: 0.8,
+            color: [1.0; 3],
+            opacity: 1.0,
+        };
+        let with_iso = SkipTable::build(&tf(), &[iso], (0.0, 1.0));
+        assert!(!with_iso.empty(0.75, 0.85));
+        assert!(with_iso.empty(0.6, 0.7));
+    }
+
+    #[test]
+    fn resume_skips_only_whole_intervals() {
+        assert_eq!(resume_interval(0.0, 1.0, 3.5, 1), 3);
+        assert_eq!(resume_interval(0.0, 1.0, 0.5, 1), 1);
+        assert_eq!(resume_interval(0.0, 1.0, f64::INFINITY, 1), 1);
+    }
+}
