@@ -485,12 +485,7 @@ pub fn evaluate(
         iterations: 0,
         _pad: [0; 2],
     };
-    let groups = (n as u32).div_ceil(64).max(1);
-    let (gx, gy) = if groups > 65535 {
-        (65535, groups.div_ceil(65535))
-    } else {
-        (groups, 1)
-    };
+    let [gx, gy, _] = groups_2d(n as u32, 64);
     let mut times = Vec::new();
     for _ in 0..repeats.max(1) {
         let t = ctx.submit(|rec| {
@@ -507,4 +502,15 @@ pub fn evaluate(
     let mut out: Vec<MlsOut> = results.read(ctx)?;
     out.truncate(n);
     Ok((out, times))
+}
+
+/// Workgroups covering `count` invocations of `group` each, as a 2D grid when one dimension's
+/// limit (65 535) is not enough; kernels flatten the index and skip invocations past `count`.
+pub(super) fn groups_2d(count: u32, group: u32) -> [u32; 3] {
+    let groups = count.div_ceil(group).max(1);
+    if groups > 65535 {
+        [65535, groups.div_ceil(65535), 1]
+    } else {
+        [groups, 1, 1]
+    }
 }

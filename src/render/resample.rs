@@ -3,7 +3,7 @@
 //! uploaded coarse grid once per dataset, when the persistent renderer uploads the field.
 
 use super::Field;
-use super::gpu::{Variant, pipeline_for, render_params};
+use super::gpu::{Variant, groups_2d, pipeline_for, render_params};
 use crate::gpu_types::{CountPush, binding};
 use crate::recon::resample;
 use crate::vk::{BindGroup, Buffer, BufferUsage, Context, ShaderCompiler, VkError};
@@ -56,12 +56,7 @@ pub fn resample_grid(
     )?;
     // One dispatch covers every point (2D when the groups exceed a dimension's limit): one
     // evaluation per invocation, at most 2^27 of them (resample::MAX_POINTS).
-    let groups = count.div_ceil(GROUP);
-    let (gx, gy) = if groups > 65535 {
-        (65535, groups.div_ceil(65535))
-    } else {
-        (groups.max(1), 1)
-    };
+    let [gx, gy, _] = groups_2d(count, GROUP);
     let push = CountPush {
         count,
         iterations: 0,
