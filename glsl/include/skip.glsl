@@ -10,13 +10,11 @@ layout(binding = BINDING_SKIP_BLOCKS, rgba32f) uniform readonly imageBuffer skip
 // lo (f32 bits), 1/width (f32 bits), bins, then bins + 1 prefix counts.
 layout(binding = BINDING_SKIP_TABLE, r32ui) uniform readonly uimageBuffer skip_table;
 
-// Bin of a value widened by `widen` bins, clamped (twin of SkipTable::bin).
-int skip_bin(float v, int widen) {
-    float lo = uintBitsToFloat(imageLoad(skip_table, 0).x);
-    float inv_width = uintBitsToFloat(imageLoad(skip_table, 1).x);
-    int bins = int(imageLoad(skip_table, 2).x);
-    float b = clamp(floor((v - lo) * inv_width), -1.0, 1e9);
-    return clamp(int(b) + widen, 0, bins - 1);
+// Bin of a value widened by `widen` bins, clamped (twin of SkipTable::bin); `header` is the
+// table's (lo, 1/width, bins), read once per block lookup.
+int skip_bin(float v, int widen, vec3 header) {
+    float b = clamp(floor((v - header.x) * header.y), -1.0, 1e9);
+    return clamp(int(b) + widen, 0, int(header.z) - 1);
 }
 
 // Stage `skip_block` (twin of Blocks::lookup): whether the block holding o + t·d (clamped into
@@ -37,8 +35,10 @@ bool skip_block(vec3 o, vec3 d, float t, out float t_exit) {
         }
     }
     vec4 r = imageLoad(skip_blocks, b.x + blocks.x * (b.y + blocks.y * b.z));
-    int b0 = skip_bin(r.x, -1);
-    int b1 = skip_bin(r.y, 1);
+    vec3 header = vec3(uintBitsToFloat(imageLoad(skip_table, 0).x),
+                       uintBitsToFloat(imageLoad(skip_table, 1).x), float(imageLoad(skip_table, 2).x));
+    int b0 = skip_bin(r.x, -1, header);
+    int b1 = skip_bin(r.y, 1, header);
     return imageLoad(skip_table, 3 + b1 + 1).x == imageLoad(skip_table, 3 + b0).x;
 }
 
