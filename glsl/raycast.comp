@@ -172,14 +172,200 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
     return i >= steps ? CHUNK_FINISHED : (i == last_step ? CHUNK_DONE : CHUNK_TRUNCATED);
 }
 #else
-// [MLS] §4 adaptive subdivision of top intervals first .. last_step (top interval k is
-// [t0 + k·l_max, min(t0 + (k+1)·l_max, t1)]) on a local stack of pending interval ends; twin
-// of src/render/raycast/adaptive.rs. A stack entry is a knot whose w holds ±(depth + 1) of the
-// interval it closes, negative when f is undefined there (one vec4 per entry keeps the
-// dynamically indexed stack small, which matters on lavapipe). `a` is the knot at the chunk's
-// start (evaluated here for the first chunk).
-uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, inout vec4 a,
-               inout vec3 color, inout float transmittance, inout uint evaluations) {
+// Adaptive integration of top intervals first .. last_step (top interval k is
+// [t0 + k·l_max, min(t0 + (k+1)·l_max, t1)]); twin of src/render/raycast/adaptive.rs, whose
+// documentation states both criteria: ADAPTIVE_CRITERION 0 = [MLS] §4 (halves compared),
+// 1 = the Hermite criterion with its step controller. Intervals are dyadic inside a top; a stack
+// entry is a knot whose w holds ±(depth + 1) of the interval it closes, negative when f is
+// undefined there (one vec4 per entry keeps the dynamically indexed stack small, which matters
+// on lavapipe). `a` is the knot at the chunk's start (evaluated here for the first chunk) and
+// `predicted` the controller's depth, both carried between chunks. The loop body has one MLS
+// call site: GLSL inlines every call, and lavapipe's compile time and code size grow with the
+// copies.
+
+#if ADAPTIVE_CRITERION == 1
+// The cubic Hermite's Bézier hull (x = lo, y = hi) and z = D, its largest departure from the
+// chord, for end values f0, f1 and end derivatives m0, m1 per unit of its interval (twin of
+// bezier_hull).
+vec3 bezier_hull(float f0, float f1, float m0, float m1) {
+    float delta = f1 - f0;
+    float b1 = f0 + m0 / 3.0;
+    float b2 = f1 - m1 / 3.0;
+    return vec3(min(min(f0, f1), min(b1, b2)), max(max(f0, f1), max(b1, b2)),
+                max(abs(m0 - delta), abs(m1 - delta)) / 3.0);
+}
+
+float hull_sensitivity(vec3 h) {
+    return transfer_sensitivity(h.x, h.y, h.z, params.tf_count);
+}
+
+// The Hermite criterion's error of [a, e] per sample spacing (twin of hermite_error); `mid`
+// gets the Hermite's midpoint knot (w = 1) unless the hull holds an isosurface value (w = 0).
+float hermite_error(vec4 a, vec4 e, float transmittance, out vec4 mid) {
+    mid = vec4(0.0);
+    bool da = a.w > 0.0;
+    bool de = e.w > 0.0;
+    if (!da && !de) {
+        return 0.0;
+    }
+    if (da != de) {
+        return 3.0e38;
+    }
+    float l = e.x - a.x;
+    float m0 = l * a.z;
+    float m1 = l * e.z;
+    float scale = transmittance * params.integrator.z;
+    vec3 whole = bezier_hull(a.y, e.y, m0, m1);
+#if MAX_ISO > 0
+    for (uint i = 0u; i < params.iso_count.x; ++i) {
+        float v = isos[i].value;
+        if (whole.x <= v && v <= whole.y) {
+            bool between = min(a.y, e.y) <= v && v <= max(a.y, e.y);
+            return between ? scale * hull_sensitivity(whole) : 3.0e38;
+        }
+    }
+#endif
+    float sm = 0.5 * (a.y + e.y) + 0.125 * (m0 - m1);
+    float mm = 1.5 * (e.y - a.y) - 0.25 * (m0 + m1);
+    mid = vec4(0.5 * (a.x + e.x), sm, mm / l, 1.0);
+    // One pass over the transfer function for both halves: their hulls' union and the larger
+    // departure.
+    vec3 h0 = bezier_hull(a.y, sm, 0.5 * m0, 0.5 * mm);
+    vec3 h1 = bezier_hull(sm, e.y, 0.5 * mm, 0.5 * m1);
+    return scale * hull_sensitivity(vec3(min(h0.x, h1.x), max(h0.y, h1.y), max(h0.z, h1.z)));
+}
+#endif
+
+#if ADAPTIVE_CRITERION == 1
+// The stack lives in registers: constant-trip loops, unrolled by NIR into selects, stand in for
+// dynamic indexing (LAVAPIPE.md: a dynamically indexed local array in divergent code ran at
+// one core's speed).
+vec4 stack_get(vec4 stack[ADAPTIVE_LEVELS], int i) {
+    vec4 v = stack[0];
+    [[unroll]] for (int k = 1; k < ADAPTIVE_LEVELS; ++k) {
+        v = k == i ? stack[k] : v;
+    }
+    return v;
+}
+
+void stack_set(inout vec4 stack[ADAPTIVE_LEVELS], int i, vec4 v) {
+    [[unroll]] for (int k = 0; k < ADAPTIVE_LEVELS; ++k) {
+        stack[k] = k == i ? v : stack[k];
+    }
+}
+
+// The Hermite criterion with its step controller (twin of integrate_hermite). Every iteration
+// of the outer loop evaluates f exactly once, at a new end or at a rejected interval's
+// midpoint; the inner loop composites the intervals that pass in between without evaluating.
+// So the SIMD lanes of a row meet at the one MLS call site whatever state each ray is in.
+uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step,
+                        inout vec4 a, inout uint predicted, inout vec3 color,
+                        inout float transmittance, inout uint evaluations) {
+    float l_max = params.preint_range.z;
+    float l_min = params.preint_range.w;
+    float epsilon = params.integrator.x;
+    float termination = params.integrator.y;
+    uint units = 1u << uint(ADAPTIVE_LEVELS - 1);
+    uint tops = uint(ceil((t1 - t0) / l_max));
+    if (first == 0u) {
+        a = knot(o, d, t0, evaluations);
+        predicted = 0u;
+    }
+    vec4 stack[ADAPTIVE_LEVELS];
+    uint last = min(last_step, tops);
+    uint k = first;
+    uint position = 0u;
+    int sp = 0;
+    while (k < last) {
+        // Composite what passes, until an interval or a new end needs an evaluation.
+        float t_eval = 0.0;
+        uint depth = 0u;
+        bool split = false;
+        bool ended = false;
+        while (true) {
+            if (position == units) {
+                k += 1u;
+                position = 0u;
+                if (k == last) {
+                    ended = true;
+                    break;
+                }
+            }
+            float start = t0 + float(k) * l_max;
+            float end = t0 + float(k + 1u) * l_max;
+            bool full = end <= t1;
+            float top = full ? l_max : t1 - start;
+            if (top <= 0.0) {
+                return CHUNK_FINISHED;
+            }
+            if (sp == 0) {
+                // A new end at the controller's depth, or deeper until the position is aligned.
+                depth = predicted;
+                while (position % (units >> depth) != 0u) {
+                    depth += 1u;
+                }
+                uint to = position + (units >> depth);
+                t_eval = to == units ? (full ? end : t1) : start + top * (float(to) / float(units));
+                break;
+            }
+            vec4 packed = stack_get(stack, sp - 1);
+            depth = uint(abs(packed.w)) - 1u;
+            vec4 e = vec4(packed.xyz, packed.w > 0.0 ? 1.0 : 0.0);
+            float len = top * exp2(-float(depth));
+            bool can_split = int(depth) + 1 < ADAPTIVE_LEVELS && (full || 0.5 * len >= l_min);
+            vec4 mid;
+            float error = hermite_error(a, e, transmittance, mid);
+            if (can_split && error > epsilon) {
+                t_eval = 0.5 * (a.x + e.x);
+                split = true;
+                break;
+            }
+            predicted = depth > 0u && 0.81 * epsilon >= 4.0 * error ? depth - 1u : depth;
+            // Accepted: the halves through the predicted midpoint when the hull holds no
+            // isosurface value, else the whole interval split at the surfaces it crosses. One
+            // emit_interval call site: GLSL inlines every call, and lavapipe's compile time
+            // grows with the inlined copies of the root finders.
+            bool halves = mid.w > 0.0;
+            bool table = full && depth + 1u < params.preint_dims.y;
+            vec4 cl = halves ? knot_segment(a, mid, 0.5 * len, table, depth + 1u)
+                             : knot_segment(a, e, len, full, depth);
+            vec4 cr = halves ? knot_segment(mid, e, 0.5 * len, table, depth + 1u) : cl;
+            for (uint piece = 0u; piece < (halves ? 2u : 1u); ++piece) {
+                bool left = piece == 0u;
+                emit_interval(o, d, left ? a : mid, halves && left ? mid : e,
+                              halves ? 0.5 * len : len, left ? cl : cr, color, transmittance,
+                              evaluations);
+            }
+            sp -= 1;
+            position += units >> depth;
+            a = e;
+            if (1.0 - transmittance > termination) {
+                return CHUNK_FINISHED;
+            }
+        }
+        if (ended) {
+            break;
+        }
+        // The one evaluation of this iteration.
+        vec4 m = knot(o, d, t_eval, evaluations);
+        float level = float(depth + (split ? 2u : 1u));
+        if (split) {
+            // Both halves are one level deeper; the left one (closed by m) comes first.
+            vec4 top_entry = stack_get(stack, sp - 1);
+            stack_set(stack, sp - 1, vec4(top_entry.xyz, top_entry.w > 0.0 ? level : -level));
+        }
+        stack_set(stack, sp, vec4(m.xyz, m.w > 0.0 ? level : -level));
+        sp += 1;
+    }
+    if (k < last) {
+        return CHUNK_TRUNCATED;
+    }
+    return k >= tops ? CHUNK_FINISHED : CHUNK_DONE;
+}
+#else
+uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step,
+                        inout vec4 a, inout uint predicted, inout vec3 color,
+                        inout float transmittance, inout uint evaluations) {
     float l_max = params.preint_range.z;
     float l_min = params.preint_range.w;
     float epsilon = params.integrator.x;
@@ -247,6 +433,21 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
         }
     }
     return k >= tops ? CHUNK_FINISHED : (k == last_step ? CHUNK_DONE : CHUNK_TRUNCATED);
+}
+#endif
+
+// The chunk state is the knot `a` with the controller's depth folded into w:
+// ±(predicted + 1), negative when f is undefined at a.
+uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, inout vec4 state,
+               inout vec3 color, inout float transmittance, inout uint evaluations) {
+    uint predicted = uint(abs(state.w));
+    predicted = predicted > 0u ? predicted - 1u : 0u;
+    vec4 a = vec4(state.xyz, state.w > 0.0 ? 1.0 : 0.0);
+    uint outcome = integrate_adaptive(o, d, t0, t1, first, last_step, a, predicted, color,
+                                      transmittance, evaluations);
+    float packed = float(predicted + 1u);
+    state = vec4(a.xyz, a.w > 0.0 ? packed : -packed);
+    return outcome;
 }
 #endif
 

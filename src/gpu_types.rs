@@ -77,6 +77,9 @@ pub mod binding {
     pub const SKIP_BLOCKS: u32 = 30;
     /// Empty-space skipping: the frame's skip table (`SkipTable::gpu_words`).
     pub const SKIP_TABLE: u32 = 31;
+    /// The transfer function's `TfPoint`s as rgba32f texels (two per point), for the Hermite
+    /// criterion's loop over its pieces (one gather per read instead of a per-lane loop).
+    pub const TRANSFER_TEXELS: u32 = 32;
 
     /// How kernels read a binding: the grid and the octree's samples, nodes and references
     /// through texel-buffer views (one AVX2 gather per 8 lanes on llvmpipe instead of a per-lane
@@ -84,9 +87,8 @@ pub mod binding {
     pub fn kind(b: u32) -> crate::vk::BindingKind {
         use crate::vk::BindingKind;
         match b {
-            SAMPLES | GRID | RESAMPLED | RESAMPLE_TARGET | PREINT | SKIP_BLOCKS => {
-                BindingKind::TexelRgba32Float
-            }
+            SAMPLES | GRID | RESAMPLED | RESAMPLE_TARGET | PREINT | SKIP_BLOCKS
+            | TRANSFER_TEXELS => BindingKind::TexelRgba32Float,
             NODES => BindingKind::TexelRgba32Uint,
             INDICES | PROBE_TEXELS | SKIP_TABLE => BindingKind::TexelR32Uint,
             _ => BindingKind::Storage,
@@ -94,7 +96,7 @@ pub mod binding {
     }
 
     /// Every binding with its macro name.
-    pub const ALL: [(&str, u32); 32] = [
+    pub const ALL: [(&str, u32); 33] = [
         ("BINDING_PARAMS", PARAMS),
         ("BINDING_GRID", GRID),
         ("BINDING_SAMPLES", SAMPLES),
@@ -127,6 +129,7 @@ pub mod binding {
         ("BINDING_RESAMPLE_TARGET", RESAMPLE_TARGET),
         ("BINDING_SKIP_BLOCKS", SKIP_BLOCKS),
         ("BINDING_SKIP_TABLE", SKIP_TABLE),
+        ("BINDING_TRANSFER_TEXELS", TRANSFER_TEXELS),
     ];
 }
 
@@ -233,7 +236,8 @@ pub struct RenderParams {
     /// Preintegration: table resolution N, number of length tables (the zero-length limits
     /// follow them), unused ×2.
     pub preint_dims: [u32; 4],
-    /// Adaptive ε, early-termination opacity, unused ×2.
+    /// Adaptive ε, early-termination opacity, sample spacing (the Hermite criterion's ε is per
+    /// spacing), unused.
     pub integrator: [f32; 4],
     /// Blinn–Phong ambient, diffuse, specular, shininess.
     pub lighting: [f32; 4],

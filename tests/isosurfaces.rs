@@ -9,7 +9,24 @@ use vmls::render::raycast::{PixelResult, raycast_image};
 use vmls::render::{Field, build_tables};
 use vmls::scene::Scene;
 
-const METHODS: [&str; 4] = ["riemann", "fixed", "adaptive", "reference"];
+const METHODS: [&str; 5] = [
+    "riemann",
+    "fixed",
+    "adaptive",
+    "adaptive-hermite",
+    "reference",
+];
+
+/// The scene keys of a method name ("adaptive-hermite": the adaptive method, Hermite criterion).
+fn method_keys(method: &str) -> Vec<String> {
+    match method.strip_suffix("-hermite") {
+        Some(m) => vec![
+            format!("render.method=\"{m}\""),
+            "render.adaptive=\"hermite\"".to_string(),
+        ],
+        None => vec![format!("render.method=\"{method}\"")],
+    }
+}
 
 fn scene(overrides: &[String]) -> Scene {
     Scene::load(None, overrides).expect("scene")
@@ -88,8 +105,10 @@ fn isosurface_in_a_constant_medium_matches_the_closed_form() {
         .collect();
     let alpha = 1.0 - t_front * (1.0 - op) * (1.0 - back);
     for method in METHODS {
+        let keys = method_keys(method);
         let o = along_x(&[
-            &format!("render.method=\"{method}\""),
+            &keys[0],
+            keys.get(1).map_or("render.adaptive=\"mls2008\"", |k| k),
             "transfer.points=[[-2.0, 0.2, 0.4, 0.6, 1.5], [2.0, 0.2, 0.4, 0.6, 1.5]]",
             "transfer.isosurfaces=[{ value = 0.3, color = [1.0, 0.5, 0.25], opacity = 0.6 }]",
             "render.early_termination=1.0",
@@ -119,9 +138,11 @@ fn isosurface_in_a_constant_medium_matches_the_closed_form() {
 fn isosurface_exactly_at_a_knot_is_composited_once() {
     // Fixed step 1 spacing = 0.25: knots at x = -1, -0.75, …, so x = 0.5 is a knot and
     // f(0.5) = 0.5 up to rounding. Transparent medium: α must be the opacity, not 1 − (1 − op)².
-    for method in ["fixed", "adaptive"] {
+    for method in ["fixed", "adaptive", "adaptive-hermite"] {
+        let keys = method_keys(method);
         let o = along_x(&[
-            &format!("render.method=\"{method}\""),
+            &keys[0],
+            keys.get(1).map_or("render.adaptive=\"mls2008\"", |k| k),
             "render.step=1.0",
             "render.l_max=4.0",
             "render.l_min=1.0",
@@ -162,13 +183,20 @@ fn near_tangent_double_crossings_between_two_knots_are_found() {
             ([0.0; 3], 0.0)
         };
         // Knots at x = ±1 (fixed, adaptive with l_min = l_max) and midpoint samples at ±0.5.
-        for (method, step) in [("fixed", 12.0), ("adaptive", 12.0), ("riemann", 6.0)] {
+        for (method, step) in [
+            ("fixed", 12.0),
+            ("adaptive", 12.0),
+            ("adaptive-hermite", 12.0),
+            ("riemann", 6.0),
+        ] {
             if method == "riemann" && b * b + 0.25 < 0.81 {
                 // Both samples inside: the crossings lie in the half steps outside them.
                 continue;
             }
+            let keys = method_keys(method);
             let o = along_x(&[
-                &format!("render.method=\"{method}\""),
+                &keys[0],
+                keys.get(1).map_or("render.adaptive=\"mls2008\"", |k| k),
                 &format!("render.step={step}"),
                 &format!("render.l_max={step}"),
                 &format!("render.l_min={step}"),

@@ -189,6 +189,25 @@ fn gpu_image_matches_cpu_reference() {
             "render.l_max=40.0",
             "render.l_min=1.0",
         ],
+        // The Hermite criterion: its controller, ε = 0 (every interval at l_min), a clipped
+        // top, the eye inside, and long rays cut into several chunks.
+        vec!["render.method=\"adaptive\"", "render.adaptive=\"hermite\""],
+        vec![
+            "render.method=\"adaptive\"",
+            "render.adaptive=\"hermite\"",
+            "render.epsilon=0.0",
+        ],
+        vec![
+            "render.method=\"adaptive\"",
+            "render.adaptive=\"hermite\"",
+            "render.l_max=40.0",
+            "render.l_min=1.0",
+        ],
+        vec![
+            "render.method=\"adaptive\"",
+            "render.adaptive=\"hermite\"",
+            "camera.eye=[0.1, 0.2, 0.3]",
+        ],
     ] {
         let mut o = SMALL.to_vec();
         o.extend(extra.iter().copied());
@@ -364,4 +383,111 @@ fn long_rays_are_integrated_in_chunks_that_the_driver_does_not_cut() {
     }
     drop(gf);
     finish(ctx);
+}
+
+#[test]
+fn hermite_chunks_carry_the_controller_state() {
+    // One top interval per dispatch: the knot and the controller's depth cross every chunk
+    // boundary through the ray state, and the image must equal the one rendered in default
+    // chunks.
+    let mut o = SMALL.to_vec();
+    o.extend([
+        "render.method=\"adaptive\"",
+        "render.adaptive=\"hermite\"",
+        "render.epsilon=0.001",
+    ]);
+    let s = scene(&o);
+    let f = field(&s);
+    let t = tables(&s, &f);
+    let (ctx, compiler) = gpu();
+    let gf = GpuField::upload(&ctx, &f).expect("upload");
+    let mut images = Vec::new();
+    for chunk in [None, Some(1)] {
+        let mut setup = s.ray_setup(&f).expect("setup");
+        setup.chunk = chunk;
+        images.push(
+            render(
+                &ctx,
+                &compiler,
+                &f,
+                &gf,
+                &s.transfer,
+                t.as_ref(),
+                &setup,
+                |_| {},
+            )
+            .expect("render"),
+        );
+    }
+    drop(gf);
+    finish(ctx);
+    let (a, b) = (&images[0], &images[1]);
+    assert_eq!(
+        a.counts, b.counts,
+        "evaluation counts differ between chunkings"
+    );
+    let max = a
+        .pixels
+        .iter()
+        .zip(&b.pixels)
+        .flat_map(|(p, q)| (0..4).map(move |k| (p[k] - q[k]).abs()))
+        .fold(0.0f32, f32::max);
+    assert!(max <= 1e-6, "chunked image differs by {max:e}");
+}
+
+#[test]
+fn hermite_criterion_converges_with_fewer_evaluations_than_fixed_steps() {
+    // CPU twin, f64: the error against the reference falls as ε falls, and at the ε whose
+    // error is no worse than fixed step 0.5 it needs fewer evaluations (the predicted
+    // midpoints make each accepted interval as accurate as two of half its length).
+    let mut base = SMALL.to_vec();
+    base.push("render.early_termination=1.0");
+    let mut r = base.clone();
+    r.extend([
+        "render.method=\"reference\"",
+        "render.reference_step=0.03125",
+    ]);
+    let rs = scene(&r);
+    let f = field(&rs);
+    let reference = cpu_render(&rs, &f);
+    let measure = |extra: &[&str]| {
+        let mut o = base.clone();
+        o.extend(extra.iter().copied());
+        let c = cpu_render(&scene(&o), &f);
+        let rmse = (c
+            .iter()
+            .zip(&reference)
+            .flat_map(|(a, b)| (0..3).map(move |k| (a.rgba[k] - b.rgba[k]).powi(2)))
+            .sum::<f64>()
+            / (3 * c.len()) as f64)
+            .sqrt();
+        let evaluations: u64 = c.iter().map(|p| u64::from(p.evaluations)).sum();
+        (rmse, evaluations)
+    };
+    let fixed = measure(&["render.method=\"fixed\"", "render.step=0.5"]);
+    let hermite: Vec<(f64, u64)> = [0.03, 0.003, 0.0003]
+        .iter()
+        .map(|e| {
+            measure(&[
+                "render.method=\"adaptive\"",
+                "render.adaptive=\"hermite\"",
+                &format!("render.epsilon={e}"),
+            ])
+        })
+        .collect();
+    eprintln!("fixed 0.5: {fixed:?}; hermite ε = 0.03, 0.003, 0.0003: {hermite:?}");
+    assert!(
+        hermite[0].0 > hermite[1].0 && hermite[1].0 > hermite[2].0,
+        "error does not fall with ε: {hermite:?}"
+    );
+    let matched = hermite
+        .iter()
+        .find(|h| h.0 <= fixed.0)
+        .expect("some ε reaches fixed step 0.5's error");
+    assert!(
+        matched.1 < fixed.1,
+        "at equal error the Hermite criterion spent {} evaluations, fixed step 0.5 {}",
+        matched.1,
+        fixed.1
+    );
 }

@@ -19,4 +19,34 @@ vec4 transfer_lookup(float s, uint count) {
     return tf[count - 1u].color_tau;
 }
 
+#if defined(ADAPTIVE_CRITERION) && ADAPTIVE_CRITERION == 1
+// The same points as rgba32f texels: 2i = color_tau, 2i + 1 = (s, padding).
+layout(binding = BINDING_TRANSFER_TEXELS, rgba32f) uniform readonly imageBuffer tf_texels;
+
+// How far τ and τ·c can move when s departs by at most `deviation` from the line the tables
+// assume, somewhere in [lo, hi] (twin of TransferFunction::sensitivity, stage
+// transfer_sensitivity). Reads through the texel view: inside divergent code a storage-buffer
+// load is a per-lane loop even at a uniform index.
+float transfer_sensitivity(float lo, float hi, float deviation, uint count) {
+    float m = 0.0;
+    vec4 ca = imageLoad(tf_texels, 0);
+    float sa = imageLoad(tf_texels, 1).x;
+    vec4 wa = vec4(ca.rgb * ca.a, ca.a);
+    for (uint i = 1u; i < count; ++i) {
+        vec4 cb = imageLoad(tf_texels, int(2u * i));
+        float sb = imageLoad(tf_texels, int(2u * i + 1u)).x;
+        vec4 wb = vec4(cb.rgb * cb.a, cb.a);
+        if (sb >= lo && sa <= hi) {
+            vec4 change = abs(wb - wa);
+            float jump = max(max(change.x, change.y), max(change.z, change.w));
+            float width = sb - sa;
+            m = max(m, width > 0.0 ? min(jump / width * deviation, jump) : jump);
+        }
+        sa = sb;
+        wa = wb;
+    }
+    return m;
+}
+#endif
+
 #endif

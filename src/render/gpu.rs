@@ -17,7 +17,7 @@ use crate::gpu_types::{
 };
 use crate::recon::NeighbourMode;
 use crate::recon::mls::{Basis, GradientMode, Weight};
-use crate::render::Method;
+use crate::render::{AdaptiveCriterion, Method};
 use crate::vk::{
     BindGroup, Buffer, BufferUsage, ComputePipeline, Context, ShaderCompiler, ShaderSource, VkError,
 };
@@ -40,6 +40,8 @@ pub struct Variant {
     pub method: Option<Method>,
     /// Adaptive stack entries (levels of subdivision).
     pub adaptive_levels: usize,
+    /// The adaptive integrator's acceptance test.
+    pub adaptive: AdaptiveCriterion,
     /// Isosurfaces of the scene (0 compiles no isosurface code).
     pub isosurfaces: usize,
     /// Rays are clipped to a boundary hull (else to the domain's box).
@@ -80,6 +82,7 @@ impl Variant {
             skip: false,
             method: None,
             adaptive_levels: 1,
+            adaptive: AdaptiveCriterion::Mls2008,
             isosurfaces: 0,
         }
     }
@@ -89,6 +92,7 @@ impl Variant {
         Self {
             method: Some(setup.method),
             adaptive_levels: adaptive::stack_size(setup.l_max, setup.l_min),
+            adaptive: setup.adaptive,
             isosurfaces: setup.isosurfaces.len(),
             hull: field.hull.is_some(),
             // The adaptive integrator does not skip yet.
@@ -154,6 +158,14 @@ impl Variant {
         d.push(("RAY_METHOD".into(), ray_method.to_string()));
         d.push(("ADAPTIVE_LEVELS".into(), self.adaptive_levels.to_string()));
         d.push((
+            "ADAPTIVE_CRITERION".into(),
+            match self.adaptive {
+                AdaptiveCriterion::Mls2008 => "0",
+                AdaptiveCriterion::Hermite => "1",
+            }
+            .into(),
+        ));
+        d.push((
             "MAX_ISO".into(),
             self.isosurfaces.min(MAX_ISOSURFACES).to_string(),
         ));
@@ -185,7 +197,10 @@ impl Variant {
                 NeighbourMode::Octree => "octree",
             },
             self.method
-                .map(|m| format!("-{}", m.name()))
+                .map(|m| match (m, self.adaptive) {
+                    (Method::Adaptive, AdaptiveCriterion::Hermite) => "-adaptive-hermite".into(),
+                    _ => format!("-{}", m.name()),
+                })
                 .unwrap_or_default()
         ) + if self.hull { "-hull" } else { "" }
             + &if self.resampled {
@@ -257,7 +272,12 @@ pub fn render_params(field: &Field, setup: Option<&RaySetup>, tf_count: u32) -> 
         p.height = r.camera.height;
         p.step = r.step as f32;
         p.min_transmittance = r.min_transmittance as f32;
-        p.integrator = [r.epsilon as f32, r.early_termination as f32, 0.0, 0.0];
+        p.integrator = [
+            r.epsilon as f32,
+            r.early_termination as f32,
+            r.spacing as f32,
+            0.0,
+        ];
         let l = &r.lighting;
         p.lighting = [
             l.ambient as f32,

@@ -31,7 +31,7 @@ use crate::vk::VkError;
 use camera::{Camera, ViewBasis};
 use glam::DVec3;
 use preintegration::PreintegrationTables;
-pub use settings::{Method, RenderSettings};
+pub use settings::{AdaptiveCriterion, Method, RenderSettings};
 use transfer::TransferFunction;
 
 /// Errors of the render layer (and everything below it).
@@ -380,7 +380,10 @@ pub struct RaySetup {
     /// Adaptive interval bounds in world units.
     pub l_min: f64,
     pub l_max: f64,
+    pub adaptive: AdaptiveCriterion,
     pub epsilon: f64,
+    /// The sample spacing in world units: the Hermite criterion's ε is per spacing.
+    pub spacing: f64,
     /// Preintegrated methods stop at this opacity.
     pub early_termination: f64,
     /// Empty-space skipping: `render.skip` with the fast path ([`skip`]).
@@ -430,7 +433,9 @@ impl RaySetup {
             step: spacings * unit,
             l_min: render.l_min * unit,
             l_max: render.l_max * unit,
+            adaptive: render.adaptive,
             epsilon: render.epsilon,
+            spacing: unit,
             early_termination: render.early_termination,
             skip: render.skip && field.reconstruction.resample > 0,
             background: render.background,

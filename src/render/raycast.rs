@@ -5,7 +5,7 @@
 //!   at the exit); per step a = 1 − exp(−τ(s)·δ), C += T·a·c(s), T *= 1 − a; stop when
 //!   T < min_transmittance;
 //! - `fixed`: preintegration, s evaluated at interval ends, one table lookup per interval;
-//! - `adaptive`: [MLS]'s subdivision (see `adaptive`).
+//! - `adaptive`: dyadic subdivision with [MLS]'s or the Hermite criterion (see `adaptive`).
 //!
 //! Where no sample has weight the field is undefined: a midpoint step there adds nothing, and
 //! so does a preintegrated interval with an undefined end. Pixel = (C + T·background, 1 − T).
@@ -216,7 +216,7 @@ pub fn raycast(
     for (t0, t1) in segments {
         match (setup.method, tables) {
             (Method::Fixed, Some(t)) => integrate_fixed(&mut ray, setup, t, t0, t1),
-            (Method::Adaptive, Some(t)) => adaptive::integrate(&mut ray, setup, t, t0, t1),
+            (Method::Adaptive, Some(t)) => adaptive::integrate(&mut ray, setup, tf, t, t0, t1),
             _ => integrate_riemann(&mut ray, setup, tf, t0, t1),
         }
         let done = match setup.method {

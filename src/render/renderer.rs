@@ -105,6 +105,7 @@ fn frame_bindings(
     ids.extend(gpu_field.hull_bindings().iter().map(|(b, _)| *b));
     ids.extend([
         binding::TRANSFER,
+        binding::TRANSFER_TEXELS,
         binding::IMAGE,
         binding::COUNTS,
         binding::RAY_STATE,
@@ -241,6 +242,7 @@ fn run_bands(
     all.extend([
         (binding::PARAMS, &constants.params),
         (binding::TRANSFER, &constants.tf),
+        (binding::TRANSFER_TEXELS, &constants.tf),
         (binding::IMAGE, &targets.image),
         (binding::COUNTS, &targets.counts),
         (binding::RAY_STATE, &targets.ray_state),

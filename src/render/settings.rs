@@ -46,6 +46,38 @@ impl Method {
     }
 }
 
+/// The adaptive integrator's acceptance test (`render.adaptive`, DESIGN.md §4).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AdaptiveCriterion {
+    /// [MLS] §4: compare an interval with its two halves (two evaluations per accepted
+    /// interval); ε is relative, (1 − α)·|C1 − C2| ≤ ε·|C1|.
+    Mls2008,
+    /// One evaluation per accepted interval: the cubic Hermite through the knots' values and
+    /// directional derivatives bounds f's departure from the line the tables assume; ε bounds the
+    /// resulting error of optical depth and colour per sample spacing.
+    Hermite,
+}
+
+impl AdaptiveCriterion {
+    /// The scene-file spelling.
+    pub fn name(self) -> &'static str {
+        match self {
+            AdaptiveCriterion::Mls2008 => "mls2008",
+            AdaptiveCriterion::Hermite => "hermite",
+        }
+    }
+
+    /// `render.epsilon` when the scene gives none: [MLS]'s 0.03 for its criterion; for the
+    /// Hermite criterion, the ε that matched fixed-step preintegration at step 0.5 in RMSE on
+    /// Marschner–Lobb (BENCHMARKS.md, "The Hermite criterion").
+    pub fn default_epsilon(self) -> f64 {
+        match self {
+            AdaptiveCriterion::Mls2008 => 0.03,
+            AdaptiveCriterion::Hermite => 0.003,
+        }
+    }
+}
+
 /// Integrator settings (scene section `[render]`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct RenderSettings {
@@ -60,7 +92,9 @@ pub struct RenderSettings {
     /// Adaptive: shortest and longest interval, in sample spacings ([MLS]: 0.16 and 2.6).
     pub l_min: f64,
     pub l_max: f64,
-    /// Adaptive: subdivision tolerance ε of (1 − α)·|C1 − C2| / |C1| < ε ([MLS]: 0.03).
+    /// Adaptive: the acceptance test.
+    pub adaptive: AdaptiveCriterion,
+    /// Adaptive: the criterion's tolerance ε ([`AdaptiveCriterion`]).
     pub epsilon: f64,
     /// Preintegrated methods stop a ray once its opacity exceeds this ([MLS]: 0.99).
     pub early_termination: f64,

@@ -69,6 +69,33 @@ impl TransferFunction {
         at(&p[p.len() - 1])
     }
 
+    /// Stage `transfer_sensitivity`: how far τ and τ·c can move when s departs by at most
+    /// `deviation` from the line the preintegration tables assume, somewhere in [lo, hi]
+    /// (DESIGN.md §4, the Hermite criterion). Over the pieces that meet [lo, hi], the largest
+    /// min(rate · deviation, jump), where jump is the largest change of τ or of one τ·c_k across
+    /// the piece and rate = jump / its width (a step in the function, width 0, counts its jump).
+    /// Per world unit, like τ.
+    pub fn sensitivity(&self, lo: f64, hi: f64, deviation: f64) -> f64 {
+        let mut m = 0.0f64;
+        for pair in self.points.windows(2) {
+            let (a, b) = (&pair[0], &pair[1]);
+            if b[0] < lo || a[0] > hi {
+                continue;
+            }
+            let jump = (1..4)
+                .map(|k| (b[k] * b[4] - a[k] * a[4]).abs())
+                .fold((b[4] - a[4]).abs(), f64::max);
+            let width = b[0] - a[0];
+            let change = if width > 0.0 {
+                (jump / width * deviation).min(jump)
+            } else {
+                jump
+            };
+            m = m.max(change);
+        }
+        m
+    }
+
     /// GPU layout.
     pub fn to_gpu(&self) -> Vec<TfPoint> {
         self.points
@@ -97,5 +124,37 @@ mod tests {
         );
         assert_eq!(tf.lookup(-3.0), ([0.0; 3], 0.0));
         assert_eq!(tf.lookup(7.0), ([1.0, 0.5, 0.0], 8.0));
+    }
+
+    #[test]
+    fn sensitivity_bounds_the_change_of_tau_and_tau_c() {
+        // τ rises 0 → 4 on [0.2, 0.4] (rate 20, τ·r up to 4), is flat to 0.6, then steps down.
+        let tf = TransferFunction::new(vec![
+            [0.2, 1.0, 0.0, 0.0, 0.0],
+            [0.4, 1.0, 0.0, 0.0, 4.0],
+            [0.6, 1.0, 0.0, 0.0, 4.0],
+            [0.6, 1.0, 0.0, 0.0, 1.0],
+        ]);
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-12;
+        // Inside the ramp: rate × deviation; capped by the ramp's whole change.
+        assert!(close(tf.sensitivity(0.25, 0.3, 0.01), 0.2));
+        assert!(close(tf.sensitivity(0.25, 0.3, 1.0), 4.0));
+        // On the flat piece nothing changes; the range touching the step counts its jump.
+        assert!(close(tf.sensitivity(0.45, 0.55, 0.01), 0.0));
+        assert!(close(tf.sensitivity(0.45, 0.6, 0.01), 3.0));
+        // Outside the points the function is constant.
+        assert!(close(tf.sensitivity(-1.0, 0.1, 0.5), 0.0));
+        assert!(close(tf.sensitivity(0.7, 2.0, 0.5), 0.0));
+        // Sampled: no change of τ over a deviation exceeds the bound.
+        for i in 0..200 {
+            let s = 0.15 + 0.5 * f64::from(i) / 200.0;
+            let dev = 0.013;
+            let bound = tf.sensitivity(s - dev, s + dev, dev);
+            let (_, t0) = tf.lookup(s);
+            for ds in [-dev, -0.5 * dev, 0.5 * dev, dev] {
+                let (_, t1) = tf.lookup(s + ds);
+                assert!((t1 - t0).abs() <= bound + 1e-12, "s {s} ds {ds}");
+            }
+        }
     }
 }

@@ -23,7 +23,7 @@ use crate::render::{Field, RaySetup, RenderError};
 // The configuration types live with the layers that use them; the scene re-exports them so
 // that a scene file's vocabulary is in one place.
 pub use crate::recon::{NeighbourMode, Reconstruction};
-pub use crate::render::{Method, RenderSettings};
+pub use crate::render::{AdaptiveCriterion, Method, RenderSettings};
 use crate::samples::{SampleSet, SampleSettings};
 use std::path::{Path, PathBuf};
 use toml::{Table, Value};
@@ -132,6 +132,7 @@ const KNOWN: &[(&str, &[&str])] = &[
             "min_transmittance",
             "l_min",
             "l_max",
+            "adaptive",
             "epsilon",
             "early_termination",
             "skip",
@@ -654,6 +655,14 @@ impl Scene {
         }
 
         let ren = section("render");
+        let adaptive = ren.choice(
+            "adaptive",
+            AdaptiveCriterion::Mls2008,
+            &[
+                ("mls2008", AdaptiveCriterion::Mls2008),
+                ("hermite", AdaptiveCriterion::Hermite),
+            ],
+        )?;
         let render = RenderSettings {
             method: ren.choice(
                 "method",
@@ -673,7 +682,8 @@ impl Scene {
             min_transmittance: ren.float("min_transmittance", 1e-4, 0.0, 1.0)?,
             l_min: ren.positive("l_min", 0.16, 1e3)?,
             l_max: ren.positive("l_max", 2.6, 1e3)?,
-            epsilon: ren.float("epsilon", 0.03, 0.0, 1e3)?,
+            adaptive,
+            epsilon: ren.float("epsilon", adaptive.default_epsilon(), 0.0, 1e3)?,
             early_termination: ren.float("early_termination", 0.99, 0.0, 1.0)?,
             skip: match ren.get("skip") {
                 None => false,

@@ -1,20 +1,41 @@
-//! [MLS] §4 adaptive subdivision, f64 twin of `integrate` (RAY_METHOD 2) in
-//! `glsl/raycast.comp`.
+//! Adaptive integration, f64 twin of `integrate` (RAY_METHOD 2) in `glsl/raycast.comp`, with
+//! two acceptance tests (`render.adaptive`, DESIGN.md §4).
 //!
-//! The ray is cut into top intervals of l_max (the last one clipped at the exit). An interval
-//! [a, e] with scalars s_a, s_e is compared with its two halves: C1 = table(len)(s_a, s_e),
-//! C2 = the halves composited (one new evaluation at the midpoint). It is accepted when
-//! (1 − α_acc)·|C1 − C2| ≤ ε·|C1| (|·| the RGB norm) and the directional derivative does not
-//! change sign (∇f(a)·v · ∇f(e)·v ≥ 0, which could hide an isosurface), or when its half would
-//! be shorter than l_min; accepted intervals composite C2. Otherwise the midpoint is pushed
-//! and the left half is processed first, since its α is needed for the right half's test. The
-//! stack holds pending interval ends with their depths, strictly deeper towards the top except
-//! for the two halves of the last split: at most ⌊log2(l_max/l_min)⌋ + 1 entries.
+//! The ray is cut into top intervals of l_max (the last one clipped at the exit); inside a top,
+//! intervals are dyadic: [a, e] at depth k has length top·2^−k and starts at a multiple of it,
+//! so that every full-top interval has its own table. Pending interval ends live on a stack with
+//! their depths, strictly deeper towards the top except for the two halves of the last split:
+//! at most ⌊log2(l_max/l_min)⌋ + 1 entries. An interval is split (its midpoint evaluated and
+//! pushed, the left half processed first, since its α is needed for the right half's test)
+//! until it is accepted or its half would be shorter than l_min.
+//!
+//! - `mls2008` ([MLS] §4): C1 = table(len)(s_a, s_e) against C2 = the halves composited (the
+//!   midpoint is evaluated for every test). Accepted when (1 − α_acc)·|C1 − C2| ≤ ε·|C1| (|·| the
+//!   RGB norm) and the directional derivative does not change sign (∇f(a)·v · ∇f(e)·v ≥ 0,
+//!   which could hide an isosurface); accepted intervals composite C2. Each top starts at
+//!   depth 0.
+//! - `hermite` (one evaluation per accepted interval): with length l, end values f0, f1,
+//!   derivatives along the ray g0, g1 and Δ = f1 − f0, the cubic Hermite through the knots
+//!   departs from the line the table assumes by at most D = max(|l·g0 − Δ|, |l·g1 − Δ|)/3 and
+//!   stays within the hull of its Bézier values {f0, f0 + l·g0/3, f1 − l·g1/3, f1}. The
+//!   interval's error per unit length is then at most T·S, T the transmittance so far and S the
+//!   transfer function's [`TransferFunction::sensitivity`] to a deviation D over that hull (a
+//!   band or a breakpoint the Hermite overshoots into counts, which catches thin features
+//!   between monotone-looking knots). Accepted when T·S·h ≤ ε, h the sample spacing: ε bounds the
+//!   error of optical depth and colour per spacing, so a ray's total is at most ε per spacing
+//!   crossed. An interval with exactly one undefined end is split (the domain's edge is inside).
+//!   A step controller picks the next interval when the stack is empty: S ∝ D = O(l²) for smooth
+//!   f, so the step that just meets ε is l·(ε/E)^½; one level coarser when 0.9 of that is at
+//!   least 2l, the same level otherwise, and deeper wherever the position is not aligned to the
+//!   coarser level. A rejected interval costs one evaluation (its midpoint; its end stays
+//!   pending). Splitting at dyadic midpoints rather than at the Hermite's extremum keeps every
+//!   length a table length.
 
 use super::Ray;
 use super::interval::{Knot, emit_interval, knot, knot_segment};
-use crate::render::RaySetup;
 use crate::render::preintegration::PreintegrationTables;
+use crate::render::transfer::TransferFunction;
+use crate::render::{AdaptiveCriterion, RaySetup};
 
 /// Stack entries needed for l_max/l_min (the shader's `ADAPTIVE_STACK`).
 pub fn stack_size(l_max: f64, l_min: f64) -> usize {
@@ -31,10 +52,95 @@ fn norm(c: [f64; 3]) -> f64 {
     (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt()
 }
 
-/// Integrates [t0, t1] adaptively into `ray`. Each pending end carries the depth of the interval
-/// it closes, so lengths are exact (top length · 2^−depth) and, for full-length top intervals,
-/// equal table `depth` without comparing floats.
+/// The Bézier hull [lo, hi] of the cubic Hermite with end values f0, f1 and end derivatives
+/// m0, m1 (per unit of its interval), and D, its largest departure from the chord.
+fn bezier_hull(f0: f64, f1: f64, m0: f64, m1: f64) -> (f64, f64, f64) {
+    let delta = f1 - f0;
+    let (b1, b2) = (f0 + m0 / 3.0, f1 - m1 / 3.0);
+    let lo = f0.min(f1).min(b1.min(b2));
+    let hi = f0.max(f1).max(b1.max(b2));
+    (lo, hi, (m0 - delta).abs().max((m1 - delta).abs()) / 3.0)
+}
+
+/// Stage `hermite_error`: the Hermite criterion's error of [a, e] per sample spacing (see the
+/// module documentation), infinite when exactly one end is undefined; and, unless the hull
+/// holds an isosurface value, the Hermite's midpoint knot, through which the interval is
+/// composited as two halves (the error is then that of the halves' chords).
+fn hermite_error(
+    ray: &Ray<'_>,
+    setup: &RaySetup,
+    tf: &TransferFunction,
+    a: &Knot,
+    e: &Knot,
+) -> (f64, Option<Knot>) {
+    let (f0, f1) = match (a.s, e.s) {
+        (Some(f0), Some(f1)) => (f0, f1),
+        (None, None) => return (0.0, None),
+        _ => return (f64::INFINITY, None),
+    };
+    let l = e.t - a.t;
+    let (m0, m1) = (l * a.slope(ray), l * e.slope(ray));
+    let scale = ray.transmittance * setup.spacing;
+    let (lo, hi, deviation) = bezier_hull(f0, f1, m0, m1);
+    for iso in &setup.isosurfaces {
+        if lo <= iso.value && iso.value <= hi {
+            // A surface the Hermite overshoots into may be crossed twice between the knots:
+            // split ("thin features", DESIGN.md §4).
+            let between = f0.min(f1) <= iso.value && iso.value <= f0.max(f1);
+            let error = if between {
+                scale * tf.sensitivity(lo, hi, deviation)
+            } else {
+                f64::INFINITY
+            };
+            return (error, None);
+        }
+    }
+    // The Hermite at u = ½: value and derivative per unit of the whole interval.
+    let sm = 0.5 * (f0 + f1) + 0.125 * (m0 - m1);
+    let mm = 1.5 * (f1 - f0) - 0.25 * (m0 + m1);
+    let (lo0, hi0, d0) = bezier_hull(f0, sm, 0.5 * m0, 0.5 * mm);
+    let (lo1, hi1, d1) = bezier_hull(sm, f1, 0.5 * mm, 0.5 * m1);
+    // One pass over the transfer function for both halves: their hulls' union and the larger
+    // departure.
+    let error = scale * tf.sensitivity(lo0.min(lo1), hi0.max(hi1), d0.max(d1));
+    let mid = Knot {
+        t: 0.5 * (a.t + e.t),
+        s: Some(sm),
+        // Only its component along the ray is ever read.
+        gradient: (ray.d * (mm / l)).to_array(),
+    };
+    (error, Some(mid))
+}
+
+/// The Hermite controller's next depth after accepting an interval at `depth` with error
+/// `error`: one level coarser when 0.9·(ε/E)^½ ≥ 2, i.e. 0.81·ε ≥ 4·E.
+fn predict_depth(depth: usize, error: f64, epsilon: f64) -> usize {
+    if depth > 0 && 0.81 * epsilon >= 4.0 * error {
+        depth - 1
+    } else {
+        depth
+    }
+}
+
+/// Integrates [t0, t1] adaptively into `ray` with the setup's criterion.
 pub(super) fn integrate(
+    ray: &mut Ray<'_>,
+    setup: &RaySetup,
+    tf: &TransferFunction,
+    tables: &PreintegrationTables,
+    t0: f64,
+    t1: f64,
+) {
+    match setup.adaptive {
+        AdaptiveCriterion::Mls2008 => integrate_mls2008(ray, setup, tables, t0, t1),
+        AdaptiveCriterion::Hermite => integrate_hermite(ray, setup, tf, tables, t0, t1),
+    }
+}
+
+/// [MLS]'s criterion. Each pending end carries the depth of the interval it closes, so lengths
+/// are exact (top length · 2^−depth) and, for full-length top intervals, equal table `depth`
+/// without comparing floats.
+fn integrate_mls2008(
     ray: &mut Ray<'_>,
     setup: &RaySetup,
     tables: &PreintegrationTables,
@@ -70,11 +176,7 @@ pub(super) fn integrate(
                 let diff = norm([0, 1, 2].map(|k| c1[k] - c2[k]));
                 let sign_change = a.slope(ray) * e.slope(ray) < 0.0;
                 if sign_change || ray.transmittance * diff > setup.epsilon * norm(c1) {
-                    // Both halves are one level deeper; the left one is processed first.
-                    if let Some(top) = stack.last_mut() {
-                        top.1 = depth + 1;
-                    }
-                    stack.push((m, depth + 1));
+                    push_half(&mut stack, m, depth);
                     continue;
                 }
                 // Accepted: the two halves, each split at any isosurface it crosses.
@@ -89,5 +191,165 @@ pub(super) fn integrate(
                 return;
             }
         }
+    }
+}
+
+/// The Hermite criterion with its step controller. Shaped like the kernel: every iteration of
+/// the outer loop evaluates f once, at a new end or at a rejected interval's midpoint; the
+/// inner loop composites the intervals that pass in between. The position inside a top is
+/// counted in units of the deepest level.
+fn integrate_hermite(
+    ray: &mut Ray<'_>,
+    setup: &RaySetup,
+    tf: &TransferFunction,
+    tables: &PreintegrationTables,
+    t0: f64,
+    t1: f64,
+) {
+    let levels = stack_size(setup.l_max, setup.l_min);
+    let units = 1u64 << (levels - 1);
+    let mut stack: Vec<(Knot, usize)> = Vec::with_capacity(levels);
+    let tops = ((t1 - t0) / setup.l_max).ceil() as u64;
+    let mut a = knot(ray, t0);
+    let mut predicted = 0;
+    let (mut k, mut position) = (0u64, 0u64);
+    while k < tops {
+        let (t, depth, split) = loop {
+            if position == units {
+                k += 1;
+                position = 0;
+                if k == tops {
+                    return;
+                }
+            }
+            let start = t0 + k as f64 * setup.l_max;
+            let end = t0 + (k + 1) as f64 * setup.l_max;
+            let full = end <= t1;
+            let top = if full { setup.l_max } else { t1 - start };
+            if top <= 0.0 {
+                return;
+            }
+            let Some(&(e, depth)) = stack.last() else {
+                // A new end at the controller's depth, or deeper until the position is aligned.
+                let mut depth = predicted;
+                while position % (units >> depth) != 0 {
+                    depth += 1;
+                }
+                let to = position + (units >> depth);
+                let t = match (to == units, full) {
+                    (true, true) => end,
+                    (true, false) => t1,
+                    (false, _) => start + top * (to as f64 / units as f64),
+                };
+                break (t, depth, false);
+            };
+            let len = top * 0.5f64.powi(depth as i32);
+            let can_split = depth + 1 < levels && (full || 0.5 * len >= setup.l_min);
+            let (error, mid) = hermite_error(ray, setup, tf, &a, &e);
+            if can_split && error > setup.epsilon {
+                break (0.5 * (a.t + e.t), depth, true);
+            }
+            predicted = predict_depth(depth, error, setup.epsilon);
+            // Accepted: the halves through the predicted midpoint when the hull holds no
+            // isosurface value, else the whole interval split at the surfaces it crosses.
+            match mid {
+                Some(m) => {
+                    let half = full
+                        .then_some(depth + 1)
+                        .filter(|&k| k < tables.tables.len());
+                    let left = knot_segment(tables, &a, &m, 0.5 * len, half);
+                    let right = knot_segment(tables, &m, &e, 0.5 * len, half);
+                    emit_interval(ray, setup, tables, &a, &m, 0.5 * len, left);
+                    emit_interval(ray, setup, tables, &m, &e, 0.5 * len, right);
+                }
+                None => {
+                    let whole = knot_segment(tables, &a, &e, len, full.then_some(depth));
+                    emit_interval(ray, setup, tables, &a, &e, len, whole);
+                }
+            }
+            stack.pop();
+            position += units >> depth;
+            a = e;
+            if 1.0 - ray.transmittance > setup.early_termination {
+                return;
+            }
+        };
+        let m = knot(ray, t);
+        if split {
+            push_half(&mut stack, m, depth);
+        } else {
+            stack.push((m, depth));
+        }
+    }
+}
+
+/// Both halves of the stack's top interval are one level deeper; the left one (closed by `m`)
+/// is processed first.
+fn push_half(stack: &mut Vec<(Knot, usize)>, m: Knot, depth: usize) {
+    if let Some(top) = stack.last_mut() {
+        top.1 = depth + 1;
+    }
+    stack.push((m, depth + 1));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{bezier_hull, predict_depth};
+
+    /// The cubic Hermite on u ∈ [0, 1] with the given end values and derivatives.
+    fn hermite(f0: f64, f1: f64, m0: f64, m1: f64, u: f64) -> f64 {
+        let (d, a, b) = (f1 - f0, m0 - (f1 - f0), m1 - (f1 - f0));
+        f0 + d * u + a * u * (1.0 - u) * (1.0 - u) - b * u * u * (1.0 - u)
+    }
+
+    #[test]
+    fn bezier_hull_bounds_the_cubic_and_its_departure_from_the_chord() {
+        let cases = [
+            (0.2, 0.7, 0.5, 0.5),
+            (0.0, 0.0, 1.0, -1.0),
+            (0.3, 0.1, -2.0, 1.5),
+            (1.0, 2.0, 3.0, -0.5),
+        ];
+        for (f0, f1, m0, m1) in cases {
+            let (lo, hi, dev) = bezier_hull(f0, f1, m0, m1);
+            let mut worst = 0.0f64;
+            for i in 0..=1000 {
+                let u = f64::from(i) / 1000.0;
+                let h = hermite(f0, f1, m0, m1, u);
+                assert!(
+                    lo - 1e-12 <= h && h <= hi + 1e-12,
+                    "{h} outside [{lo}, {hi}]"
+                );
+                worst = worst.max((h - (f0 + (f1 - f0) * u)).abs());
+            }
+            assert!(worst <= dev + 1e-12, "departure {worst} above D = {dev}");
+            // D is within a factor 3 of the real departure whenever there is one.
+            assert!(
+                dev <= 3.0 * worst + 1e-12,
+                "D = {dev} loose against {worst}"
+            );
+        }
+        // A line departs from nothing.
+        assert_eq!(bezier_hull(0.1, 0.5, 0.4, 0.4).2, 0.0);
+    }
+
+    #[test]
+    fn predicted_midpoint_is_exact_for_cubics() {
+        // hermite_error's midpoint: 0.5·(f0 + f1) + (m0 − m1)/8 and derivative
+        // 1.5·Δ − (m0 + m1)/4, against p(u) = 2u³ − u² + 0.5u + 0.1.
+        let p = |u: f64| 2.0 * u * u * u - u * u + 0.5 * u + 0.1;
+        let dp = |u: f64| 6.0 * u * u - 2.0 * u + 0.5;
+        let (f0, f1, m0, m1) = (p(0.0), p(1.0), dp(0.0), dp(1.0));
+        let sm = 0.5 * (f0 + f1) + 0.125 * (m0 - m1);
+        let mm = 1.5 * (f1 - f0) - 0.25 * (m0 + m1);
+        assert!((sm - p(0.5)).abs() < 1e-14 && (mm - dp(0.5)).abs() < 1e-14);
+    }
+
+    #[test]
+    fn controller_grows_one_level_only_with_a_fourfold_margin() {
+        assert_eq!(predict_depth(3, 0.0, 0.01), 2);
+        assert_eq!(predict_depth(3, 0.01 * 0.81 / 4.0, 0.01), 2);
+        assert_eq!(predict_depth(3, 0.01 * 0.81 / 4.0 * 1.01, 0.01), 3);
+        assert_eq!(predict_depth(0, 0.0, 0.01), 0);
     }
 }
