@@ -69,6 +69,16 @@ fn cpu_render(scene: &Scene, field: &Field) -> Vec<PixelResult> {
     )
 }
 
+/// RMSE of the RGB channels of two CPU images.
+fn rgb_rmse(c: &[PixelResult], reference: &[PixelResult]) -> f64 {
+    (c.iter()
+        .zip(reference)
+        .flat_map(|(a, b)| (0..3).map(move |k| (a.rgba[k] - b.rgba[k]).powi(2)))
+        .sum::<f64>()
+        / (3 * c.len()) as f64)
+        .sqrt()
+}
+
 /// Largest RGBA difference per pixel.
 fn pixel_differences(gpu: &GpuImage, cpu: &[PixelResult]) -> Vec<f64> {
     gpu.pixels
@@ -313,14 +323,7 @@ fn midpoint_rule_converges_to_the_reference() {
         ]);
         let rs = scene(&r);
         let reference = cpu_render(&rs, &f);
-        let rmse = (c
-            .iter()
-            .zip(&reference)
-            .flat_map(|(a, b)| (0..3).map(move |k| (a.rgba[k] - b.rgba[k]).powi(2)))
-            .sum::<f64>()
-            / (3 * c.len()) as f64)
-            .sqrt();
-        errors.push(rmse);
+        errors.push(rgb_rmse(&c, &reference));
     }
     assert!(
         errors[0] > errors[1] && errors[1] > errors[2],
@@ -454,13 +457,7 @@ fn hermite_criterion_converges_with_fewer_evaluations_than_fixed_steps() {
         let mut o = base.clone();
         o.extend(extra.iter().copied());
         let c = cpu_render(&scene(&o), &f);
-        let rmse = (c
-            .iter()
-            .zip(&reference)
-            .flat_map(|(a, b)| (0..3).map(move |k| (a.rgba[k] - b.rgba[k]).powi(2)))
-            .sum::<f64>()
-            / (3 * c.len()) as f64)
-            .sqrt();
+        let rmse = rgb_rmse(&c, &reference);
         let evaluations: u64 = c.iter().map(|p| u64::from(p.evaluations)).sum();
         (rmse, evaluations)
     };
