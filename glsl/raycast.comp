@@ -177,11 +177,11 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
 // documentation states both criteria: ADAPTIVE_CRITERION 0 = [MLS] §4 (halves compared),
 // 1 = the Hermite criterion with its step controller. Intervals are dyadic inside a top; a stack
 // entry is a knot whose w holds ±(depth + 1) of the interval it closes, negative when f is
-// undefined there (one vec4 per entry keeps the dynamically indexed stack small, which matters
-// on lavapipe). `a` is the knot at the chunk's start (evaluated here for the first chunk) and
-// `predicted` the controller's depth, both carried between chunks. The loop body has one MLS
-// call site: GLSL inlines every call, and lavapipe's compile time and code size grow with the
-// copies.
+// undefined there (one vec4 per entry keeps the stack small, which matters on lavapipe; the
+// Hermite kernel also keeps it in registers). `a` is the knot at the chunk's start (evaluated
+// here for the first chunk) and `predicted` the Hermite controller's depth (unused by [MLS]'s
+// criterion), both carried between chunks. Each loop body has few MLS call sites: GLSL inlines
+// every call, and lavapipe's compile time and code size grow with the copies.
 
 #if ADAPTIVE_CRITERION == 1
 // The cubic Hermite's Bézier hull (x = lo, y = hi) and z = D, its largest departure from the
