@@ -7,7 +7,7 @@ layout(local_size_x = 64) in;
 
 #include "types.glsl"
 
-layout(std430, binding = BINDING_PARAMS) readonly buffer ParamsBuf { RenderParams params; };
+#include "params.glsl"
 layout(std430, binding = BINDING_POINTS) readonly buffer PointsBuf { vec4 points[]; };
 layout(std430, binding = BINDING_RESULTS) writeonly buffer ResultsBuf { MlsOut results[]; };
 layout(push_constant) uniform Push { CountPush push; };
@@ -15,6 +15,7 @@ layout(push_constant) uniform Push { CountPush push; };
 #include "neighbours.glsl"
 
 void main() {
+    load_params();
     uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * 64u;
     if (i >= push.count) {
         return;

@@ -18,13 +18,15 @@ layout(local_size_x = 8, local_size_y = 8) in;
 
 #include "types.glsl"
 
-layout(std430, binding = BINDING_PARAMS) readonly buffer ParamsBuf { RenderParams params; };
+#include "params.glsl"
 layout(std430, binding = BINDING_IMAGE) buffer ImageBuf { vec4 image[]; };
 layout(std430, binding = BINDING_COUNTS) buffer CountsBuf { uint counts[]; };
 layout(std430, binding = BINDING_RAY_STATE) buffer RayStateBuf { vec4 ray_state[]; };
 layout(push_constant) uniform Push { RayPush band; };
 
 #include "neighbours.glsl"
+// The ray caster binds the transfer function's texel view too (frame_bindings).
+#define TRANSFER_TEXELS_BOUND 1
 #include "transfer.glsl"
 #include "camera.glsl"
 
@@ -121,8 +123,17 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
 }
 #elif RAY_METHOD == 1
 // Preintegration with a constant step: intervals first .. last_step, one lookup of
-// table 0 per interval, the clipped composite for the last one. `prev` is the knot at the
-// chunk's start (evaluated here for the first chunk).
+// table 0 per interval, the clipped composite for the ray's last one (twin of integrate_fixed).
+// `prev` is the knot at the chunk's start (evaluated here for the first chunk).
+//
+// llvmpipe runs the body of every `if`, and the first iteration of every loop, whatever its
+// lanes decide (gallivm masks lanes and never branches around a block). Rare work behind a
+// condition in the loop would therefore cost every interval: the clipped composite (three
+// lookups and an exp), the isosurface root finders (an MLS evaluation each) and the skip lookup.
+// So the hot loop composites plain full-length intervals only and stops at an interval that
+// needs more: one crossing an isosurface or possibly touching one (needs_surfaces), or one
+// past the last skip lookup. The round around it does that work, once per round for the lanes
+// that stopped, and the ray's last interval follows, once per chunk.
 uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, inout vec4 prev,
                inout vec3 color, inout float transmittance, inout uint evaluations) {
     float l = params.step;
@@ -131,29 +142,43 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
         prev = knot(o, d, t0, evaluations);
     }
     uint last = min(last_step, steps);
+    uint full_end = min(last, steps - 1u);
     uint i = first;
+    // Interval i awaits emit_interval, `next` its end knot.
+    bool pending = false;
+    vec4 next = prev;
 #if SKIP == 1
     float occupied_until = -3.0e38;
+    uint checked = 0xffffffffu;
 #endif
-    for (; i < last; ++i) {
-        float ta = t0 + float(i) * l;
-        float tb = min(ta + l, t1);
-        if (tb <= ta) {
-            return CHUNK_FINISHED;
+    while (i < full_end) {
+        if (pending) {
+            float ta = t0 + float(i) * l;
+            float len = min(ta + l, t1) - ta;
+            emit_interval(o, d, prev, next, len, knot_segment(prev, next, len, true, 0u),
+                          color, transmittance, evaluations);
+            prev = next;
+            pending = false;
+            if (1.0 - transmittance > params.integrator.y) {
+                return CHUNK_FINISHED;
+            }
+            i += 1u;
         }
 #if SKIP == 1
         // Intervals inside an empty block are skipped; the first one reaching past it starts
         // from a fresh knot (twin of skip in integrate_fixed).
-        if (ta >= occupied_until) {
+        float ts = t0 + float(i) * l;
+        if (i < full_end && ts >= occupied_until && i != checked) {
             float t_exit;
-            if (skip_block(o, d, ta, t_exit)) {
+            checked = i;
+            if (skip_block(o, d, ts, t_exit)) {
                 uint j = min(resume_interval(t0, l, t_exit, i), last);
                 if (j >= steps) {
                     return CHUNK_FINISHED;
                 }
                 if (j > i) {
                     prev = knot(o, d, t0 + float(j) * l, evaluations);
-                    i = j - 1u;
+                    i = j;
                     continue;
                 }
             } else {
@@ -161,13 +186,54 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
             }
         }
 #endif
-        vec4 next = knot(o, d, tb, evaluations);
-        vec4 plain = knot_segment(prev, next, tb - ta, i + 1u < steps, 0u);
-        emit_interval(o, d, prev, next, tb - ta, plain, color, transmittance, evaluations);
+        for (; i < full_end; ++i) {
+            float ta = t0 + float(i) * l;
+            float tb = min(ta + l, t1);
+            if (tb <= ta) {
+                return CHUNK_FINISHED;
+            }
+#if SKIP == 1
+            if (ta >= occupied_until && i != checked) {
+                break;
+            }
+#endif
+            next = knot(o, d, tb, evaluations);
+            if (needs_surfaces(prev, next)) {
+                pending = true;
+                break;
+            }
+            vec4 c = knot_segment(prev, next, tb - ta, true, 0u);
+            color += transmittance * c.rgb;
+            transmittance *= 1.0 - c.a;
+            prev = next;
+            if (1.0 - transmittance > params.integrator.y) {
+                return CHUNK_FINISHED;
+            }
+        }
+    }
+    // The ray's last interval, clipped at t1, with everything it may need.
+    if (i + 1u == steps && i < last) {
+        float ta = t0 + float(i) * l;
+        float tb = min(ta + l, t1);
+        if (tb <= ta) {
+            return CHUNK_FINISHED;
+        }
+#if SKIP == 1
+        if (ta >= occupied_until) {
+            float t_exit;
+            if (skip_block(o, d, ta, t_exit) && resume_interval(t0, l, t_exit, i) >= steps) {
+                return CHUNK_FINISHED;
+            }
+        }
+#endif
+        next = knot(o, d, tb, evaluations);
+        emit_interval(o, d, prev, next, tb - ta, knot_segment(prev, next, tb - ta, false, 0u),
+                      color, transmittance, evaluations);
         prev = next;
         if (1.0 - transmittance > params.integrator.y) {
             return CHUNK_FINISHED;
         }
+        i += 1u;
     }
     return i >= steps ? CHUNK_FINISHED : (i == last_step ? CHUNK_DONE : CHUNK_TRUNCATED);
 }
@@ -472,6 +538,10 @@ bool terminated(float transmittance) {
 }
 
 void main() {
+    load_params();
+#if MAX_ISO > 0
+    load_isos();
+#endif
     uvec2 pixel = uvec2(gl_GlobalInvocationID.x, gl_GlobalInvocationID.y + band.row_offset);
     if (pixel.x >= params.width || gl_GlobalInvocationID.y >= band.rows || pixel.y >= params.height) {
         return;

@@ -9,7 +9,7 @@ layout(local_size_x = 64) in;
 
 #include "types.glsl"
 
-layout(std430, binding = BINDING_PARAMS) readonly buffer ParamsBuf { RenderParams params; };
+#include "params.glsl"
 // A texel-buffer view (binding::kind): its size limit is maxTexelBufferElements (128 M texels on
 // lavapipe), not maxStorageBufferRange (128 MiB).
 layout(binding = BINDING_RESAMPLE_TARGET, rgba32f) uniform writeonly imageBuffer fine;
@@ -18,6 +18,7 @@ layout(push_constant) uniform Push { CountPush push; };
 #include "neighbours.glsl"
 
 void main() {
+    load_params();
     uint n = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * 64u;
     if (n >= push.count) {
         return;

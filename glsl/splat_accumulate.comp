@@ -13,7 +13,9 @@ layout(local_size_x = 64) in;
 #include "types.glsl"
 
 layout(push_constant) uniform PushBlock { SlabPush push; };
-layout(std430, binding = BINDING_PARAMS) readonly buffer ParamsBuf { SplatParams params; };
+// A uniform block (binding::kind): one load per SIMD row on llvmpipe. std140 and std430
+// agree on SplatParams, which has no arrays.
+layout(std140, binding = BINDING_PARAMS) uniform ParamsBuf { SplatParams params; };
 
 #include "splat.glsl"
 layout(std430, binding = BINDING_SPLATS) readonly buffer SplatBuf { Splat splats[]; };

@@ -12,7 +12,9 @@ layout(local_size_x = 64) in;
 
 #include "types.glsl"
 
-layout(std430, binding = BINDING_PARAMS) readonly buffer ParamsBuf { SplatParams params; };
+// A uniform block (binding::kind): one load per SIMD row on llvmpipe. std140 and std430
+// agree on SplatParams, which has no arrays.
+layout(std140, binding = BINDING_PARAMS) uniform ParamsBuf { SplatParams params; };
 layout(std430, binding = BINDING_SPLAT_KERNELS) readonly buffer KernelBuf { Sample kernels[]; };
 layout(std430, binding = BINDING_SPLATS) writeonly buffer SplatBuf { Splat splats[]; };
 layout(std430, binding = BINDING_SLAB_COUNTS) buffer CountBuf { uint slab_counts[]; };

@@ -9,7 +9,9 @@ layout(local_size_x = 8, local_size_y = 8) in;
 
 #include "types.glsl"
 
-layout(std430, binding = BINDING_PARAMS) readonly buffer ParamsBuf { SplatParams params; };
+// A uniform block (binding::kind): one load per SIMD row on llvmpipe. std140 and std430
+// agree on SplatParams, which has no arrays.
+layout(std140, binding = BINDING_PARAMS) uniform ParamsBuf { SplatParams params; };
 layout(std430, binding = BINDING_PIXEL_SEGMENTS) writeonly buffer SegBuf { vec2 pixel_segments[]; };
 layout(std430, binding = BINDING_SPLAT_STATS) buffer StatsBuf { uint stats[]; };
 

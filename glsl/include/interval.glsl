@@ -25,6 +25,42 @@ bool crosses(float sa, float se, float v) {
     return (sa - v) * (se - v) < 0.0 || (se == v && sa != v);
 }
 
+// The isosurface values in registers (load_isos() at the start of main): the fixed-step loop
+// tests them every interval, and a storage-buffer read is a loop over the lanes on llvmpipe.
+vec4 iso_values = vec4(0.0);
+
+void load_isos() {
+    [[unroll]] for (int i = 0; i < MAX_ISO; ++i) {
+        if (uint(i) < params.iso_count.x) {
+            iso_values[i] = isos[i].value;
+        }
+    }
+}
+#endif
+
+// Whether emit_interval does more with [a, e] than composite its table segment: both ends
+// defined and an isosurface crossed, or a near-tangent double crossing possible (the
+// preconditions of split_at_extremum). A cheap test for the hot loop of the fixed-step
+// integrator; false without isosurfaces.
+bool needs_surfaces(vec4 a, vec4 e) {
+#if MAX_ISO > 0
+    bool turn = a.z * e.z < 0.0;
+    float sign_f = a.z > 0.0 ? 1.0 : -1.0;
+    float top = max(sign_f * a.y, sign_f * e.y);
+    bool any = false;
+    [[unroll]] for (int i = 0; i < MAX_ISO; ++i) {
+        float v = iso_values[i];
+        bool live = uint(i) < params.iso_count.x;
+        any = any || (live && (crosses(a.y, e.y, v) || (turn && sign_f * v > top)));
+    }
+    return any && a.w != 0.0 && e.w != 0.0;
+#else
+    return false;
+#endif
+}
+
+#if MAX_ISO > 0
+
 const uint LOCATE_ITERATIONS = 12u;
 const uint EXTREMUM_ITERATIONS = 3u;
 const uint HERMITE_BISECTIONS = 24u;

@@ -5,6 +5,34 @@
 
 layout(std430, binding = BINDING_TRANSFER) readonly buffer TransferBuf { TfPoint tf[]; };
 
+#if TRANSFER_TEXELS_BOUND == 1
+// The same points as rgba32f texels: 2i = color_tau, 2i + 1 = (s, padding). The ray caster
+// binds this view; inside divergent code a storage-buffer load is a per-lane loop even at a
+// uniform index, and `if` bodies run whatever the lanes decide (BENCHMARKS.md, "Two lavapipe
+// costs").
+layout(binding = BINDING_TRANSFER_TEXELS, rgba32f) uniform readonly imageBuffer tf_texels;
+
+// rgb = emitted colour, a = extinction τ per world unit: the same selection and arithmetic as
+// the storage-buffer version below, over all points without an early exit.
+vec4 transfer_lookup(float s, uint count) {
+    vec4 ca = imageLoad(tf_texels, 0);
+    float sa = imageLoad(tf_texels, 1).x;
+    vec4 inside = ca;
+    float s_first = sa;
+    for (uint i = 1u; i < count; ++i) {
+        vec4 cb = imageLoad(tf_texels, int(2u * i));
+        float sb = imageLoad(tf_texels, int(2u * i + 1u)).x;
+        if (s >= sa && s < sb) {
+            inside = mix(ca, cb, (s - sa) / (sb - sa));
+        }
+        ca = cb;
+        sa = sb;
+    }
+    // Beyond the last point (and NaN): the last colour; at or below the first: the first.
+    vec4 c = s >= sa || !(s == s) ? ca : inside;
+    return s <= s_first ? imageLoad(tf_texels, 0) : c;
+}
+#else
 // rgb = emitted colour, a = extinction τ per world unit.
 vec4 transfer_lookup(float s, uint count) {
     if (s <= tf[0].s) {
@@ -18,10 +46,9 @@ vec4 transfer_lookup(float s, uint count) {
     }
     return tf[count - 1u].color_tau;
 }
+#endif
 
 #if defined(ADAPTIVE_CRITERION) && ADAPTIVE_CRITERION == 1
-// The same points as rgba32f texels: 2i = color_tau, 2i + 1 = (s, padding).
-layout(binding = BINDING_TRANSFER_TEXELS, rgba32f) uniform readonly imageBuffer tf_texels;
 
 // How far τ and τ·c can move when s departs by at most `deviation` from the line the tables
 // assume, somewhere in [lo, hi] (twin of TransferFunction::sensitivity, stage

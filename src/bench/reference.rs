@@ -10,7 +10,8 @@
 //!
 //! The cache key is a SHA-256 over everything the image depends on: the validated reference
 //! scene, the bytes of its data file, the vmls version, commit and executable, and where it was
-//! rendered (the device and driver, or the f64 CPU twins). A changed key renders anew; a cache
+//! rendered (the device and driver and the GLSL sources, which `VMLS_GLSL_DIR` can change
+//! without changing the executable, or the f64 CPU twins). A changed key renders anew; a cache
 //! file that cannot be read, or has another size, is a miss and is rendered over.
 
 use super::BenchError;
@@ -71,6 +72,7 @@ pub fn reference_key(
     match mode {
         ReferenceMode::Gpu => {
             h.update(b"gpu");
+            h.update(crate::vk::source_texts().as_bytes());
             h.update(ctx.info().name.as_bytes());
             h.update(ctx.info().driver.as_bytes());
         }

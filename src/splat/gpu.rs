@@ -210,10 +210,8 @@ impl SplatPipelines {
         let post = variant.shading == Shading::Post;
         let make = |kernel: &str, bindings: &[u32], push: u32| {
             let spirv = compiler.compile(ShaderSource::File(kernel), &defines)?;
-            let kinds: Vec<(u32, crate::vk::BindingKind)> = bindings
-                .iter()
-                .map(|&b| (b, crate::vk::BindingKind::Storage))
-                .collect();
+            let kinds: Vec<(u32, crate::vk::BindingKind)> =
+                bindings.iter().map(|&b| (b, binding::kind(b))).collect();
             ComputePipeline::with_kinds(ctx, kernel, &spirv, &kinds, push)
         };
         let push = std::mem::size_of::<SlabPush>() as u32;

@@ -44,9 +44,11 @@ impl Buffer {
             });
         }
         let vk_usage = match usage {
-            // Every storage buffer may also be read through a texel-buffer view (BindingKind).
+            // Every storage buffer may also be read through a texel-buffer view or as a uniform
+            // buffer (BindingKind).
             BufferUsage::Storage => {
                 vk::BufferUsageFlags::STORAGE_BUFFER
+                    | vk::BufferUsageFlags::UNIFORM_BUFFER
                     | vk::BufferUsageFlags::STORAGE_TEXEL_BUFFER
                     | vk::BufferUsageFlags::INDIRECT_BUFFER
                     | vk::BufferUsageFlags::TRANSFER_DST

@@ -36,6 +36,8 @@ pub struct DeviceInfo {
     pub driver: String,
     pub api_version: String,
     pub max_storage_buffer_range: u64,
+    /// Bytes a uniform-buffer binding may span.
+    pub max_uniform_buffer_range: u64,
     /// Elements a texel-buffer view may span.
     pub max_texel_buffer_elements: u64,
     pub max_workgroup_count: [u32; 3],
@@ -338,6 +340,7 @@ fn device_info(
         driver: driver_name,
         api_version: version_string(props.api_version),
         max_storage_buffer_range: u64::from(props.limits.max_storage_buffer_range),
+        max_uniform_buffer_range: u64::from(props.limits.max_uniform_buffer_range),
         max_texel_buffer_elements: u64::from(props.limits.max_texel_buffer_elements),
         max_workgroup_count: props.limits.max_compute_work_group_count,
         timestamp_period_ns: (valid_bits > 0 && props.limits.timestamp_period > 0.0)

@@ -21,7 +21,7 @@ pub use buffer::{Buffer, BufferUsage};
 pub use commands::{DispatchTiming, Recorder};
 pub use context::{Context, ContextOptions, DeviceInfo, RawContext};
 pub use pipeline::{BindGroup, BindingKind, ComputePipeline};
-pub use shader::{ShaderCompiler, ShaderSource, shader_names};
+pub use shader::{ShaderCompiler, ShaderSource, shader_names, source_texts};
 
 use ash::vk;
 

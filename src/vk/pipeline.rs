@@ -18,6 +18,10 @@ pub const MAX_PUSH_CONSTANTS: u32 = 128;
 pub enum BindingKind {
     /// A storage buffer (`buffer` block).
     Storage,
+    /// A uniform buffer (`uniform` block, std140) of at most maxUniformBufferRange bytes: for
+    /// parameters every invocation reads at the same address, which llvmpipe loads once per SIMD
+    /// row where a storage-buffer read is a loop over the lanes.
+    Uniform,
     /// A storage texel buffer of `uint`s (`r32ui uimageBuffer`).
     TexelR32Uint,
     /// A storage texel buffer of `vec4`s (`rgba32f imageBuffer`).
@@ -30,6 +34,7 @@ impl BindingKind {
     fn descriptor_type(self) -> vk::DescriptorType {
         match self {
             BindingKind::Storage => vk::DescriptorType::STORAGE_BUFFER,
+            BindingKind::Uniform => vk::DescriptorType::UNIFORM_BUFFER,
             _ => vk::DescriptorType::STORAGE_TEXEL_BUFFER,
         }
     }
@@ -37,7 +42,7 @@ impl BindingKind {
     /// The view's format and its element size in bytes.
     fn texel(self) -> Option<(vk::Format, u64)> {
         match self {
-            BindingKind::Storage => None,
+            BindingKind::Storage | BindingKind::Uniform => None,
             BindingKind::TexelR32Uint => Some((vk::Format::R32_UINT, 4)),
             BindingKind::TexelRgba32Float => Some((vk::Format::R32G32B32A32_SFLOAT, 16)),
             BindingKind::TexelRgba32Uint => Some((vk::Format::R32G32B32A32_UINT, 16)),
@@ -265,6 +270,16 @@ impl<'a> BindGroup<'a> {
         // needs them; `group` destroys whatever was made if a later step fails.
         let mut views = Vec::with_capacity(buffers.len());
         for (binding, buffer) in buffers {
+            if kind_of(*binding) == BindingKind::Uniform
+                && buffer.size() > shared.info.max_uniform_buffer_range
+            {
+                return Err(VkError::Limit {
+                    resource: format!("uniform buffer '{}'", buffer.name()),
+                    bytes: buffer.size(),
+                    limit: shared.info.max_uniform_buffer_range,
+                    limit_name: "maxUniformBufferRange",
+                });
+            }
             let Some((format, texel_bytes)) = kind_of(*binding).texel() else {
                 views.push(None);
                 continue;
@@ -295,6 +310,7 @@ impl<'a> BindGroup<'a> {
         let mut sizes: Vec<vk::DescriptorPoolSize> = Vec::new();
         for ty in [
             vk::DescriptorType::STORAGE_BUFFER,
+            vk::DescriptorType::UNIFORM_BUFFER,
             vk::DescriptorType::STORAGE_TEXEL_BUFFER,
         ] {
             let n = buffers

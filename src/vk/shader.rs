@@ -22,6 +22,7 @@ macro_rules! embed {
 /// Every GLSL file of the project, by its path relative to `glsl/`.
 static SOURCES: &[(&str, &str)] = embed![
     "include/types.glsl",
+    "include/params.glsl",
     "include/mls.glsl",
     "include/neighbours.glsl",
     "include/transfer.glsl",
@@ -48,6 +49,23 @@ static SOURCES: &[(&str, &str)] = embed![
 /// Names of the embedded GLSL files.
 pub fn shader_names() -> impl Iterator<Item = &'static str> {
     SOURCES.iter().map(|(n, _)| *n)
+}
+
+/// The text of every GLSL file as a new compiler would read it (from `VMLS_GLSL_DIR` when it is
+/// set; an unreadable file contributes its error): what a cache of rendered images keys on, since
+/// shaders compiled from a directory change without the executable changing.
+pub fn source_texts() -> String {
+    let dir = std::env::var_os("VMLS_GLSL_DIR").map(PathBuf::from);
+    let mut all = String::new();
+    for name in shader_names() {
+        all.push_str(name);
+        all.push('\n');
+        match lookup(&dir, name) {
+            Ok(text) | Err(text) => all.push_str(&text),
+        }
+        all.push('\n');
+    }
+    all
 }
 
 /// A kernel to compile: an embedded file by name, or literal text (probes, tests).
