@@ -155,8 +155,8 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
         if (pending) {
             float ta = t0 + float(i) * l;
             float len = min(ta + l, t1) - ta;
-            emit_interval(o, d, prev, next, len, knot_segment(prev, next, len, true, 0u),
-                          color, transmittance, evaluations);
+            emit_interval(o, d, prev, next, len, full_segment(prev, next), color,
+                          transmittance, evaluations);
             prev = next;
             pending = false;
             if (1.0 - transmittance > params.integrator.y) {
@@ -202,7 +202,7 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
                 pending = true;
                 break;
             }
-            vec4 c = knot_segment(prev, next, tb - ta, true, 0u);
+            vec4 c = full_segment(prev, next);
             color += transmittance * c.rgb;
             transmittance *= 1.0 - c.a;
             prev = next;
@@ -250,17 +250,6 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
 // every call, and lavapipe's compile time and code size grow with the copies.
 
 #if ADAPTIVE_CRITERION == 1
-// The cubic Hermite's Bézier hull (x = lo, y = hi) and z = D, its largest departure from the
-// chord, for end values f0, f1 and end derivatives m0, m1 per unit of its interval (twin of
-// bezier_hull).
-vec3 bezier_hull(float f0, float f1, float m0, float m1) {
-    float delta = f1 - f0;
-    float b1 = f0 + m0 / 3.0;
-    float b2 = f1 - m1 / 3.0;
-    return vec3(min(min(f0, f1), min(b1, b2)), max(max(f0, f1), max(b1, b2)),
-                max(abs(m0 - delta), abs(m1 - delta)) / 3.0);
-}
-
 float hull_sensitivity(vec3 h) {
     return transfer_sensitivity(h.x, h.y, h.z, params.tf_count);
 }

@@ -9,22 +9,28 @@ use vmls::render::raycast::{PixelResult, raycast_image};
 use vmls::render::{Field, build_tables};
 use vmls::scene::Scene;
 
-const METHODS: [&str; 5] = [
+const METHODS: [&str; 6] = [
     "riemann",
     "fixed",
+    "fixed-hermite",
     "adaptive",
     "adaptive-hermite",
     "reference",
 ];
 
-/// The scene keys of a method name ("adaptive-hermite": the adaptive method, Hermite criterion).
+/// The scene keys of a method name ("adaptive-hermite": the adaptive method, Hermite criterion;
+/// "fixed-hermite": fixed steps composited through the Hermite's midpoints).
 fn method_keys(method: &str) -> Vec<String> {
-    match method.strip_suffix("-hermite") {
-        Some(m) => vec![
-            format!("render.method=\"{m}\""),
+    match method {
+        "fixed-hermite" => vec![
+            "render.method=\"fixed\"".to_string(),
+            "render.interval=\"hermite\"".to_string(),
+        ],
+        "adaptive-hermite" => vec![
+            "render.method=\"adaptive\"".to_string(),
             "render.adaptive=\"hermite\"".to_string(),
         ],
-        None => vec![format!("render.method=\"{method}\"")],
+        m => vec![format!("render.method=\"{m}\"")],
     }
 }
 
@@ -138,7 +144,7 @@ fn isosurface_in_a_constant_medium_matches_the_closed_form() {
 fn isosurface_exactly_at_a_knot_is_composited_once() {
     // Fixed step 1 spacing = 0.25: knots at x = -1, -0.75, …, so x = 0.5 is a knot and
     // f(0.5) = 0.5 up to rounding. Transparent medium: α must be the opacity, not 1 − (1 − op)².
-    for method in ["fixed", "adaptive", "adaptive-hermite"] {
+    for method in ["fixed", "fixed-hermite", "adaptive", "adaptive-hermite"] {
         let keys = method_keys(method);
         let o = along_x(&[
             &keys[0],
@@ -185,6 +191,7 @@ fn near_tangent_double_crossings_between_two_knots_are_found() {
         // Knots at x = ±1 (fixed, adaptive with l_min = l_max) and midpoint samples at ±0.5.
         for (method, step) in [
             ("fixed", 12.0),
+            ("fixed-hermite", 12.0),
             ("adaptive", 12.0),
             ("adaptive-hermite", 12.0),
             ("riemann", 6.0),

@@ -218,6 +218,10 @@ fn gpu_image_matches_cpu_reference() {
             "render.adaptive=\"hermite\"",
             "camera.eye=[0.1, 0.2, 0.3]",
         ],
+        // Fixed steps through the Hermite's predicted midpoints: a long step, the eye inside.
+        vec!["render.interval=\"hermite\""],
+        vec!["render.interval=\"hermite\"", "render.step=1.5"],
+        vec!["render.interval=\"hermite\"", "camera.eye=[0.1, 0.2, 0.3]"],
     ] {
         let mut o = SMALL.to_vec();
         o.extend(extra.iter().copied());
@@ -436,6 +440,55 @@ fn hermite_chunks_carry_the_controller_state() {
         .flat_map(|(p, q)| (0..4).map(move |k| (p[k] - q[k]).abs()))
         .fold(0.0f32, f32::max);
     assert!(max <= 1e-6, "chunked image differs by {max:e}");
+}
+
+#[test]
+fn hermite_intervals_are_more_accurate_than_linear_ones_at_the_same_knots() {
+    // CPU twin, f64: compositing each interval through the cubic Hermite's predicted midpoint
+    // costs no evaluation and cuts the error against the reference at every step (linear
+    // intervals of half the step, printed for comparison, cost twice the evaluations).
+    let err = Scene::load(None, &["render.interval=\"cubic\"".to_string()])
+        .expect_err("an unknown interval model is refused");
+    assert!(err.to_string().contains("render.interval"), "{err}");
+    let mut base = SMALL.to_vec();
+    base.push("render.early_termination=1.0");
+    let mut r = base.clone();
+    r.extend([
+        "render.method=\"reference\"",
+        "render.reference_step=0.03125",
+    ]);
+    let rs = scene(&r);
+    let f = field(&rs);
+    let reference = cpu_render(&rs, &f);
+    let measure = |interval: &str, step: f64| {
+        let mut o = base.clone();
+        let keys = [
+            format!("render.interval=\"{interval}\""),
+            format!("render.step={step}"),
+        ];
+        o.extend(keys.iter().map(String::as_str));
+        let c = cpu_render(&scene(&o), &f);
+        let evaluations: u64 = c.iter().map(|p| u64::from(p.evaluations)).sum();
+        (rgb_rmse(&c, &reference), evaluations)
+    };
+    // Measured gains 1.70x and 1.25x: the cubic model holds better on shorter intervals of this
+    // scene's narrow band of dense extinction.
+    for (step, gain) in [(0.5, 1.5), (1.0, 1.15)] {
+        let linear = measure("linear", step);
+        let hermite = measure("hermite", step);
+        let finer = measure("linear", 0.5 * step);
+        eprintln!("step {step}: linear {linear:?}, hermite {hermite:?}, linear/2 {finer:?}");
+        assert_eq!(
+            hermite.1, linear.1,
+            "step {step}: the midpoints cost evaluations"
+        );
+        assert!(
+            hermite.0 * gain < linear.0,
+            "step {step}: Hermite RMSE {:.2e} against linear {:.2e}",
+            hermite.0,
+            linear.0
+        );
+    }
 }
 
 #[test]

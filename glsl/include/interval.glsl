@@ -251,6 +251,17 @@ void emit_crossings(vec3 o, vec3 d, vec4 a, vec4 e, inout vec3 color, inout floa
 #endif
 }
 
+// The cubic Hermite's Bézier hull (x = lo, y = hi) and z = D, its largest departure from the
+// chord, for end values f0, f1 and end derivatives m0, m1 per unit of its interval (twin of
+// bezier_hull).
+vec3 bezier_hull(float f0, float f1, float m0, float m1) {
+    float delta = f1 - f0;
+    float b1 = f0 + m0 / 3.0;
+    float b2 = f1 - m1 / 3.0;
+    return vec3(min(min(f0, f1), min(b1, b2)), max(max(f0, f1), max(b1, b2)),
+                max(abs(m0 - delta), abs(m1 - delta)) / 3.0);
+}
+
 #if RAY_METHOD != 0
 // (C, α) of [a, e] of exactly len: table `level` for full-length intervals, else the clipped
 // composite; undefined ends contribute nothing (twin of interval::knot_segment).
@@ -259,6 +270,35 @@ vec4 knot_segment(vec4 a, vec4 e, float len, bool full, uint level) {
         return vec4(0.0);
     }
     return full ? preint_lookup(level, a.y, e.y) : preint_segment(a.y, e.y, len);
+}
+
+// (C, α) of a full-length interval of the fixed-step integrator: table 0, or with
+// INTERVAL_HERMITE two lookups of table 1 (half the step) through the cubic Hermite's predicted
+// midpoint where both ends are defined and no isosurface value lies in the Hermite's hull (twin
+// of hermite_segment and knot_segment). Both cases make the same two lookups with selected
+// arguments: llvmpipe would run both sides of a branch.
+vec4 full_segment(vec4 a, vec4 e) {
+#if INTERVAL_HERMITE == 1
+    float l = e.x - a.x;
+    float m0 = l * a.z;
+    float m1 = l * e.z;
+    vec3 h = bezier_hull(a.y, e.y, m0, m1);
+    bool halves = a.w != 0.0 && e.w != 0.0;
+#if MAX_ISO > 0
+    [[unroll]] for (int i = 0; i < MAX_ISO; ++i) {
+        float v = iso_values[i];
+        halves = halves && !(uint(i) < params.iso_count.x && h.x <= v && v <= h.y);
+    }
+#endif
+    float sm = 0.5 * (a.y + e.y) + 0.125 * (m0 - m1);
+    vec4 c0 = preint_lookup(halves ? 1u : 0u, a.y, halves ? sm : e.y);
+    vec4 c1 = preint_lookup(1u, sm, e.y);
+    vec4 both = vec4(c0.rgb + (1.0 - c0.a) * c1.rgb, c0.a + (1.0 - c0.a) * c1.a);
+    bool defined = a.w != 0.0 && e.w != 0.0;
+    return defined ? (halves ? both : c0) : vec4(0.0);
+#else
+    return knot_segment(a, e, e.x - a.x, true, 0u);
+#endif
 }
 
 #if MAX_ISO > 0

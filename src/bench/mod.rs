@@ -292,6 +292,11 @@ pub fn run(
     if generated && opts.analytic_reference {
         ref_set.push("reconstruction.method=\"exact\"".into());
     }
+    // The field itself, never the fast path's resampling of it (which a `--set
+    // reconstruction.resample` for the measured configurations would otherwise select); and no
+    // skipping, which needs the fast path.
+    ref_set.push("reconstruction.resample=0".into());
+    ref_set.push("render.skip=false".into());
     ref_set.extend(opts.reference_set.iter().cloned());
     let ref_scene = Scene::load(opts.scene.as_deref(), &ref_set)?;
     // Images of an earlier run in the same directory must not pass for this run's.

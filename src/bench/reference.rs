@@ -4,8 +4,9 @@
 //! overrides, but none of the swept settings) rendered by the `reference` integrator: midpoint
 //! steps of `render.reference_step` with the transfer function applied directly. For a
 //! generated volume it integrates the analytic field (`reconstruction.method = "exact"`), the
-//! true image; otherwise the scene's own reconstruction, the most exact image vmls can make of
-//! it — then swept reconstruction settings are measured against the scene's field, and their
+//! true image; otherwise the scene's own reconstruction (by the direct solve: the bench never
+//! renders a reference through the fast path, `reconstruction.resample`), the most exact image
+//! vmls can make of it — then swept reconstruction settings are measured against the scene's field, and their
 //! error includes the reconstruction change.
 //!
 //! The cache key is a SHA-256 over everything the image depends on: the validated reference

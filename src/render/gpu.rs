@@ -17,7 +17,7 @@ use crate::gpu_types::{
 };
 use crate::recon::NeighbourMode;
 use crate::recon::mls::{Basis, GradientMode, Weight};
-use crate::render::{AdaptiveCriterion, Method};
+use crate::render::{AdaptiveCriterion, IntervalModel, Method};
 use crate::vk::{
     BindGroup, Buffer, BufferUsage, ComputePipeline, Context, ShaderCompiler, ShaderSource, VkError,
 };
@@ -42,6 +42,8 @@ pub struct Variant {
     pub adaptive_levels: usize,
     /// The adaptive integrator's acceptance test.
     pub adaptive: AdaptiveCriterion,
+    /// How the fixed-step integrator composites an interval.
+    pub interval: IntervalModel,
     /// Isosurfaces of the scene (0 compiles no isosurface code).
     pub isosurfaces: usize,
     /// Rays are clipped to a boundary hull (else to the domain's box).
@@ -83,6 +85,7 @@ impl Variant {
             method: None,
             adaptive_levels: 1,
             adaptive: AdaptiveCriterion::Mls2008,
+            interval: IntervalModel::Linear,
             isosurfaces: 0,
         }
     }
@@ -93,6 +96,7 @@ impl Variant {
             method: Some(setup.method),
             adaptive_levels: adaptive::stack_size(setup.l_max, setup.l_min),
             adaptive: setup.adaptive,
+            interval: setup.interval,
             isosurfaces: setup.isosurfaces.len(),
             hull: field.hull.is_some(),
             // The adaptive integrator does not skip yet.
@@ -166,6 +170,10 @@ impl Variant {
             .into(),
         ));
         d.push((
+            "INTERVAL_HERMITE".into(),
+            flag(self.interval == IntervalModel::Hermite),
+        ));
+        d.push((
             "MAX_ISO".into(),
             self.isosurfaces.min(MAX_ISOSURFACES).to_string(),
         ));
@@ -197,8 +205,11 @@ impl Variant {
                 NeighbourMode::Octree => "octree",
             },
             self.method
-                .map(|m| match (m, self.adaptive) {
-                    (Method::Adaptive, AdaptiveCriterion::Hermite) => "-adaptive-hermite".into(),
+                .map(|m| match (m, self.adaptive, self.interval) {
+                    (Method::Adaptive, AdaptiveCriterion::Hermite, _) => {
+                        "-adaptive-hermite".into()
+                    }
+                    (Method::Fixed, _, IntervalModel::Hermite) => "-fixed-hermite".into(),
                     _ => format!("-{}", m.name()),
                 })
                 .unwrap_or_default()

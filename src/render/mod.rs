@@ -31,7 +31,7 @@ use crate::vk::VkError;
 use camera::{Camera, ViewBasis};
 use glam::DVec3;
 use preintegration::PreintegrationTables;
-pub use settings::{AdaptiveCriterion, Method, RenderSettings};
+pub use settings::{AdaptiveCriterion, IntervalModel, Method, RenderSettings};
 use transfer::TransferFunction;
 
 /// Errors of the render layer (and everything below it).
@@ -381,6 +381,8 @@ pub struct RaySetup {
     pub l_min: f64,
     pub l_max: f64,
     pub adaptive: AdaptiveCriterion,
+    /// Fixed: how an interval between two knots is composited.
+    pub interval: IntervalModel,
     pub epsilon: f64,
     /// The sample spacing in world units: the Hermite criterion's ε is per spacing.
     pub spacing: f64,
@@ -434,6 +436,7 @@ impl RaySetup {
             l_min: render.l_min * unit,
             l_max: render.l_max * unit,
             adaptive: render.adaptive,
+            interval: render.interval,
             epsilon: render.epsilon,
             spacing: unit,
             early_termination: render.early_termination,
@@ -447,12 +450,13 @@ impl RaySetup {
     }
 
     /// The table lengths this setup's method reads (longest first), or none: fixed uses the
-    /// step, adaptive l_max, l_max/2, … ≥ l_min; both add halvings for clipped remainders
-    /// ([`preintegration::remainder_levels`]).
+    /// step (and its half for Hermite intervals), adaptive l_max, l_max/2, … ≥ l_min; both add
+    /// halvings for clipped remainders ([`preintegration::remainder_levels`]).
     pub fn table_lengths(&self, tf: &TransferFunction) -> Vec<f64> {
-        let (top, bottom) = match self.method {
-            Method::Fixed => (self.step, self.step),
-            Method::Adaptive => (self.l_max, self.l_min),
+        let (top, bottom) = match (self.method, self.interval) {
+            (Method::Fixed, IntervalModel::Hermite) => (self.step, 0.5 * self.step),
+            (Method::Fixed, IntervalModel::Linear) => (self.step, self.step),
+            (Method::Adaptive, _) => (self.l_max, self.l_min),
             _ => return Vec::new(),
         };
         let mut lengths = vec![top];

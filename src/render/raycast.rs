@@ -4,7 +4,9 @@
 //! - `riemann`/`reference`: n = ⌈L/δ⌉ midpoint steps of length δ (the last one shortened to end
 //!   at the exit); per step a = 1 − exp(−τ(s)·δ), C += T·a·c(s), T *= 1 − a; stop when
 //!   T < min_transmittance;
-//! - `fixed`: preintegration, s evaluated at interval ends, one table lookup per interval;
+//! - `fixed`: preintegration, s evaluated at interval ends, one table lookup per interval, or
+//!   with `render.interval = "hermite"` two of the half step's table through the cubic
+//!   Hermite's predicted midpoint (`hermite_segment`);
 //! - `adaptive`: dyadic subdivision with [MLS]'s or the Hermite criterion (see `adaptive`).
 //!
 //! Where no sample has weight the field is undefined: a midpoint step there adds nothing, and
@@ -19,10 +21,10 @@ use super::skip::{Blocks, SkipTable, resume_interval};
 use super::transfer::TransferFunction;
 use super::{Field, RaySetup};
 use crate::recon::mls::Neighbours;
-use crate::render::Method;
+use crate::render::{IntervalModel, Method};
 use crate::samples::bvh::Segments;
 use glam::DVec3;
-use interval::{Knot, emit_crossings, emit_interval, knot, knot_segment};
+use interval::{Knot, emit_crossings, emit_interval, hermite_segment, knot, knot_segment};
 
 /// One pixel of the reference integrator.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -163,8 +165,12 @@ fn integrate_fixed(
             }
         }
         let next = knot(ray, tb);
-        let level = (i + 1 < steps).then_some(0);
-        let plain = knot_segment(tables, &prev, &next, tb - ta, level);
+        let full = i + 1 < steps;
+        let hermite = (full && setup.interval == IntervalModel::Hermite)
+            .then(|| hermite_segment(ray, setup, tables, &prev, &next, 0))
+            .flatten();
+        let plain = hermite
+            .unwrap_or_else(|| knot_segment(tables, &prev, &next, tb - ta, full.then_some(0)));
         emit_interval(ray, setup, tables, &prev, &next, tb - ta, plain);
         prev = next;
         if 1.0 - ray.transmittance > setup.early_termination {

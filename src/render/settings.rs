@@ -78,6 +78,29 @@ impl AdaptiveCriterion {
     }
 }
 
+/// How the fixed-step integrator composites the interval between two knots
+/// (`render.interval`, DESIGN.md §4).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum IntervalModel {
+    /// f linear between the knots: one lookup of the step's table ([MLS] §4).
+    Linear,
+    /// Two halves through the midpoint of the cubic Hermite that the knots' values and
+    /// directional derivatives define (exact for cubic f along the ray): two lookups of the
+    /// half step's table, no further evaluation. Intervals whose Hermite hull holds an isosurface
+    /// value stay linear (their surfaces are located between the knots).
+    Hermite,
+}
+
+impl IntervalModel {
+    /// The scene-file spelling.
+    pub fn name(self) -> &'static str {
+        match self {
+            IntervalModel::Linear => "linear",
+            IntervalModel::Hermite => "hermite",
+        }
+    }
+}
+
 /// Integrator settings (scene section `[render]`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct RenderSettings {
@@ -94,6 +117,8 @@ pub struct RenderSettings {
     pub l_max: f64,
     /// Adaptive: the acceptance test.
     pub adaptive: AdaptiveCriterion,
+    /// Fixed: how an interval between two knots is composited.
+    pub interval: IntervalModel,
     /// Adaptive: the criterion's tolerance ε ([`AdaptiveCriterion`]).
     pub epsilon: f64,
     /// Preintegrated methods stop a ray once its opacity exceeds this ([MLS]: 0.99).

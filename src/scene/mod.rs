@@ -23,7 +23,7 @@ use crate::render::{Field, RaySetup, RenderError};
 // The configuration types live with the layers that use them; the scene re-exports them so
 // that a scene file's vocabulary is in one place.
 pub use crate::recon::{NeighbourMode, Reconstruction};
-pub use crate::render::{AdaptiveCriterion, Method, RenderSettings};
+pub use crate::render::{AdaptiveCriterion, IntervalModel, Method, RenderSettings};
 use crate::samples::{SampleSet, SampleSettings};
 use std::path::{Path, PathBuf};
 use toml::{Table, Value};
@@ -133,6 +133,7 @@ const KNOWN: &[(&str, &[&str])] = &[
             "l_min",
             "l_max",
             "adaptive",
+            "interval",
             "epsilon",
             "early_termination",
             "skip",
@@ -683,6 +684,14 @@ impl Scene {
             l_min: ren.positive("l_min", 0.16, 1e3)?,
             l_max: ren.positive("l_max", 2.6, 1e3)?,
             adaptive,
+            interval: ren.choice(
+                "interval",
+                IntervalModel::Linear,
+                &[
+                    ("linear", IntervalModel::Linear),
+                    ("hermite", IntervalModel::Hermite),
+                ],
+            )?,
             epsilon: ren.float("epsilon", adaptive.default_epsilon(), 0.0, 1e3)?,
             early_termination: ren.float("early_termination", 0.99, 0.0, 1.0)?,
             skip: match ren.get("skip") {

@@ -32,7 +32,7 @@
 //!   length a table length.
 
 use super::Ray;
-use super::interval::{Knot, emit_interval, knot, knot_segment};
+use super::interval::{Knot, bezier_hull, emit_interval, knot, knot_segment};
 use crate::render::preintegration::PreintegrationTables;
 use crate::render::transfer::TransferFunction;
 use crate::render::{AdaptiveCriterion, RaySetup};
@@ -50,16 +50,6 @@ pub fn stack_size(l_max: f64, l_min: f64) -> usize {
 
 fn norm(c: [f64; 3]) -> f64 {
     (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt()
-}
-
-/// The Bézier hull [lo, hi] of the cubic Hermite with end values f0, f1 and end derivatives
-/// m0, m1 (per unit of its interval), and D, its largest departure from the chord.
-fn bezier_hull(f0: f64, f1: f64, m0: f64, m1: f64) -> (f64, f64, f64) {
-    let delta = f1 - f0;
-    let (b1, b2) = (f0 + m0 / 3.0, f1 - m1 / 3.0);
-    let lo = f0.min(f1).min(b1.min(b2));
-    let hi = f0.max(f1).max(b1.max(b2));
-    (lo, hi, (m0 - delta).abs().max((m1 - delta).abs()) / 3.0)
 }
 
 /// Stage `hermite_error`: the Hermite criterion's error of [a, e] per sample spacing (see the
@@ -294,7 +284,8 @@ fn push_half(stack: &mut Vec<(Knot, usize)>, m: Knot, depth: usize) {
 
 #[cfg(test)]
 mod tests {
-    use super::{bezier_hull, predict_depth};
+    use super::super::interval::bezier_hull;
+    use super::predict_depth;
 
     /// The cubic Hermite on u ∈ [0, 1] with the given end values and derivatives.
     fn hermite(f0: f64, f1: f64, m0: f64, m1: f64, u: f64) -> f64 {

@@ -213,6 +213,57 @@ pub(super) fn knot_segment(
     }
 }
 
+/// The Bézier hull [lo, hi] of the cubic Hermite with end values f0, f1 and end derivatives
+/// m0, m1 (per unit of its interval), and D, its largest departure from the chord.
+pub(super) fn bezier_hull(f0: f64, f1: f64, m0: f64, m1: f64) -> (f64, f64, f64) {
+    let delta = f1 - f0;
+    let (b1, b2) = (f0 + m0 / 3.0, f1 - m1 / 3.0);
+    let lo = f0.min(f1).min(b1.min(b2));
+    let hi = f0.max(f1).max(b1.max(b2));
+    (lo, hi, (m0 - delta).abs().max((m1 - delta).abs()) / 3.0)
+}
+
+/// Stage `hermite_segment` (`render.interval = "hermite"`): (C, α) of the full-length
+/// interval [a, e] composited as two halves through the midpoint of the cubic Hermite that
+/// the knots' values and directional derivatives define, from table `level + 1` (half the
+/// length). The midpoint is exact for cubic f along the ray, where the linear segment's error
+/// is of the order of the second derivative. None when an end is undefined or an isosurface
+/// value lies in the Hermite's Bézier hull: such an interval stays linear, so that its
+/// surfaces are located between its knots as usual.
+pub(super) fn hermite_segment(
+    ray: &Ray<'_>,
+    setup: &RaySetup,
+    tables: &PreintegrationTables,
+    a: &Knot,
+    e: &Knot,
+    level: usize,
+) -> Option<([f64; 3], f64)> {
+    let (f0, f1) = (a.s?, e.s?);
+    let l = e.t - a.t;
+    let (m0, m1) = (l * a.slope(ray), l * e.slope(ray));
+    let (lo, hi, _) = bezier_hull(f0, f1, m0, m1);
+    if setup
+        .isosurfaces
+        .iter()
+        .any(|iso| lo <= iso.value && iso.value <= hi)
+    {
+        return None;
+    }
+    let sm = 0.5 * (f0 + f1) + 0.125 * (m0 - m1);
+    let half = &tables.tables[level + 1];
+    let c0 = tables.lookup(half, f0, sm);
+    let c1 = tables.lookup(half, sm, f1);
+    let through = 1.0 - c0[3];
+    Some((
+        [
+            c0[0] + through * c1[0],
+            c0[1] + through * c1[1],
+            c0[2] + through * c1[2],
+        ],
+        c0[3] + through * c1[3],
+    ))
+}
+
 /// Composites [a, e] (of exactly `len`) into the ray, split at isosurface crossings and, for a
 /// near-tangent double crossing, at the extremum between them. `plain` is the interval's
 /// [`knot_segment`], which the callers have already looked up; it is used as it is when no
