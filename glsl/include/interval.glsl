@@ -269,7 +269,9 @@ vec4 knot_segment(vec4 a, vec4 e, float len, bool full, uint level) {
     if (a.w == 0.0 || e.w == 0.0) {
         return vec4(0.0);
     }
-    return full ? preint_lookup(level, a.y, e.y) : preint_segment(a.y, e.y, len);
+    // The clipped composite costs a masked iteration, not its lookups, when every lane is full.
+    vec4 clipped = preint_segment_if(!full, a.y, e.y, len);
+    return full ? preint_lookup(level, a.y, e.y) : clipped;
 }
 
 // (C, α) of a full-length interval of the fixed-step integrator: table 0, or with

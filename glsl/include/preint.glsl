@@ -34,38 +34,59 @@ float one_minus_exp(float x) {
 
 // (C, α) of a segment of any length r in (0, longest table]: binary decomposition over the
 // table lengths, then the remainder from the zero-length limits (stage preintegrate_clipped).
-vec4 preint_segment(float s_f, float s_b, float r) {
+// One loop of one lookup per iteration, its arguments selected: iterations 0 .. levels − 1 the
+// tables, `levels` the zero-length limits, `levels` + 1 the last table for the remainder's
+// colour. With `wanted` false the loop has no iterations to run: llvmpipe then pays one masked
+// iteration instead of every lookup (it runs every loop's first iteration and both sides of
+// every branch, whatever the lanes decide), so callers that need the clipped composite only
+// for some intervals pass the condition instead of branching around the call.
+vec4 preint_segment_if(bool wanted, float s_f, float s_b, float r) {
     vec3 color = vec3(0.0);
     float alpha = 0.0;
     float done = 0.0;
     uint levels = params.preint_dims.y;
     float l = params.preint_range.z;
-    for (uint k = 0u; k < levels; ++k) {
-        if (r - done >= l * (1.0 - 1e-6)) {
-            float end = min(done + l, r);
-            vec4 e = preint_lookup(k, s_f + (s_b - s_f) * (done / r), s_f + (s_b - s_f) * (end / r));
-            color += (1.0 - alpha) * e.rgb;
-            alpha += (1.0 - alpha) * e.a;
-            done = end;
+    vec4 zero = vec4(0.0);
+    float s0 = s_f;
+    uint n = wanted ? levels + 2u : 0u;
+    for (uint k = 0u; k < n; ++k) {
+        bool table = k < levels;
+        if (k == levels) {
+            s0 = s_f + (s_b - s_f) * (done / r);
         }
-        l *= 0.5;
-    }
-    float rest = r - done;
-    if (rest > 0.0) {
-        float s0 = s_f + (s_b - s_f) * (done / r);
-        vec4 zero = preint_lookup(levels, s0, s_b);
-        float tau = zero.a;
-        float a = one_minus_exp(rest * tau);
-        vec4 e = preint_lookup(levels - 1u, s0, s_b);
-        float t_small = 2.0 * l * tau;
-        vec3 c = zero.rgb;
-        if (e.a > 0.0 && t_small > 0.0) {
-            c += (e.rgb / e.a - zero.rgb) * min(rest * tau / t_small, 1.0);
+        float end = min(done + l, r);
+        uint at = table ? k : (k == levels ? levels : levels - 1u);
+        vec4 e = preint_lookup(at, table ? s_f + (s_b - s_f) * (done / r) : s0,
+                               table ? s_f + (s_b - s_f) * (end / r) : s_b);
+        if (table) {
+            if (r - done >= l * (1.0 - 1e-6)) {
+                color += (1.0 - alpha) * e.rgb;
+                alpha += (1.0 - alpha) * e.a;
+                done = end;
+            }
+            l *= 0.5;
+        } else if (k == levels) {
+            zero = e;
+        } else {
+            float rest = r - done;
+            if (rest > 0.0) {
+                float tau = zero.a;
+                float a = one_minus_exp(rest * tau);
+                float t_small = 2.0 * l * tau;
+                vec3 c = zero.rgb;
+                if (e.a > 0.0 && t_small > 0.0) {
+                    c += (e.rgb / e.a - zero.rgb) * min(rest * tau / t_small, 1.0);
+                }
+                color += (1.0 - alpha) * a * c;
+                alpha += (1.0 - alpha) * a;
+            }
         }
-        color += (1.0 - alpha) * a * c;
-        alpha += (1.0 - alpha) * a;
     }
     return vec4(color, alpha);
+}
+
+vec4 preint_segment(float s_f, float s_b, float r) {
+    return preint_segment_if(true, s_f, s_b, r);
 }
 
 #endif
