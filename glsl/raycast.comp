@@ -62,7 +62,9 @@ const uint CHUNK_TRUNCATED = 2u; // a loop ended early: the driver's loop limit
 uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, inout vec4 prev,
                inout vec3 color, inout float transmittance, inout uint evaluations) {
     uint steps = uint(ceil((t1 - t0) / params.step));
-    bool isos = params.iso_count.x > 0u;
+    // A compile-time false without isosurfaces: llvmpipe would run the extra evaluations under
+    // a runtime condition anyway.
+    bool isos = MAX_ISO > 0 && params.iso_count.x > 0u;
     if (first == 0u && isos) {
         prev = knot(o, d, t0, evaluations);
     }
@@ -72,44 +74,73 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
 #if SKIP == 1
     float occupied_until = -3.0e38;
 #endif
-    for (; i < last; ++i) {
-        float ta = t0 + float(i) * params.step;
-        float dt = min(params.step, t1 - ta);
-        if (dt <= 0.0) {
-            exited = true;
-            break;
-        }
-#if SKIP == 1
-        // A midpoint in an empty block adds nothing: resume at the first midpoint past the
-        // block (twin of skip in integrate_riemann). With isosurfaces, the knot at the t_exit
-        // stands in for the skipped samples (no crossing inside an empty block).
-        float tm = ta + 0.5 * dt;
-        if (tm >= occupied_until) {
-            float t_exit;
-            if (skip_block(o, d, tm, t_exit)) {
-                uint j = min(resume_interval(t0 - 0.5 * params.step, params.step, t_exit, i + 1u), last);
-                if (isos) {
-                    prev = knot(o, d, min(t_exit, t1), evaluations);
+    // As in the fixed-step kernel, the hot loop leaves a sample whose step crosses or may touch
+    // an isosurface (needs_surfaces) to the round around it, so that the root finders, which
+    // llvmpipe would otherwise run on every step, run once per round: sample i, `k`, awaits
+    // emit_crossings and its own step.
+    bool pending = false;
+    vec4 k = prev;
+    float pending_dt = 0.0;
+    while (i < last && !exited) {
+        if (pending) {
+            emit_crossings(o, d, prev, k, color, transmittance, evaluations);
+            prev = k;
+            pending = false;
+            if (k.w != 0.0) {
+                vec4 ct = transfer_lookup(k.y, params.tf_count);
+                float a = 1.0 - exp(-ct.a * pending_dt);
+                color += transmittance * a * ct.rgb;
+                transmittance *= 1.0 - a;
+                if (transmittance < params.min_transmittance) {
+                    return CHUNK_FINISHED;
                 }
-                i = j - 1u;
-                continue;
-            } else {
-                occupied_until = t_exit;
             }
+            i += 1u;
         }
+        for (; i < last; ++i) {
+            float ta = t0 + float(i) * params.step;
+            float dt = min(params.step, t1 - ta);
+            if (dt <= 0.0) {
+                exited = true;
+                break;
+            }
+#if SKIP == 1
+            // A midpoint in an empty block adds nothing: resume at the first midpoint past the
+            // block (twin of skip in integrate_riemann). With isosurfaces, the knot at the
+            // t_exit stands in for the skipped samples (no crossing inside an empty block).
+            float tm = ta + 0.5 * dt;
+            if (tm >= occupied_until) {
+                float t_exit;
+                if (skip_block(o, d, tm, t_exit)) {
+                    uint j = min(resume_interval(t0 - 0.5 * params.step, params.step, t_exit, i + 1u), last);
+                    if (isos) {
+                        prev = knot(o, d, min(t_exit, t1), evaluations);
+                    }
+                    i = j - 1u;
+                    continue;
+                } else {
+                    occupied_until = t_exit;
+                }
+            }
 #endif
-        vec4 k = knot(o, d, ta + 0.5 * dt, evaluations);
-        emit_crossings(o, d, prev, k, color, transmittance, evaluations);
-        prev = k;
-        if (k.w == 0.0) {
-            continue;
-        }
-        vec4 ct = transfer_lookup(k.y, params.tf_count);
-        float a = 1.0 - exp(-ct.a * dt);
-        color += transmittance * a * ct.rgb;
-        transmittance *= 1.0 - a;
-        if (transmittance < params.min_transmittance) {
-            return CHUNK_FINISHED;
+            vec4 next = knot(o, d, ta + 0.5 * dt, evaluations);
+            if (needs_surfaces(prev, next)) {
+                k = next;
+                pending_dt = dt;
+                pending = true;
+                break;
+            }
+            prev = next;
+            if (next.w == 0.0) {
+                continue;
+            }
+            vec4 ct = transfer_lookup(next.y, params.tf_count);
+            float a = 1.0 - exp(-ct.a * dt);
+            color += transmittance * a * ct.rgb;
+            transmittance *= 1.0 - a;
+            if (transmittance < params.min_transmittance) {
+                return CHUNK_FINISHED;
+            }
         }
     }
     if (!exited && i < steps) {

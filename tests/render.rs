@@ -442,14 +442,9 @@ fn hermite_chunks_carry_the_controller_state() {
     assert!(max <= 1e-6, "chunked image differs by {max:e}");
 }
 
-#[test]
-fn hermite_intervals_are_more_accurate_than_linear_ones_at_the_same_knots() {
-    // CPU twin, f64: compositing each interval through the cubic Hermite's predicted midpoint
-    // costs no evaluation and cuts the error against the reference at every step (linear
-    // intervals of half the step, printed for comparison, cost twice the evaluations).
-    let err = Scene::load(None, &["render.interval=\"cubic\"".to_string()])
-        .expect_err("an unknown interval model is refused");
-    assert!(err.to_string().contains("render.interval"), "{err}");
+/// The CPU twin's RMSE against its own reference (step 1/32) and its evaluations, for SMALL with
+/// early termination off plus the given keys; the reference is rendered once.
+fn cpu_error_meter() -> impl Fn(&[&str]) -> (f64, u64) {
     let mut base = SMALL.to_vec();
     base.push("render.early_termination=1.0");
     let mut r = base.clone();
@@ -460,16 +455,29 @@ fn hermite_intervals_are_more_accurate_than_linear_ones_at_the_same_knots() {
     let rs = scene(&r);
     let f = field(&rs);
     let reference = cpu_render(&rs, &f);
-    let measure = |interval: &str, step: f64| {
+    move |extra: &[&str]| {
         let mut o = base.clone();
-        let keys = [
-            format!("render.interval=\"{interval}\""),
-            format!("render.step={step}"),
-        ];
-        o.extend(keys.iter().map(String::as_str));
+        o.extend(extra.iter().copied());
         let c = cpu_render(&scene(&o), &f);
         let evaluations: u64 = c.iter().map(|p| u64::from(p.evaluations)).sum();
         (rgb_rmse(&c, &reference), evaluations)
+    }
+}
+
+#[test]
+fn hermite_intervals_are_more_accurate_than_linear_ones_at_the_same_knots() {
+    // CPU twin, f64: compositing each interval through the cubic Hermite's predicted midpoint
+    // costs no evaluation and cuts the error against the reference at every step (linear
+    // intervals of half the step, printed for comparison, cost twice the evaluations).
+    let err = Scene::load(None, &["render.interval=\"cubic\"".to_string()])
+        .expect_err("an unknown interval model is refused");
+    assert!(err.to_string().contains("render.interval"), "{err}");
+    let meter = cpu_error_meter();
+    let measure = |interval: &str, step: f64| {
+        meter(&[
+            &format!("render.interval=\"{interval}\""),
+            &format!("render.step={step}"),
+        ])
     };
     // Measured gains 1.70x and 1.25x: the cubic model holds better on shorter intervals of this
     // scene's narrow band of dense extinction.
@@ -496,24 +504,7 @@ fn hermite_criterion_converges_with_fewer_evaluations_than_fixed_steps() {
     // CPU twin, f64: the error against the reference falls as ε falls, and at the ε whose
     // error is no worse than fixed step 0.5 it needs fewer evaluations (the predicted
     // midpoints make each accepted interval as accurate as two of half its length).
-    let mut base = SMALL.to_vec();
-    base.push("render.early_termination=1.0");
-    let mut r = base.clone();
-    r.extend([
-        "render.method=\"reference\"",
-        "render.reference_step=0.03125",
-    ]);
-    let rs = scene(&r);
-    let f = field(&rs);
-    let reference = cpu_render(&rs, &f);
-    let measure = |extra: &[&str]| {
-        let mut o = base.clone();
-        o.extend(extra.iter().copied());
-        let c = cpu_render(&scene(&o), &f);
-        let rmse = rgb_rmse(&c, &reference);
-        let evaluations: u64 = c.iter().map(|p| u64::from(p.evaluations)).sum();
-        (rmse, evaluations)
-    };
+    let measure = cpu_error_meter();
     let fixed = measure(&["render.method=\"fixed\"", "render.step=0.5"]);
     let hermite: Vec<(f64, u64)> = [0.03, 0.003, 0.0003]
         .iter()
