@@ -53,12 +53,35 @@ const uint CHUNK_DONE = 0u;      // reached last_step, more to do in this segmen
 const uint CHUNK_FINISHED = 1u;  // the segment is complete (t_exit or termination)
 const uint CHUNK_TRUNCATED = 2u; // a loop ended early: the driver's loop limit
 
+// Whether the ray has stopped: opacity for the preintegrated methods, transmittance for the
+// midpoint rule.
+bool terminated(float transmittance) {
+#if RAY_METHOD == 0
+    return transmittance < params.min_transmittance;
+#else
+    return 1.0 - transmittance > params.integrator.y;
+#endif
+}
+
 #if RAY_METHOD == 0
 // Midpoint rule (riemann, reference): steps first .. last_step of n = ⌈L/δ⌉; isosurfaces
 // crossed between consecutive samples are composited before the later sample's step. `prev`
 // is the previous sample (w = 0 before the first). With isosurfaces, f is also evaluated at the
 // entry and the t_exit, so that a surface in the half step before the first sample or after the
 // last is not missed.
+// The midpoint step of sample k (length dt) composited (nothing where f is undefined); true
+// once the ray has stopped.
+bool midpoint_step(vec4 k, float dt, inout vec3 color, inout float transmittance) {
+    if (k.w == 0.0) {
+        return false;
+    }
+    vec4 ct = transfer_lookup(k.y, params.tf_count);
+    float a = 1.0 - exp(-ct.a * dt);
+    color += transmittance * a * ct.rgb;
+    transmittance *= 1.0 - a;
+    return terminated(transmittance);
+}
+
 uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, inout vec4 prev,
                inout vec3 color, inout float transmittance, inout uint evaluations) {
     uint steps = uint(ceil((t1 - t0) / params.step));
@@ -86,14 +109,8 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
             emit_crossings(o, d, prev, k, color, transmittance, evaluations);
             prev = k;
             pending = false;
-            if (k.w != 0.0) {
-                vec4 ct = transfer_lookup(k.y, params.tf_count);
-                float a = 1.0 - exp(-ct.a * pending_dt);
-                color += transmittance * a * ct.rgb;
-                transmittance *= 1.0 - a;
-                if (transmittance < params.min_transmittance) {
-                    return CHUNK_FINISHED;
-                }
+            if (midpoint_step(k, pending_dt, color, transmittance)) {
+                return CHUNK_FINISHED;
             }
             i += 1u;
         }
@@ -131,14 +148,7 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
                 break;
             }
             prev = next;
-            if (next.w == 0.0) {
-                continue;
-            }
-            vec4 ct = transfer_lookup(next.y, params.tf_count);
-            float a = 1.0 - exp(-ct.a * dt);
-            color += transmittance * a * ct.rgb;
-            transmittance *= 1.0 - a;
-            if (transmittance < params.min_transmittance) {
+            if (midpoint_step(next, dt, color, transmittance)) {
                 return CHUNK_FINISHED;
             }
         }
@@ -190,7 +200,7 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
                           transmittance, evaluations);
             prev = next;
             pending = false;
-            if (1.0 - transmittance > params.integrator.y) {
+            if (terminated(transmittance)) {
                 return CHUNK_FINISHED;
             }
             i += 1u;
@@ -237,7 +247,7 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
             color += transmittance * c.rgb;
             transmittance *= 1.0 - c.a;
             prev = next;
-            if (1.0 - transmittance > params.integrator.y) {
+            if (terminated(transmittance)) {
                 return CHUNK_FINISHED;
             }
         }
@@ -261,7 +271,7 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
         emit_interval(o, d, prev, next, tb - ta, knot_segment(prev, next, tb - ta, false, 0u),
                       color, transmittance, evaluations);
         prev = next;
-        if (1.0 - transmittance > params.integrator.y) {
+        if (terminated(transmittance)) {
             return CHUNK_FINISHED;
         }
         i += 1u;
@@ -311,7 +321,7 @@ float hermite_error(vec4 a, vec4 e, float transmittance, out vec4 mid) {
         }
     }
 #endif
-    float sm = 0.5 * (a.y + e.y) + 0.125 * (m0 - m1);
+    float sm = hermite_midpoint(a.y, e.y, m0, m1);
     float mm = 1.5 * (e.y - a.y) - 0.25 * (m0 + m1);
     mid = vec4(0.5 * (a.x + e.x), sm, mm / l, 1.0);
     // One pass over the transfer function for both halves: their hulls' union and the larger
@@ -544,16 +554,6 @@ uint segment_steps(float t0, float t1) {
     return uint(ceil((t1 - t0) / params.preint_range.z));
 #else
     return uint(ceil((t1 - t0) / params.step));
-#endif
-}
-
-// Whether the ray has stopped: opacity for the preintegrated methods, transmittance for the
-// midpoint rule.
-bool terminated(float transmittance) {
-#if RAY_METHOD == 0
-    return transmittance < params.min_transmittance;
-#else
-    return 1.0 - transmittance > params.integrator.y;
 #endif
 }
 

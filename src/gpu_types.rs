@@ -83,8 +83,8 @@ pub mod binding {
 
     /// How kernels read a binding: the grid and the octree's samples, nodes and references
     /// through texel-buffer views (one AVX2 gather per 8 lanes on llvmpipe instead of a per-lane
-    /// loop; LAVAPIPE.md "Read paths"), the parameters as a uniform buffer (one load per SIMD
-    /// row), everything else as storage buffers.
+    /// loop; LAVAPIPE.md "Read paths"), the parameters as a uniform buffer (cheaper than a
+    /// storage-buffer read on llvmpipe), everything else as storage buffers.
     pub fn kind(b: u32) -> crate::vk::BindingKind {
         use crate::vk::BindingKind;
         match b {

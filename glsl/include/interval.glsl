@@ -262,6 +262,11 @@ vec3 bezier_hull(float f0, float f1, float m0, float m1) {
                 max(abs(m0 - delta), abs(m1 - delta)) / 3.0);
 }
 
+// The cubic Hermite's value at the middle of its interval (twin of hermite_midpoint).
+float hermite_midpoint(float f0, float f1, float m0, float m1) {
+    return 0.5 * (f0 + f1) + 0.125 * (m0 - m1);
+}
+
 #if RAY_METHOD != 0
 // (C, α) of [a, e] of exactly len: table `level` for full-length intervals, else the clipped
 // composite; undefined ends contribute nothing (twin of interval::knot_segment).
@@ -285,18 +290,18 @@ vec4 full_segment(vec4 a, vec4 e) {
     float m0 = l * a.z;
     float m1 = l * e.z;
     vec3 h = bezier_hull(a.y, e.y, m0, m1);
-    bool halves = a.w != 0.0 && e.w != 0.0;
+    bool defined = a.w != 0.0 && e.w != 0.0;
+    bool halves = defined;
 #if MAX_ISO > 0
     [[unroll]] for (int i = 0; i < MAX_ISO; ++i) {
         float v = iso_values[i];
         halves = halves && !(uint(i) < params.iso_count.x && h.x <= v && v <= h.y);
     }
 #endif
-    float sm = 0.5 * (a.y + e.y) + 0.125 * (m0 - m1);
+    float sm = hermite_midpoint(a.y, e.y, m0, m1);
     vec4 c0 = preint_lookup(halves ? 1u : 0u, a.y, halves ? sm : e.y);
     vec4 c1 = preint_lookup(1u, sm, e.y);
     vec4 both = vec4(c0.rgb + (1.0 - c0.a) * c1.rgb, c0.a + (1.0 - c0.a) * c1.a);
-    bool defined = a.w != 0.0 && e.w != 0.0;
     return defined ? (halves ? both : c0) : vec4(0.0);
 #else
     return knot_segment(a, e, e.x - a.x, true, 0u);

@@ -91,16 +91,6 @@ pub enum IntervalModel {
     Hermite,
 }
 
-impl IntervalModel {
-    /// The scene-file spelling.
-    pub fn name(self) -> &'static str {
-        match self {
-            IntervalModel::Linear => "linear",
-            IntervalModel::Hermite => "hermite",
-        }
-    }
-}
-
 /// Integrator settings (scene section `[render]`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct RenderSettings {

@@ -19,8 +19,8 @@ pub enum BindingKind {
     /// A storage buffer (`buffer` block).
     Storage,
     /// A uniform buffer (`uniform` block, std140) of at most maxUniformBufferRange bytes: for
-    /// parameters every invocation reads at the same address, which llvmpipe loads once per SIMD
-    /// row where a storage-buffer read is a loop over the lanes.
+    /// parameters every invocation reads at the same address, cheaper to read on llvmpipe than
+    /// a storage buffer, whose reads are loops over the lanes (BENCHMARKS.md).
     Uniform,
     /// A storage texel buffer of `uint`s (`r32ui uimageBuffer`).
     TexelR32Uint,

@@ -32,7 +32,7 @@
 //!   length a table length.
 
 use super::Ray;
-use super::interval::{Knot, bezier_hull, emit_interval, knot, knot_segment};
+use super::interval::{Knot, bezier_hull, emit_interval, hermite_midpoint, knot, knot_segment};
 use crate::render::preintegration::PreintegrationTables;
 use crate::render::transfer::TransferFunction;
 use crate::render::{AdaptiveCriterion, RaySetup};
@@ -86,7 +86,7 @@ fn hermite_error(
         }
     }
     // The Hermite at u = ½: value and derivative per unit of the whole interval.
-    let sm = 0.5 * (f0 + f1) + 0.125 * (m0 - m1);
+    let sm = hermite_midpoint(f0, f1, m0, m1);
     let mm = 1.5 * (f1 - f0) - 0.25 * (m0 + m1);
     let (lo0, hi0, d0) = bezier_hull(f0, sm, 0.5 * m0, 0.5 * mm);
     let (lo1, hi1, d1) = bezier_hull(sm, f1, 0.5 * mm, 0.5 * m1);
@@ -284,7 +284,7 @@ fn push_half(stack: &mut Vec<(Knot, usize)>, m: Knot, depth: usize) {
 
 #[cfg(test)]
 mod tests {
-    use super::super::interval::bezier_hull;
+    use super::super::interval::{bezier_hull, hermite_midpoint};
     use super::predict_depth;
 
     /// The cubic Hermite on u ∈ [0, 1] with the given end values and derivatives.
@@ -326,12 +326,12 @@ mod tests {
 
     #[test]
     fn predicted_midpoint_is_exact_for_cubics() {
-        // hermite_error's midpoint: 0.5·(f0 + f1) + (m0 − m1)/8 and derivative
+        // hermite_midpoint: 0.5·(f0 + f1) + (m0 − m1)/8, and hermite_error's derivative
         // 1.5·Δ − (m0 + m1)/4, against p(u) = 2u³ − u² + 0.5u + 0.1.
         let p = |u: f64| 2.0 * u * u * u - u * u + 0.5 * u + 0.1;
         let dp = |u: f64| 6.0 * u * u - 2.0 * u + 0.5;
         let (f0, f1, m0, m1) = (p(0.0), p(1.0), dp(0.0), dp(1.0));
-        let sm = 0.5 * (f0 + f1) + 0.125 * (m0 - m1);
+        let sm = hermite_midpoint(f0, f1, m0, m1);
         let mm = 1.5 * (f1 - f0) - 0.25 * (m0 + m1);
         assert!((sm - p(0.5)).abs() < 1e-14 && (mm - dp(0.5)).abs() < 1e-14);
     }

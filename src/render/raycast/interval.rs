@@ -223,6 +223,12 @@ pub(super) fn bezier_hull(f0: f64, f1: f64, m0: f64, m1: f64) -> (f64, f64, f64)
     (lo, hi, (m0 - delta).abs().max((m1 - delta).abs()) / 3.0)
 }
 
+/// The cubic Hermite's value at the middle of its interval, from its end values and end
+/// derivatives per unit of the interval (exact for cubics).
+pub(super) fn hermite_midpoint(f0: f64, f1: f64, m0: f64, m1: f64) -> f64 {
+    0.5 * (f0 + f1) + 0.125 * (m0 - m1)
+}
+
 /// Stage `hermite_segment` (`render.interval = "hermite"`): (C, α) of the full-length
 /// interval [a, e] composited as two halves through the midpoint of the cubic Hermite that
 /// the knots' values and directional derivatives define, from table `level + 1` (half the
@@ -249,7 +255,7 @@ pub(super) fn hermite_segment(
     {
         return None;
     }
-    let sm = 0.5 * (f0 + f1) + 0.125 * (m0 - m1);
+    let sm = hermite_midpoint(f0, f1, m0, m1);
     let half = &tables.tables[level + 1];
     let c0 = tables.lookup(half, f0, sm);
     let c1 = tables.lookup(half, sm, f1);
