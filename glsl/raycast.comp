@@ -350,15 +350,26 @@ void stack_set(inout vec4 stack[ADAPTIVE_LEVELS], int i, vec4 v) {
     }
 }
 
+// Units of the deepest level covered in the top starting at `start`: all of them in a full top,
+// ⌊r/u⌋ of the ray's last one (length r); the rest is the tail (twin of top_limit).
+uint top_limit(float start, float t1, float l_max, uint units) {
+    if (start + l_max <= t1) {
+        return units;
+    }
+    return min(uint(max(floor((t1 - start) / l_max * float(units)), 0.0)), units);
+}
+
 // The Hermite criterion with its step controller (twin of integrate_hermite). Every iteration
 // of the outer loop evaluates f exactly once, at a new end or at a rejected interval's
 // midpoint; the inner loop composites the intervals that pass in between without evaluating.
 // So the SIMD lanes of a row meet at the one MLS call site whatever state each ray is in.
+// Every interval of the loop has a table length: the ray's last top is covered only up to
+// whole units, and the remainder (the tail, shorter than a unit) is composited after the loop,
+// so the loop never pays the clipped composite's lookups.
 uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step,
                         inout vec4 a, inout uint predicted, inout vec3 color,
                         inout float transmittance, inout uint evaluations) {
     float l_max = params.preint_range.z;
-    float l_min = params.preint_range.w;
     float epsilon = params.integrator.x;
     float termination = params.integrator.y;
     uint units = 1u << uint(ADAPTIVE_LEVELS - 1);
@@ -372,6 +383,7 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
     uint k = first;
     uint position = 0u;
     int sp = 0;
+    bool tail = false;
     while (k < last) {
         // Composite what passes, until an interval or a new end needs an evaluation.
         float t_eval = 0.0;
@@ -379,36 +391,38 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
         bool split = false;
         bool ended = false;
         while (true) {
-            if (position == units) {
+            float start = t0 + float(k) * l_max;
+            uint limit = top_limit(start, t1, l_max, units);
+            if (position == limit) {
+                if (k + 1u == tops) {
+                    tail = true;
+                    ended = true;
+                    break;
+                }
                 k += 1u;
                 position = 0u;
                 if (k == last) {
                     ended = true;
                     break;
                 }
-            }
-            float start = t0 + float(k) * l_max;
-            float end = t0 + float(k + 1u) * l_max;
-            bool full = end <= t1;
-            float top = full ? l_max : t1 - start;
-            if (top <= 0.0) {
-                return CHUNK_FINISHED;
+                continue;
             }
             if (sp == 0) {
-                // A new end at the controller's depth, or deeper until the position is aligned.
+                // A new end at the controller's depth, or deeper until the interval is aligned
+                // and inside the covered part of the top.
                 depth = predicted;
-                while (position % (units >> depth) != 0u) {
+                while (position % (units >> depth) != 0u || position + (units >> depth) > limit) {
                     depth += 1u;
                 }
                 uint to = position + (units >> depth);
-                t_eval = to == units ? (full ? end : t1) : start + top * (float(to) / float(units));
+                t_eval = to == units ? start + l_max : start + l_max * (float(to) / float(units));
                 break;
             }
             vec4 packed = stack_get(stack, sp - 1);
             depth = uint(abs(packed.w)) - 1u;
             vec4 e = vec4(packed.xyz, packed.w > 0.0 ? 1.0 : 0.0);
-            float len = top * exp2(-float(depth));
-            bool can_split = int(depth) + 1 < ADAPTIVE_LEVELS && (full || 0.5 * len >= l_min);
+            float len = l_max * exp2(-float(depth));
+            bool can_split = int(depth) + 1 < ADAPTIVE_LEVELS;
             vec4 mid;
             float error = hermite_error(a, e, transmittance, mid);
             if (can_split && error > epsilon) {
@@ -420,12 +434,12 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
             // Accepted: the halves through the predicted midpoint when the hull holds no
             // isosurface value, else the whole interval split at the surfaces it crosses. One
             // emit_interval call site: GLSL inlines every call, and lavapipe's compile time
-            // grows with the inlined copies of the root finders.
+            // grows with the inlined copies of the root finders. Both halves and the whole
+            // interval read a table (adaptive setups build one below the deepest level): no
+            // clipped composite here.
             bool halves = mid.w > 0.0;
-            bool table = full && depth + 1u < params.preint_dims.y;
-            vec4 cl = halves ? knot_segment(a, mid, 0.5 * len, table, depth + 1u)
-                             : knot_segment(a, e, len, full, depth);
-            vec4 cr = halves ? knot_segment(mid, e, 0.5 * len, table, depth + 1u) : cl;
+            vec4 cl = table_segment(halves ? depth + 1u : depth, a, halves ? mid : e);
+            vec4 cr = table_segment(depth + 1u, mid, e);
             for (uint piece = 0u; piece < (halves ? 2u : 1u); ++piece) {
                 bool left = piece == 0u;
                 emit_interval(o, d, left ? a : mid, halves && left ? mid : e,
@@ -452,6 +466,17 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
         }
         stack_set(stack, sp, vec4(m.xyz, m.w > 0.0 ? level : -level));
         sp += 1;
+    }
+    if (tail) {
+        // From the last covered unit to t1, clipped, without a test: once per chunk.
+        float len = t1 - a.x;
+        if (len > 0.0) {
+            vec4 e = knot(o, d, t1, evaluations);
+            emit_interval(o, d, a, e, len, knot_segment(a, e, len, false, 0u), color,
+                          transmittance, evaluations);
+            a = e;
+        }
+        return CHUNK_FINISHED;
     }
     if (k < last) {
         return CHUNK_TRUNCATED;

@@ -279,6 +279,13 @@ vec4 knot_segment(vec4 a, vec4 e, float len, bool full, uint level) {
     return full ? preint_lookup(level, a.y, e.y) : clipped;
 }
 
+// (C, α) of [a, e] from table `level`, which must be its length; undefined ends contribute
+// nothing (knot_segment without the clipped composite, which costs a masked loop iteration).
+vec4 table_segment(uint level, vec4 a, vec4 e) {
+    vec4 c = preint_lookup(level, a.y, e.y);
+    return a.w != 0.0 && e.w != 0.0 ? c : vec4(0.0);
+}
+
 // (C, α) of a full-length interval of the fixed-step integrator: table 0, or with
 // INTERVAL_HERMITE two lookups of table 1 (half the step) through the cubic Hermite's predicted
 // midpoint where both ends are defined and no isosurface value lies in the Hermite's hull (twin

@@ -468,7 +468,10 @@ impl RaySetup {
         }
         let tau_max = tf.points().iter().map(|p| p[4]).fold(0.0, f64::max);
         let last = lengths[lengths.len() - 1];
-        for _ in 0..preintegration::remainder_levels(last, tau_max) {
+        // Adaptive intervals accepted at the deepest level are composited as halves through
+        // the Hermite's midpoint, which read the table one level down.
+        let below = usize::from(self.method == Method::Adaptive);
+        for _ in 0..preintegration::remainder_levels(last, tau_max).max(below) {
             let l = lengths[lengths.len() - 1];
             lengths.push(0.5 * l);
         }

@@ -7,7 +7,9 @@
 //! their depths, strictly deeper towards the top except for the two halves of the last split:
 //! at most ⌊log2(l_max/l_min)⌋ + 1 entries. An interval is split (its midpoint evaluated and
 //! pushed, the left half processed first, since its α is needed for the right half's test)
-//! until it is accepted or its half would be shorter than l_min.
+//! until it is accepted or its half would be shorter than l_min. The Hermite criterion covers
+//! the last top only in whole units of the deepest level, so that every interval it tests has a
+//! table, and composites the remainder (shorter than a unit) as the ray's clipped tail.
 //!
 //! - `mls2008` ([MLS] §4): C1 = table(len)(s_a, s_e) against C2 = the halves composited (the
 //!   midpoint is evaluated for every test). Accepted when (1 − α_acc)·|C1 − C2| ≤ ε·|C1| (|·| the
@@ -187,7 +189,14 @@ fn integrate_mls2008(
 /// The Hermite criterion with its step controller. Shaped like the kernel: every iteration of
 /// the outer loop evaluates f once, at a new end or at a rejected interval's midpoint; the
 /// inner loop composites the intervals that pass in between. The position inside a top is
-/// counted in units of the deepest level.
+/// counted in units of the deepest level, u = l_max·2^−(levels−1).
+///
+/// Every interval the loop composites has a table length: the ray's last top (clipped at t1,
+/// length r) is covered only up to ⌊r/u⌋ units, by intervals that are dyadic and aligned as in
+/// a full top, and the remainder (shorter than u, so never split) is the ray's tail, composited
+/// once after the loop. The kernel's loop then never runs the clipped composite, which costs
+/// every lane its lookups whenever one lane of a SIMD row needs it (BENCHMARKS.md, "Two lavapipe
+/// costs").
 fn integrate_hermite(
     ray: &mut Ray<'_>,
     setup: &RaySetup,
@@ -203,38 +212,35 @@ fn integrate_hermite(
     let mut a = knot(ray, t0);
     let mut predicted = 0;
     let (mut k, mut position) = (0u64, 0u64);
-    while k < tops {
+    'tops: while k < tops {
         let (t, depth, split) = loop {
-            if position == units {
+            let start = t0 + k as f64 * setup.l_max;
+            let limit = top_limit(start, t1, setup.l_max, units);
+            if position == limit {
+                if k + 1 == tops {
+                    break 'tops;
+                }
                 k += 1;
                 position = 0;
-                if k == tops {
-                    return;
-                }
-            }
-            let start = t0 + k as f64 * setup.l_max;
-            let end = t0 + (k + 1) as f64 * setup.l_max;
-            let full = end <= t1;
-            let top = if full { setup.l_max } else { t1 - start };
-            if top <= 0.0 {
-                return;
+                continue;
             }
             let Some(&(e, depth)) = stack.last() else {
-                // A new end at the controller's depth, or deeper until the position is aligned.
+                // A new end at the controller's depth, or deeper until the interval is aligned
+                // and inside the covered part of the top.
                 let mut depth = predicted;
-                while position % (units >> depth) != 0 {
+                while position % (units >> depth) != 0 || position + (units >> depth) > limit {
                     depth += 1;
                 }
                 let to = position + (units >> depth);
-                let t = match (to == units, full) {
-                    (true, true) => end,
-                    (true, false) => t1,
-                    (false, _) => start + top * (to as f64 / units as f64),
+                let t = if to == units {
+                    start + setup.l_max
+                } else {
+                    start + setup.l_max * (to as f64 / units as f64)
                 };
                 break (t, depth, false);
             };
-            let len = top * 0.5f64.powi(depth as i32);
-            let can_split = depth + 1 < levels && (full || 0.5 * len >= setup.l_min);
+            let len = setup.l_max * 0.5f64.powi(depth as i32);
+            let can_split = depth + 1 < levels;
             let (error, mid) = hermite_error(ray, setup, tf, &a, &e);
             if can_split && error > setup.epsilon {
                 break (0.5 * (a.t + e.t), depth, true);
@@ -244,16 +250,15 @@ fn integrate_hermite(
             // isosurface value, else the whole interval split at the surfaces it crosses.
             match mid {
                 Some(m) => {
-                    let half = full
-                        .then_some(depth + 1)
-                        .filter(|&k| k < tables.tables.len());
+                    // Adaptive setups build a table below the deepest level.
+                    let half = Some(depth + 1);
                     let left = knot_segment(tables, &a, &m, 0.5 * len, half);
                     let right = knot_segment(tables, &m, &e, 0.5 * len, half);
                     emit_interval(ray, setup, tables, &a, &m, 0.5 * len, left);
                     emit_interval(ray, setup, tables, &m, &e, 0.5 * len, right);
                 }
                 None => {
-                    let whole = knot_segment(tables, &a, &e, len, full.then_some(depth));
+                    let whole = knot_segment(tables, &a, &e, len, Some(depth));
                     emit_interval(ray, setup, tables, &a, &e, len, whole);
                 }
             }
@@ -271,6 +276,23 @@ fn integrate_hermite(
             stack.push((m, depth));
         }
     }
+    // The tail: from the last covered unit to t1, clipped, without a test.
+    let len = t1 - a.t;
+    if k + 1 == tops && len > 0.0 {
+        let e = knot(ray, t1);
+        let whole = knot_segment(tables, &a, &e, len, None);
+        emit_interval(ray, setup, tables, &a, &e, len, whole);
+    }
+}
+
+/// Units of the deepest level that the Hermite integrator covers in the top starting at
+/// `start`: all of them in a full top, ⌊r/u⌋ of the last one (length r = t1 − start).
+fn top_limit(start: f64, t1: f64, l_max: f64, units: u64) -> u64 {
+    if start + l_max <= t1 {
+        units
+    } else {
+        (((t1 - start) / l_max * units as f64).floor().max(0.0) as u64).min(units)
+    }
 }
 
 /// Both halves of the stack's top interval are one level deeper; the left one (closed by `m`)
@@ -285,7 +307,7 @@ fn push_half(stack: &mut Vec<(Knot, usize)>, m: Knot, depth: usize) {
 #[cfg(test)]
 mod tests {
     use super::super::interval::{bezier_hull, hermite_midpoint};
-    use super::predict_depth;
+    use super::{predict_depth, top_limit};
 
     /// The cubic Hermite on u ∈ [0, 1] with the given end values and derivatives.
     fn hermite(f0: f64, f1: f64, m0: f64, m1: f64, u: f64) -> f64 {
@@ -342,5 +364,24 @@ mod tests {
         assert_eq!(predict_depth(3, 0.01 * 0.81 / 4.0, 0.01), 2);
         assert_eq!(predict_depth(3, 0.01 * 0.81 / 4.0 * 1.01, 0.01), 3);
         assert_eq!(predict_depth(0, 0.0, 0.01), 0);
+    }
+
+    #[test]
+    fn last_top_is_covered_in_whole_units_and_never_past_the_exit() {
+        // 16 units of 0.25 in a top of 4.
+        assert_eq!(top_limit(0.0, 10.0, 4.0, 16), 16);
+        assert_eq!(top_limit(8.0, 12.0, 4.0, 16), 16);
+        assert_eq!(top_limit(8.0, 11.9, 4.0, 16), 15);
+        assert_eq!(top_limit(8.0, 8.2, 4.0, 16), 0);
+        assert_eq!(top_limit(8.0, 7.9, 4.0, 16), 0);
+        for i in 0..1000 {
+            let r = 4.0 * f64::from(i) / 1000.0;
+            let n = top_limit(1.0, 1.0 + r, 4.0, 16);
+            let covered = f64::from(n as u32) * 0.25;
+            assert!(
+                covered <= r + 1e-12 && r - covered < 0.25 + 1e-12,
+                "r {r}: {n} units"
+            );
+        }
     }
 }
