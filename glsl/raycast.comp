@@ -390,6 +390,7 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
         uint depth = 0u;
         bool split = false;
         bool ended = false;
+        bool top_start = false;
         while (true) {
             float start = t0 + float(k) * l_max;
             uint limit = top_limit(start, t1, l_max, units);
@@ -416,6 +417,7 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
                 }
                 uint to = position + (units >> depth);
                 t_eval = to == units ? start + l_max : start + l_max * (float(to) / float(units));
+                top_start = position == 0u;
                 break;
             }
             vec4 packed = stack_get(stack, sp - 1);
@@ -456,8 +458,32 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
         if (ended) {
             break;
         }
+#if SKIP == 1
+        // At a top's start, outside the inner loop (whose `if` bodies every lane pays): tops
+        // inside a run of empty blocks are skipped, and the first one reaching past the run
+        // starts from a fresh knot (twin of the skip in integrate_hermite).
+        bool restart = false;
+        if (top_start) {
+            float run = skip_run(o, d, t0 + float(k) * l_max, t1);
+            uint j = resume_interval(t0, l_max, run, k);
+            if (j >= tops) {
+                return CHUNK_FINISHED;
+            }
+            if (j > k) {
+                restart = true;
+                k = min(j, last);
+                t_eval = t0 + float(k) * l_max;
+            }
+        }
+#endif
         // The one evaluation of this iteration.
         vec4 m = knot(o, d, t_eval, evaluations);
+#if SKIP == 1
+        if (restart) {
+            a = m;
+            continue;
+        }
+#endif
         float level = float(depth + (split ? 2u : 1u));
         if (split) {
             // Both halves are one level deeper; the left one (closed by m) comes first.

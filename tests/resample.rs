@@ -181,12 +181,13 @@ fn worst(a: &[[f32; 4]], b: &[[f64; 4]]) -> f64 {
 
 #[test]
 fn gpu_fast_path_images_match_the_cpu_twin_with_and_without_skipping() {
-    for method in ["fixed", "riemann"] {
+    for method in ["fixed", "riemann", "adaptive"] {
         let m = format!("render.method=\"{method}\"");
         let mut evals = Vec::new();
         let mut cpus = Vec::new();
         for skip in ["render.skip=false", "render.skip=true"] {
-            let s = scene(&[&m, skip]);
+            // The adaptive integrator skips with the Hermite criterion, whole tops at a time.
+            let s = scene(&[&m, skip, "render.adaptive=\"hermite\"", "render.l_max=1"]);
             let (g, ge, c, ce, variant) = both(&s);
             let w = worst(&g, &c);
             assert!(w < 2e-3, "{method} {skip}: GPU vs CPU {w:.2e}");

@@ -42,6 +42,23 @@ bool skip_block(vec3 o, vec3 d, float t, out float t_exit) {
     return imageLoad(skip_table, 3 + b1 + 1).x == imageLoad(skip_table, 3 + b0).x;
 }
 
+// Stage `skip_run` (twin of Blocks::run): from t across consecutive empty blocks, at most
+// SKIP_RUN of them and no further once past t_end; where the run stops (t when the block at t
+// is occupied). Blocks are looked up RUN_NUDGE of an edge past the point, since a point on a
+// face may round into the block just left; a lookup whose exit does not advance ends the run.
+float skip_run(vec3 o, vec3 d, float t, float t_end) {
+    vec3 size = float(SKIP_BLOCK) / params.grid_inv_spacing.xyz;
+    float nudge = float(RUN_NUDGE) * min(size.x, min(size.y, size.z));
+    for (uint n = 0u; n < uint(SKIP_RUN); ++n) {
+        float t_exit;
+        if (t >= t_end || !skip_block(o, d, t + nudge, t_exit) || t_exit <= t) {
+            break;
+        }
+        t = t_exit;
+    }
+    return t;
+}
+
 // Twin of skip::resume_interval: the first interval of length l from t0 that reaches past
 // `t_exit`, no earlier than `next`.
 uint resume_interval(float t0, float l, float t_exit, uint next) {

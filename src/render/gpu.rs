@@ -99,8 +99,7 @@ impl Variant {
             interval: setup.interval,
             isosurfaces: setup.isosurfaces.len(),
             hull: field.hull.is_some(),
-            // The adaptive integrator does not skip yet.
-            skip: setup.skip && setup.method != Method::Adaptive,
+            skip: setup.skip,
             ..Self::of(field)
         }
     }
@@ -144,6 +143,8 @@ impl Variant {
         d.push(("RESAMPLE_FACTOR".into(), self.resample.max(1).to_string()));
         d.push(("SKIP".into(), flag(self.skip)));
         d.push(("SKIP_BLOCK".into(), super::skip::SKIP_BLOCK.to_string()));
+        d.push(("SKIP_RUN".into(), super::skip::SKIP_RUN.to_string()));
+        d.push(("RUN_NUDGE".into(), format!("{:e}", super::skip::RUN_NUDGE)));
         // The analytic field's constants, from the generator (one copy of each number).
         d.push((
             "ML_F_M".into(),

@@ -440,7 +440,11 @@ impl RaySetup {
             epsilon: render.epsilon,
             spacing: unit,
             early_termination: render.early_termination,
-            skip: render.skip && field.reconstruction.resample > 0,
+            // [MLS]'s criterion (the paper's integrator) does not skip.
+            skip: render.skip
+                && field.reconstruction.resample > 0
+                && !(render.method == Method::Adaptive
+                    && render.adaptive == AdaptiveCriterion::Mls2008),
             background: render.background,
             min_transmittance: render.min_transmittance,
             isosurfaces: isosurfaces.to_vec(),

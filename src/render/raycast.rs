@@ -49,6 +49,11 @@ impl Skip<'_> {
     fn lookup(&self, o: DVec3, d: DVec3, t: f64) -> (bool, f64) {
         self.blocks.lookup(self.table, o, d, t)
     }
+
+    /// Stage `skip_run`.
+    pub(super) fn run(&self, o: DVec3, d: DVec3, t: f64, t_end: f64) -> f64 {
+        self.blocks.run(self.table, o, d, t, t_end)
+    }
 }
 
 /// Front-to-back accumulation along one ray.

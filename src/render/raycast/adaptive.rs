@@ -9,7 +9,10 @@
 //! pushed, the left half processed first, since its α is needed for the right half's test)
 //! until it is accepted or its half would be shorter than l_min. The Hermite criterion covers
 //! the last top only in whole units of the deepest level, so that every interval it tests has a
-//! table, and composites the remainder (shorter than a unit) as the ray's clipped tail.
+//! table, and composites the remainder (shorter than a unit) as the ray's clipped tail. With
+//! empty-space skipping it looks at each top's start for a run of empty blocks
+//! ([`crate::render::skip::Blocks::run`]) and resumes at the first top reaching past the run,
+//! from a fresh knot; [MLS]'s criterion does not skip.
 //!
 //! - `mls2008` ([MLS] §4): C1 = table(len)(s_a, s_e) against C2 = the halves composited (the
 //!   midpoint is evaluated for every test). Accepted when (1 − α_acc)·|C1 − C2| ≤ ε·|C1| (|·| the
@@ -36,6 +39,7 @@
 use super::Ray;
 use super::interval::{Knot, bezier_hull, emit_interval, hermite_midpoint, knot, knot_segment};
 use crate::render::preintegration::PreintegrationTables;
+use crate::render::skip::resume_interval;
 use crate::render::transfer::TransferFunction;
 use crate::render::{AdaptiveCriterion, RaySetup};
 
@@ -213,7 +217,7 @@ fn integrate_hermite(
     let mut predicted = 0;
     let (mut k, mut position) = (0u64, 0u64);
     'tops: while k < tops {
-        let (t, depth, split) = loop {
+        let (t, depth, next) = loop {
             let start = t0 + k as f64 * setup.l_max;
             let limit = top_limit(start, t1, setup.l_max, units);
             if position == limit {
@@ -225,6 +229,18 @@ fn integrate_hermite(
                 continue;
             }
             let Some(&(e, depth)) = stack.last() else {
+                // At a top's start: tops inside a run of empty blocks are skipped, and the
+                // first one reaching past the run starts from a fresh knot.
+                if let Some(skip) = ray.skip.filter(|_| position == 0) {
+                    let run = skip.run(ray.o, ray.d, start, t1);
+                    let j = resume_interval(t0, setup.l_max, run, k);
+                    if j >= tops {
+                        return;
+                    }
+                    if j > k {
+                        break (t0 + j as f64 * setup.l_max, 0, Next::Restart(j));
+                    }
+                }
                 // A new end at the controller's depth, or deeper until the interval is aligned
                 // and inside the covered part of the top.
                 let mut depth = predicted;
@@ -237,13 +253,13 @@ fn integrate_hermite(
                 } else {
                     start + setup.l_max * (to as f64 / units as f64)
                 };
-                break (t, depth, false);
+                break (t, depth, Next::End);
             };
             let len = setup.l_max * 0.5f64.powi(depth as i32);
             let can_split = depth + 1 < levels;
             let (error, mid) = hermite_error(ray, setup, tf, &a, &e);
             if can_split && error > setup.epsilon {
-                break (0.5 * (a.t + e.t), depth, true);
+                break (0.5 * (a.t + e.t), depth, Next::Split);
             }
             predicted = predict_depth(depth, error, setup.epsilon);
             // Accepted: the halves through the predicted midpoint when the hull holds no
@@ -270,10 +286,13 @@ fn integrate_hermite(
             }
         };
         let m = knot(ray, t);
-        if split {
-            push_half(&mut stack, m, depth);
-        } else {
-            stack.push((m, depth));
+        match next {
+            Next::End => stack.push((m, depth)),
+            Next::Split => push_half(&mut stack, m, depth),
+            Next::Restart(j) => {
+                a = m;
+                k = j;
+            }
         }
     }
     // The tail: from the last covered unit to t1, clipped, without a test.
@@ -283,6 +302,16 @@ fn integrate_hermite(
         let whole = knot_segment(tables, &a, &e, len, None);
         emit_interval(ray, setup, tables, &a, &e, len, whole);
     }
+}
+
+/// What the Hermite integrator's one evaluation per iteration is for.
+enum Next {
+    /// A new pending end.
+    End,
+    /// The midpoint of the rejected interval on top of the stack.
+    Split,
+    /// The start of top j, after skipped empty tops.
+    Restart(u64),
 }
 
 /// Units of the deepest level that the Hermite integrator covers in the top starting at
