@@ -416,7 +416,7 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
                     depth += 1u;
                 }
                 uint to = position + (units >> depth);
-                t_eval = to == units ? start + l_max : start + l_max * (float(to) / float(units));
+                t_eval = start + l_max * (float(to) / float(units));
                 top_start = position == 0u;
                 break;
             }
@@ -500,7 +500,6 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
             vec4 e = knot(o, d, t1, evaluations);
             emit_interval(o, d, a, e, len, knot_segment(a, e, len, false, 0u), color,
                           transmittance, evaluations);
-            a = e;
         }
         return CHUNK_FINISHED;
     }

@@ -36,6 +36,11 @@ use glam::DVec3;
 pub const SKIP_BLOCK: usize = 2;
 /// Bins of the scalar axis in a [`SkipTable`].
 pub const SKIP_BINS: usize = 1024;
+/// Most blocks one [`Blocks::run`] crosses (the kernel's SKIP_RUN): a bounded loop, and a run
+/// that ends early only resumes sooner.
+pub const SKIP_RUN: u32 = 64;
+/// How far past a point [`Blocks::run`] looks up its block, in block edges.
+pub const RUN_NUDGE: f64 = 1e-3;
 
 /// Occupied bins of the scalar axis for one transfer function and isosurface set.
 #[derive(Debug, Clone, PartialEq)]
@@ -158,13 +163,7 @@ impl Blocks {
         let r = self.ranges[b[0] + self.dims[0] * (b[1] + self.dims[1] * b[2])];
         (table.empty(r[0], r[1]), exit)
     }
-}
 
-/// Most blocks one [`Blocks::run`] crosses (the kernel's SKIP_RUN): a bounded loop, and a run
-/// that ends early only resumes sooner.
-pub const SKIP_RUN: u32 = 64;
-
-impl Blocks {
     /// Stage `skip_run`: from t, across consecutive empty blocks, at most [`SKIP_RUN`] of them
     /// and no further once past `t_end`; the ray parameter where the run stops (t itself when
     /// the block at t is occupied). Each block is looked up a thousandth of its edge past the
@@ -187,9 +186,6 @@ impl Blocks {
         t
     }
 }
-
-/// How far past a point [`Blocks::run`] looks up its block, in block edges.
-pub const RUN_NUDGE: f64 = 1e-3;
 
 /// Where the integrators resume after an empty block: the first of the intervals of length `l`
 /// starting at t0 (numbered from 0) that reaches past `exit`, no earlier than `next`.

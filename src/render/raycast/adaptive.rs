@@ -248,11 +248,7 @@ fn integrate_hermite(
                     depth += 1;
                 }
                 let to = position + (units >> depth);
-                let t = if to == units {
-                    start + setup.l_max
-                } else {
-                    start + setup.l_max * (to as f64 / units as f64)
-                };
+                let t = start + setup.l_max * (to as f64 / units as f64);
                 break (t, depth, Next::End);
             };
             let len = setup.l_max * 0.5f64.powi(depth as i32);
