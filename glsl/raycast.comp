@@ -42,6 +42,15 @@ layout(push_constant) uniform Push { RayPush band; };
 
 #if SKIP == 1
 #include "skip.glsl"
+layout(std430, binding = BINDING_SKIP_STATS) buffer SkipStatsBuf { vec4 skip_stats[]; };
+// This ray's skipping so far (carried between chunks): x = ray length skipped, y = evaluations
+// saved (twin of Ray::skipped and Ray::saved).
+vec2 skipped = vec2(0.0);
+
+// Outer steps skipped over `len` of the ray, of which `restart` knots are evaluated anyway.
+void count_skip(float len, uint steps, uint restart) {
+    skipped += vec2(len, float(steps) - float(restart));
+}
 #endif
 
 #if HULL == 1
@@ -123,13 +132,14 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
             }
 #if SKIP == 1
             // A midpoint in an empty block adds nothing: resume at the first midpoint past the
-            // block (twin of skip in integrate_riemann). With isosurfaces, the knot at the
-            // t_exit stands in for the skipped samples (no crossing inside an empty block).
+            // run of empty blocks (twin of skip in integrate_riemann). With isosurfaces, the
+            // knot at its end stands in for the skipped samples (no crossing inside).
             float tm = ta + 0.5 * dt;
             if (tm >= occupied_until) {
                 float t_exit;
-                if (skip_block(o, d, tm, t_exit)) {
+                if (skip_span(o, d, tm, t1, t_exit)) {
                     uint j = min(resume_interval(t0 - 0.5 * params.step, params.step, t_exit, i + 1u), last);
+                    count_skip(min(t0 + float(j) * params.step, t1) - ta, j - i, isos ? 1u : 0u);
                     if (isos) {
                         prev = knot(o, d, min(t_exit, t1), evaluations);
                     }
@@ -206,18 +216,20 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
             i += 1u;
         }
 #if SKIP == 1
-        // Intervals inside an empty block are skipped; the first one reaching past it starts
-        // from a fresh knot (twin of skip in integrate_fixed).
+        // Intervals inside a run of empty blocks are skipped; the first one reaching past it
+        // starts from a fresh knot (twin of skip in integrate_fixed).
         float ts = t0 + float(i) * l;
         if (i < full_end && ts >= occupied_until && i != checked) {
             float t_exit;
             checked = i;
-            if (skip_block(o, d, ts, t_exit)) {
+            if (skip_span(o, d, ts, t1, t_exit)) {
                 uint j = min(resume_interval(t0, l, t_exit, i), last);
                 if (j >= steps) {
+                    count_skip(t1 - ts, steps - i, 0u);
                     return CHUNK_FINISHED;
                 }
                 if (j > i) {
+                    count_skip(float(j - i) * l, j - i, 1u);
                     prev = knot(o, d, t0 + float(j) * l, evaluations);
                     i = j;
                     continue;
@@ -262,7 +274,8 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
 #if SKIP == 1
         if (ta >= occupied_until) {
             float t_exit;
-            if (skip_block(o, d, ta, t_exit) && resume_interval(t0, l, t_exit, i) >= steps) {
+            if (skip_span(o, d, ta, t1, t_exit) && resume_interval(t0, l, t_exit, i) >= steps) {
+                count_skip(t1 - ta, 1u, 0u);
                 return CHUNK_FINISHED;
             }
         }
@@ -466,12 +479,16 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
         if (top_start) {
             float run = skip_run(o, d, t0 + float(k) * l_max, t1);
             uint j = resume_interval(t0, l_max, run, k);
+            float start = t0 + float(k) * l_max;
             if (j >= tops) {
+                count_skip(t1 - start, tops - k, 0u);
                 return CHUNK_FINISHED;
             }
             if (j > k) {
                 restart = true;
-                k = min(j, last);
+                uint to = min(j, last);
+                count_skip(float(to - k) * l_max, to - k, 1u);
+                k = to;
                 t_eval = t0 + float(k) * l_max;
             }
         }
@@ -630,6 +647,9 @@ void main() {
         transmittance = image[index].a;
         evaluations = count & RAY_EVALUATIONS;
         state = ray_state[index];
+#if SKIP == 1
+        skipped = skip_stats[index].xy;
+#endif
     }
     vec3 o, d;
     camera_ray(pixel, o, d);
@@ -670,6 +690,14 @@ void main() {
             break;
         }
     }
+#if SKIP == 1
+    // z: the ray's length inside the domain, the denominator of the skipped fraction.
+    float inside = 0.0;
+    for (int s = 0; s < segments; ++s) {
+        inside += segs[s].y - segs[s].x;
+    }
+    skip_stats[index] = vec4(skipped, inside, 0.0);
+#endif
     if (outcome == CHUNK_FINISHED) {
         image[index] = vec4(color + transmittance * params.background.rgb, 1.0 - transmittance);
         counts[index] = evaluations | RAY_DONE;

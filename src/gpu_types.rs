@@ -80,6 +80,9 @@ pub mod binding {
     /// The transfer function's `TfPoint`s as rgba32f texels (two per point), for the Hermite
     /// criterion's loop over its pieces (one gather per read instead of a per-lane loop).
     pub const TRANSFER_TEXELS: u32 = 32;
+    /// Empty-space skipping's report per pixel, `vec4(ray length skipped, evaluations saved,
+    /// ray length inside the domain, 0)` (written by raycast.comp's skipping variants).
+    pub const SKIP_STATS: u32 = 33;
 
     /// How kernels read a binding: the grid and the octree's samples, nodes and references
     /// through texel-buffer views (one AVX2 gather per 8 lanes on llvmpipe instead of a per-lane
@@ -98,7 +101,7 @@ pub mod binding {
     }
 
     /// Every binding with its macro name.
-    pub const ALL: [(&str, u32); 33] = [
+    pub const ALL: [(&str, u32); 34] = [
         ("BINDING_PARAMS", PARAMS),
         ("BINDING_GRID", GRID),
         ("BINDING_SAMPLES", SAMPLES),
@@ -131,6 +134,7 @@ pub mod binding {
         ("BINDING_RESAMPLE_TARGET", RESAMPLE_TARGET),
         ("BINDING_SKIP_BLOCKS", SKIP_BLOCKS),
         ("BINDING_SKIP_TABLE", SKIP_TABLE),
+        ("BINDING_SKIP_STATS", SKIP_STATS),
         ("BINDING_TRANSFER_TEXELS", TRANSFER_TEXELS),
     ];
 }

@@ -48,7 +48,11 @@ fn default_scene_renders_png_with_stats() {
     assert_eq!(st["method"], "fixed");
     assert!(st["function_evaluations"].as_u64().expect("count") > 65536);
     assert!(st["gpu_ms"]["raycast"].as_f64().expect("ms") > 0.0);
-    assert_eq!(st["variant"], "raycast:linear-wendland-local-grid-fixed");
+    // The default scene takes the fast path (resample = "auto") with Hermite intervals.
+    assert_eq!(
+        st["variant"],
+        "raycast:linear-wendland-local-grid-fixed-hermite-resample2"
+    );
     assert!(
         st["table_lengths_world"]
             .as_array()

@@ -102,6 +102,7 @@ fn wraps_an_application_device() {
                     support: 2.4,
                     neighbours: NeighbourMode::Grid,
                     resample: 0,
+                    resample_auto: false,
                 },
                 &OctreeSettings::default(),
                 |_| {},

@@ -125,7 +125,7 @@ fn gpu_exact_image_matches_the_cpu_reference() {
         "camera.width=20",
         "camera.height=16",
     ];
-    let scene = Scene::load(None, &set.map(String::from)).expect("scene");
+    let scene = common::general_scene(&set.map(String::from));
     let field = scene.field(|_| {}).expect("field");
     let setup = scene.ray_setup(&field).expect("setup");
     let cpu = vmls::render::raycast::raycast_image(&setup, &field, &scene.transfer, None);

@@ -25,7 +25,7 @@ fn gaussian_scene(extra: &[&str]) -> Scene {
     .map(|s| s.to_string())
     .collect();
     o.extend(extra.iter().map(|s| s.to_string()));
-    Scene::load(None, &o).expect("scene")
+    common::general_scene(&o)
 }
 
 fn scattered_field() -> Field {

@@ -77,7 +77,7 @@ fn scene(extra: &[&str]) -> Scene {
     .map(|s| s.to_string())
     .collect();
     o.extend(extra.iter().map(|s| s.to_string()));
-    Scene::load(None, &o).expect("scene")
+    common::general_scene(&o)
 }
 
 /// The GPU image and the f64 reference of a scene's view of the field.

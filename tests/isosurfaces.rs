@@ -35,7 +35,7 @@ fn method_keys(method: &str) -> Vec<String> {
 }
 
 fn scene(overrides: &[String]) -> Scene {
-    Scene::load(None, overrides).expect("scene")
+    common::general_scene(overrides)
 }
 
 /// GPU and CPU images of a scene over a given volume.

@@ -239,6 +239,7 @@ fn tables_are_rebuilt_only_when_their_inputs_change() {
             "volume.resolution=9",
             "render.table_resolution=16",
             "render.method=\"adaptive\"",
+            "reconstruction.resample=0",
         ]
         .iter()
         .map(|s| s.to_string())

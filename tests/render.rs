@@ -13,7 +13,7 @@ use vmls::vk::Context;
 
 fn scene(overrides: &[&str]) -> Scene {
     let o: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
-    Scene::load(None, &o).expect("scene")
+    common::general_scene(&o)
 }
 
 fn field(scene: &Scene) -> Field {

@@ -20,7 +20,7 @@ fn scene(extra: &[&str]) -> Scene {
     .map(|s| s.to_string())
     .collect();
     o.extend(extra.iter().map(|s| s.to_string()));
-    Scene::load(None, &o).expect("scene")
+    common::general_scene(&o)
 }
 
 #[test]

@@ -9,6 +9,7 @@ use common::*;
 use vmls::probe::random_points;
 use vmls::recon::{Basis, GradientMode, Weight};
 use vmls::render::gpu::{GpuField, evaluate};
+use vmls::render::skip::SkipReport;
 use vmls::scene::{NeighbourMode, Scene};
 
 /// RMSE and maximum of |resampled − direct| over `points`, relative to the data range.
@@ -140,8 +141,18 @@ fn scene(extra: &[&str]) -> Scene {
     .expect("scene")
 }
 
-/// GPU image and evaluations, CPU twin image and evaluations.
-fn both(s: &Scene) -> (Vec<[f32; 4]>, u64, Vec<[f64; 4]>, u64, String) {
+/// A scene rendered on the GPU and by its CPU twin.
+struct Both {
+    gpu: Vec<[f32; 4]>,
+    gpu_evals: u64,
+    gpu_skip: Option<SkipReport>,
+    cpu: Vec<[f64; 4]>,
+    cpu_evals: u64,
+    cpu_skip: SkipReport,
+    variant: String,
+}
+
+fn both(s: &Scene) -> Both {
     let field = s.field(|_| {}).expect("field");
     let setup = s.ray_setup(&field).expect("setup");
     let tables = vmls::render::build_tables(
@@ -157,19 +168,27 @@ fn both(s: &Scene) -> (Vec<[f32; 4]>, u64, Vec<[f64; 4]>, u64, String) {
     let image = common::splat::scene_frame(&mut renderer, s);
     drop(renderer);
     finish(ctx);
-    let gpu_evals = image
-        .counts
-        .iter()
-        .map(|c| u64::from(c & vmls::gpu_types::ray_count::EVALUATIONS))
-        .sum();
-    let cpu_evals = cpu.iter().map(|p| u64::from(p.evaluations)).sum();
-    (
-        image.pixels,
-        gpu_evals,
-        cpu.iter().map(|p| p.rgba).collect(),
-        cpu_evals,
-        image.variant,
-    )
+    let mut cpu_skip = SkipReport::default();
+    for p in &cpu {
+        cpu_skip.add(
+            p.skipped_length,
+            u64::from(p.evaluations_saved),
+            p.inside_length,
+        );
+    }
+    Both {
+        gpu_evals: image
+            .counts
+            .iter()
+            .map(|c| u64::from(c & vmls::gpu_types::ray_count::EVALUATIONS))
+            .sum(),
+        gpu: image.pixels,
+        gpu_skip: image.skip,
+        cpu_evals: cpu.iter().map(|p| u64::from(p.evaluations)).sum(),
+        cpu: cpu.iter().map(|p| p.rgba).collect(),
+        cpu_skip,
+        variant: image.variant,
+    }
 }
 
 fn worst(a: &[[f32; 4]], b: &[[f64; 4]]) -> f64 {
@@ -185,28 +204,55 @@ fn gpu_fast_path_images_match_the_cpu_twin_with_and_without_skipping() {
         let m = format!("render.method=\"{method}\"");
         let mut evals = Vec::new();
         let mut cpus = Vec::new();
+        let mut saved = Vec::new();
         for skip in ["render.skip=false", "render.skip=true"] {
             // The adaptive integrator skips with the Hermite criterion, whole tops at a time.
             let s = scene(&[&m, skip, "render.adaptive=\"hermite\"", "render.l_max=1"]);
-            let (g, ge, c, ce, variant) = both(&s);
-            let w = worst(&g, &c);
+            let b = both(&s);
+            let w = worst(&b.gpu, &b.cpu);
             assert!(w < 2e-3, "{method} {skip}: GPU vs CPU {w:.2e}");
-            assert!(variant.contains("resample3"), "{variant}");
-            assert_eq!(
-                variant.contains("-skip"),
-                skip.ends_with("true"),
-                "{variant}"
-            );
+            assert!(b.variant.contains("resample3"), "{}", b.variant);
+            let skipping = skip.ends_with("true");
+            assert_eq!(b.variant.contains("-skip"), skipping, "{}", b.variant);
             // Evaluation counts agree up to rounding at block faces.
+            let (ge, ce) = (b.gpu_evals, b.cpu_evals);
             let rel = (ge as f64 - ce as f64).abs() / ce as f64;
             assert!(rel < 0.02, "{method} {skip}: evaluations GPU {ge} CPU {ce}");
+            // The skipping report (`--stats` "skip"): GPU against its twin.
+            assert_eq!(b.gpu_skip.is_some(), skipping, "{method} {skip}");
+            if let Some(g) = b.gpu_skip {
+                let c = b.cpu_skip;
+                let near = |x: f64, y: f64| (x - y).abs() <= 0.02 * y.abs().max(1e-9);
+                assert!(
+                    near(g.inside_length, c.inside_length)
+                        && near(g.skipped_length, c.skipped_length)
+                        && near(g.evaluations_saved as f64, c.evaluations_saved as f64),
+                    "{method}: skip report GPU {g:?} CPU {c:?}"
+                );
+                assert!(c.fraction() > 0.0 && c.fraction() < 1.0, "{c:?}");
+            }
             evals.push(ce);
-            cpus.push(c);
+            cpus.push(b.cpu);
+            saved.push(b.cpu_skip.evaluations_saved);
         }
         assert!(
             evals[1] < evals[0],
             "{method}: skipping saved nothing: {evals:?}"
         );
+        // Saved evaluations are exactly the difference for fixed steps and the midpoint rule
+        // (up to early termination on a slightly different image). For adaptive they are one
+        // per skipped top, what those tops would at least have cost; the controller's state
+        // after a resume changes the rest, so there is no frame-wide equality to test.
+        let difference = evals[0] - evals[1];
+        if method == "adaptive" {
+            assert!(saved[1] > 0, "{saved:?} {evals:?}");
+        } else {
+            let off = (saved[1] as f64 - difference as f64).abs();
+            assert!(
+                off <= 0.01 * evals[0] as f64,
+                "{method}: saved {saved:?}, {evals:?}"
+            );
+        }
         let change = cpus[0]
             .iter()
             .zip(&cpus[1])
@@ -266,4 +312,41 @@ fn resample_is_refused_where_it_cannot_serve() {
     .expect("scene");
     let err = s.field(|_| {}).expect_err("2^27 fine points at most");
     assert!(err.to_string().contains("fine points"), "{err}");
+}
+
+#[test]
+fn auto_takes_the_fast_path_only_where_it_serves() {
+    let factor = |set: &[&str]| {
+        let mut all = vec!["reconstruction.resample=\"auto\"".to_string()];
+        all.extend(set.iter().map(|s| s.to_string()));
+        let s = Scene::load(None, &all).expect("scene");
+        let f = s.field(|_| {}).expect("auto never refuses");
+        assert!(
+            !f.reconstruction.resample_auto,
+            "a built field resolves auto"
+        );
+        f.reconstruction.resample
+    };
+    // The built-in default scene asks for it.
+    let default = Scene::load(None, &[]).expect("scene");
+    assert!(default.reconstruction.resample_auto);
+    assert_eq!(factor(&[]), vmls::recon::resample::AUTO_FACTOR);
+    assert_eq!(factor(&["reconstruction.basis=\"quadratic\""]), 2);
+    // Everywhere an explicit factor is refused, auto falls back to the direct solve.
+    for set in [
+        "reconstruction.neighbours=\"octree\"",
+        "reconstruction.support=0.8",
+        "render.method=\"splat\"",
+        "reconstruction.method=\"exact\"",
+        // The reference integrator's image is the ground truth of the scene's own field.
+        "render.method=\"reference\"",
+        "volume.file=\"tests/data/legacy/unstructured-42-ascii.vtk\"",
+    ] {
+        assert_eq!(factor(&[set]), 0, "{set}");
+    }
+    // A grid whose fine grid would pass 2^27 points.
+    assert_eq!(factor(&["volume.resolution=258"]), 0);
+    let err = Scene::load(None, &["reconstruction.resample=\"4\"".to_string()])
+        .expect_err("a string other than auto");
+    assert!(err.to_string().contains("\"auto\""), "{err}");
 }

@@ -59,6 +59,16 @@ float skip_run(vec3 o, vec3 d, float t, float t_end) {
     return t;
 }
 
+// Stages skip_block then skip_run (twin of Skip::span): whether the block at t is empty and, if
+// so, where the run of empty blocks from it ends (else the block's exit).
+bool skip_span(vec3 o, vec3 d, float t, float t_end, out float t_exit) {
+    bool empty = skip_block(o, d, t, t_exit);
+    if (empty) {
+        t_exit = skip_run(o, d, t_exit, t_end);
+    }
+    return empty;
+}
+
 // Twin of skip::resume_interval: the first interval of length l from t0 that reaches past
 // `t_exit`, no earlier than `next`.
 uint resume_interval(float t0, float l, float t_exit, uint next) {

@@ -125,7 +125,8 @@ mod tests {
 
     #[test]
     fn linear_flops_are_the_papers_count() {
-        let r = crate::scene::Scene::load(None, &[])
+        // The general path (the default scene takes the fast path).
+        let r = crate::scene::Scene::load(None, &["reconstruction.resample=0".to_string()])
             .expect("scene")
             .reconstruction;
         let field = Field::new(

@@ -48,6 +48,10 @@ pub struct Reconstruction {
     /// The regular-grid fast path: the field resampled `resample` times finer and interpolated
     /// ([`resample`]); 0 evaluates the general path everywhere.
     pub resample: u32,
+    /// `reconstruction.resample = "auto"`: the field picks the factor when it sees the data
+    /// ([`resample::AUTO_FACTOR`] on a regular grid with grid neighbours and MLS, else 0), sets
+    /// `resample` to it and clears this flag; so a built field never holds it set.
+    pub resample_auto: bool,
 }
 
 /// Errors of the reconstruction layer.

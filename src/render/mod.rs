@@ -22,7 +22,7 @@ use crate::data::{DataError, Volume};
 use crate::recon::ReconMethod;
 use crate::recon::gaussian::{KernelVolumes, gaussian_evaluate};
 use crate::recon::mls::{MlsSettings, MlsValue, Neighbours, Visit, mls_evaluate};
-use crate::recon::resample::{MAX_POINTS, ResampledGrid, fine_points};
+use crate::recon::resample::{AUTO_FACTOR, MAX_POINTS, ResampledGrid, fine_points};
 use crate::recon::{GridNeighbours, Octree, OctreeSettings, ReconError};
 use crate::recon::{NeighbourMode, Reconstruction};
 use crate::samples::bvh::HullBvh;
@@ -156,7 +156,14 @@ impl Field {
         if !grid || reconstruction.neighbours == NeighbourMode::Octree {
             field.octree = Some(Octree::from_samples(&field.samples, octree, progress)?);
         }
-        if reconstruction.resample > 0 {
+        if field.reconstruction.resample_auto {
+            field.reconstruction.resample_auto = false;
+            field.reconstruction.resample = AUTO_FACTOR;
+            if field.check_resample().is_err() {
+                field.reconstruction.resample = 0;
+            }
+        }
+        if field.reconstruction.resample > 0 {
             field.check_resample()?;
         }
         Ok(field)

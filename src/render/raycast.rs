@@ -32,6 +32,11 @@ pub struct PixelResult {
     pub rgba: [f64; 4],
     /// MLS evaluations spent on this ray.
     pub evaluations: u32,
+    /// Empty-space skipping: ray length skipped and evaluations saved (see
+    /// [`super::skip::SkipReport`]), and the ray's length inside the domain.
+    pub skipped_length: f64,
+    pub evaluations_saved: u32,
+    pub inside_length: f64,
     /// The ray crossed the hull more often than `bvh::MAX_HITS`: nothing was integrated (the
     /// GPU renderer fails with an error for such a ray).
     pub hull_overflow: bool,
@@ -50,6 +55,17 @@ impl Skip<'_> {
         self.blocks.lookup(self.table, o, d, t)
     }
 
+    /// Stages `skip_block` then `skip_run` (twin of skip_span): whether the block at t is
+    /// empty and, if so, where the run of empty blocks from it ends (else the block's exit).
+    fn span(&self, o: DVec3, d: DVec3, t: f64, t_end: f64) -> (bool, f64) {
+        let (empty, exit) = self.lookup(o, d, t);
+        if empty {
+            (true, self.run(o, d, exit, t_end))
+        } else {
+            (false, exit)
+        }
+    }
+
     /// Stage `skip_run`.
     pub(super) fn run(&self, o: DVec3, d: DVec3, t: f64, t_end: f64) -> f64 {
         self.blocks.run(self.table, o, d, t, t_end)
@@ -66,9 +82,19 @@ struct Ray<'a> {
     color: [f64; 3],
     transmittance: f64,
     evaluations: u32,
+    /// Ray length skipped and evaluations saved so far.
+    skipped: f64,
+    saved: u32,
 }
 
 impl Ray<'_> {
+    /// Outer steps skipped over `len` of the ray, of which `restart` knots are evaluated
+    /// anyway (twin of count_skip).
+    fn count_skip(&mut self, len: f64, steps: u64, restart: u64) {
+        self.skipped += len;
+        self.saved += (steps - restart) as u32;
+    }
+
     /// Composites a premultiplied segment (C, α) behind what is accumulated.
     fn composite(&mut self, c: [f64; 3], alpha: f64) {
         for (acc, ci) in self.color.iter_mut().zip(c) {
@@ -95,12 +121,16 @@ fn integrate_riemann(ray: &mut Ray<'_>, setup: &RaySetup, tf: &TransferFunction,
             break;
         }
         let tm = ta + 0.5 * dt;
-        // A midpoint in an empty block adds nothing: resume at the first midpoint past the
-        // block; with isosurfaces the knot at the exit stands in for the skipped samples.
+        // A midpoint in an empty block adds nothing: resume at the first midpoint past the run
+        // of empty blocks; with isosurfaces the knot at its end stands in for the skipped
+        // samples.
         if let Some(skip) = ray.skip.filter(|_| tm >= occupied_until) {
-            let (empty, exit) = skip.lookup(ray.o, ray.d, tm);
+            let (empty, exit) = skip.span(ray.o, ray.d, tm, t1);
             if empty {
                 let j = resume_interval(t0 - 0.5 * setup.step, setup.step, exit, i + 1);
+                let to = j.min(steps);
+                let len = (t0 + to as f64 * setup.step).min(t1) - ta;
+                ray.count_skip(len, to - i, u64::from(isos));
                 if isos {
                     prev = Some(knot(ray, exit.min(t1)));
                 }
@@ -151,16 +181,18 @@ fn integrate_fixed(
         if tb <= ta {
             break;
         }
-        // Intervals inside an empty block are skipped; the first one reaching past it starts
-        // from a fresh knot.
+        // Intervals inside a run of empty blocks are skipped; the first one reaching past it
+        // starts from a fresh knot.
         if let Some(skip) = ray.skip.filter(|_| ta >= occupied_until) {
-            let (empty, exit) = skip.lookup(ray.o, ray.d, ta);
+            let (empty, exit) = skip.span(ray.o, ray.d, ta, t1);
             if empty {
                 let j = resume_interval(t0, l, exit, i);
                 if j >= steps {
+                    ray.count_skip(t1 - ta, steps - i, 0);
                     break;
                 }
                 if j > i {
+                    ray.count_skip((j - i) as f64 * l, j - i, 1);
                     prev = knot(ray, t0 + j as f64 * l);
                     i = j;
                     continue;
@@ -209,6 +241,8 @@ pub fn raycast(
         color: [0.0; 3],
         transmittance: 1.0,
         evaluations: 0,
+        skipped: 0.0,
+        saved: 0,
     };
     let (segments, hull_overflow) = match &field.hull {
         None => (
@@ -222,6 +256,7 @@ pub fn raycast(
             Segments::Overflow => (Vec::new(), true),
         },
     };
+    let inside_length = segments.iter().map(|(t0, t1)| t1 - t0).sum();
     // Each inside segment is integrated on its own, with clipped intervals at its ends
     // ([MLS] §4); the ray stops at the method's termination.
     for (t0, t1) in segments {
@@ -247,6 +282,9 @@ pub fn raycast(
             1.0 - tr,
         ],
         evaluations: ray.evaluations,
+        skipped_length: ray.skipped,
+        evaluations_saved: ray.saved,
+        inside_length,
         hull_overflow,
     }
 }
@@ -264,6 +302,9 @@ pub fn raycast_image(
         PixelResult {
             rgba: [0.0; 4],
             evaluations: 0,
+            skipped_length: 0.0,
+            evaluations_saved: 0,
+            inside_length: 0.0,
             hull_overflow: false,
         };
         w * h

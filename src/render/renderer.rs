@@ -17,7 +17,7 @@
 use super::gpu::{GpuField, Variant, pipeline_for, render_params, table_params};
 use super::preintegration::PreintegrationTables;
 use super::shading::{Isosurface, Lighting};
-use super::skip::SkipTable;
+use super::skip::{SkipReport, SkipTable};
 use super::transfer::TransferFunction;
 use super::{Field, Method, RaySetup, RenderError, RenderSettings, TableCache};
 use crate::gpu_types::{IsoSurface, RayPush, binding, ray_count};
@@ -50,6 +50,8 @@ pub struct GpuImage {
     pub shaders: Vec<(&'static str, Vec<(String, String)>)>,
     /// What splatting did (the splatting methods only).
     pub splat: Option<SplatReport>,
+    /// What empty-space skipping did (ray casting with `render.skip` in effect only).
+    pub skip: Option<SkipReport>,
 }
 
 /// A splatting frame's counters and per-stage GPU time.
@@ -100,7 +102,11 @@ fn frame_bindings(
 ) -> Vec<u32> {
     let mut ids: Vec<u32> = gpu_field.bindings().iter().map(|(b, _)| *b).collect();
     if skip {
-        ids.extend([binding::SKIP_BLOCKS, binding::SKIP_TABLE]);
+        ids.extend([
+            binding::SKIP_BLOCKS,
+            binding::SKIP_TABLE,
+            binding::SKIP_STATS,
+        ]);
     }
     ids.extend(gpu_field.hull_bindings().iter().map(|(b, _)| *b));
     ids.extend([
@@ -214,6 +220,7 @@ struct FrameTargets {
     image: Buffer,
     counts: Buffer,
     ray_state: Buffer,
+    skip_stats: Buffer,
 }
 
 fn frame_targets(ctx: &Context, pixels: u64) -> Result<FrameTargets, VkError> {
@@ -222,6 +229,7 @@ fn frame_targets(ctx: &Context, pixels: u64) -> Result<FrameTargets, VkError> {
         image: Buffer::new(ctx, "image", pixels * 16, BufferUsage::Storage)?,
         counts: Buffer::new(ctx, "evaluation counts", pixels * 4, BufferUsage::Storage)?,
         ray_state: Buffer::new(ctx, "ray state", pixels * 16, BufferUsage::Storage)?,
+        skip_stats: Buffer::new(ctx, "skip report", pixels * 16, BufferUsage::Storage)?,
     })
 }
 
@@ -256,6 +264,7 @@ fn run_bands(
     if let Some(t) = &constants.skip {
         all.extend(gpu_field.skip_bindings());
         all.push((binding::SKIP_TABLE, t));
+        all.push((binding::SKIP_STATS, &targets.skip_stats));
     }
     let group = BindGroup::new(ctx, pipeline, &all)?;
     let (w, h) = (setup.camera.width, setup.camera.height);
@@ -336,9 +345,27 @@ fn run_bands(
     Ok((gpu_ms, bands))
 }
 
-/// Pixels and evaluation counts (flags removed).
-fn read_image(ctx: &Context, targets: &FrameTargets) -> Result<(Vec<[f32; 4]>, Vec<u32>), VkError> {
+/// A ray-cast frame as read back.
+struct Readback {
+    pixels: Vec<[f32; 4]>,
+    /// Evaluations per pixel, flags removed.
+    counts: Vec<u32>,
+    skip: Option<SkipReport>,
+}
+
+/// Pixels and evaluation counts, and the skipping report when the frame skipped.
+fn read_image(ctx: &Context, targets: &FrameTargets, skip: bool) -> Result<Readback, VkError> {
     let n = targets.pixels as usize;
+    let report = if skip {
+        let rays: Vec<[f32; 4]> = targets.skip_stats.read(ctx)?;
+        let mut r = SkipReport::default();
+        for p in rays.iter().take(n) {
+            r.add(f64::from(p[0]), p[1] as u64, f64::from(p[2]));
+        }
+        Some(r)
+    } else {
+        None
+    };
     let mut pixels: Vec<[f32; 4]> = targets.image.read(ctx)?;
     pixels.truncate(n);
     let mut counts: Vec<u32> = targets.counts.read(ctx)?;
@@ -346,7 +373,11 @@ fn read_image(ctx: &Context, targets: &FrameTargets) -> Result<(Vec<[f32; 4]>, V
     for c in &mut counts {
         *c &= ray_count::EVALUATIONS;
     }
-    Ok((pixels, counts))
+    Ok(Readback {
+        pixels,
+        counts,
+        skip: report,
+    })
 }
 
 fn check_tables(setup: &RaySetup, tables: Option<&PreintegrationTables>) -> Result<(), VkError> {
@@ -396,7 +427,11 @@ pub fn render(
         setup,
         &mut progress,
     )?;
-    let (pixels, counts) = read_image(ctx, &targets)?;
+    let Readback {
+        pixels,
+        counts,
+        skip,
+    } = read_image(ctx, &targets, variant.skip)?;
     Ok(GpuImage {
         pixels,
         counts,
@@ -405,6 +440,7 @@ pub fn render(
         variant: variant.name("raycast"),
         shaders: vec![("raycast.comp", variant.defines())],
         splat: None,
+        skip,
     })
 }
 
@@ -576,7 +612,11 @@ impl Renderer {
             &setup,
             &mut progress,
         )?;
-        let (pixels, counts) = read_image(&self.ctx, targets)?;
+        let Readback {
+            pixels,
+            counts,
+            skip,
+        } = read_image(&self.ctx, targets, variant.skip)?;
         Ok((
             GpuImage {
                 pixels,
@@ -586,6 +626,7 @@ impl Renderer {
                 variant: variant.name("raycast"),
                 shaders: vec![("raycast.comp", variant.defines())],
                 splat: None,
+                skip,
             },
             FrameStats {
                 gpu_ms,
@@ -686,6 +727,7 @@ impl Renderer {
                     slabs: setup.slabs,
                     slab: setup.slab,
                 }),
+                skip: None,
             },
             FrameStats {
                 gpu_ms,

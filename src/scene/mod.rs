@@ -154,6 +154,9 @@ weight = "wendland"
 # support: 2.4 (× spacing on grids; 1.5 × the 8th-neighbour distance for irregular data)
 gradient = "local"
 neighbours = "grid"
+# The fast path wherever it serves (a regular grid, grid neighbours, ray casting; not the
+# reference integrator): 2x finer, interpolated.
+resample = "auto"
 [transfer]
 # A translucent blue shell below 0.5, a dense bright band at the 0.5 level set, orange above.
 points = [[0.0, 0.0, 0.0, 0.0, 0.0], [0.35, 0.1, 0.2, 0.5, 0.3], [0.45, 0.2, 0.5, 1.0, 1.5],
@@ -168,6 +171,7 @@ height = 256
 [render]
 method = "fixed"
 step = 0.25
+interval = "hermite"
 background = [0.0, 0.0, 0.0]
 "#;
 
@@ -498,7 +502,7 @@ impl Scene {
         };
 
         let rec = section("reconstruction");
-        let reconstruction = Reconstruction {
+        let mut reconstruction = Reconstruction {
             method: rec.choice(
                 "method",
                 ReconMethod::Mls,
@@ -548,7 +552,19 @@ impl Scene {
                     ("octree", NeighbourMode::Octree),
                 ],
             )?,
-            resample: rec.int("resample", 0, 0, i64::from(resample::MAX_FACTOR))? as u32,
+            resample: match rec.get("resample") {
+                None => 0,
+                Some(Value::String(a)) if a == "auto" => 0,
+                Some(Value::Integer(i)) if (0..=i64::from(resample::MAX_FACTOR)).contains(i) => {
+                    *i as u32
+                }
+                Some(v) => {
+                    let expected =
+                        format!("an integer in [0, {}] or \"auto\"", resample::MAX_FACTOR);
+                    return Err(rec.err("resample", &expected, v));
+                }
+            },
+            resample_auto: matches!(rec.get("resample"), Some(Value::String(a)) if a == "auto"),
         };
 
         if reconstruction.method == ReconMethod::Exact
@@ -702,6 +718,17 @@ impl Scene {
             table_resolution: ren.int("table_resolution", 512, 2, 4096)? as usize,
             splat: splat::parse(&section("splat"))?,
         };
+        // "auto" chooses the direct solve wherever the fast path cannot serve, and for the
+        // reference integrator, whose image is the ground truth of the scene's own field.
+        if reconstruction.resample_auto
+            && (reconstruction.neighbours == NeighbourMode::Octree
+                || reconstruction.support < 1.0
+                || reconstruction.method != ReconMethod::Mls
+                || render.method.splat_shading().is_some()
+                || render.method == Method::Reference)
+        {
+            reconstruction.resample_auto = false;
+        }
         if reconstruction.resample > 0 {
             let why = if reconstruction.neighbours == NeighbourMode::Octree {
                 Some(

@@ -9,8 +9,20 @@ use vmls::data::dataset::{CellType, Cells, Geometry};
 use vmls::data::{Volume, marschner_lobb};
 use vmls::recon::{Basis, GradientMode, OctreeSettings, Weight};
 use vmls::render::Field;
-use vmls::scene::{NeighbourMode, Reconstruction};
+use vmls::scene::{NeighbourMode, Reconstruction, Scene};
 use vmls::vk::{Context, ContextOptions, ShaderCompiler};
+
+/// The built-in default scene on the general path with linear intervals (as it stood before it
+/// opted into `resample = "auto"` and Hermite intervals), with `overrides` applied after: the
+/// tests of the direct solve and its CPU twin start from it.
+pub fn general_scene(overrides: &[String]) -> Scene {
+    let mut o = vec![
+        "reconstruction.resample=0".to_string(),
+        "render.interval=\"linear\"".to_string(),
+    ];
+    o.extend_from_slice(overrides);
+    Scene::load(None, &o).expect("scene")
+}
 
 /// A validated context on the default device (lavapipe in CI) and a shader compiler.
 pub fn gpu() -> (Context, ShaderCompiler) {
@@ -50,6 +62,7 @@ pub fn recon(
         support,
         neighbours,
         resample: 0,
+        resample_auto: false,
     }
 }
 

@@ -25,7 +25,7 @@ pub fn scene(extra: &[&str]) -> Scene {
     .map(|s| s.to_string())
     .collect();
     o.extend(extra.iter().map(|s| s.to_string()));
-    Scene::load(None, &o).expect("scene")
+    super::general_scene(&o)
 }
 
 pub fn setup(s: &Scene, field: &Field, shading: Shading) -> SplatSetup {

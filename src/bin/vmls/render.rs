@@ -9,6 +9,7 @@ use vmls::render::RenderError;
 use vmls::render::evalmap::{check_path, write_eval_map};
 use vmls::render::output::{format_of, write_image};
 use vmls::render::renderer::Renderer;
+use vmls::render::skip::SkipReport;
 use vmls::scene::Scene;
 
 pub fn run_render(
@@ -127,6 +128,7 @@ pub fn run_render(
                     "splat_composite": r.stage_ms[3] / r.counts.kept().max(1) as f64,
                 },
             })),
+            "skip": image.skip.as_ref().map(skip_json),
             "upload_ms": upload_ms,
             "frames": frames.iter().map(|f| serde_json::json!({
                 "gpu_ms": f.gpu_ms,
@@ -176,11 +178,11 @@ pub fn run_render_cpu(
     format_of(output)?;
     let scene = Scene::load(scene_path, set)?;
     let field = scene.field(|_| {})?;
-    let (pixels, splat): (Vec<[f64; 4]>, _) = match scene.render.method.splat_shading() {
+    let (pixels, splat, skip): (Vec<[f64; 4]>, _, _) = match scene.render.method.splat_shading() {
         Some(shading) => {
             let setup = scene.splat_setup(shading, &field)?;
             let image = vmls::splat::accumulate::splat_image(&setup, &field, &scene.transfer);
-            (image.pixels, Some(image.counts))
+            (image.pixels, Some(image.counts), None)
         }
         None => {
             let setup = scene.ray_setup(&field)?;
@@ -197,7 +199,18 @@ pub fn run_render_cpu(
                 &scene.transfer,
                 tables.as_ref(),
             );
-            (image.iter().map(|p| p.rgba).collect(), None)
+            let skip = setup.skip.then(|| {
+                let mut r = SkipReport::default();
+                for p in &image {
+                    r.add(
+                        p.skipped_length,
+                        u64::from(p.evaluations_saved),
+                        p.inside_length,
+                    );
+                }
+                r
+            });
+            (image.iter().map(|p| p.rgba).collect(), None, skip)
         }
     };
     let rgba: Vec<[f32; 4]> = pixels.iter().map(|p| p.map(|c| c as f32)).collect();
@@ -216,8 +229,19 @@ pub fn run_render_cpu(
                 "footprints_skipped_by_occlusion": c.skipped_occluded,
                 "footprints_accumulated": c.accumulated,
             })),
+            "skip": skip.as_ref().map(skip_json),
         });
         write_json(stats, &value)?;
     }
     Ok(())
+}
+
+/// `--stats` "skip": what empty-space skipping did in the frame.
+fn skip_json(r: &SkipReport) -> serde_json::Value {
+    serde_json::json!({
+        "ray_length_skipped": r.fraction(),
+        "ray_length_skipped_world": r.skipped_length,
+        "ray_length_inside_world": r.inside_length,
+        "evaluations_saved": r.evaluations_saved,
+    })
 }

@@ -235,9 +235,11 @@ fn integrate_hermite(
                     let run = skip.run(ray.o, ray.d, start, t1);
                     let j = resume_interval(t0, setup.l_max, run, k);
                     if j >= tops {
+                        ray.count_skip(t1 - start, tops - k, 0);
                         return;
                     }
                     if j > k {
+                        ray.count_skip((j - k) as f64 * setup.l_max, j - k, 1);
                         break (t0 + j as f64 * setup.l_max, 0, Next::Restart(j));
                     }
                 }
