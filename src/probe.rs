@@ -146,6 +146,10 @@ pub const PROBE_WORDS: u32 = 1 << 24;
 /// Words `probe_memory`'s atomic mode adds to: a 512² image's four channels.
 pub const PROBE_ATOMIC_WORDS: u32 = 1 << 20;
 
+/// Points per axis of the periodic grid `probe_memory`'s ray-march mode reads (128³ rgba32ui
+/// texels: 32 MiB, the first half of the probe's words).
+pub const MARCH_DIM: i32 = 128;
+
 /// What `probe_memory` measures.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum MemoryMode {
@@ -162,17 +166,21 @@ pub enum MemoryMode {
     Stream,
     /// Float adds by compare-and-swap loops at random words (splat_accumulate's sheet_add).
     Atomic,
+    /// A ray march's reads as the fast path makes them: 8×8 tiles of parallel rays, each
+    /// reading its cell's 8 corner texels (rgba32) per step.
+    MarchTexelGather,
 }
 
 impl MemoryMode {
     /// Every mode, in the order `vmls probe` prints them.
-    pub const ALL: [MemoryMode; 6] = [
+    pub const ALL: [MemoryMode; 7] = [
         MemoryMode::Gather,
         MemoryMode::TexelGather,
         MemoryMode::CoherentGather,
         MemoryMode::CoherentTexelGather,
         MemoryMode::Stream,
         MemoryMode::Atomic,
+        MemoryMode::MarchTexelGather,
     ];
 
     pub fn name(self) -> &'static str {
@@ -183,6 +191,7 @@ impl MemoryMode {
             MemoryMode::CoherentTexelGather => "probe_memory:coherent-texel-gather",
             MemoryMode::Stream => "probe_memory:stream",
             MemoryMode::Atomic => "probe_memory:atomic-add",
+            MemoryMode::MarchTexelGather => "probe_memory:march-texel-gather",
         }
     }
 
@@ -192,8 +201,32 @@ impl MemoryMode {
             MemoryMode::TexelGather | MemoryMode::CoherentTexelGather => "1",
             MemoryMode::Stream => "2",
             MemoryMode::Atomic => "3",
+            MemoryMode::MarchTexelGather => "4",
         }
     }
+
+    /// Load instructions per iteration of an invocation.
+    fn loads_per_iteration(self) -> u32 {
+        match self {
+            MemoryMode::MarchTexelGather => 8,
+            _ => 1,
+        }
+    }
+}
+
+/// The ray-march mode's ray for invocation `id` (twin of march_start): its fixed-point origin
+/// and step, 256 units per cell.
+pub fn march_start(id: u32) -> ([i32; 3], [i32; 3]) {
+    let h = probe_hash(id >> 6);
+    let mask = (MARCH_DIM * 256 - 1) as u32;
+    let start = [0, 1, 2].map(|k| (probe_hash(h + k) & mask) as i32);
+    let step = [
+        (probe_hash(h + 3) & 255) as i32 - 128,
+        (probe_hash(h + 4) & 255) as i32 - 128,
+        128,
+    ];
+    let lane = [(id & 7) as i32, ((id >> 3) & 7) as i32, 0];
+    (std::array::from_fn(|a| start[a] + 77 * lane[a]), step)
 }
 
 /// The word `probe_memory` reads at index i.
@@ -224,6 +257,20 @@ pub fn memory_reference(mode: MemoryMode, id: u32, count: u32, iterations: u32) 
                 }
             }
             MemoryMode::Atomic => sum = sum.wrapping_add(1),
+            MemoryMode::MarchTexelGather => {
+                let (origin, step) = march_start(id);
+                let cell: [i32; 3] =
+                    std::array::from_fn(|a| (origin[a] + it as i32 * step[a]) >> 8);
+                for c in 0..8 {
+                    let corner = [c & 1, (c >> 1) & 1, c >> 2];
+                    let k: [i32; 3] =
+                        std::array::from_fn(|a| (cell[a] + corner[a]) & (MARCH_DIM - 1));
+                    let texel = (k[0] + MARCH_DIM * (k[1] + MARCH_DIM * k[2])) as u32;
+                    for w in 0..4 {
+                        sum = sum.wrapping_add(probe_word(4 * texel + w));
+                    }
+                }
+            }
             MemoryMode::CoherentGather | MemoryMode::CoherentTexelGather => {
                 let base = probe_hash((id >> 3).wrapping_mul(iterations).wrapping_add(it));
                 let i = (base & (PROBE_WORDS - 1) & !7) | (id & 7);
@@ -293,14 +340,23 @@ pub fn memory_probe(
         "PROBE_ATOMIC_WORDS".into(),
         format!("{PROBE_ATOMIC_WORDS}u"),
     ));
+    defines.push(("MARCH_DIM".into(), MARCH_DIM.to_string()));
     let spirv = compiler.compile(ShaderSource::File("probe_memory.comp"), &defines)?;
     let source_binding = match mode {
-        MemoryMode::TexelGather | MemoryMode::CoherentTexelGather => binding::PROBE_TEXELS,
+        MemoryMode::TexelGather
+        | MemoryMode::CoherentTexelGather
+        | MemoryMode::MarchTexelGather => binding::PROBE_TEXELS,
         _ => binding::PROBE_SOURCE,
+    };
+    // The ray-march mode reads the probe's texel binding as rgba32 texels, as the fast path
+    // reads its fine grid.
+    let source_kind = match mode {
+        MemoryMode::MarchTexelGather => crate::vk::BindingKind::TexelRgba32Uint,
+        _ => binding::kind(source_binding),
     };
     let kinds = [
         (binding::PROBE, binding::kind(binding::PROBE)),
-        (source_binding, binding::kind(source_binding)),
+        (source_binding, source_kind),
     ];
     let pipeline = ComputePipeline::with_kinds(
         ctx,
@@ -324,9 +380,10 @@ pub fn memory_probe(
     )?;
     let gpu_ms = timed_dispatches(ctx, &pipeline, &group, invocations, iterations, repeats)?;
     let ms = median(&gpu_ms);
-    let loads = f64::from(invocations) * f64::from(iterations);
+    let loads =
+        f64::from(invocations) * f64::from(iterations) * f64::from(mode.loads_per_iteration());
     let bytes_per_load = match mode {
-        MemoryMode::Stream => 16.0,
+        MemoryMode::Stream | MemoryMode::MarchTexelGather => 16.0,
         MemoryMode::Atomic => 8.0,
         _ => 4.0,
     };
@@ -364,9 +421,12 @@ pub struct Ceilings {
     pub stream_bytes_per_s: f64,
     /// Float adds by compare-and-swap per second, at random words of a 4 MiB buffer.
     pub atomic_adds_per_s: f64,
+    /// rgba32 texel loads per second in a ray march's pattern (8×8 tiles of parallel rays, the
+    /// 8 corners of each ray's cell per step): the fast path's ceiling.
+    pub march_texel_gathers_per_s: f64,
 }
 
-/// Measures [`Ceilings`]: `probe_fma`, then `probe_memory` in its six modes, each the median
+/// Measures [`Ceilings`]: `probe_fma`, then `probe_memory` in its seven modes, each the median
 /// of `repeats` dispatches after a warm-up.
 pub fn ceilings(
     ctx: &Context,
@@ -383,6 +443,7 @@ pub fn ceilings(
         coherent_texel_gathers_per_s: run(MemoryMode::CoherentTexelGather)?.loads_per_s,
         stream_bytes_per_s: run(MemoryMode::Stream)?.bytes_per_s,
         atomic_adds_per_s: run(MemoryMode::Atomic)?.loads_per_s,
+        march_texel_gathers_per_s: run(MemoryMode::MarchTexelGather)?.loads_per_s,
     })
 }
 

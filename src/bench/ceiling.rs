@@ -7,7 +7,11 @@
 //!   solve — 39k + 56 for the linear basis, [MLS] Table 2's count. The Gaussian sum: 25 per
 //!   neighbour (a weight, an exp, a gradient); the analytic field: 60 per evaluation. Candidate
 //!   tests that find no weight are not counted, so the FMA share is a lower bound.
-//! - Loads, all through texel-buffer views, against the coherent texel-gather ceiling
+//! - The fast path (`reconstruction.resample`): 8 rgba32 texel reads and 124 flops per
+//!   evaluation, against the ray-march gather ceiling (`probe_memory:march-texel-gather`,
+//!   which reads as the fast path does: the 8 corners of each ray's cell, 8×8 tiles of
+//!   neighbouring rays). The preintegration lookups are not counted (a lower bound).
+//! - Other loads, all through texel-buffer views, against the coherent texel-gather ceiling
 //!   (neighbouring rays of a SIMD row read nearby grid rows or one leaf): the grid's row path
 //!   (constant and linear bases) reads π·s² rows of MLS_GRID_WINDOW vec4s (s = support in
 //!   spacings); the generic grid path one texel per weighted neighbour (again for an
@@ -26,13 +30,35 @@ use crate::probe::Ceilings;
 use crate::recon::{Basis, GradientMode, ReconMethod};
 use crate::render::Field;
 
+/// How an evaluation reads memory: which probe is its ceiling.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Reads {
+    /// Storage-buffer gathers (`probe_memory:coherent-gather`).
+    Storage,
+    /// Texel-view gathers of nearby words (`probe_memory:coherent-texel-gather`).
+    Texel,
+    /// A ray march's cell corners (`probe_memory:march-texel-gather`).
+    March,
+}
+
+impl Reads {
+    /// The `bound_by` name of the ceiling.
+    pub fn name(self) -> &'static str {
+        match self {
+            Reads::Storage => "gather",
+            Reads::Texel => "texel-gather",
+            Reads::March => "march-texel-gather",
+        }
+    }
+}
+
 /// Work of one evaluation, by the model above.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EvaluationCost {
     pub flops: f64,
-    /// Load instructions, and whether they go through texel views.
+    /// Load instructions, and how they read.
     pub loads: f64,
-    pub texel_loads: bool,
+    pub reads: Reads,
 }
 
 /// The model's cost of one evaluation of `field` with `k` weighted neighbours on average.
@@ -43,7 +69,7 @@ pub fn evaluation_cost(field: &Field, k: f64) -> EvaluationCost {
         return EvaluationCost {
             flops: 8.0 * 14.0 + 12.0,
             loads: 8.0,
-            texel_loads: true,
+            reads: Reads::March,
         };
     }
     let t = r.basis.terms() as f64;
@@ -59,15 +85,18 @@ pub fn evaluation_cost(field: &Field, k: f64) -> EvaluationCost {
     } else {
         0.0
     };
-    let (loads, texel_loads) = match (&field.octree, r.method) {
-        (_, ReconMethod::Exact) => (0.0, false),
+    let (loads, reads) = match (&field.octree, r.method) {
+        (_, ReconMethod::Exact) => (0.0, Reads::Storage),
         (None, ReconMethod::Mls) if r.basis != Basis::Quadratic => {
             let s = r.support;
             let bx = (2.0 * s).floor() + 1.0;
             let window = ((bx + 3.0) / 4.0).ceil();
-            (std::f64::consts::PI * s * s * window + gradient_pass, true)
+            (
+                std::f64::consts::PI * s * s * window + gradient_pass,
+                Reads::Texel,
+            )
         }
-        (None, _) => (k + gradient_pass, true),
+        (None, _) => (k + gradient_pass, Reads::Texel),
         (Some(o), _) => {
             let stats = o.stats(0);
             let per_leaf = stats.references as f64 / stats.leaves.max(1) as f64;
@@ -75,14 +104,14 @@ pub fn evaluation_cost(field: &Field, k: f64) -> EvaluationCost {
             let depth = f64::from(stats.depth);
             (
                 depth + per_leaf * texels * (1.0 + gradient_pass.min(1.0)),
-                true,
+                Reads::Texel,
             )
         }
     };
     EvaluationCost {
         flops,
         loads,
-        texel_loads,
+        reads,
     }
 }
 
@@ -108,10 +137,10 @@ pub fn splat_shares(
 pub fn shares(c: &Ceilings, cost: EvaluationCost, evaluations: u64, gpu_ms: f64) -> (f64, f64) {
     let per_s = evaluations as f64 / (gpu_ms * 1e-3);
     // Neighbouring rays read the same leaf or nearby grid rows: the coherent ceilings.
-    let load_ceiling = if cost.texel_loads {
-        c.coherent_texel_gathers_per_s
-    } else {
-        c.coherent_gathers_per_s
+    let load_ceiling = match cost.reads {
+        Reads::Storage => c.coherent_gathers_per_s,
+        Reads::Texel => c.coherent_texel_gathers_per_s,
+        Reads::March => c.march_texel_gathers_per_s,
     };
     (
         per_s * cost.flops / (c.fma_gflops * 1e9),
@@ -142,7 +171,7 @@ mod tests {
         // Grid rows: π·2.4² rows of two vec4s, through the grid's texel view.
         let rows = std::f64::consts::PI * 2.4 * 2.4 * 2.0;
         assert!(
-            (cost.loads - rows).abs() < 1e-9 && cost.texel_loads,
+            (cost.loads - rows).abs() < 1e-9 && cost.reads == Reads::Texel,
             "{cost:?}"
         );
     }
@@ -157,14 +186,19 @@ mod tests {
             coherent_texel_gathers_per_s: 2e8,
             stream_bytes_per_s: 1e9,
             atomic_adds_per_s: 1e7,
+            march_texel_gathers_per_s: 4e8,
         };
-        let cost = EvaluationCost {
+        let mut cost = EvaluationCost {
             flops: 2000.0,
             loads: 50.0,
-            texel_loads: true,
+            reads: Reads::Texel,
         };
         // 1e6 evaluations in 1 s: 2 GFLOP/s of 100, 5e7 texel loads/s of 2e8.
         let (f, l) = shares(&c, cost, 1_000_000, 1000.0);
         assert!((f - 0.02).abs() < 1e-12 && (l - 0.25).abs() < 1e-12);
+        // The fast path's reads against the ray-march ceiling.
+        cost.reads = Reads::March;
+        let (_, l) = shares(&c, cost, 1_000_000, 1000.0);
+        assert!((l - 0.125).abs() < 1e-12);
     }
 }

@@ -429,14 +429,16 @@ pub fn run(
                     }
                 };
                 let cost = ceiling::evaluation_cost(field, k);
-                Some(ceiling::shares(c, cost, evaluations, gpu_med))
+                let (f, l) = ceiling::shares(c, cost, evaluations, gpu_med);
+                Some((f, l, cost.reads.name()))
             }
             (Some(c), Some(report)) => {
                 let exact = image
                     .shaders
                     .iter()
                     .any(|(_, d)| d.contains(&("SPLAT_EXACT".into(), "1".into())));
-                Some(ceiling::splat_shares(c, report, exact))
+                let (f, a) = ceiling::splat_shares(c, report, exact);
+                Some((f, a, "atomic"))
             }
             _ => None,
         };
@@ -444,9 +446,8 @@ pub fn run(
             fma_share: shares.map(|s| s.0),
             memory_share: shares.map(|s| s.1),
             bound_by: match shares {
-                Some((f, g)) if f >= g => "fma".into(),
-                Some(_) if !raycast => "atomic".into(),
-                Some(_) => "texel-gather".into(),
+                Some((f, g, _)) if f >= g => "fma".into(),
+                Some((_, _, reads)) => reads.into(),
                 None => String::new(),
             },
             source: "vmls".into(),

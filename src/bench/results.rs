@@ -56,17 +56,19 @@ pub struct Row {
     pub psnr: Option<f64>,
     pub non_finite: Option<u64>,
     /// Share of the device's ceilings the frame's ray-casting kernel reached, by the cost model
-    /// of [`super::ceiling`] against `probe_fma` and the coherent texel-gather ceiling of its
-    /// loads (`probe_memory:coherent-texel-gather`), measured in the same run.
+    /// of [`super::ceiling`] against `probe_fma` and the gather ceiling of its loads
+    /// (`probe_memory:coherent-texel-gather`, or `march-texel-gather` for the fast path),
+    /// measured in the same run.
     /// Splatting rows: `splat_accumulate`'s shares of the FMA and atomic-add ceilings.
-    /// `bound_by` names the larger (`fma`, `gather`, `texel-gather`, `atomic`); all three are
+    /// `bound_by` names the larger (`fma`, `gather`, `texel-gather`, `march-texel-gather`,
+    /// `atomic`); all three are
     /// empty when the run skipped the ceilings.
     /// These three columns may be missing from imported files (rows written before them).
     #[serde(default)]
     pub fma_share: Option<f64>,
     #[serde(default)]
     pub memory_share: Option<f64>,
-    /// Which of the two is larger: `fma`, `texel-gather` or `atomic`.
+    /// Which of the two is larger (the names above).
     #[serde(default)]
     pub bound_by: String,
     /// What the error was measured against.

@@ -210,12 +210,14 @@ pub fn bench(args: &BenchArgs) -> Result<(), CliError> {
             measured_ceilings = Some(*c);
             say(format!(
                 "ceilings: probe_fma {:.1} GFLOP/s; gathers {:.1} M/s random, {:.1} M/s \
-                 coherent; texel gathers {:.1} / {:.1} M/s; atomic adds {:.1} M/s",
+                 coherent; texel gathers {:.1} / {:.1} M/s; ray-march texel gathers {:.1} M/s; \
+                 atomic adds {:.1} M/s",
                 c.fma_gflops,
                 c.gathers_per_s * 1e-6,
                 c.coherent_gathers_per_s * 1e-6,
                 c.texel_gathers_per_s * 1e-6,
                 c.coherent_texel_gathers_per_s * 1e-6,
+                c.march_texel_gathers_per_s * 1e-6,
                 c.atomic_adds_per_s * 1e-6
             ));
         }

@@ -135,6 +135,8 @@ pub fn run_probe(
             None,
             &[
                 format!("volume.resolution={resolution}"),
+                // The MLS solve itself (the default scene takes the fast path).
+                "reconstruction.resample=0".into(),
                 format!(
                     "reconstruction.neighbours=\"{}\"",
                     if mode == NeighbourMode::Grid {
