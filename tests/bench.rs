@@ -97,7 +97,8 @@ fn sweep_writes_rows_plot_and_caches_the_reference() {
         );
         assert!(first > next && next > 0, "{first} {next}");
         assert_eq!(r.non_finite, Some(0));
-        // Linear MLS on grid neighbours: both ceiling shares by the stated model.
+        // The default scene's fast path: both ceiling shares by the stated model, its reads
+        // against the ray-march gather ceiling.
         let (fma, gather) = (finite(r.fma_share), finite(r.memory_share));
         assert!(
             fma > 0.0 && gather > 0.0 && fma < 10.0 && gather < 10.0,
@@ -105,7 +106,11 @@ fn sweep_writes_rows_plot_and_caches_the_reference() {
         );
         assert_eq!(
             r.bound_by,
-            if fma >= gather { "fma" } else { "texel-gather" }
+            if fma >= gather {
+                "fma"
+            } else {
+                "march-texel-gather"
+            }
         );
         assert!(finite(r.rmse) < 0.05, "{r:?}");
         assert!(finite(r.max_abs) >= finite(r.rmse));

@@ -7,6 +7,7 @@
 
 pub mod camera;
 pub mod evalmap;
+mod frame;
 pub mod gpu;
 pub mod output;
 pub mod preintegration;

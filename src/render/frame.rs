@@ -1,0 +1,344 @@
+//! The stages of one ray-cast frame (stage `raycast`'s host side), run by
+//! [`super::renderer`]: each its own function.
+//! - `frame_pipeline`: the shader variant the field and setup need (compiled, or cached);
+//! - `frame_constants`: kernel constants, transfer function and isosurfaces (small, per frame);
+//! - `frame_targets`: image, counts, ray-state and skip-report buffers (per image size);
+//! - `run_bands`: the image in bands of rows, one submission per chunk of outer steps, with the
+//!   loop-limit fallback (LAVAPIPE.md: llvmpipe ends loops after 65 535 iterations);
+//! - `read_image`: pixels, evaluation counts and the skipping report back to the host.
+
+use super::gpu::{GpuField, Variant, pipeline_for, render_params, table_params};
+use super::preintegration::PreintegrationTables;
+use super::shading::Isosurface;
+use super::skip::{SkipReport, SkipTable};
+use super::transfer::TransferFunction;
+use super::{Field, Method, RaySetup};
+use crate::gpu_types::{IsoSurface, RayPush, binding, ray_count};
+use crate::vk::{
+    BindGroup, Buffer, BufferUsage, ComputePipeline, Context, ShaderCompiler, VkError,
+};
+
+/// Pixels per band (one submission each).
+const BAND_PIXELS: u32 = 16 * 1024;
+
+/// Outer steps of the longest possible ray: midpoint steps or fixed intervals of `step`, or
+/// adaptive top intervals of l_max, over the box diagonal, plus one per possible segment (each
+/// inside segment of a hull rounds its own count up).
+pub fn outer_steps(setup: &RaySetup) -> u32 {
+    let diagonal = (setup.box_hi - setup.box_lo).length();
+    let step = match setup.method {
+        Method::Adaptive => setup.l_max,
+        _ => setup.step,
+    };
+    let segments = (crate::samples::bvh::MAX_HITS / 2 + 1) as f64;
+    ((diagonal / step).ceil() + segments).min(f64::from(u32::MAX / 2)) as u32
+}
+
+/// Outer steps per dispatch. llvmpipe ends every loop after 65 535 iterations per invocation
+/// and dispatch (LAVAPIPE.md), and one MLS evaluation runs 30–60 of them (neighbour rows,
+/// octree descent): about 256 evaluations per ray and dispatch leaves a margin of 4 or more.
+/// An adaptive top interval costs up to 2^levels evaluations.
+pub fn default_chunk(setup: &RaySetup) -> u32 {
+    const EVALUATIONS_PER_DISPATCH: u32 = 256;
+    match setup.method {
+        Method::Adaptive => {
+            let levels = super::raycast::adaptive::stack_size(setup.l_max, setup.l_min);
+            (EVALUATIONS_PER_DISPATCH >> levels.min(8)).max(1)
+        }
+        _ => EVALUATIONS_PER_DISPATCH,
+    }
+}
+
+/// Binding numbers of the ray caster for a field and setup.
+pub(super) fn frame_bindings(
+    gpu_field: &GpuField,
+    setup: &RaySetup,
+    with_tables: bool,
+    skip: bool,
+) -> Vec<u32> {
+    let mut ids: Vec<u32> = gpu_field.bindings().iter().map(|(b, _)| *b).collect();
+    if skip {
+        ids.extend([
+            binding::SKIP_BLOCKS,
+            binding::SKIP_TABLE,
+            binding::SKIP_STATS,
+        ]);
+    }
+    ids.extend(gpu_field.hull_bindings().iter().map(|(b, _)| *b));
+    ids.extend([
+        binding::TRANSFER,
+        binding::TRANSFER_TEXELS,
+        binding::IMAGE,
+        binding::COUNTS,
+        binding::RAY_STATE,
+    ]);
+    if !setup.isosurfaces.is_empty() {
+        ids.push(binding::ISO);
+    }
+    if with_tables {
+        ids.push(binding::PREINT);
+    }
+    ids
+}
+
+/// Compiles the ray caster's variant for a field and setup.
+pub(super) fn frame_pipeline(
+    ctx: &Context,
+    compiler: &ShaderCompiler,
+    variant: &Variant,
+    bindings: &[u32],
+) -> Result<ComputePipeline, VkError> {
+    pipeline_for(
+        ctx,
+        compiler,
+        "raycast.comp",
+        variant,
+        bindings,
+        std::mem::size_of::<RayPush>() as u32,
+    )
+}
+
+/// The tables as the kernel reads them: every length's table, then the zero-length limits.
+pub(super) fn table_buffer(
+    ctx: &Context,
+    tables: &PreintegrationTables,
+) -> Result<Buffer, VkError> {
+    let data: Vec<[f32; 4]> = tables
+        .tables
+        .iter()
+        .flatten()
+        .chain(&tables.limits)
+        .copied()
+        .collect();
+    Buffer::from_slice(ctx, "preintegration tables", &data)
+}
+
+/// Per-frame constants: kernel parameters, transfer function, isosurfaces, skip table.
+pub(super) struct FrameConstants {
+    pub(super) params: Buffer,
+    pub(super) tf: Buffer,
+    pub(super) iso: Buffer,
+    /// The frame's [`SkipTable`] (with empty-space skipping).
+    pub(super) skip: Option<Buffer>,
+}
+
+pub(super) fn frame_constants(
+    ctx: &Context,
+    field: &Field,
+    setup: &RaySetup,
+    tf: &TransferFunction,
+    tables: Option<&PreintegrationTables>,
+    skip: bool,
+) -> Result<FrameConstants, VkError> {
+    let gpu_tf = tf.to_gpu();
+    let skip = match skip {
+        true => {
+            let table = SkipTable::build(tf, &setup.isosurfaces, super::scalar_range(field));
+            Some(Buffer::from_slice(ctx, "skip table", &table.gpu_words())?)
+        }
+        false => None,
+    };
+    let mut params = render_params(field, Some(setup), gpu_tf.len() as u32);
+    if let Some(t) = tables {
+        table_params(&mut params, t);
+    }
+    let isos = iso_buffer_data(&setup.isosurfaces);
+    Ok(FrameConstants {
+        params: Buffer::from_slice(ctx, "render params", &[params])?,
+        tf: Buffer::from_slice(ctx, "transfer function", &gpu_tf)?,
+        iso: Buffer::from_slice(ctx, "isosurfaces", &isos)?,
+        skip,
+    })
+}
+
+/// The isosurfaces as kernels read them; never empty, since a zero-sized binding is invalid
+/// (the kernel constants say how many are real).
+pub fn iso_buffer_data(isosurfaces: &[Isosurface]) -> Vec<IsoSurface> {
+    let mut isos: Vec<IsoSurface> = isosurfaces
+        .iter()
+        .map(|i| IsoSurface {
+            color_opacity: [
+                i.color[0] as f32,
+                i.color[1] as f32,
+                i.color[2] as f32,
+                i.opacity as f32,
+            ],
+            value: i.value as f32,
+            _pad: [0.0; 3],
+        })
+        .collect();
+    if isos.is_empty() {
+        isos.push(IsoSurface::default());
+    }
+    isos
+}
+
+/// Image, counts and ray-state buffers for `pixels` pixels.
+pub(super) struct FrameTargets {
+    pub(super) pixels: u64,
+    pub(super) image: Buffer,
+    pub(super) counts: Buffer,
+    pub(super) ray_state: Buffer,
+    pub(super) skip_stats: Buffer,
+}
+
+pub(super) fn frame_targets(ctx: &Context, pixels: u64) -> Result<FrameTargets, VkError> {
+    Ok(FrameTargets {
+        pixels,
+        image: Buffer::new(ctx, "image", pixels * 16, BufferUsage::Storage)?,
+        counts: Buffer::new(ctx, "evaluation counts", pixels * 4, BufferUsage::Storage)?,
+        ray_state: Buffer::new(ctx, "ray state", pixels * 16, BufferUsage::Storage)?,
+        skip_stats: Buffer::new(ctx, "skip report", pixels * 16, BufferUsage::Storage)?,
+    })
+}
+
+/// Binds everything and runs the bands; returns (GPU ms, submissions).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn run_bands(
+    ctx: &Context,
+    pipeline: &ComputePipeline,
+    gpu_field: &GpuField,
+    constants: &FrameConstants,
+    targets: &FrameTargets,
+    table: Option<&Buffer>,
+    setup: &RaySetup,
+    progress: &mut dyn FnMut(f64),
+) -> Result<(f64, u32), VkError> {
+    let mut all = gpu_field.bindings();
+    all.extend(gpu_field.hull_bindings());
+    all.extend([
+        (binding::PARAMS, &constants.params),
+        (binding::TRANSFER, &constants.tf),
+        (binding::TRANSFER_TEXELS, &constants.tf),
+        (binding::IMAGE, &targets.image),
+        (binding::COUNTS, &targets.counts),
+        (binding::RAY_STATE, &targets.ray_state),
+    ]);
+    if !setup.isosurfaces.is_empty() {
+        all.push((binding::ISO, &constants.iso));
+    }
+    if let Some(t) = table {
+        all.push((binding::PREINT, t));
+    }
+    if let Some(t) = &constants.skip {
+        all.extend(gpu_field.skip_bindings());
+        all.push((binding::SKIP_TABLE, t));
+        all.push((binding::SKIP_STATS, &targets.skip_stats));
+    }
+    let group = BindGroup::new(ctx, pipeline, &all)?;
+    let (w, h) = (setup.camera.width, setup.camera.height);
+    let band_rows = (BAND_PIXELS / w.max(1))
+        .clamp(8, h.max(8))
+        .next_multiple_of(8);
+    let outer = outer_steps(setup);
+    let mut chunk = setup.chunk.unwrap_or_else(|| default_chunk(setup));
+    let mut gpu_ms = 0.0;
+    let mut bands = 0;
+    let mut row = 0;
+    while row < h {
+        let rows = band_rows.min(h - row);
+        let mut first = 0;
+        let mut band_counts: Vec<u32> = Vec::new();
+        while first < outer {
+            let push = RayPush {
+                row_offset: row,
+                rows,
+                first,
+                last: first.saturating_add(chunk).min(outer),
+            };
+            let timings = ctx.submit(|rec| {
+                rec.dispatch(
+                    pipeline,
+                    &group,
+                    bytemuck::bytes_of(&push),
+                    [w.div_ceil(8), rows.div_ceil(8), 1],
+                    "raycast",
+                )
+            })?;
+            gpu_ms += timings.iter().filter_map(|t| t.gpu_ms).sum::<f64>();
+            bands += 1;
+            band_counts =
+                targets
+                    .counts
+                    .read_range(ctx, (row * w) as usize, (rows * w) as usize)?;
+            if band_counts.iter().any(|c| c & ray_count::TRUNCATED != 0) {
+                // The driver cut a loop short: this band again, from its start, in halves.
+                if chunk == 1 {
+                    return Err(VkError::Usage(format!(
+                        "raycast: the device ended a loop early even for one step per dispatch \
+                         (llvmpipe allows 65 535 loop iterations per invocation); rows {row}..{} \
+                         cannot be rendered with these settings",
+                        row + rows
+                    )));
+                }
+                chunk = chunk.div_ceil(2);
+                first = 0;
+                continue;
+            }
+            if band_counts.iter().all(|c| c & ray_count::DONE != 0) {
+                break;
+            }
+            first = push.last;
+        }
+        let pixel_of = |i: usize| (i as u32 % w, row + i as u32 / w);
+        if let Some(i) = band_counts
+            .iter()
+            .position(|c| c & ray_count::HULL_OVERFLOW != 0)
+        {
+            let (x, y) = pixel_of(i);
+            return Err(VkError::Usage(format!(
+                "raycast: the ray through pixel ({x}, {y}) crosses the domain's boundary more \
+                 than {} times; the mesh is too convoluted for the hull clipper",
+                crate::samples::bvh::MAX_HITS
+            )));
+        }
+        if let Some(i) = band_counts.iter().position(|c| c & ray_count::DONE == 0) {
+            let (x, y) = pixel_of(i);
+            return Err(VkError::Usage(format!(
+                "raycast: pixel ({x}, {y}) was not finished after {outer} steps"
+            )));
+        }
+        row += rows;
+        progress(f64::from(row) / f64::from(h));
+    }
+    Ok((gpu_ms, bands))
+}
+
+/// A ray-cast frame as read back.
+pub(super) struct Readback {
+    pub(super) pixels: Vec<[f32; 4]>,
+    /// Evaluations per pixel, flags removed.
+    pub(super) counts: Vec<u32>,
+    pub(super) skip: Option<SkipReport>,
+}
+
+/// Pixels and evaluation counts, and the skipping report when the frame skipped.
+pub(super) fn read_image(
+    ctx: &Context,
+    targets: &FrameTargets,
+    skip: bool,
+) -> Result<Readback, VkError> {
+    let n = targets.pixels as usize;
+    let report = if skip {
+        let rays: Vec<[f32; 4]> = targets.skip_stats.read(ctx)?;
+        let mut r = SkipReport::default();
+        for p in rays.iter().take(n) {
+            r.add(f64::from(p[0]), p[1] as u64, f64::from(p[2]));
+        }
+        Some(r)
+    } else {
+        None
+    };
+    let mut pixels: Vec<[f32; 4]> = targets.image.read(ctx)?;
+    pixels.truncate(n);
+    let mut counts: Vec<u32> = targets.counts.read(ctx)?;
+    counts.truncate(n);
+    for c in &mut counts {
+        *c &= ray_count::EVALUATIONS;
+    }
+    Ok(Readback {
+        pixels,
+        counts,
+        skip: report,
+    })
+}
