@@ -168,14 +168,7 @@ fn both(s: &Scene) -> Both {
     let image = common::splat::scene_frame(&mut renderer, s);
     drop(renderer);
     finish(ctx);
-    let mut cpu_skip = SkipReport::default();
-    for p in &cpu {
-        cpu_skip.add(
-            p.skipped_length,
-            u64::from(p.evaluations_saved),
-            p.inside_length,
-        );
-    }
+    let cpu_skip = vmls::render::raycast::skip_report(&cpu);
     Both {
         gpu_evals: image
             .counts

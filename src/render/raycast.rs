@@ -17,7 +17,7 @@ mod interval;
 
 use super::camera::clip_box;
 use super::preintegration::PreintegrationTables;
-use super::skip::{Blocks, SkipTable, resume_interval};
+use super::skip::{Blocks, SkipReport, SkipTable, resume_interval};
 use super::transfer::TransferFunction;
 use super::{Field, RaySetup};
 use crate::recon::mls::Neighbours;
@@ -287,6 +287,19 @@ pub fn raycast(
         inside_length,
         hull_overflow,
     }
+}
+
+/// The skipping report of a CPU image (twin of the GPU's `--stats` "skip").
+pub fn skip_report(image: &[PixelResult]) -> SkipReport {
+    let mut r = SkipReport::default();
+    for p in image {
+        r.add(
+            p.skipped_length,
+            u64::from(p.evaluations_saved),
+            p.inside_length,
+        );
+    }
+    r
 }
 
 /// Renders the whole image on the CPU (rows split over the available cores).

@@ -199,17 +199,9 @@ pub fn run_render_cpu(
                 &scene.transfer,
                 tables.as_ref(),
             );
-            let skip = setup.skip.then(|| {
-                let mut r = SkipReport::default();
-                for p in &image {
-                    r.add(
-                        p.skipped_length,
-                        u64::from(p.evaluations_saved),
-                        p.inside_length,
-                    );
-                }
-                r
-            });
+            let skip = setup
+                .skip
+                .then(|| vmls::render::raycast::skip_report(&image));
             (image.iter().map(|p| p.rgba).collect(), None, skip)
         }
     };
