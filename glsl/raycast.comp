@@ -477,9 +477,9 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
         // starts from a fresh knot (twin of the skip in integrate_hermite).
         bool restart = false;
         if (top_start) {
-            float run = skip_run(o, d, t0 + float(k) * l_max, t1);
-            uint j = resume_interval(t0, l_max, run, k);
             float start = t0 + float(k) * l_max;
+            float run = skip_run(o, d, start, t1);
+            uint j = resume_interval(t0, l_max, run, k);
             if (j >= tops) {
                 count_skip(t1 - start, tops - k, 0u);
                 return CHUNK_FINISHED;

@@ -502,6 +502,7 @@ impl Scene {
         };
 
         let rec = section("reconstruction");
+        let auto = matches!(rec.get("resample"), Some(Value::String(a)) if a == "auto");
         let mut reconstruction = Reconstruction {
             method: rec.choice(
                 "method",
@@ -554,7 +555,7 @@ impl Scene {
             )?,
             resample: match rec.get("resample") {
                 None => 0,
-                Some(Value::String(a)) if a == "auto" => 0,
+                _ if auto => 0,
                 Some(Value::Integer(i)) if (0..=i64::from(resample::MAX_FACTOR)).contains(i) => {
                     *i as u32
                 }
@@ -564,7 +565,7 @@ impl Scene {
                     return Err(rec.err("resample", &expected, v));
                 }
             },
-            resample_auto: matches!(rec.get("resample"), Some(Value::String(a)) if a == "auto"),
+            resample_auto: auto,
         };
 
         if reconstruction.method == ReconMethod::Exact
