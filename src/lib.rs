@@ -3,6 +3,8 @@
 //! Layers, bottom up:
 //! - [`vk`]: the Vulkan layer, the only module that calls Vulkan directly: context, buffers, pipelines,
 //!   commands, timestamp queries, run-time GLSL compilation.
+//! - [`files`]: reading inputs (regular files only, bounded) and writing outputs all or
+//!   nothing through exclusive temporaries.
 //! - [`data`]: loaders and generators producing a [`data::Volume`].
 //! - [`samples`]: the sample set every input becomes (positions, values, supports, domain).
 //! - [`recon`]: MLS reconstruction (f64 CPU reference) and the redundant octree [OCT].
@@ -15,6 +17,7 @@
 pub mod bench;
 pub mod check;
 pub mod data;
+pub mod files;
 pub mod gpu_types;
 pub mod info;
 pub mod probe;

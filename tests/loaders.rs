@@ -374,7 +374,7 @@ fn vtk_with(binary: bool, rest: &[u8]) -> Vec<u8> {
 fn vtk_missing_file_names_the_path() {
     let path = std::env::temp_dir().join("vmls-no-such-dir/absent.vtk");
     let e = data::load(&path, None).unwrap_err();
-    assert!(matches!(e, DataError::Io { .. }), "{e:?}");
+    assert!(matches!(e, DataError::File(_)), "{e:?}");
     assert!(e.to_string().contains(&path.display().to_string()), "{e}");
 }
 

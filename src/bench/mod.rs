@@ -27,6 +27,7 @@ use crate::scene::{Scene, SceneError};
 use crate::vk::{Context, ShaderCompiler, ShaderSource};
 use reference::{Reference, ReferenceMode, reference_image};
 use results::Row;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -49,6 +50,12 @@ pub enum BenchError {
     Sweep { arg: String, message: String },
     #[error("{0}")]
     Usage(String),
+}
+
+impl From<crate::files::FileError> for BenchError {
+    fn from(e: crate::files::FileError) -> Self {
+        BenchError::Render(e.into())
+    }
 }
 
 impl From<crate::vk::VkError> for BenchError {
@@ -382,8 +389,9 @@ pub fn run(
                 let spirv = compiler.compile(ShaderSource::File(kernel), defines)?;
                 let stem = kernel.trim_end_matches(".comp");
                 let path = dir.join(format!("{index:03}-{stem}.spv"));
-                std::fs::write(&path, bytemuck::cast_slice::<u32, u8>(&spirv))
-                    .map_err(|e| io_err(&path, e))?;
+                crate::files::write_output("SPIR-V", &path, &[], |out| {
+                    out.write_all(bytemuck::cast_slice::<u32, u8>(&spirv))
+                })?;
             }
         }
         let names: Vec<&str> = per_kernel

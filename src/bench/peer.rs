@@ -41,9 +41,8 @@ pub fn run_peer(
         Some(p) => p.clone(),
         None => {
             let p = dir.join("scene.toml");
-            std::fs::write(&p, crate::scene::DEFAULT_SCENE).map_err(|e| BenchError::Io {
-                path: p.display().to_string(),
-                message: e.to_string(),
+            crate::files::write_output("peer scene", &p, &[], |out| {
+                std::io::Write::write_all(out, crate::scene::DEFAULT_SCENE.as_bytes())
             })?;
             p
         }

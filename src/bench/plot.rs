@@ -9,6 +9,7 @@ use super::BenchError;
 use super::results::{Row, pareto_front};
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use std::io::Write;
 use std::path::Path;
 
 /// Smallest error drawn: a row identical to the reference sits on the bottom edge.
@@ -134,25 +135,42 @@ fn draw<DB: DrawingBackend>(
     root.present().map_err(err)
 }
 
-/// Writes the plot as `stem.svg` and `stem.png` (1100×750).
+/// Writes the plot as `stem.svg` and `stem.png` (1100×750), both or neither.
 pub fn write_speed_error(stem: &Path, rows: &[Row], title: &str) -> Result<(), BenchError> {
     crate::render::output::register_fonts();
-    let size = (1100, 750);
+    let (w, h) = (1100, 750);
     let svg = stem.with_extension("svg");
-    draw(SVGBackend::new(&svg, size).into_drawing_area(), rows, title).map_err(|message| {
-        BenchError::Io {
-            path: svg.display().to_string(),
-            message,
-        }
-    })?;
     let png = stem.with_extension("png");
+    let mut outputs = crate::files::Outputs::new(&[("plot", &svg), ("plot", &png)], &[])?;
+    let mut text = String::new();
     draw(
-        BitMapBackend::new(&png, size).into_drawing_area(),
+        SVGBackend::with_string(&mut text, (w, h)).into_drawing_area(),
+        rows,
+        title,
+    )
+    .map_err(|message| BenchError::Io {
+        path: svg.display().to_string(),
+        message,
+    })?;
+    let mut rgb = vec![0u8; (w * h * 3) as usize];
+    draw(
+        BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area(),
         rows,
         title,
     )
     .map_err(|message| BenchError::Io {
         path: png.display().to_string(),
         message,
-    })
+    })?;
+    let image = image::RgbImage::from_raw(w, h, rgb).ok_or_else(|| BenchError::Io {
+        path: png.display().to_string(),
+        message: "the plot's pixel buffer does not match its size".into(),
+    })?;
+    outputs.write(&svg, |out| out.write_all(text.as_bytes()))?;
+    outputs.write(&png, |out| {
+        image
+            .write_to(out, image::ImageFormat::Png)
+            .map_err(std::io::Error::other)
+    })?;
+    Ok(outputs.commit()?)
 }

@@ -21,6 +21,7 @@ use crate::render::renderer::Renderer;
 use crate::scene::{Scene, VolumeSource};
 use crate::vk::Context;
 use sha2::{Digest, Sha256};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// Where the reference is rendered.
@@ -155,11 +156,8 @@ pub fn reference_image(
         }
         write_image(p, width, height, &pixels)?;
         let note = p.with_extension("txt");
-        std::fs::write(&note, format!("{description}\n{scene:#?}\n")).map_err(|e| {
-            BenchError::Io {
-                path: note.display().to_string(),
-                message: e.to_string(),
-            }
+        crate::files::write_output("reference note", &note, &[], |out| {
+            write!(out, "{description}\n{scene:#?}\n")
         })?;
     }
     Ok(Reference {

@@ -8,6 +8,7 @@
 
 use super::BenchError;
 use serde::{Deserialize, Serialize};
+use std::io::Write;
 use std::path::Path;
 
 /// One configuration's measurements.
@@ -97,16 +98,23 @@ fn io_err(path: &Path, message: impl std::fmt::Display) -> BenchError {
 
 /// Writes the rows as CSV with a header line.
 pub fn write_csv(path: &Path, rows: &[Row]) -> Result<(), BenchError> {
-    let mut w = csv::Writer::from_path(path).map_err(|e| io_err(path, e))?;
+    let mut w = csv::Writer::from_writer(Vec::new());
     for r in rows {
         w.serialize(r).map_err(|e| io_err(path, e))?;
     }
-    w.flush().map_err(|e| io_err(path, e))
+    let bytes = w.into_inner().map_err(|e| io_err(path, e))?;
+    Ok(crate::files::write_output("CSV", path, &[], |out| {
+        out.write_all(&bytes)
+    })?)
 }
+
+/// Largest results file `read_csv` reads (a sweep writes a few hundred bytes per row).
+pub const MAX_CSV_BYTES: u64 = 256 << 20;
 
 /// Reads rows written by [`write_csv`] (by this or another machine, or by a peer script).
 pub fn read_csv(path: &Path) -> Result<Vec<Row>, BenchError> {
-    let mut r = csv::Reader::from_path(path).map_err(|e| io_err(path, e))?;
+    let bytes = crate::files::read_input(path, MAX_CSV_BYTES)?;
+    let mut r = csv::Reader::from_reader(bytes.as_slice());
     r.deserialize()
         .enumerate()
         .map(|(i, row)| {
@@ -127,7 +135,10 @@ pub fn write_json(
 ) -> Result<(), BenchError> {
     let value = serde_json::json!({ "run": context, "rows": rows });
     let text = serde_json::to_string_pretty(&value).map_err(|e| io_err(path, e))?;
-    std::fs::write(path, text + "\n").map_err(|e| io_err(path, e))
+    Ok(crate::files::write_output("JSON", path, &[], |out| {
+        out.write_all(text.as_bytes())?;
+        out.write_all(b"\n")
+    })?)
 }
 
 /// The rows no other row beats on both GPU time and RMSE (ties kept), fastest first. Rows

@@ -28,6 +28,15 @@ use std::path::{Path, PathBuf};
 /// Vulkan storage-buffer limit we know of and would only fail later, less clearly.
 pub const MAX_SAMPLES: u64 = 1 << 30;
 
+/// Largest data file we read: [`MAX_SAMPLES`] doubles and room for a header, or text.
+pub const MAX_FILE_BYTES: u64 = 8 * MAX_SAMPLES + (1 << 20);
+
+/// Reads a data file: a regular file of at most [`MAX_FILE_BYTES`] (see [`crate::files`]), so
+/// that a FIFO, a device or a directory is refused before any read.
+pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>, DataError> {
+    Ok(crate::files::read_input(path, MAX_FILE_BYTES)?)
+}
+
 /// A regular grid of scalar samples.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Volume {
@@ -88,12 +97,6 @@ impl Volume {
 /// Errors of the data layer. Every variant names the file it is about.
 #[derive(Debug, thiserror::Error)]
 pub enum DataError {
-    #[error("{path}: cannot read: {source}")]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
     /// The file does not follow its format: `location` is "line N" or "byte N".
     #[error("{path}: {location}: expected {expected}, found {found}")]
     Format {
@@ -126,6 +129,8 @@ pub enum DataError {
         z: usize,
         value: f32,
     },
+    #[error(transparent)]
+    File(#[from] crate::files::FileError),
     #[error("{path}: dimensions {dims:?} are too large: {reason}")]
     TooLarge {
         path: PathBuf,

@@ -25,7 +25,7 @@
 //!
 //! Errors name byte offsets; in a `.nii.gz` they are offsets in the decompressed stream.
 
-use super::nrrd::{Scalar, decode, gunzip, shown};
+use super::nrrd::{Scalar, decode, gunzip};
 use super::{DataError, Volume, check_finite, checked_sample_count};
 use std::path::Path;
 
@@ -33,10 +33,7 @@ const HEADER_SIZE: usize = 348;
 
 /// Reads and parses a `.nii` or `.nii.gz` file.
 pub fn load(path: &Path) -> Result<Volume, DataError> {
-    let bytes = std::fs::read(path).map_err(|source| DataError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = super::read_file(path)?;
     parse(path, &bytes)
 }
 
@@ -117,7 +114,13 @@ fn header(path: &Path, b: &[u8], suffix: &str) -> Result<Header, DataError> {
             let what = "two-file NIfTI (.hdr/.img pair); convert it to a single .nii".into();
             return Err(unsupported(344, what));
         }
-        other => return Err(format(344, "the magic \"n+1\\0\"", shown(other))),
+        other => {
+            return Err(format(
+                344,
+                "the magic \"n+1\\0\"",
+                crate::files::excerpt(other),
+            ));
+        }
     }
 
     let dim: [i16; 8] = std::array::from_fn(|i| i16_at(40 + 2 * i, big_endian));

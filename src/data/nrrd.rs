@@ -1,5 +1,5 @@
 //! NRRD reader (`.nrrd`, header and data in one file), plus the typed-sample helpers that the
-//! VTK and NIfTI readers share (`Scalar`, `decode`, `parse_text`, `gunzip`, `shown`).
+//! VTK and NIfTI readers share (`Scalar`, `decode`, `parse_text`, `gunzip`).
 //!
 //! Contract: the magic line `NRRD000X`, then `field: value` lines up to the first empty line;
 //! the data follows that empty line. Read fields:
@@ -202,20 +202,9 @@ pub(crate) fn gunzip(
     }
 }
 
-/// Quotes input for an error message, cut to a readable length.
-pub(crate) fn shown(bytes: &[u8]) -> String {
-    const MAX: usize = 40;
-    let text = String::from_utf8_lossy(&bytes[..bytes.len().min(MAX)]);
-    let more = if bytes.len() > MAX { "..." } else { "" };
-    format!("'{}'{more}", text.escape_debug())
-}
-
 /// Reads and parses a `.nrrd` file.
 pub fn load(path: &Path) -> Result<Volume, DataError> {
-    let bytes = std::fs::read(path).map_err(|source| DataError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = super::read_file(path)?;
     parse(path, &bytes)
 }
 
@@ -269,7 +258,11 @@ pub fn parse(path: &Path, bytes: &[u8]) -> Result<Volume, DataError> {
     let magic = lines.next().unwrap_or_default();
     let version_ok = magic.len() == 8 && magic[4..].iter().all(u8::is_ascii_digit);
     if !magic.starts_with(b"NRRD") || !version_ok {
-        return Err(err(1, "the NRRD magic 'NRRD000X'", shown(magic)));
+        return Err(err(
+            1,
+            "the NRRD magic 'NRRD000X'",
+            crate::files::excerpt(magic),
+        ));
     }
 
     let mut h = Header::default();
@@ -285,14 +278,18 @@ pub fn parse(path: &Path, bytes: &[u8]) -> Result<Volume, DataError> {
             continue;
         }
         let Some(colon) = text.find(':') else {
-            return Err(err(line, "'field: value' or a '#' comment", shown(raw)));
+            return Err(err(
+                line,
+                "'field: value' or a '#' comment",
+                crate::files::excerpt(raw),
+            ));
         };
         if text[colon + 1..].starts_with('=') {
             continue;
         }
         let field = text[..colon].trim().to_ascii_lowercase();
         let value = text[colon + 1..].trim();
-        let bad = |what: &str| err(line, what, shown(value.as_bytes()));
+        let bad = |what: &str| err(line, what, crate::files::excerpt(value.as_bytes()));
         let words: Vec<&str> = value.split_ascii_whitespace().collect();
         match field.as_str() {
             "type" => {
@@ -527,7 +524,7 @@ fn parse_text_values(
         path: path.to_path_buf(),
         location: format!("line {}", line_of(at)),
         expected,
-        found: shown(found),
+        found: crate::files::excerpt(found),
     };
     // Each value takes at least two bytes (digit and separator), which bounds the allocation
     // by the file size rather than by the header.

@@ -39,10 +39,7 @@ use std::path::Path;
 
 /// Reads a `.csv` or `.ply` file, choosing by extension.
 pub fn load(path: &Path) -> Result<Dataset, DataError> {
-    let bytes = std::fs::read(path).map_err(|source| DataError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = super::read_file(path)?;
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().to_ascii_lowercase())
@@ -197,8 +194,17 @@ pub fn parse_csv(path: &Path, bytes: &[u8]) -> Result<Dataset, DataError> {
                 continue;
             }
             let value = field.parse::<f64>().map_err(|_| {
-                let location = format!("line {line}, column {} ('{}')", c + 1, headers[c]);
-                format_error(path, location, "a number", format!("'{field}'"))
+                let location = format!(
+                    "line {line}, column {} ('{}')",
+                    c + 1,
+                    crate::files::excerpt_text(&headers[c], crate::files::EXCERPT_CHARS)
+                );
+                format_error(
+                    path,
+                    location,
+                    "a number",
+                    crate::files::excerpt(field.as_bytes()),
+                )
             })?;
             match *column {
                 Column::Axis(a) => p[a] = value,
@@ -376,7 +382,7 @@ fn payload_error(
     let found = if content.is_empty() {
         text.to_string()
     } else {
-        format!("'{content}' ({text})")
+        format!("{} ({text})", crate::files::excerpt(content.as_bytes()))
     };
     format_error(
         path,

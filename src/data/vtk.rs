@@ -41,16 +41,13 @@
 pub use super::vtk_legacy::{load_dataset, parse_dataset};
 
 use super::dataset::{DataArray, Location};
-use super::nrrd::{Sample, Scalar, decode, parse_text, shown};
+use super::nrrd::{Sample, Scalar, decode, parse_text};
 use super::{DataError, Volume, check_finite, checked_sample_count};
 use std::path::Path;
 
 /// Reads and parses a legacy `.vtk` file; see the module documentation for `array`.
 pub fn load(path: &Path, array: Option<&str>) -> Result<Volume, DataError> {
-    let bytes = std::fs::read(path).map_err(|source| DataError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = super::read_file(path)?;
     parse(path, &bytes, array)
 }
 
@@ -123,7 +120,11 @@ impl<'a> Reader<'a> {
     /// A format error at `line` (or at the end of the input), quoting what was found.
     pub(super) fn unexpected(&self, line: Option<&Line>, expected: impl Into<String>) -> DataError {
         match line {
-            Some(l) => self.format(l.start, expected, format!("'{}'", l.tokens.join(" "))),
+            Some(l) => self.format(
+                l.start,
+                expected,
+                crate::files::excerpt(l.tokens.join(" ").as_bytes()),
+            ),
             None => self.format(self.bytes.len(), expected, "end of file"),
         }
     }
@@ -326,7 +327,7 @@ impl<'a> Reader<'a> {
                         Elem::Bit => "bit",
                     };
                     let expected = format!("a {ty} value (value {} of {total})", i + 1);
-                    return Err(self.format(at, expected, shown(token)));
+                    return Err(self.format(at, expected, crate::files::excerpt(token)));
                 }
             }
         }
@@ -366,8 +367,8 @@ impl<'a> Reader<'a> {
         let expected =
             format!("a keyword or the end of the file after the array's {values} values");
         let found = match self.binary {
-            true => shown(self.bytes.get(next.start..).unwrap_or_default()),
-            false => format!("'{}'", t.join(" ")),
+            true => crate::files::excerpt(self.bytes.get(next.start..).unwrap_or_default()),
+            false => crate::files::excerpt(t.join(" ").as_bytes()),
         };
         Err(self.format(next.start, expected, found))
     }
@@ -457,7 +458,7 @@ pub(super) fn open<'a>(
         return Err(r.format(
             0,
             "the VTK legacy header '# vtk DataFile Version x.y'",
-            shown(first),
+            crate::files::excerpt(first),
         ));
     }
     r.raw_line(); // the title, free text

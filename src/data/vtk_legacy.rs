@@ -54,10 +54,7 @@ use super::dataset::DataArray;
 
 /// Reads and parses a legacy `.vtk` file of any supported dataset type.
 pub fn load_dataset(path: &Path) -> Result<Dataset, DataError> {
-    let bytes = std::fs::read(path).map_err(|source| DataError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = super::read_file(path)?;
     parse_dataset(path, &bytes)
 }
 

@@ -51,10 +51,7 @@ use std::path::Path;
 
 /// Reads and parses a VTK XML file.
 pub fn load(path: &Path) -> Result<Dataset, DataError> {
-    let bytes = std::fs::read(path).map_err(|source| DataError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = super::read_file(path)?;
     parse(path, &bytes)
 }
 
@@ -139,7 +136,7 @@ fn appended_block<'a>(path: &Path, bytes: &'a [u8], at: usize) -> Result<Appende
     let start = match marker {
         Some(m) if bytes[after + m] == b'_' => after + m + 1,
         _ => {
-            let found = super::nrrd::shown(bytes.get(after..).unwrap_or_default());
+            let found = crate::files::excerpt(bytes.get(after..).unwrap_or_default());
             return Err(err(after, "'_' starting the appended data", found));
         }
     };

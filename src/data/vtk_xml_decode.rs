@@ -25,7 +25,7 @@
 //! `Dataset::validate`, naming the element); errors give the byte offset of the bad token.
 
 use super::DataError;
-use super::nrrd::{Scalar, shown};
+use super::nrrd::Scalar;
 use base64::Engine;
 use std::borrow::Cow;
 use std::io::Read;
@@ -379,7 +379,7 @@ impl Decoder<'_> {
                 return Err(self.format(
                     location,
                     expected,
-                    format!("more, starting with {}", shown(token)),
+                    format!("more, starting with {}", crate::files::excerpt(token)),
                 ));
             }
             let Some(v) = parse_value(token, a.ty) else {
@@ -387,7 +387,7 @@ impl Decoder<'_> {
                 return Err(self.format(
                     location,
                     format!("a {} value", a.ty.name()),
-                    shown(token),
+                    crate::files::excerpt(token),
                 ));
             };
             if keep == Keep::All || i.is_multiple_of(stride) {

@@ -61,17 +61,13 @@ pub fn check_path(path: &Path) -> Result<(), RenderError> {
     }
 }
 
-/// Writes the heat map of `counts` (row 0 at the top) to a PNG file.
-pub fn write_eval_map(
+/// The heat map of `counts` (row 0 at the top) with its legend below, as an image.
+pub fn eval_map_image(
     path: &Path,
     width: u32,
     height: u32,
     counts: &[u32],
-) -> Result<(), RenderError> {
-    let err = |message: String| RenderError::Output {
-        path: path.display().to_string(),
-        message,
-    };
+) -> Result<image::RgbImage, RenderError> {
     check_path(path)?;
     let max = counts.iter().copied().max().unwrap_or(0).max(1);
     let mut img = image::RgbImage::new(width, height + LEGEND);
@@ -86,19 +82,26 @@ pub fn write_eval_map(
             img.put_pixel(x, y, colour);
         }
     }
-    draw_legend(&mut img, bar_top + 7, max)
-        .map_err(|e| err(format!("cannot draw the legend: {e}")))?;
-    let file_name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = path.with_file_name(format!(".{file_name}.partial"));
-    img.save_with_format(&tmp, image::ImageFormat::Png)
-        .map_err(|e| err(format!("cannot write the evaluation map: {e}")))?;
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        err(format!("cannot write the evaluation map: {e}"))
-    })
+    draw_legend(&mut img, bar_top + 7, max).map_err(|e| RenderError::Output {
+        path: path.display().to_string(),
+        message: format!("cannot draw the legend: {e}"),
+    })?;
+    Ok(img)
+}
+
+/// Writes the heat map of `counts` to a PNG file (see [`eval_map_image`]).
+pub fn write_eval_map(
+    path: &Path,
+    width: u32,
+    height: u32,
+    counts: &[u32],
+) -> Result<(), RenderError> {
+    let img = eval_map_image(path, width, height, counts)?;
+    crate::files::write_output("--eval-map", path, &[], |w| {
+        img.write_to(w, image::ImageFormat::Png)
+            .map_err(std::io::Error::other)
+    })?;
+    Ok(())
 }
 
 #[cfg(test)]

@@ -48,6 +48,8 @@ pub enum RenderError {
     Camera(String),
     #[error(transparent)]
     Samples(#[from] crate::samples::SampleError),
+    #[error(transparent)]
+    File(#[from] crate::files::FileError),
     #[error("{key}: {message}")]
     Setting { key: &'static str, message: String },
     #[error("{path}: {message}")]

@@ -1,8 +1,9 @@
 //! Image files: `.png` is 8-bit RGBA, values clamped to [0,1] with no gamma; `.exr` is 32-bit
-//! float RGBA, linear. Files are written to a temporary name beside the target and renamed, so
-//! a failure never leaves a partial image behind.
+//! float RGBA, linear. Files are written through [`crate::files`]: an exclusive temporary beside
+//! the target, renamed when complete, so a failure never leaves a partial image behind.
 
 use super::RenderError;
+use std::io::{Seek, Write};
 use std::path::Path;
 
 /// Output formats by extension.
@@ -27,32 +28,28 @@ pub fn format_of(path: &Path) -> Result<ImageFormat, RenderError> {
     }
 }
 
-/// Writes RGBA pixels (row 0 at the top) to `path`.
-pub fn write_image(
+/// Refuses pixels holding NaN or ±Inf: such an image is garbage, and PNG's clamp would hide it.
+pub fn check_finite(pixels: &[[f32; 4]]) -> Result<(), RenderError> {
+    let bad = |p: &&[f32; 4]| p.iter().any(|v| !v.is_finite());
+    match pixels.iter().position(|p| bad(&p)) {
+        None => Ok(()),
+        Some(first) => Err(RenderError::NonFinite {
+            count: pixels.iter().filter(bad).count(),
+            first,
+        }),
+    }
+}
+
+/// Encodes RGBA pixels (row 0 at the top) in the format `path`'s extension names.
+pub fn encode_image(
+    out: &mut (impl Write + Seek),
     path: &Path,
     width: u32,
     height: u32,
     pixels: &[[f32; 4]],
-) -> Result<(), RenderError> {
-    let format = format_of(path)?;
-    if let Some(first) = pixels.iter().position(|p| p.iter().any(|v| !v.is_finite())) {
-        return Err(RenderError::NonFinite {
-            count: pixels
-                .iter()
-                .filter(|p| p.iter().any(|v| !v.is_finite()))
-                .count(),
-            first,
-        });
-    }
-    let err = |message: String| RenderError::Output {
-        path: path.display().to_string(),
-        message,
-    };
-    let file_name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = path.with_file_name(format!(".{file_name}.partial"));
+) -> std::io::Result<()> {
+    let format = format_of(path).map_err(std::io::Error::other)?;
+    let mismatch = || std::io::Error::other("pixel count does not match the image size");
     let result = match format {
         ImageFormat::Png => {
             let bytes: Vec<u8> = pixels
@@ -60,33 +57,51 @@ pub fn write_image(
                 .flat_map(|p| p.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8))
                 .collect();
             image::RgbaImage::from_raw(width, height, bytes)
-                .ok_or_else(|| err("pixel count does not match the image size".into()))?
-                .save_with_format(&tmp, image::ImageFormat::Png)
+                .ok_or_else(mismatch)?
+                .write_to(out, image::ImageFormat::Png)
         }
         ImageFormat::Exr => {
             let floats: Vec<f32> = pixels.iter().flat_map(|p| *p).collect();
             image::Rgba32FImage::from_raw(width, height, floats)
-                .ok_or_else(|| err("pixel count does not match the image size".into()))?
-                .save_with_format(&tmp, image::ImageFormat::OpenExr)
+                .ok_or_else(mismatch)?
+                .write_to(out, image::ImageFormat::OpenExr)
         }
     };
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(err(format!("cannot write image: {e}")));
-    }
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        err(format!("cannot write image: {e}"))
-    })
+    result.map_err(std::io::Error::other)
 }
+
+/// Writes RGBA pixels (row 0 at the top) to `path` through [`crate::files::write_output`]:
+/// nothing is written when a pixel is not finite or the encoder fails.
+pub fn write_image(
+    path: &Path,
+    width: u32,
+    height: u32,
+    pixels: &[[f32; 4]],
+) -> Result<(), RenderError> {
+    format_of(path)?;
+    check_finite(pixels)?;
+    crate::files::write_output("image", path, &[], |w| {
+        encode_image(w, path, width, height, pixels)
+    })?;
+    Ok(())
+}
+
+/// Largest image file [`read_image`] reads: a 16384² RGBA float EXR without compression.
+pub const MAX_IMAGE_BYTES: u64 = 16384 * 16384 * 16 + (1 << 20);
 
 /// Reads a `.png` or `.exr` image as linear RGBA floats (PNG bytes / 255, no gamma), row 0 at
 /// the top: the inverse of [`write_image`].
 pub fn read_image(path: &Path) -> Result<(u32, u32, Vec<[f32; 4]>), RenderError> {
-    let img = image::open(path).map_err(|e| RenderError::Output {
-        path: path.display().to_string(),
-        message: format!("cannot read image: {e}"),
-    })?;
+    let bytes = crate::files::read_input(path, MAX_IMAGE_BYTES)?;
+    let format = match format_of(path)? {
+        ImageFormat::Png => image::ImageFormat::Png,
+        ImageFormat::Exr => image::ImageFormat::OpenExr,
+    };
+    let img =
+        image::load_from_memory_with_format(&bytes, format).map_err(|e| RenderError::Output {
+            path: path.display().to_string(),
+            message: format!("cannot read image: {e}"),
+        })?;
     let rgba = img.to_rgba32f();
     let (w, h) = rgba.dimensions();
     let pixels = rgba

@@ -4,6 +4,11 @@
 
 use crate::gpu_types::TfPoint;
 
+/// Most control points a transfer function may have: the kernels scan them per lookup, so the
+/// count bounds the work of every sample (1024 is more than any colour-map preset ParaView
+/// ships).
+pub const MAX_POINTS: usize = 1024;
+
 /// Control points `[s, r, g, b, τ]`, sorted by s.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TransferFunction {
@@ -20,6 +25,12 @@ impl TransferFunction {
     pub fn from_toml(value: &toml::Value) -> Result<Self, String> {
         let expected = "a non-empty array of [s, r, g, b, tau] with s non-decreasing, finite numbers, colour and tau >= 0";
         let rows = value.as_array().filter(|a| !a.is_empty()).ok_or(expected)?;
+        if rows.len() > MAX_POINTS {
+            return Err(format!(
+                "at most {MAX_POINTS} points (found {}): {expected}",
+                rows.len()
+            ));
+        }
         let mut points = Vec::with_capacity(rows.len());
         for (i, row) in rows.iter().enumerate() {
             let row = row

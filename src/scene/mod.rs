@@ -31,12 +31,10 @@ use toml::{Table, Value};
 /// Errors of the scene layer.
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
-    #[error("{path}: cannot read: {source}")]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
+    #[error(transparent)]
+    File(#[from] crate::files::FileError),
+    #[error("{path}: expected UTF-8 text, found invalid bytes at byte {offset}")]
+    NotText { path: PathBuf, offset: usize },
     #[error("{path}: invalid TOML: {message}")]
     Toml { path: String, message: String },
     #[error("{origin}: key '{key}': expected {expected}, found {found}")]
@@ -68,6 +66,10 @@ pub enum VolumeSource {
         array: Option<String>,
     },
 }
+
+/// Largest scene file we read: scenes are a few hundred bytes; a transfer function of
+/// [`crate::render::transfer::MAX_POINTS`] points fits many times over.
+pub const MAX_SCENE_BYTES: u64 = 4 << 20;
 
 /// A validated scene.
 #[derive(Debug, Clone, PartialEq)]
@@ -175,10 +177,12 @@ interval = "hermite"
 background = [0.0, 0.0, 0.0]
 "#;
 
+/// A value as an error message quotes it: short and escaped (see [`crate::files::excerpt`]).
 fn describe(v: &Value) -> String {
+    use crate::files::{EXCERPT_CHARS, excerpt_text};
     match v {
-        Value::String(s) => format!("\"{s}\""),
-        other => other.to_string(),
+        Value::String(s) => format!("\"{}\"", excerpt_text(s, EXCERPT_CHARS)),
+        other => excerpt_text(&other.to_string(), 2 * EXCERPT_CHARS),
     }
 }
 
@@ -350,7 +354,7 @@ fn parse_isosurfaces(v: &Value) -> Result<Vec<Isosurface>, String> {
 /// Parses a `--set section.key=value` argument into the table.
 fn apply_set(table: &mut Table, arg: &str) -> Result<(), SceneError> {
     let set_err = |message: String| SceneError::Set {
-        arg: arg.to_string(),
+        arg: crate::files::excerpt_text(arg, 2 * crate::files::EXCERPT_CHARS),
         message,
     };
     let (path, raw) = arg
@@ -395,7 +399,7 @@ fn check_known(table: &Table, origin: &str) -> Result<(), SceneError> {
         let Some((_, keys)) = KNOWN.iter().find(|(s, _)| s == section) else {
             return Err(SceneError::UnknownKey {
                 origin: origin.into(),
-                key: section.clone(),
+                key: crate::files::excerpt_text(section, crate::files::EXCERPT_CHARS),
                 context: " (sections)".into(),
                 known: KNOWN.iter().map(|(s, _)| *s).collect::<Vec<_>>().join(", "),
             });
@@ -403,7 +407,7 @@ fn check_known(table: &Table, origin: &str) -> Result<(), SceneError> {
         let Value::Table(t) = value else {
             return Err(SceneError::Key {
                 origin: origin.into(),
-                key: section.clone(),
+                key: crate::files::excerpt_text(section, crate::files::EXCERPT_CHARS),
                 expected: "a section".into(),
                 found: describe(value),
             });
@@ -412,7 +416,10 @@ fn check_known(table: &Table, origin: &str) -> Result<(), SceneError> {
             if !keys.contains(&key.as_str()) {
                 return Err(SceneError::UnknownKey {
                     origin: origin.into(),
-                    key: format!("{section}.{key}"),
+                    key: crate::files::excerpt_text(
+                        &format!("{section}.{key}"),
+                        crate::files::EXCERPT_CHARS,
+                    ),
                     context: format!(" of [{section}]"),
                     known: keys.join(", "),
                 });
@@ -423,13 +430,23 @@ fn check_known(table: &Table, origin: &str) -> Result<(), SceneError> {
 }
 
 impl Scene {
+    /// The data files this scene reads, as (key, path), so that no output can overwrite one.
+    pub fn input_files(&self) -> Vec<(&'static str, &Path)> {
+        match &self.volume {
+            VolumeSource::File { path, .. } => vec![("volume.file", path.as_path())],
+            VolumeSource::MarschnerLobb { .. } => Vec::new(),
+        }
+    }
+
     /// Loads a scene file (or the built-in default with `None`) and applies `--set` overrides.
     pub fn load(path: Option<&Path>, overrides: &[String]) -> Result<Self, SceneError> {
         let (text, origin, base) = match path {
             Some(p) => (
-                std::fs::read_to_string(p).map_err(|source| SceneError::Io {
-                    path: p.to_path_buf(),
-                    source,
+                String::from_utf8(crate::files::read_input(p, MAX_SCENE_BYTES)?).map_err(|e| {
+                    SceneError::NotText {
+                        path: p.to_path_buf(),
+                        offset: e.utf8_error().valid_up_to(),
+                    }
                 })?,
                 p.display().to_string(),
                 p.parent().map(Path::to_path_buf).unwrap_or_default(),

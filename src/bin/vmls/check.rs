@@ -1,6 +1,6 @@
 //! `vmls check`: the hard-case and convergence suite, one line per measured number.
 
-use crate::{CliError, DeviceArgs, context, write_json};
+use crate::{CliError, DeviceArgs, context, plan_outputs, write_json};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -37,6 +37,7 @@ pub fn check(args: &CheckArgs) -> Result<(), CliError> {
             "no case matches '{f}' (vmls check --list names them)"
         )));
     }
+    let outputs = plan_outputs(None, None, &[("--json", args.json.as_deref())])?;
     let ctx = context(&args.device)?;
     println!("device: {} ({})", ctx.info().name, ctx.info().driver);
     let outcomes = vmls::check::run(&ctx, args.quick, args.case.as_deref(), |o| {
@@ -52,6 +53,7 @@ pub fn check(args: &CheckArgs) -> Result<(), CliError> {
     });
     if let Some(path) = &args.json {
         write_json(
+            outputs,
             path,
             &serde_json::json!({
                 "device": ctx.info().name,

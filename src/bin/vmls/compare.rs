@@ -3,13 +3,18 @@
 use crate::CliError;
 use std::path::Path;
 use vmls::bench::metrics::image_error;
+use vmls::files::Outputs;
 use vmls::render::RenderError;
-use vmls::render::output::{format_of, read_image, write_image};
+use vmls::render::output::{encode_image, format_of, read_image};
 
 pub fn compare(image: &Path, reference: &Path, diff: Option<&Path>) -> Result<(), CliError> {
     if let Some(d) = diff {
         format_of(d)?;
     }
+    let mut outputs = Outputs::new(
+        &diff.map(|d| ("--diff", d)).into_iter().collect::<Vec<_>>(),
+        &[("image", image), ("reference", reference)],
+    )?;
     let (w, h, a) = read_image(image)?;
     let (rw, rh, b) = read_image(reference)?;
     let Some(e) = image_error(&a, &b, w).filter(|_| (w, h) == (rw, rh)) else {
@@ -54,7 +59,7 @@ pub fn compare(image: &Path, reference: &Path, diff: Option<&Path>) -> Result<()
                 [r, g, b, 1.0]
             })
             .collect();
-        write_image(path, w, h, &heat)?;
+        outputs.write(path, |out| encode_image(out, path, w, h, &heat))?;
     }
-    Ok(())
+    Ok(outputs.commit()?)
 }

@@ -11,8 +11,9 @@ mod render;
 
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
-use std::io::IsTerminal;
+use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
+use vmls::files::Outputs;
 use vmls::render::RenderError;
 use vmls::scene::{Scene, SceneError};
 use vmls::vk::{Context, ContextOptions};
@@ -139,6 +140,12 @@ enum CliError {
     Usage(String),
 }
 
+impl From<vmls::files::FileError> for CliError {
+    fn from(e: vmls::files::FileError) -> Self {
+        CliError::Render(e.into())
+    }
+}
+
 impl From<vmls::vk::VkError> for CliError {
     fn from(e: vmls::vk::VkError) -> Self {
         CliError::Render(e.into())
@@ -178,15 +185,55 @@ fn progress_bar(message: &'static str) -> ProgressBar {
     bar
 }
 
-fn write_json(path: &Path, value: &serde_json::Value) -> Result<(), RenderError> {
-    let text = serde_json::to_string_pretty(value).unwrap_or_default();
-    std::fs::write(path, text + "\n").map_err(|e| RenderError::Output {
-        path: path.display().to_string(),
-        message: format!("cannot write: {e}"),
-    })
+/// Plans a command's outputs (see [`vmls::files::Outputs`]): the scene file and the data files
+/// it names are inputs no output may be.
+fn plan_outputs(
+    scene_path: Option<&Path>,
+    scene: Option<&Scene>,
+    outputs: &[(&str, Option<&Path>)],
+) -> Result<Outputs, CliError> {
+    let mut inputs: Vec<(&str, &Path)> = scene_path.map(|p| ("scene", p)).into_iter().collect();
+    if let Some(scene) = scene {
+        inputs.extend(scene.input_files());
+    }
+    let outputs: Vec<(&str, &Path)> = outputs
+        .iter()
+        .filter_map(|&(role, p)| p.map(|p| (role, p)))
+        .collect();
+    Ok(Outputs::new(&outputs, &inputs)?)
 }
 
+/// Writes `value` as pretty JSON to `path`, one of the planned `outputs`, and commits them.
+fn write_json(
+    mut outputs: Outputs,
+    path: &Path,
+    value: &serde_json::Value,
+) -> Result<(), CliError> {
+    outputs.write(path, json_to(value))?;
+    Ok(outputs.commit()?)
+}
+
+/// Writes `value` as pretty JSON and a newline.
+fn json_to(
+    value: &serde_json::Value,
+) -> impl FnOnce(&mut std::io::BufWriter<&std::fs::File>) -> std::io::Result<()> + '_ {
+    move |w| {
+        serde_json::to_writer_pretty(&mut *w, value)?;
+        w.write_all(b"\n")
+    }
+}
+
+/// Longest error line the CLI prints, in characters.
+const MAX_REPORT_CHARS: usize = 2000;
+
+/// The error and its causes on one line. Every quote of input is already a short escaped
+/// excerpt; as a last guard the line is escaped again (no control character reaches the
+/// terminal) and cut to [`MAX_REPORT_CHARS`], whatever a lower layer or crate put in it.
 fn report(error: &dyn std::error::Error) -> String {
+    vmls::files::printable(&chain(error), MAX_REPORT_CHARS)
+}
+
+fn chain(error: &dyn std::error::Error) -> String {
     let mut line = error.to_string();
     let mut source = error.source();
     while let Some(s) = source {

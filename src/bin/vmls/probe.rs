@@ -1,6 +1,6 @@
 //! `vmls probe`: the device's ceilings and MLS evaluation throughput, side by side.
 
-use crate::{CliError, DeviceArgs, context, write_json};
+use crate::{CliError, DeviceArgs, context, plan_outputs, write_json};
 use std::path::Path;
 use vmls::probe::{
     MemoryMode, coherent_order, fma_probe, median, memory_probe, mls_probe, random_points,
@@ -36,6 +36,7 @@ pub fn run_file_probe(
     overrides.extend(set.iter().cloned());
     // An empty scene, not the built-in one: its generator would conflict with volume.file.
     let scene = Scene::parse("", "vmls probe --file", Path::new("."), &overrides)?;
+    let outputs = plan_outputs(None, Some(&scene), &[("--json", json)])?;
     let field = scene.field(|_| {})?;
     let stats = field
         .octree
@@ -82,6 +83,7 @@ pub fn run_file_probe(
     }
     if let Some(path) = json {
         write_json(
+            outputs,
             path,
             &serde_json::json!({
                 "device": ctx.info().name,
@@ -102,6 +104,7 @@ pub fn run_probe(
     json: Option<&Path>,
     device: &DeviceArgs,
 ) -> Result<(), CliError> {
+    let outputs = plan_outputs(None, None, &[("--json", json)])?;
     let ctx = context(device)?;
     let compiler = ShaderCompiler::new()?;
     println!("device: {} ({})", ctx.info().name, ctx.info().driver);
@@ -182,6 +185,7 @@ pub fn run_probe(
     }
     if let Some(path) = json {
         write_json(
+            outputs,
             path,
             &serde_json::json!({
                 "device": ctx.info().name,

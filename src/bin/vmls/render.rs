@@ -1,13 +1,13 @@
 //! `vmls render`: one scene to an image on the GPU (or with the f64 CPU twins), with statistics.
 
 use crate::probe::octree_json;
-use crate::{CliError, DeviceArgs, context, progress_bar, write_json};
+use crate::{CliError, DeviceArgs, context, json_to, plan_outputs, progress_bar};
 use std::path::Path;
 use std::time::Instant;
 use vmls::data::dataset::Location;
 use vmls::render::RenderError;
-use vmls::render::evalmap::{check_path, write_eval_map};
-use vmls::render::output::{format_of, write_image};
+use vmls::render::evalmap::{check_path, eval_map_image};
+use vmls::render::output::{check_finite, encode_image, format_of};
 use vmls::render::renderer::Renderer;
 use vmls::render::skip::SkipReport;
 use vmls::scene::Scene;
@@ -27,6 +27,15 @@ pub fn run_render(
         check_path(map)?;
     }
     let scene = Scene::load(scene_path, set)?;
+    let mut outputs = plan_outputs(
+        scene_path,
+        Some(&scene),
+        &[
+            ("-o", Some(output)),
+            ("--stats", stats),
+            ("--eval-map", eval_map),
+        ],
+    )?;
     if eval_map.is_some() && scene.render.method.splat_shading().is_some() {
         return Err(CliError::Usage(format!(
             "--eval-map counts MLS evaluations per ray; render.method = \"{}\" splats and \
@@ -78,14 +87,17 @@ pub fn run_render(
         }
         .into());
     }
-    write_image(
-        output,
-        scene.camera.width,
-        scene.camera.height,
-        &image.pixels,
-    )?;
+    let (width, height) = (scene.camera.width, scene.camera.height);
+    check_finite(&image.pixels)?;
+    outputs.write(output, |w| {
+        encode_image(w, output, width, height, &image.pixels)
+    })?;
     if let Some(map) = eval_map {
-        write_eval_map(map, scene.camera.width, scene.camera.height, &image.counts)?;
+        let img = eval_map_image(map, width, height, &image.counts)?;
+        outputs.write(map, |w| {
+            img.write_to(w, image::ImageFormat::Png)
+                .map_err(std::io::Error::other)
+        })?;
     }
     if let Some(stats) = stats {
         let evaluations: u64 = image.counts.iter().map(|&c| u64::from(c)).sum();
@@ -162,9 +174,9 @@ pub fn run_render(
                 "supports": field.samples.provenance.support_kind,
             },
         });
-        write_json(stats, &value)?;
+        outputs.write(stats, json_to(&value))?;
     }
-    Ok(())
+    Ok(outputs.commit()?)
 }
 
 /// `vmls render --cpu`: the f64 CPU twins, rows over all cores.
@@ -177,6 +189,11 @@ pub fn run_render_cpu(
     let start = Instant::now();
     format_of(output)?;
     let scene = Scene::load(scene_path, set)?;
+    let mut outputs = plan_outputs(
+        scene_path,
+        Some(&scene),
+        &[("-o", Some(output)), ("--stats", stats)],
+    )?;
     let field = scene.field(|_| {})?;
     let (pixels, splat, skip): (Vec<[f64; 4]>, _, _) = match scene.render.method.splat_shading() {
         Some(shading) => {
@@ -206,7 +223,10 @@ pub fn run_render_cpu(
         }
     };
     let rgba: Vec<[f32; 4]> = pixels.iter().map(|p| p.map(|c| c as f32)).collect();
-    write_image(output, scene.camera.width, scene.camera.height, &rgba)?;
+    check_finite(&rgba)?;
+    outputs.write(output, |w| {
+        encode_image(w, output, scene.camera.width, scene.camera.height, &rgba)
+    })?;
     if let Some(stats) = stats {
         let value = serde_json::json!({
             "device": "cpu (f64 reference twins)",
@@ -223,9 +243,9 @@ pub fn run_render_cpu(
             })),
             "skip": skip.as_ref().map(skip_json),
         });
-        write_json(stats, &value)?;
+        outputs.write(stats, json_to(&value))?;
     }
-    Ok(())
+    Ok(outputs.commit()?)
 }
 
 /// `--stats` "skip": what empty-space skipping did in the frame.
