@@ -370,3 +370,267 @@ fn compare_counts_non_finite_pixels_and_fails() {
     );
     assert!(!String::from_utf8_lossy(&out.stdout).contains("NaN"));
 }
+
+/// Asserts a quick failure naming every needle, with nothing written.
+fn refused_quickly(args: &[&str], needles: &[&str], png: &Path) {
+    let out = vmls_within(args, Duration::from_secs(120));
+    assert_fails(&out, needles, png);
+}
+
+#[test]
+fn keys_that_set_work_or_memory_are_range_checked_by_name() {
+    let d = dir("ranges");
+    let png = d.join("x.png");
+    let cases: &[(&str, &[&str])] = &[
+        ("render.step=1e-5", &["render.step", "[0.001, 1000]"]),
+        ("render.step=1e-9", &["render.step"]),
+        ("render.reference_step=0", &["render.reference_step"]),
+        ("render.l_min=1e-9", &["render.l_min"]),
+        ("render.l_max=1e9", &["render.l_max"]),
+        ("render.epsilon=-1", &["render.epsilon"]),
+        ("render.table_resolution=1", &["render.table_resolution"]),
+        (
+            "render.table_resolution=100000",
+            &["render.table_resolution"],
+        ),
+        ("camera.width=100000", &["camera.width"]),
+        ("camera.eye=[1e308, 0, 0]", &["camera.eye", "1e15"]),
+        ("camera.target=[0, 0, -1e300]", &["camera.target"]),
+        (
+            "render.background=[1e308, 0, 0]",
+            &["render.background", "1e6"],
+        ),
+        ("render.background=[nan, 0, 0]", &["render.background"]),
+        (
+            "transfer.points=[[0, 0, 0, 0, 0], [1e38, 1, 1, 1, 1]]",
+            &["transfer.points", "1e30"],
+        ),
+        (
+            "transfer.points=[[0, 0, 0, 0, 1e300]]",
+            &["transfer.points"],
+        ),
+        (
+            "transfer.isosurfaces=[{ value = 1e35 }]",
+            &["transfer.isosurfaces"],
+        ),
+    ];
+    for (set, needles) in cases {
+        refused_quickly(&["render", "-o", s(&png), "--set", set], needles, &png);
+    }
+    // The image's pixel count, beyond each side's own range.
+    refused_quickly(
+        &[
+            "render",
+            "-o",
+            s(&png),
+            "--set",
+            "camera.width=16384",
+            "--set",
+            "camera.height=16384",
+        ],
+        &["camera.width × camera.height", "67108864"],
+        &png,
+    );
+    // A transfer function of 10 000 points (it took over a minute).
+    let points: Vec<String> = (0..10_000)
+        .map(|i| format!("[{}, 1, 1, 1, 1]", f64::from(i) / 1e4))
+        .collect();
+    let scene = d.join("tf.toml");
+    std::fs::write(
+        &scene,
+        format!("[transfer]\npoints = [{}]\n", points.join(", ")),
+    )
+    .expect("write");
+    refused_quickly(
+        &["render", s(&scene), "-o", s(&png)],
+        &["transfer.points", "at most 1024 points (found 10000)"],
+        &png,
+    );
+    // Table resolutions the scene allows but the device cannot bind name the key and the
+    // largest this device takes.
+    refused_quickly(
+        &[
+            "render",
+            "-o",
+            s(&png),
+            "--set",
+            "render.table_resolution=4096",
+        ],
+        &[
+            "render.table_resolution",
+            "expected at most",
+            "maxStorageBufferRange",
+        ],
+        &png,
+    );
+    // A step the f32 ray parameter cannot resolve at the eye's distance.
+    refused_quickly(
+        &["render", "-o", s(&png), "--set", "camera.eye=[1e14, 0, 0]"],
+        &["render.step", "f32 resolution", "camera.eye"],
+        &png,
+    );
+    // probe's counts.
+    for arg in ["--points=0", "--repeats=0", "--resolution=1"] {
+        let out = vmls(&["probe", arg]);
+        assert_eq!(out.status.code(), Some(2), "probe {arg}");
+    }
+}
+
+#[test]
+fn the_work_budget_refuses_and_force_lifts_it() {
+    let d = dir("budget");
+    let png = d.join("x.png");
+    // 1024² rays at a step of 0.01 spacings plan 7e9 evaluations; the camera looks away
+    // from the volume, so that the forced render is quick although the bound is not.
+    let args = [
+        "render",
+        "-o",
+        s(&png),
+        "--set",
+        "render.step=0.01",
+        "--set",
+        "camera.width=1024",
+        "--set",
+        "camera.height=1024",
+        "--set",
+        "camera.target=[60, 40, 50]",
+    ];
+    refused_quickly(&args, &["work budget", "render.step", "--force"], &png);
+    let mut forced = args.to_vec();
+    forced.push("--force");
+    let out = vmls_within(&forced, Duration::from_secs(300));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(png.exists());
+}
+
+#[cfg(unix)]
+#[test]
+fn ctrl_c_stops_a_long_render_and_leaves_nothing() {
+    let d = dir("ctrl-c");
+    let (png, stats) = (d.join("x.png"), d.join("stats.json"));
+    // The reference integrator at 1024² takes minutes on lavapipe.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_vmls"))
+        .args([
+            "render",
+            "-o",
+            s(&png),
+            "--stats",
+            s(&stats),
+            "--set",
+            "render.method=\"reference\"",
+            "--set",
+            "camera.width=1024",
+            "--set",
+            "camera.height=1024",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run vmls");
+    // Wait until the temporaries exist (the outputs are planned), then a little more.
+    let start = Instant::now();
+    while listing(&d).is_empty() && start.elapsed() < Duration::from_secs(60) {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    std::thread::sleep(Duration::from_secs(3));
+    assert!(
+        child.try_wait().expect("wait").is_none(),
+        "the render ended too early to test"
+    );
+    let pid = i32::try_from(child.id()).expect("pid");
+    // SAFETY: `pid` is our own child, still running (checked above, never reaped).
+    assert_eq!(unsafe { libc::kill(pid, libc::SIGINT) }, 0);
+    let start = Instant::now();
+    while child.try_wait().expect("wait").is_none() {
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "no stop after Ctrl-C"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let out = child.wait_with_output().expect("output");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("interrupted"), "{stderr}");
+    assert!(listing(&d).is_empty(), "left behind: {:?}", listing(&d));
+}
+
+/// Writes a little-endian float NRRD of `dims` with `values`, or extra header lines.
+fn nrrd(path: &Path, dims: [usize; 3], extra: &str, values: &[f32]) {
+    let mut bytes = format!(
+        "NRRD0004\ntype: float\ndimension: 3\nsizes: {} {} {}\n{extra}endian: little\nencoding: raw\n\n",
+        dims[0], dims[1], dims[2]
+    )
+    .into_bytes();
+    for v in values {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    std::fs::write(path, bytes).expect("write");
+}
+
+#[test]
+fn geometry_and_values_beyond_f32_or_without_volume_are_refused_by_name() {
+    let d = dir("geometry");
+    let png = d.join("x.png");
+    let ramp: Vec<f32> = (0..64).map(|i| i as f32 / 63.0).collect();
+    let file = |name: &str| d.join(name);
+    let set = |p: &Path| format!("volume.file={}", s(p));
+    let cases: Vec<(std::path::PathBuf, Vec<&str>)> = vec![
+        {
+            let p = file("spacing.nrrd");
+            nrrd(&p, [4, 4, 4], "spacings: 1e308 1 1\n", &ramp);
+            (p, vec!["spacing.nrrd", "extent along x", "1e15"])
+        },
+        {
+            let p = file("flat.nrrd");
+            nrrd(&p, [8, 8, 1], "", &ramp);
+            (
+                p,
+                vec!["flat.nrrd", "grid dimensions [8, 8, 1]", "1 along z"],
+            )
+        },
+        {
+            let p = file("huge.nrrd");
+            let mut v = ramp.clone();
+            v[9] = 1e38;
+            nrrd(&p, [4, 4, 4], "", &v);
+            (
+                p,
+                vec!["huge.nrrd", "sample 9 (x=1, y=2, z=0)", "1e38", "±1e30"],
+            )
+        },
+        {
+            let p = file("negative.nrrd");
+            let v: Vec<f32> = ramp.iter().map(|x| -1e38 * x).collect();
+            nrrd(&p, [4, 4, 4], "", &v);
+            (p, vec!["negative.nrrd", "sample 1", "±1e30"])
+        },
+        {
+            let p = file("spacing.vtk");
+            let mut text = String::from(
+                "# vtk DataFile Version 3.0\nt\nASCII\nDATASET STRUCTURED_POINTS\nDIMENSIONS 2 2 2\nSPACING 1e308 1 1\nORIGIN 0 0 0\nPOINT_DATA 8\nSCALARS f float\nLOOKUP_TABLE default\n",
+            );
+            text.push_str("0 1 2 3 4 5 6 7\n");
+            std::fs::write(&p, text).expect("write");
+            (p, vec!["spacing.vtk", "extent along x"])
+        },
+        {
+            let p = file("origin.vtk");
+            let text = "# vtk DataFile Version 3.0\nt\nASCII\nDATASET STRUCTURED_POINTS\nDIMENSIONS 2 2 2\nSPACING 1 1 1\nORIGIN 0 0 1e300\nPOINT_DATA 8\nSCALARS f float\nLOOKUP_TABLE default\n0 1 2 3 4 5 6 7\n";
+            std::fs::write(&p, text).expect("write");
+            (p, vec!["origin.vtk", "extent along z"])
+        },
+        {
+            let p = file("plane.csv");
+            std::fs::write(&p, "x,y,z,v\n0,0,0,1\n1,0,0,2\n0,1,0,3\n1,1,0,4\n").expect("write");
+            (p, vec!["plane.csv", "extent along z"])
+        },
+    ];
+    for (p, needles) in &cases {
+        refused_quickly(&["render", "-o", s(&png), "--set", &set(p)], needles, &png);
+    }
+}

@@ -265,6 +265,96 @@ impl Geometry {
         }
         (lo, hi)
     }
+
+    /// Refuses geometry the renderer cannot resolve or that encloses no volume, naming the
+    /// axis: a regular grid's spacing must be finite and positive; every coordinate within
+    /// ±[`super::MAX_COORDINATE`]; every axis at least [`super::MIN_EXTENT`] long and
+    /// [`super::MIN_RELATIVE_EXTENT`] of its coordinates' magnitude; a grid needs two samples
+    /// along every axis (one layer, 8×8×1, is a plane with no thickness to integrate over:
+    /// vmls rejects it rather than render a transparent image).
+    pub fn check_domain(&self, path: &Path) -> Result<(), DataError> {
+        let err = |what: String, expected: &str, found: String| DataError::Geometry {
+            path: path.to_path_buf(),
+            what,
+            expected: expected.to_string(),
+            found,
+        };
+        const AXES: [&str; 3] = ["x", "y", "z"];
+        if let Geometry::Image {
+            origin, spacing, ..
+        } = self
+        {
+            for a in 0..3 {
+                if !origin[a].is_finite() {
+                    return Err(err(
+                        format!("origin along {}", AXES[a]),
+                        "a finite number",
+                        origin[a].to_string(),
+                    ));
+                }
+                if !(spacing[a].is_finite() && spacing[a] > 0.0) {
+                    return Err(err(
+                        format!("spacing along {}", AXES[a]),
+                        "a finite number > 0",
+                        spacing[a].to_string(),
+                    ));
+                }
+            }
+        }
+        let grid_dims = match self {
+            Geometry::Image { dims, .. } | Geometry::Structured { dims, .. } => Some(*dims),
+            Geometry::Rectilinear { coords } => Some(coords.each_ref().map(Vec::len)),
+            _ => None,
+        };
+        if let Some(dims) = grid_dims
+            && let Some(a) = (0..3).find(|&a| dims[a] < 2)
+        {
+            return Err(err(
+                format!("grid dimensions {dims:?}"),
+                "at least 2 samples along every axis (a single layer has no thickness to render)",
+                format!("{} along {}", dims[a], AXES[a]),
+            ));
+        }
+        if self.point_count() == 0 {
+            return Ok(());
+        }
+        let (lo, hi) = match self {
+            // Grids have their corners without a walk over every point.
+            Geometry::Image {
+                dims,
+                origin,
+                spacing,
+            } => (
+                *origin,
+                std::array::from_fn(|a| origin[a] + (dims[a] - 1) as f64 * spacing[a]),
+            ),
+            Geometry::Rectilinear { coords } => (
+                coords.each_ref().map(|c| c[0]),
+                coords.each_ref().map(|c| c[c.len() - 1]),
+            ),
+            _ => self.bounds(),
+        };
+        for a in 0..3 {
+            let magnitude = lo[a].abs().max(hi[a].abs());
+            if magnitude > super::MAX_COORDINATE {
+                return Err(err(
+                    format!("extent along {} (origin, spacing, points)", AXES[a]),
+                    "coordinates within ±1e15 (the kernels square distances in f32)",
+                    format!("[{:e}, {:e}]", lo[a], hi[a]),
+                ));
+            }
+            let extent = hi[a] - lo[a];
+            if extent < super::MIN_EXTENT || extent < super::MIN_RELATIVE_EXTENT * magnitude {
+                return Err(err(
+                    format!("extent along {}", AXES[a]),
+                    "a domain at least 1e-12 and 1e-9 of its coordinates' magnitude long along \
+                     every axis (flat or sub-resolution data encloses no volume)",
+                    format!("[{:e}, {:e}]", lo[a], hi[a]),
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Position of point i of a regular grid stored x fastest.
@@ -327,7 +417,8 @@ impl Dataset {
         })
     }
 
-    /// Checks what every loader must guarantee: finite coordinates, array lengths, cell
+    /// Checks what every loader must guarantee: finite coordinates, a domain the kernels can
+    /// resolve ([`Geometry::check_domain`]), renderable values ([`super::renderable_value`]), array lengths, cell
     /// indices in range and point counts per cell type. Errors name `path`.
     pub fn validate(&self, path: &Path) -> Result<(), DataError> {
         let n = self.geometry.point_count();
@@ -406,6 +497,7 @@ impl Dataset {
                 }
             }
         }
+        self.geometry.check_domain(path)?;
         let cells = self.geometry.cell_count();
         for a in &self.arrays {
             let expected = match a.location {
@@ -420,7 +512,7 @@ impl Dataset {
                     &a.values.len().to_string(),
                 ));
             }
-            if let Some(i) = a.values.iter().position(|v| !v.is_finite()) {
+            if let Some(i) = a.values.iter().position(|v| !super::renderable_value(*v)) {
                 return Err(DataError::NonFiniteValue {
                     path: path.to_path_buf(),
                     array: a.name.clone(),

@@ -28,6 +28,28 @@ use std::path::{Path, PathBuf};
 /// Vulkan storage-buffer limit we know of and would only fail later, less clearly.
 pub const MAX_SAMPLES: u64 = 1 << 30;
 
+/// Largest magnitude of a data value. The kernels compute in f32, whose largest value is
+/// 3.4e38: values of ±1e38 overflow in MLS sums and render wrongly, ±1e34 render exactly
+/// (measured); 1e30 leaves room for every weighted sum and product the kernels form.
+pub const MAX_VALUE: f32 = 1e30;
+
+/// Largest magnitude of any coordinate (origin, far corner, point): squared distances, which
+/// the kernels form in f32, stay below 1e30.
+pub const MAX_COORDINATE: f64 = 1e15;
+
+/// Smallest extent of a domain along an axis, in world units (squared, still a normal f32).
+pub const MIN_EXTENT: f64 = 1e-12;
+
+/// Smallest extent along an axis relative to the coordinates' magnitude there: below it the
+/// f64 world positions (and the f32 ones relative to the domain's centre) cannot tell
+/// neighbouring samples apart.
+pub const MIN_RELATIVE_EXTENT: f64 = 1e-9;
+
+/// Whether a data value is one vmls renders: finite and within ±[`MAX_VALUE`].
+pub fn renderable_value(v: f32) -> bool {
+    v.is_finite() && v.abs() <= MAX_VALUE
+}
+
 /// Largest data file we read: [`MAX_SAMPLES`] doubles and room for a header, or text.
 pub const MAX_FILE_BYTES: u64 = 8 * MAX_SAMPLES + (1 << 20);
 
@@ -119,7 +141,7 @@ pub enum DataError {
         found: u64,
     },
     #[error(
-        "{path}: sample {index} (x={x}, y={y}, z={z}) is {value}: NaN and infinite values are rejected"
+        "{path}: sample {index} (x={x}, y={y}, z={z}) is {value:e}: expected a finite value within ±1e30 (NaN, infinite and larger values are rejected: the kernels' f32 arithmetic would overflow)"
     )]
     NonFinite {
         path: PathBuf,
@@ -147,8 +169,16 @@ pub enum DataError {
         index: usize,
         point: [f64; 3],
     },
+    /// The domain's geometry is outside what the kernels can resolve, or has no volume.
+    #[error("{path}: {what}: expected {expected}, found {found}")]
+    Geometry {
+        path: PathBuf,
+        what: String,
+        expected: String,
+        found: String,
+    },
     #[error(
-        "{path}: array '{array}' element {index} is {value}: NaN and infinite values are rejected"
+        "{path}: array '{array}' element {index} is {value:e}: expected a finite value within ±1e30 (NaN, infinite and larger values are rejected: the kernels' f32 arithmetic would overflow)"
     )]
     NonFiniteValue {
         path: PathBuf,
@@ -211,9 +241,13 @@ pub fn checked_sample_count(path: &Path, dims: [u64; 3]) -> Result<usize, DataEr
     })
 }
 
-/// Rejects the first NaN/Inf value, naming its grid position.
+/// Rejects the first value that is not [`renderable_value`], naming its grid position.
 pub fn check_finite(path: &Path, dims: [usize; 3], values: &[f32]) -> Result<(), DataError> {
-    if let Some((index, &value)) = values.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+    if let Some((index, &value)) = values
+        .iter()
+        .enumerate()
+        .find(|(_, v)| !renderable_value(**v))
+    {
         let x = index % dims[0];
         let y = (index / dims[0]) % dims[1];
         let z = index / (dims[0] * dims[1]);
@@ -236,17 +270,24 @@ pub fn load(path: &Path, array: Option<&str>) -> Result<Volume, DataError> {
         .file_name()
         .map(|n| n.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default();
-    if name.ends_with(".vtk") {
-        vtk::load(path, array)
+    let volume = if name.ends_with(".vtk") {
+        vtk::load(path, array)?
     } else if name.ends_with(".nrrd") {
-        nrrd::load(path)
+        nrrd::load(path)?
     } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
-        nifti::load(path)
+        nifti::load(path)?
     } else {
-        Err(DataError::UnknownFormat {
+        return Err(DataError::UnknownFormat {
             path: path.to_path_buf(),
-        })
+        });
+    };
+    dataset::Geometry::Image {
+        dims: volume.dims,
+        origin: volume.origin,
+        spacing: volume.spacing,
     }
+    .check_domain(path)?;
+    Ok(volume)
 }
 
 /// Loads any supported file as a [`Dataset`] (geometry and every scalar array), validated by

@@ -20,7 +20,7 @@ mod input;
 mod output;
 
 pub use input::{FileId, read_input};
-pub use output::{Outputs, write_output};
+pub use output::{Outputs, remove_temporaries, write_output};
 
 use std::path::PathBuf;
 

@@ -4,14 +4,48 @@ use super::{FileError, FileId};
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 use tempfile::NamedTempFile;
+
+/// The temporaries alive in this process, so that a signal handler that must exit at once
+/// can still remove them ([`remove_temporaries`]).
+static LIVE: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+fn live() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {
+    // A panic while holding the lock leaves the list as valid as before it.
+    LIVE.lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// Deletes every temporary an unfinished [`Outputs`] holds, for a process about to exit
+/// without unwinding (a second Ctrl-C): nothing partial is left on disk.
+pub fn remove_temporaries() {
+    for path in live().drain(..) {
+        let _ = std::fs::remove_file(path);
+    }
+}
 
 /// One planned output.
 struct Item {
     role: String,
     target: PathBuf,
-    temp: NamedTempFile,
+    /// `None` once renamed onto the target.
+    temp: Option<NamedTempFile>,
     written: bool,
+}
+
+impl Item {
+    fn temp_path(&self) -> Option<PathBuf> {
+        self.temp.as_ref().map(|t| t.path().to_path_buf())
+    }
+}
+
+impl Drop for Item {
+    fn drop(&mut self) {
+        if let Some(path) = self.temp_path() {
+            live().retain(|p| *p != path);
+        }
+    }
 }
 
 /// A set of outputs written all or nothing (see the module contract).
@@ -91,10 +125,12 @@ impl Outputs {
                     Some(p) if !p.as_os_str().is_empty() => p,
                     _ => Path::new("."),
                 };
+                let temp = temporary_for(target, dir)?;
+                live().push(temp.path().to_path_buf());
                 Ok(Item {
                     role: role.to_string(),
                     target: target.to_path_buf(),
-                    temp: temporary_for(target, dir)?,
+                    temp: Some(temp),
                     written: false,
                 })
             })
@@ -120,7 +156,10 @@ impl Outputs {
             action: "write",
             source,
         };
-        let file = item.temp.as_file();
+        let Some(temp) = item.temp.as_ref() else {
+            return Err(io(std::io::Error::other("the output was already renamed")));
+        };
+        let file = temp.as_file();
         let mut w = BufWriter::new(file);
         write(&mut w).map_err(io)?;
         w.flush().map_err(io)?;
@@ -140,8 +179,13 @@ impl Outputs {
                 found: "an output that was never written".into(),
             });
         }
-        for item in self.items {
-            item.temp.persist(&item.target).map_err(|e| FileError::Io {
+        for mut item in self.items {
+            let path = item.temp_path();
+            let Some(temp) = item.temp.take() else {
+                continue;
+            };
+            live().retain(|p| Some(p) != path.as_ref());
+            temp.persist(&item.target).map_err(|e| FileError::Io {
                 path: item.target.clone(),
                 action: "rename the finished temporary onto",
                 source: e.error,

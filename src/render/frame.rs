@@ -17,6 +17,7 @@ use crate::gpu_types::{IsoSurface, RayPush, binding, ray_count};
 use crate::vk::{
     BindGroup, Buffer, BufferUsage, ComputePipeline, Context, ShaderCompiler, VkError,
 };
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Pixels per band (one submission each).
 const BAND_PIXELS: u32 = 16 * 1024;
@@ -203,7 +204,8 @@ pub(super) fn run_bands(
     table: Option<&Buffer>,
     setup: &RaySetup,
     progress: &mut dyn FnMut(f64),
-) -> Result<(f64, u32), VkError> {
+    stop: Option<&AtomicBool>,
+) -> Result<Option<(f64, u32)>, VkError> {
     let mut all = gpu_field.bindings();
     all.extend(gpu_field.hull_bindings());
     all.extend([
@@ -257,6 +259,9 @@ pub(super) fn run_bands(
             })?;
             gpu_ms += timings.iter().filter_map(|t| t.gpu_ms).sum::<f64>();
             bands += 1;
+            if stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
+                return Ok(None);
+            }
             band_counts =
                 targets
                     .counts
@@ -301,7 +306,7 @@ pub(super) fn run_bands(
         row += rows;
         progress(f64::from(row) / f64::from(h));
     }
-    Ok((gpu_ms, bands))
+    Ok(Some((gpu_ms, bands)))
 }
 
 /// A ray-cast frame as read back.

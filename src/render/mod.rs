@@ -29,7 +29,7 @@ use crate::recon::{NeighbourMode, Reconstruction};
 use crate::samples::bvh::HullBvh;
 use crate::samples::{Domain, Positions, Provenance, SampleSet, Supports};
 use crate::vk::VkError;
-use camera::{Camera, ViewBasis};
+use camera::{Camera, Projection, ViewBasis};
 use glam::DVec3;
 use preintegration::PreintegrationTables;
 pub use settings::{AdaptiveCriterion, IntervalModel, Method, RenderSettings};
@@ -54,6 +54,17 @@ pub enum RenderError {
     Setting { key: &'static str, message: String },
     #[error("{path}: {message}")]
     Output { path: String, message: String },
+    #[error(
+        "the render plans up to {planned:.3e} MLS evaluations, more than the work budget of \
+         {budget:.1e} ({hint}); pass --force to render anyway"
+    )]
+    Budget {
+        planned: f64,
+        budget: f64,
+        hint: String,
+    },
+    #[error("interrupted: the render stopped and wrote nothing")]
+    Interrupted,
     #[error(
         "the render produced {count} non-finite pixel values (first at pixel {first}); no image written"
     )]
@@ -435,6 +446,27 @@ impl RaySetup {
             _ => render.step,
         };
         let unit = field.min_spacing();
+        let (step_key, finest) = match render.method {
+            Method::Reference => ("render.reference_step", render.reference_step),
+            Method::Adaptive => ("render.l_min", render.l_min),
+            _ => ("render.step", render.step),
+        };
+        let reach = ray_reach(camera, field.frame_origin, box_lo, box_hi);
+        // A step below the f32 resolution of the ray parameter at the far side of the box
+        // would leave t unchanged: the kernel would stall or return an empty image.
+        let resolvable = reach * F32_STEP_RESOLUTION;
+        if finest * unit < resolvable {
+            return Err(RenderError::Setting {
+                key: step_key,
+                message: format!(
+                    "expected at least {:.3e} sample spacings: {finest} spacings ({:.3e} world \
+                     units) is below the f32 resolution of rays reaching {reach:.3e} world units \
+                     from camera.eye; take a longer step or move camera.eye closer",
+                    resolvable / unit,
+                    finest * unit
+                ),
+            });
+        }
         Ok(Self {
             camera: *camera,
             basis,
@@ -460,6 +492,51 @@ impl RaySetup {
             isosurfaces: isosurfaces.to_vec(),
             lighting: *lighting,
             chunk: None,
+        })
+    }
+
+    /// An upper bound of the MLS evaluations this setup's frame makes: every pixel's ray
+    /// crosses at most the box's diagonal, in steps of the finest length the method takes
+    /// (fixed, riemann: the step; reference: its step; adaptive: l_min, twice for rejected
+    /// trials). Isosurface refinement adds a few per crossing and is not counted.
+    pub fn work_bound(&self) -> f64 {
+        let pixels = f64::from(self.camera.width) * f64::from(self.camera.height);
+        let diagonal = (self.box_hi - self.box_lo).length();
+        let (finest, trials) = match self.method {
+            Method::Adaptive => (self.l_min, 2.0),
+            _ => (self.step, 1.0),
+        };
+        pixels * (diagonal / finest).ceil() * trials
+    }
+
+    /// Refuses a frame whose [`RaySetup::work_bound`] exceeds `budget` evaluations, before any
+    /// GPU work, so that no valid-looking scene can occupy a device for hours.
+    pub fn check_budget(&self, budget: f64) -> Result<(), RenderError> {
+        let planned = self.work_bound();
+        if planned <= budget {
+            return Ok(());
+        }
+        let key = match self.method {
+            Method::Reference => "render.reference_step",
+            Method::Adaptive => "render.l_min",
+            _ => "render.step",
+        };
+        Err(RenderError::Budget {
+            planned,
+            budget,
+            hint: format!(
+                "{} × {} rays over a box diagonal of {:.0} steps; take a longer {key} or a \
+                 smaller image",
+                self.camera.width,
+                self.camera.height,
+                ((self.box_hi - self.box_lo).length()
+                    / if self.method == Method::Adaptive {
+                        self.l_min
+                    } else {
+                        self.step
+                    })
+                .ceil()
+            ),
         })
     }
 
@@ -493,6 +570,35 @@ impl RaySetup {
     }
 }
 
+/// Smallest step relative to the distance rays travel: 2^-20, eight f32 ulps of the ray
+/// parameter at the far side of the box.
+pub const F32_STEP_RESOLUTION: f64 = 1.0 / (1u64 << 20) as f64;
+
+/// The work budget of a frame in MLS evaluations (see [`RaySetup::check_budget`]): about
+/// 2.5 minutes of the general path on lavapipe at 30 M evaluations/s, seconds on a GPU; the
+/// CLI's `--force` lifts it.
+pub const WORK_BUDGET: f64 = 4.0e9;
+
+/// How far from the eye any ray reaches inside the box: the farthest corner, plus the half
+/// diagonal of an orthographic view's plane of origins.
+fn ray_reach(camera: &Camera, frame_origin: DVec3, lo: DVec3, hi: DVec3) -> f64 {
+    let eye = DVec3::from(camera.eye) - frame_origin;
+    let corner = DVec3::new(
+        (eye.x - lo.x).abs().max((eye.x - hi.x).abs()),
+        (eye.y - lo.y).abs().max((eye.y - hi.y).abs()),
+        (eye.z - lo.z).abs().max((eye.z - hi.z).abs()),
+    )
+    .length();
+    let plane = match camera.projection {
+        Projection::Perspective { .. } => 0.0,
+        Projection::Orthographic { view_height } => {
+            let aspect = f64::from(camera.width) / f64::from(camera.height);
+            0.5 * view_height * (1.0 + aspect * aspect).sqrt()
+        }
+    };
+    corner + plane
+}
+
 /// Builds the preintegration tables a setup needs (`None` for the direct methods). The scalar
 /// range covers the data with a 5% margin each side, because MLS may overshoot the samples;
 /// values beyond it are clamped to the range.
@@ -514,6 +620,29 @@ pub fn build_tables(
         resolution,
         progress,
     ))
+}
+
+/// Refuses tables the device cannot bind before they are built: `lengths` tables and the
+/// zero-length limits, each `resolution`² entries of 16 bytes, in one storage buffer of at
+/// most `limit` bytes (the device's maxStorageBufferRange). The error names the key and the
+/// largest resolution this scene can have on this device.
+pub fn check_table_size(lengths: &[f64], resolution: usize, limit: u64) -> Result<(), RenderError> {
+    let tables = lengths.len() as u64 + 1;
+    let bytes = |r: u64| tables * r * r * 16;
+    let r = resolution as u64;
+    if bytes(r) <= limit {
+        return Ok(());
+    }
+    let largest = ((limit / (16 * tables)) as f64).sqrt().floor() as u64;
+    Err(RenderError::Setting {
+        key: "render.table_resolution",
+        message: format!(
+            "expected at most {largest} for this scene on this device: {resolution} needs \
+             {} bytes ({tables} tables of {resolution}² entries × 16 bytes), more than the \
+             device's maxStorageBufferRange of {limit} bytes",
+            bytes(r)
+        ),
+    })
 }
 
 /// What tables depend on: control points, lengths, resolution, scalar range.

@@ -17,12 +17,14 @@ use super::preintegration::PreintegrationTables;
 use super::shading::{Isosurface, Lighting};
 use super::skip::SkipReport;
 use super::transfer::TransferFunction;
-use super::{Field, RaySetup, RenderError, RenderSettings, TableCache};
+use super::{Field, RaySetup, RenderError, RenderSettings, TableCache, check_table_size};
 use crate::render::camera::Camera;
 use crate::splat::SplatCounts;
 use crate::splat::SplatSetup;
 use crate::splat::gpu::{GpuKernels, SplatPipelines, SplatTargets, SplatVariant, splat_frame};
 use crate::vk::{Buffer, ComputePipeline, Context, ShaderCompiler, VkError};
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 /// A rendered image as the GPU produced it.
@@ -103,7 +105,9 @@ pub fn render(
         table.as_ref(),
         setup,
         &mut progress,
-    )?;
+        None,
+    )?
+    .ok_or_else(|| VkError::Usage("raycast: stopped without a stop request".into()))?;
     let Readback {
         pixels,
         counts,
@@ -168,9 +172,18 @@ pub struct Renderer {
     splat_kernels: Option<GpuKernels>,
     splat_pipelines: Vec<SplatPipelines>,
     splat_targets: Option<SplatTargets>,
+    /// Set from elsewhere (a Ctrl-C handler) to end a ray-casting frame after its current
+    /// dispatch with [`RenderError::Interrupted`].
+    stop: Option<Arc<AtomicBool>>,
 }
 
 impl Renderer {
+    /// Lets `flag` stop frames: once it is set, a ray-casting frame ends after the dispatch
+    /// in flight with [`RenderError::Interrupted`] and returns no image.
+    pub fn set_stop(&mut self, flag: Arc<AtomicBool>) {
+        self.stop = Some(flag);
+    }
+
     /// Uploads the field's samples, octree and hull.
     pub fn new(ctx: &Context, field: Field) -> Result<Self, RenderError> {
         let gpu_field = GpuField::upload(ctx, &field)?;
@@ -186,6 +199,7 @@ impl Renderer {
             splat_kernels: None,
             splat_pipelines: Vec::new(),
             splat_targets: None,
+            stop: None,
         })
     }
 
@@ -216,6 +230,13 @@ impl Renderer {
             view.lighting,
             &self.field,
         )?;
+        if setup.method.preintegrated() {
+            check_table_size(
+                &setup.table_lengths(view.transfer),
+                view.settings.table_resolution,
+                self.ctx.info().max_storage_buffer_range,
+            )?;
+        }
         let builds = self.tables.builds();
         let table_start = Instant::now();
         self.tables.get(
@@ -288,7 +309,9 @@ impl Renderer {
             table,
             &setup,
             &mut progress,
-        )?;
+            self.stop.as_deref(),
+        )?
+        .ok_or(RenderError::Interrupted)?;
         let Readback {
             pixels,
             counts,

@@ -9,6 +9,13 @@ use crate::gpu_types::TfPoint;
 /// ships).
 pub const MAX_POINTS: usize = 1024;
 
+/// Largest colour component of a control point (as `scene::MAX_COLOUR`).
+pub const MAX_COLOUR: f64 = 1e6;
+
+/// Largest extinction per world unit: with the smallest world lengths the domain check allows
+/// (1e-12), optical depths of a sample stay moderate; beyond it f32 products overflow.
+pub const MAX_TAU: f64 = 1e15;
+
 /// Control points `[s, r, g, b, τ]`, sorted by s.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TransferFunction {
@@ -23,7 +30,7 @@ impl TransferFunction {
 
     /// Reads `[[s, r, g, b, τ], ...]`; the error says what was expected.
     pub fn from_toml(value: &toml::Value) -> Result<Self, String> {
-        let expected = "a non-empty array of [s, r, g, b, tau] with s non-decreasing, finite numbers, colour and tau >= 0";
+        let expected = "a non-empty array of [s, r, g, b, tau] with s non-decreasing, |s| <= 1e30, colour in [0, 1e6] and tau in [0, 1e15]";
         let rows = value.as_array().filter(|a| !a.is_empty()).ok_or(expected)?;
         if rows.len() > MAX_POINTS {
             return Err(format!(
@@ -45,7 +52,10 @@ impl TransferFunction {
                     _ => return Err(format!("{expected} (point {i} has a non-number)")),
                 };
             }
-            if p.iter().any(|x| !x.is_finite()) || p[1..].iter().any(|&x| x < 0.0) {
+            let in_range = p[0].abs() <= f64::from(crate::data::MAX_VALUE)
+                && p[1..4].iter().all(|c| (0.0..=MAX_COLOUR).contains(c))
+                && (0.0..=MAX_TAU).contains(&p[4]);
+            if !in_range {
                 return Err(format!("{expected} (point {i})"));
             }
             if points.last().is_some_and(|q: &[f64; 5]| p[0] < q[0]) {

@@ -186,6 +186,15 @@ fn describe(v: &Value) -> String {
     }
 }
 
+/// A bound as an error message prints it: plain, or in e-notation when very large or small.
+fn short(x: f64) -> String {
+    if x == 0.0 || (1e-3..1e6).contains(&x.abs()) {
+        x.to_string()
+    } else {
+        format!("{x:e}")
+    }
+}
+
 /// Typed access to one section, with errors naming `section.key`.
 struct Section<'a> {
     origin: &'a str,
@@ -273,11 +282,17 @@ impl<'a> Section<'a> {
         }
     }
 
-    fn vec3(&self, key: &str, default: [f64; 3]) -> Result<[f64; 3], SceneError> {
+    /// Three numbers, each in [lo, hi].
+    fn vec3(&self, key: &str, default: [f64; 3], lo: f64, hi: f64) -> Result<[f64; 3], SceneError> {
         let Some(v) = self.get(key) else {
             return Ok(default);
         };
-        let bad = || self.err(key, "an array of 3 finite numbers", v);
+        let expected = format!(
+            "an array of 3 numbers, each in [{}, {}]",
+            short(lo),
+            short(hi)
+        );
+        let bad = || self.err(key, &expected, v);
         let Value::Array(a) = v else {
             return Err(bad());
         };
@@ -287,8 +302,8 @@ impl<'a> Section<'a> {
         let mut out = [0.0; 3];
         for (o, x) in out.iter_mut().zip(a) {
             *o = match x {
-                Value::Float(f) if f.is_finite() => *f,
-                Value::Integer(i) => *i as f64,
+                Value::Float(f) if (lo..=hi).contains(f) => *f,
+                Value::Integer(i) if (lo..=hi).contains(&(*i as f64)) => *i as f64,
                 _ => return Err(bad()),
             };
         }
@@ -296,10 +311,21 @@ impl<'a> Section<'a> {
     }
 }
 
+/// Largest colour component (background, transfer function, isosurfaces): far beyond any
+/// HDR use, and far from f32's overflow when composited.
+pub const MAX_COLOUR: f64 = crate::render::transfer::MAX_COLOUR;
+
+/// Smallest step, adaptive interval bound or reference step, in sample spacings. Smaller
+/// steps only cost time (the image converges long before); the work budget bounds the rest.
+pub const MIN_STEP: f64 = 1e-3;
+
+/// Largest image, in pixels (8192²): every pixel keeps 48 bytes of GPU and host buffers.
+pub const MAX_PIXELS: u64 = 1 << 26;
+
 /// Reads `[{ value, color, opacity }, …]`; the error says what was expected.
 fn parse_isosurfaces(v: &Value) -> Result<Vec<Isosurface>, String> {
     let expected = format!(
-        "an array of at most {MAX_ISOSURFACES} tables {{ value = s, color = [r, g, b], opacity = a }} with finite numbers, colour >= 0 and opacity in [0, 1]"
+        "an array of at most {MAX_ISOSURFACES} tables {{ value = s, color = [r, g, b], opacity = a }} with |s| <= 1e30, colour in [0, 1e6] and opacity in [0, 1]"
     );
     let items = v
         .as_array()
@@ -327,7 +353,7 @@ fn parse_isosurfaces(v: &Value) -> Result<Vec<Isosurface>, String> {
                         .iter()
                         .filter_map(|x| x.as_float().or(x.as_integer().map(|n| n as f64)))
                         .collect();
-                    if c.len() != 3 || c.iter().any(|x| !x.is_finite() || *x < 0.0) {
+                    if c.len() != 3 || c.iter().any(|x| !(0.0..=MAX_COLOUR).contains(x)) {
                         return Err(bad());
                     }
                     [c[0], c[1], c[2]]
@@ -335,7 +361,9 @@ fn parse_isosurfaces(v: &Value) -> Result<Vec<Isosurface>, String> {
                 None if t.get("color").is_none() => [1.0, 1.0, 1.0],
                 _ => return Err(bad()),
             };
-            let value = num(t, "value").ok_or_else(bad)?;
+            let value = num(t, "value")
+                .filter(|v| v.abs() <= f64::from(crate::data::MAX_VALUE))
+                .ok_or_else(bad)?;
             let opacity = match t.get("opacity") {
                 None => 1.0,
                 Some(_) => num(t, "opacity")
@@ -673,13 +701,37 @@ impl Scene {
             }
         };
         let camera = Camera {
-            eye: cam.vec3("eye", [3.0, 2.0, 2.5])?,
-            target: cam.vec3("target", [0.0; 3])?,
-            up: cam.vec3("up", [0.0, 0.0, 1.0])?,
+            eye: cam.vec3(
+                "eye",
+                [3.0, 2.0, 2.5],
+                -crate::data::MAX_COORDINATE,
+                crate::data::MAX_COORDINATE,
+            )?,
+            target: cam.vec3(
+                "target",
+                [0.0; 3],
+                -crate::data::MAX_COORDINATE,
+                crate::data::MAX_COORDINATE,
+            )?,
+            up: cam.vec3(
+                "up",
+                [0.0, 0.0, 1.0],
+                -crate::data::MAX_COORDINATE,
+                crate::data::MAX_COORDINATE,
+            )?,
             projection,
             width: cam.int("width", 256, 1, 16384)? as u32,
             height: cam.int("height", 256, 1, 16384)? as u32,
         };
+        let pixels = u64::from(camera.width) * u64::from(camera.height);
+        if pixels > MAX_PIXELS {
+            return Err(SceneError::Key {
+                origin: origin.into(),
+                key: "camera.width × camera.height".into(),
+                expected: format!("at most {MAX_PIXELS} pixels (8192²)"),
+                found: format!("{} × {} = {pixels}", camera.width, camera.height),
+            });
+        }
         if let Err(message) = camera.basis() {
             return Err(SceneError::Key {
                 origin: origin.into(),
@@ -711,12 +763,12 @@ impl Scene {
                     ("splat-post", Method::SplatPost),
                 ],
             )?,
-            step: ren.positive("step", 0.25, 1e3)?,
-            reference_step: ren.positive("reference_step", 1.0 / 32.0, 1e3)?,
-            background: ren.vec3("background", [0.0; 3])?,
+            step: ren.float("step", 0.25, MIN_STEP, 1e3)?,
+            reference_step: ren.float("reference_step", 1.0 / 32.0, MIN_STEP, 1e3)?,
+            background: ren.vec3("background", [0.0; 3], 0.0, MAX_COLOUR)?,
             min_transmittance: ren.float("min_transmittance", 1e-4, 0.0, 1.0)?,
-            l_min: ren.positive("l_min", 0.16, 1e3)?,
-            l_max: ren.positive("l_max", 2.6, 1e3)?,
+            l_min: ren.float("l_min", 0.16, MIN_STEP, 1e3)?,
+            l_max: ren.float("l_max", 2.6, MIN_STEP, 1e3)?,
             adaptive,
             interval: ren.choice(
                 "interval",

@@ -13,6 +13,8 @@ use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use vmls::files::Outputs;
 use vmls::render::RenderError;
 use vmls::scene::{Scene, SceneError};
@@ -66,6 +68,11 @@ enum Command {
         /// exact image splatting approximates).
         #[arg(long)]
         cpu: bool,
+        /// Render even when the frame plans more MLS evaluations than the work budget
+        /// (4e9, minutes on lavapipe): the budget keeps a mistyped step from occupying the
+        /// device for hours.
+        #[arg(long)]
+        force: bool,
         #[command(flatten)]
         device: DeviceArgs,
     },
@@ -103,14 +110,14 @@ enum Command {
     Check(check::CheckArgs),
     /// Measure the FMA ceiling and MLS evaluation throughput side by side.
     Probe {
-        /// Marschner–Lobb resolution of the probe field.
-        #[arg(long, default_value_t = 41)]
-        resolution: usize,
-        /// Evaluation points per dispatch.
-        #[arg(long, default_value_t = 65536)]
-        points: usize,
-        /// Timed repetitions (after one warm-up).
-        #[arg(long, default_value_t = 5)]
+        /// Marschner–Lobb resolution of the probe field (2–1024).
+        #[arg(long, default_value_t = 41, value_parser = clap::value_parser!(u32).range(2..=1024))]
+        resolution: u32,
+        /// Evaluation points per dispatch (1–16 777 216).
+        #[arg(long, default_value_t = 65536, value_parser = clap::value_parser!(u32).range(1..=1 << 24))]
+        points: u32,
+        /// Timed repetitions after one warm-up (1–1000).
+        #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..=1000))]
         repeats: u32,
         /// Write the results as JSON.
         #[arg(long)]
@@ -223,6 +230,31 @@ fn json_to(
     }
 }
 
+/// The stop request of a long command: the first Ctrl-C sets it (a ray-casting frame ends
+/// after its current dispatch, and nothing is written); a second one removes every temporary
+/// output and exits at once with status 130.
+fn interrupt_flag() -> Arc<AtomicBool> {
+    let flag = Arc::new(AtomicBool::new(false));
+    let seen = flag.clone();
+    // Without a handler (another one is installed) Ctrl-C keeps its default: exit at once.
+    let _ = ctrlc::set_handler(move || {
+        if seen.swap(true, Ordering::SeqCst) {
+            vmls::files::remove_temporaries();
+            std::process::exit(130);
+        }
+        eprintln!("vmls: interrupted: stopping without writing (Ctrl-C again to quit at once)");
+    });
+    flag
+}
+
+/// Fails with [`RenderError::Interrupted`] once a stop was requested.
+fn check_stop(stop: &AtomicBool) -> Result<(), CliError> {
+    if stop.load(Ordering::SeqCst) {
+        return Err(RenderError::Interrupted.into());
+    }
+    Ok(())
+}
+
 /// Longest error line the CLI prints, in characters.
 const MAX_REPORT_CHARS: usize = 2000;
 
@@ -258,8 +290,10 @@ fn main() {
             set,
             frames,
             cpu,
+            force,
             device,
         } => {
+            let stop = interrupt_flag();
             if *cpu {
                 if eval_map.is_some() || *frames != 1 {
                     Err(CliError::Usage(
@@ -268,18 +302,26 @@ fn main() {
                             .into(),
                     ))
                 } else {
-                    render::run_render_cpu(scene.as_deref(), output, stats.as_deref(), set)
+                    render::run_render_cpu(
+                        scene.as_deref(),
+                        output,
+                        stats.as_deref(),
+                        set,
+                        *force,
+                        &stop,
+                    )
                 }
             } else {
-                render::run_render(
-                    scene.as_deref(),
+                let request = render::Request {
+                    scene_path: scene.as_deref(),
                     output,
-                    stats.as_deref(),
-                    eval_map.as_deref(),
+                    stats: stats.as_deref(),
+                    eval_map: eval_map.as_deref(),
                     set,
-                    *frames,
-                    device,
-                )
+                    frames: *frames,
+                    force: *force,
+                };
+                render::run_render(&request, device, &stop)
             }
         }
         Command::Bench(args) => bench::bench(args),
@@ -312,12 +354,21 @@ fn main() {
             set,
             device,
         } => match file {
-            Some(f) => probe::run_file_probe(f, set, *points, *repeats, json.as_deref(), device),
-            None => probe::run_probe(*resolution, *points, *repeats, json.as_deref(), device),
+            Some(f) => {
+                probe::run_file_probe(f, set, *points as usize, *repeats, json.as_deref(), device)
+            }
+            None => probe::run_probe(
+                *resolution as usize,
+                *points as usize,
+                *repeats,
+                json.as_deref(),
+                device,
+            ),
         },
     };
     if let Err(e) = result {
         eprintln!("vmls: error: {}", report(&e));
-        std::process::exit(1);
+        let interrupted = matches!(e, CliError::Render(RenderError::Interrupted));
+        std::process::exit(if interrupted { 130 } else { 1 });
     }
 }

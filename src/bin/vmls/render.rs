@@ -1,8 +1,10 @@
 //! `vmls render`: one scene to an image on the GPU (or with the f64 CPU twins), with statistics.
 
 use crate::probe::octree_json;
-use crate::{CliError, DeviceArgs, context, json_to, plan_outputs, progress_bar};
+use crate::{CliError, DeviceArgs, check_stop, context, json_to, plan_outputs, progress_bar};
 use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 use vmls::data::dataset::Location;
 use vmls::render::RenderError;
@@ -12,15 +14,32 @@ use vmls::render::renderer::Renderer;
 use vmls::render::skip::SkipReport;
 use vmls::scene::Scene;
 
+/// What `vmls render` was asked for.
+pub struct Request<'a> {
+    pub scene_path: Option<&'a Path>,
+    pub output: &'a Path,
+    pub stats: Option<&'a Path>,
+    pub eval_map: Option<&'a Path>,
+    pub set: &'a [String],
+    pub frames: u32,
+    /// Past the work budget.
+    pub force: bool,
+}
+
 pub fn run_render(
-    scene_path: Option<&Path>,
-    output: &Path,
-    stats: Option<&Path>,
-    eval_map: Option<&Path>,
-    set: &[String],
-    frames_wanted: u32,
+    request: &Request<'_>,
     device: &DeviceArgs,
+    stop: &Arc<AtomicBool>,
 ) -> Result<(), CliError> {
+    let &Request {
+        scene_path,
+        output,
+        stats,
+        eval_map,
+        set,
+        frames: frames_wanted,
+        force,
+    } = request;
     let start = Instant::now();
     format_of(output)?;
     if let Some(map) = eval_map {
@@ -48,11 +67,19 @@ pub fn run_render(
     bar.finish_and_clear();
     let ctx = context(device)?;
     let step_world = match scene.render.method.splat_shading() {
-        None => Some(scene.ray_setup(&field)?.step),
+        None => {
+            let setup = scene.ray_setup(&field)?;
+            if !force {
+                setup.check_budget(vmls::render::WORK_BUDGET)?;
+            }
+            Some(setup.step)
+        }
         Some(_) => None,
     };
+    check_stop(stop)?;
     let upload_start = Instant::now();
     let mut renderer = Renderer::new(&ctx, field)?;
+    renderer.set_stop(stop.clone());
     let upload_ms = upload_start.elapsed().as_secs_f64() * 1e3;
     // Frame k turns the camera by 10°·k about its up axis through the target: later frames
     // show what a new camera costs with everything else kept on the GPU.
@@ -87,6 +114,7 @@ pub fn run_render(
         }
         .into());
     }
+    check_stop(stop)?;
     let (width, height) = (scene.camera.width, scene.camera.height);
     check_finite(&image.pixels)?;
     outputs.write(output, |w| {
@@ -185,6 +213,8 @@ pub fn run_render_cpu(
     output: &Path,
     stats: Option<&Path>,
     set: &[String],
+    force: bool,
+    stop: &AtomicBool,
 ) -> Result<(), CliError> {
     let start = Instant::now();
     format_of(output)?;
@@ -203,6 +233,10 @@ pub fn run_render_cpu(
         }
         None => {
             let setup = scene.ray_setup(&field)?;
+            if !force {
+                setup.check_budget(vmls::render::WORK_BUDGET)?;
+            }
+            check_stop(stop)?;
             let tables = vmls::render::build_tables(
                 &setup,
                 &field,
@@ -222,6 +256,7 @@ pub fn run_render_cpu(
             (image.iter().map(|p| p.rgba).collect(), None, skip)
         }
     };
+    check_stop(stop)?;
     let rgba: Vec<[f32; 4]> = pixels.iter().map(|p| p.map(|c| c as f32)).collect();
     check_finite(&rgba)?;
     outputs.write(output, |w| {
