@@ -417,8 +417,8 @@ impl Dataset {
         })
     }
 
-    /// Checks what every loader must guarantee: finite coordinates, a domain the kernels can
-    /// resolve ([`Geometry::check_domain`]), renderable values ([`super::renderable_value`]), array lengths, cell
+    /// Checks what every loader must guarantee: finite coordinates, renderable values
+    /// ([`super::renderable_value`]), array lengths, cell
     /// indices in range and point counts per cell type. Errors name `path`.
     pub fn validate(&self, path: &Path) -> Result<(), DataError> {
         let n = self.geometry.point_count();
@@ -497,7 +497,6 @@ impl Dataset {
                 }
             }
         }
-        self.geometry.check_domain(path)?;
         let cells = self.geometry.cell_count();
         for a in &self.arrays {
             let expected = match a.location {

@@ -295,21 +295,31 @@ pub fn load(path: &Path, array: Option<&str>) -> Result<Volume, DataError> {
 /// and PLY points. Regular-grid formats (NRRD, NIfTI) give an image with one point array
 /// named "scalars".
 pub fn load_dataset(path: &Path) -> Result<dataset::Dataset, DataError> {
+    parse_dataset_bytes(path, &read_file(path)?)
+}
+
+/// [`load_dataset`] on bytes already read: the reader is chosen by `path`'s extension, and
+/// `path` names the file in errors (the fuzz targets enter here).
+pub fn parse_dataset_bytes(path: &Path, bytes: &[u8]) -> Result<dataset::Dataset, DataError> {
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default();
     let dataset = if name.ends_with(".vtk") {
-        vtk::load_dataset(path)?
-    } else if name.ends_with(".csv") || name.ends_with(".ply") {
-        points::load(path)?
-    } else if name.ends_with(".nrrd") || name.ends_with(".nii") || name.ends_with(".nii.gz") {
-        dataset::Dataset::from_volume(load(path, None)?, "scalars")
+        vtk_legacy::parse_dataset(path, bytes)?
+    } else if name.ends_with(".csv") {
+        points::parse_csv(path, bytes)?
+    } else if name.ends_with(".ply") {
+        points::parse_ply(path, bytes)?
+    } else if name.ends_with(".nrrd") {
+        dataset::Dataset::from_volume(nrrd::parse(path, bytes)?, "scalars")
+    } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
+        dataset::Dataset::from_volume(nifti::parse(path, bytes)?, "scalars")
     } else if [".vti", ".vtr", ".vts", ".vtu", ".vtp"]
         .iter()
         .any(|e| name.ends_with(e))
     {
-        vtk_xml::load(path)?
+        vtk_xml::parse(path, bytes)?
     } else {
         return Err(DataError::UnknownFormat {
             path: path.to_path_buf(),

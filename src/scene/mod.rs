@@ -851,21 +851,39 @@ impl Scene {
                 &self.octree,
                 progress,
             )?),
-            VolumeSource::File { path, array } => {
+            VolumeSource::File { path, .. } => {
                 let dataset = crate::data::load_dataset(path)?;
-                let set = SampleSet::from_dataset(&dataset, path, array.as_deref(), &self.samples)
-                    .map_err(|e| match e {
-                        crate::samples::SampleError::Data(d) => RenderError::Data(d),
-                        other => RenderError::Samples(other),
-                    })?;
-                Ok(Field::from_samples(
-                    set,
-                    self.reconstruction,
-                    &self.octree,
-                    progress,
-                )?)
+                self.field_from_dataset(&dataset, path, progress)
             }
         }
+    }
+
+    /// The field of a dataset already loaded (`path` names it in errors), with this scene's
+    /// `volume.scalars`, supports, reconstruction and octree.
+    pub fn field_from_dataset(
+        &self,
+        dataset: &crate::data::dataset::Dataset,
+        path: &Path,
+        progress: impl FnMut(f64),
+    ) -> Result<Field, RenderError> {
+        // Loaders describe flat or vast data (`vmls info`); rendering needs a volume the f32
+        // kernels can resolve.
+        dataset.geometry.check_domain(path)?;
+        let array = match &self.volume {
+            VolumeSource::File { array, .. } => array.as_deref(),
+            VolumeSource::MarschnerLobb { .. } => None,
+        };
+        let set =
+            SampleSet::from_dataset(dataset, path, array, &self.samples).map_err(|e| match e {
+                crate::samples::SampleError::Data(d) => RenderError::Data(d),
+                other => RenderError::Samples(other),
+            })?;
+        Ok(Field::from_samples(
+            set,
+            self.reconstruction,
+            &self.octree,
+            progress,
+        )?)
     }
 
     /// What the persistent renderer draws for this scene: its camera and everything else.

@@ -43,6 +43,14 @@ impl Buffer {
                 limit_name: "maxStorageBufferRange",
             });
         }
+        if size > shared.info.max_heap_bytes {
+            return Err(VkError::Limit {
+                resource: format!("buffer '{name}'"),
+                bytes: size,
+                limit: shared.info.max_heap_bytes,
+                limit_name: "the largest device-local memory heap",
+            });
+        }
         let vk_usage = match usage {
             // Every storage buffer may also be read through a texel-buffer view or as a uniform
             // buffer (BindingKind).

@@ -41,6 +41,8 @@ pub struct DeviceInfo {
     /// Elements a texel-buffer view may span.
     pub max_texel_buffer_elements: u64,
     pub max_workgroup_count: [u32; 3],
+    /// Bytes of the largest device-local memory heap: no single buffer can be larger.
+    pub max_heap_bytes: u64,
     /// Nanoseconds per timestamp tick; `None` when the queue has no timestamps.
     pub timestamp_period_ns: Option<f64>,
 }
@@ -56,9 +58,11 @@ pub struct RawContext {
     pub queue: vk::Queue,
 }
 
-/// Counts validation errors reported through the debug messenger.
+/// Counts validation errors and warnings reported through the debug messenger (core and
+/// synchronization validation both report through it).
 pub(crate) struct ValidationState {
     errors: AtomicU32,
+    warnings: AtomicU32,
 }
 
 pub(crate) struct Shared {
@@ -110,6 +114,11 @@ unsafe extern "system" fn debug_callback(
         }
         eprintln!("vmls: Vulkan validation error: {message}");
     } else if severity.contains(vk::DebugUtilsMessageSeverityFlagsEXT::WARNING) {
+        if !user.is_null() {
+            // SAFETY: as above.
+            let state = unsafe { &*(user as *const ValidationState) };
+            state.warnings.fetch_add(1, Ordering::SeqCst);
+        }
         eprintln!("vmls: Vulkan validation warning: {message}");
     }
     vk::FALSE
@@ -185,6 +194,7 @@ fn create_instance(
 ) -> Result<(ash::Instance, Option<Messenger>, Box<ValidationState>), VkError> {
     let state = Box::new(ValidationState {
         errors: AtomicU32::new(0),
+        warnings: AtomicU32::new(0),
     });
     let mut layers: Vec<*const i8> = Vec::new();
     let mut extensions: Vec<*const i8> = Vec::new();
@@ -331,6 +341,15 @@ fn device_info(
     let valid_bits = families
         .get(queue_family as usize)
         .map_or(0, |f| f.timestamp_valid_bits);
+    // SAFETY: as above.
+    let memory = unsafe { instance.get_physical_device_memory_properties(physical) };
+    let max_heap_bytes = memory
+        .memory_heaps_as_slice()
+        .iter()
+        .filter(|h| h.flags.contains(vk::MemoryHeapFlags::DEVICE_LOCAL))
+        .map(|h| h.size)
+        .max()
+        .unwrap_or(u64::MAX);
     DeviceInfo {
         name: props
             .device_name_as_c_str()
@@ -343,6 +362,7 @@ fn device_info(
         max_uniform_buffer_range: u64::from(props.limits.max_uniform_buffer_range),
         max_texel_buffer_elements: u64::from(props.limits.max_texel_buffer_elements),
         max_workgroup_count: props.limits.max_compute_work_group_count,
+        max_heap_bytes,
         timestamp_period_ns: (valid_bits > 0 && props.limits.timestamp_period > 0.0)
             .then_some(f64::from(props.limits.timestamp_period)),
     }
@@ -439,6 +459,7 @@ impl Context {
             None,
             Box::new(ValidationState {
                 errors: AtomicU32::new(0),
+                warnings: AtomicU32::new(0),
             }),
             false,
             force_staging,
@@ -550,6 +571,12 @@ impl Context {
     /// Validation errors reported so far (always 0 when validation is off).
     pub fn validation_errors(&self) -> u32 {
         self.shared.validation.errors.load(Ordering::SeqCst)
+    }
+
+    /// Validation warnings reported so far (always 0 when validation is off); the test suite
+    /// requires none, as it requires no error.
+    pub fn validation_warnings(&self) -> u32 {
+        self.shared.validation.warnings.load(Ordering::SeqCst)
     }
 
     /// Bytes written from the host into buffers so far (mapped copies and staged uploads alike).

@@ -30,6 +30,11 @@ use ash::vk;
 pub enum VkError {
     #[error("cannot load the Vulkan loader (libvulkan.so.1): {0}; run tools/setup")]
     Loading(String),
+    #[error(
+        "the Vulkan device was lost in {call} for {what} (a driver reset, a GPU fault, or a \
+         dispatch that ran past the system's GPU watchdog); the render stopped and wrote nothing"
+    )]
+    DeviceLost { call: &'static str, what: String },
     #[error("{call} failed for {what}: {result}")]
     Call {
         call: &'static str,
@@ -78,10 +83,41 @@ pub(crate) trait VkResultExt<T> {
 
 impl<T> VkResultExt<T> for Result<T, vk::Result> {
     fn call(self, call: &'static str, what: impl FnOnce() -> String) -> Result<T, VkError> {
-        self.map_err(|result| VkError::Call {
-            call,
-            what: what(),
-            result,
+        self.map_err(|result| match result {
+            vk::Result::ERROR_DEVICE_LOST => VkError::DeviceLost { call, what: what() },
+            result => VkError::Call {
+                call,
+                what: what(),
+                result,
+            },
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn device_loss_is_named_and_other_results_keep_their_code() {
+        let lost: Result<(), vk::Result> = Err(vk::Result::ERROR_DEVICE_LOST);
+        let e = lost
+            .call("vkWaitForFences", || "the raycast dispatch".into())
+            .expect_err("lost");
+        assert!(matches!(e, VkError::DeviceLost { .. }), "{e:?}");
+        let text = e.to_string();
+        assert!(
+            text.contains("device was lost") && text.contains("raycast"),
+            "{text}"
+        );
+        let oom: Result<(), vk::Result> = Err(vk::Result::ERROR_OUT_OF_DEVICE_MEMORY);
+        let e = oom
+            .call("vkAllocateMemory", || "x".into())
+            .expect_err("oom");
+        assert!(matches!(e, VkError::Call { .. }), "{e:?}");
+        assert!(
+            e.to_string().contains("vkAllocateMemory failed for x"),
+            "{e}"
+        );
     }
 }

@@ -40,9 +40,11 @@ pub fn gpu_with(force_staging: bool) -> (Context, ShaderCompiler) {
     (ctx, ShaderCompiler::new().expect("shaderc"))
 }
 
-/// Asserts the context saw no validation error and holds no allocation.
+/// Asserts the context saw no validation message (core or synchronization validation, error
+/// or warning) and holds no allocation.
 pub fn finish(ctx: Context) {
     assert_eq!(ctx.validation_errors(), 0, "Vulkan validation errors");
+    assert_eq!(ctx.validation_warnings(), 0, "Vulkan validation warnings");
     assert_eq!(ctx.live_allocations(), 0, "GPU allocations leaked");
 }
 

@@ -1,0 +1,5 @@
+//! Legacy VTK (every dataset type, ASCII and binary): parse and validate never panic.
+#![no_main]
+libfuzzer_sys::fuzz_target!(|data: &[u8]| {
+    let _ = vmls::data::parse_dataset_bytes(std::path::Path::new("fuzz.vtk"), data);
+});
