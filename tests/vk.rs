@@ -38,6 +38,7 @@ fn out_of_memory_is_an_error_not_a_panic() {
 fn unknown_device_names_the_available_ones() {
     let err = Context::new(&ContextOptions {
         validation: Some(false),
+        sync_validation: None,
         device: Some("no-such-device".into()),
         force_staging: false,
     })

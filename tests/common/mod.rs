@@ -33,6 +33,7 @@ pub fn gpu() -> (Context, ShaderCompiler) {
 pub fn gpu_with(force_staging: bool) -> (Context, ShaderCompiler) {
     let ctx = Context::new(&ContextOptions {
         validation: Some(true),
+        sync_validation: None,
         device: None,
         force_staging,
     })

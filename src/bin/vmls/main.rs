@@ -174,6 +174,7 @@ impl From<vmls::recon::ReconError> for CliError {
 fn context(args: &DeviceArgs) -> Result<Context, RenderError> {
     Ok(Context::new(&ContextOptions {
         validation: args.validation.then_some(true),
+        sync_validation: None,
         device: args.device.clone(),
         force_staging: false,
     })?)
