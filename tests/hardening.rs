@@ -230,36 +230,21 @@ fn inputs_that_are_not_regular_files_are_refused() {
     let folder = d.join("folder.nrrd");
     std::fs::create_dir(&folder).expect("mkdir");
     let limit = Duration::from_secs(60);
+    let with_volume = |p: &Path| -> Vec<String> {
+        let set = format!("volume.file={}", s(p));
+        ["render", "-o", s(&png), "--set", &set]
+            .map(String::from)
+            .to_vec()
+    };
     let cases: [(Vec<String>, &str); 4] = [
         (
-            vec![
-                "render".into(),
-                s(&fifo).into(),
-                "-o".into(),
-                s(&png).into(),
-            ],
+            ["render", s(&fifo), "-o", s(&png)]
+                .map(String::from)
+                .to_vec(),
             "FIFO",
         ),
-        (
-            vec![
-                "render".into(),
-                "-o".into(),
-                s(&png).into(),
-                "--set".into(),
-                format!("volume.file={}", s(&fifo_volume)),
-            ],
-            "FIFO",
-        ),
-        (
-            vec![
-                "render".into(),
-                "-o".into(),
-                s(&png).into(),
-                "--set".into(),
-                format!("volume.file={}", s(&zero)),
-            ],
-            "character device",
-        ),
+        (with_volume(&fifo_volume), "FIFO"),
+        (with_volume(&zero), "character device"),
         (vec!["info".into(), s(&folder).into()], "directory"),
     ];
     for (args, what) in cases {
