@@ -446,28 +446,7 @@ impl RaySetup {
             _ => render.step,
         };
         let unit = field.min_spacing();
-        let (step_key, finest) = match render.method {
-            Method::Reference => ("render.reference_step", render.reference_step),
-            Method::Adaptive => ("render.l_min", render.l_min),
-            _ => ("render.step", render.step),
-        };
-        let reach = ray_reach(camera, field.frame_origin, box_lo, box_hi);
-        // A step below the f32 resolution of the ray parameter at the far side of the box
-        // would leave t unchanged: the kernel would stall or return an empty image.
-        let resolvable = reach * F32_STEP_RESOLUTION;
-        if finest * unit < resolvable {
-            return Err(RenderError::Setting {
-                key: step_key,
-                message: format!(
-                    "expected at least {:.3e} sample spacings: {finest} spacings ({:.3e} world \
-                     units) is below the f32 resolution of rays reaching {reach:.3e} world units \
-                     from camera.eye; take a longer step or move camera.eye closer",
-                    resolvable / unit,
-                    finest * unit
-                ),
-            });
-        }
-        Ok(Self {
+        let setup = Self {
             camera: *camera,
             basis,
             frame_origin: field.frame_origin,
@@ -492,6 +471,39 @@ impl RaySetup {
             isosurfaces: isosurfaces.to_vec(),
             lighting: *lighting,
             chunk: None,
+        };
+        setup.check_resolution(field)?;
+        Ok(setup)
+    }
+
+    /// The shortest length, in world units, this setup's method steps by: the step (the
+    /// reference step for `reference`), or l_min for `adaptive`.
+    fn finest_step(&self) -> f64 {
+        match self.method {
+            Method::Adaptive => self.l_min,
+            _ => self.step,
+        }
+    }
+
+    /// Refuses a step below the f32 resolution of the ray parameter at the far side of the box:
+    /// t would not change, and the kernel would stall or return an empty image.
+    fn check_resolution(&self, field: &Field) -> Result<(), RenderError> {
+        let reach = ray_reach(&self.camera, self.frame_origin, self.box_lo, self.box_hi);
+        let resolvable = reach * F32_STEP_RESOLUTION;
+        let finest = self.finest_step();
+        if finest >= resolvable {
+            return Ok(());
+        }
+        let unit = field.min_spacing();
+        Err(RenderError::Setting {
+            key: self.method.finest_step_key(),
+            message: format!(
+                "expected at least {:.3e} sample spacings: {} spacings ({finest:.3e} world \
+                 units) is below the f32 resolution of rays reaching {reach:.3e} world units \
+                 from camera.eye; take a longer step or move camera.eye closer",
+                resolvable / unit,
+                finest / unit
+            ),
         })
     }
 
@@ -501,12 +513,17 @@ impl RaySetup {
     /// trials). Isosurface refinement adds a few per crossing and is not counted.
     pub fn work_bound(&self) -> f64 {
         let pixels = f64::from(self.camera.width) * f64::from(self.camera.height);
-        let diagonal = (self.box_hi - self.box_lo).length();
-        let (finest, trials) = match self.method {
-            Method::Adaptive => (self.l_min, 2.0),
-            _ => (self.step, 1.0),
+        let trials = if self.method == Method::Adaptive {
+            2.0
+        } else {
+            1.0
         };
-        pixels * (diagonal / finest).ceil() * trials
+        pixels * self.steps_per_diagonal() * trials
+    }
+
+    /// Steps of [`RaySetup::finest_step`] along the box's diagonal.
+    fn steps_per_diagonal(&self) -> f64 {
+        ((self.box_hi - self.box_lo).length() / self.finest_step()).ceil()
     }
 
     /// Refuses a frame whose [`RaySetup::work_bound`] exceeds `budget` evaluations, before any
@@ -516,26 +533,16 @@ impl RaySetup {
         if planned <= budget {
             return Ok(());
         }
-        let key = match self.method {
-            Method::Reference => "render.reference_step",
-            Method::Adaptive => "render.l_min",
-            _ => "render.step",
-        };
         Err(RenderError::Budget {
             planned,
             budget,
             hint: format!(
-                "{} × {} rays over a box diagonal of {:.0} steps; take a longer {key} or a \
-                 smaller image",
+                "{} × {} rays over a box diagonal of {:.0} steps; take a longer {} or a smaller \
+                 image",
                 self.camera.width,
                 self.camera.height,
-                ((self.box_hi - self.box_lo).length()
-                    / if self.method == Method::Adaptive {
-                        self.l_min
-                    } else {
-                        self.step
-                    })
-                .ceil()
+                self.steps_per_diagonal(),
+                self.method.finest_step_key()
             ),
         })
     }
@@ -583,12 +590,7 @@ pub const WORK_BUDGET: f64 = 4.0e9;
 /// diagonal of an orthographic view's plane of origins.
 fn ray_reach(camera: &Camera, frame_origin: DVec3, lo: DVec3, hi: DVec3) -> f64 {
     let eye = DVec3::from(camera.eye) - frame_origin;
-    let corner = DVec3::new(
-        (eye.x - lo.x).abs().max((eye.x - hi.x).abs()),
-        (eye.y - lo.y).abs().max((eye.y - hi.y).abs()),
-        (eye.z - lo.z).abs().max((eye.z - hi.z).abs()),
-    )
-    .length();
+    let corner = (eye - lo).abs().max((eye - hi).abs()).length();
     let plane = match camera.projection {
         Projection::Perspective { .. } => 0.0,
         Projection::Orthographic { view_height } => {

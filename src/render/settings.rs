@@ -44,6 +44,15 @@ impl Method {
     pub fn preintegrated(self) -> bool {
         matches!(self, Method::Fixed | Method::Adaptive)
     }
+
+    /// The scene key of the shortest length the method steps by (what bounds its work).
+    pub fn finest_step_key(self) -> &'static str {
+        match self {
+            Method::Reference => "render.reference_step",
+            Method::Adaptive => "render.l_min",
+            _ => "render.step",
+        }
+    }
 }
 
 /// The adaptive integrator's acceptance test (`render.adaptive`, DESIGN.md §4).
