@@ -492,6 +492,119 @@ fn the_work_budget_refuses_and_force_lifts_it() {
     assert!(png.exists());
 }
 
+#[test]
+fn splatting_checks_its_budget_before_accumulating() {
+    let d = dir("splat-budget");
+    let png = d.join("x.png");
+    // 764 sheets over 4096² pixels: refused before any work.
+    refused_quickly(
+        &[
+            "render",
+            "-o",
+            s(&png),
+            "--set",
+            "render.method=\"splat\"",
+            "--set",
+            "camera.width=4096",
+            "--set",
+            "camera.height=4096",
+            "--set",
+            "splat.slab=0.1",
+        ],
+        &[
+            "work budget",
+            "footprint-pixel evaluations",
+            "sheets of 4096 × 4096",
+            "splat.slab",
+            "--force",
+        ],
+        &png,
+    );
+    // 100³ kernels over thin sheets bin some 3.8e8 footprint blocks into a 64² image: known
+    // only after the projection, refused before the accumulation.
+    refused_quickly(
+        &[
+            "render",
+            "-o",
+            s(&png),
+            "--set",
+            "render.method=\"splat\"",
+            "--set",
+            "volume.resolution=100",
+            "--set",
+            "splat.slab=0.05",
+            "--set",
+            "camera.width=64",
+            "--set",
+            "camera.height=64",
+        ],
+        &["work budget", "binned footprint blocks", "--force"],
+        &png,
+    );
+}
+
+#[test]
+fn the_bench_checks_the_budget_of_the_reference_and_each_configuration() {
+    let d = dir("bench-budget");
+    let out = d.join("out");
+    let results = out.join("results.csv");
+    let bench = |extra: &[&'static str]| {
+        let mut args = vec![
+            "bench",
+            "--methods",
+            "fixed",
+            "--repeat",
+            "1",
+            "--warmup",
+            "0",
+            "--no-cache",
+            "--no-ceilings",
+            "--out",
+            s(&out),
+            // Looking away from the volume: a forced run is quick although the bound is not.
+            "--set",
+            "camera.width=1024",
+            "--set",
+            "camera.height=1024",
+            "--set",
+            "camera.target=[60, 40, 50]",
+        ];
+        args.extend(extra);
+        args
+    };
+    let reference = bench(&["--reference-set", "render.reference_step=0.01"]);
+    refused_quickly(
+        &reference,
+        &[
+            "the reference",
+            "work budget",
+            "render.reference_step",
+            "--force",
+        ],
+        &results,
+    );
+    let config = bench(&[
+        "--reference-set",
+        "render.reference_step=2",
+        "--set",
+        "render.step=0.01",
+    ]);
+    refused_quickly(
+        &config,
+        &["configuration 0", "work budget", "render.step", "--force"],
+        &results,
+    );
+    let mut forced = config.clone();
+    forced.push("--force");
+    let run = vmls_within(&forced, Duration::from_secs(300));
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(results.exists());
+}
+
 #[cfg(unix)]
 #[test]
 fn ctrl_c_stops_a_long_render_and_leaves_nothing() {

@@ -48,6 +48,12 @@ pub enum BenchError {
     },
     #[error("--sweep {arg}: {message}")]
     Sweep { arg: String, message: String },
+    #[error("{what}: {source}")]
+    Budget {
+        what: String,
+        #[source]
+        source: Box<RenderError>,
+    },
     #[error("{0}")]
     Usage(String),
 }
@@ -173,6 +179,10 @@ pub struct BenchOptions {
     pub dump_spirv: Option<PathBuf>,
     /// Measure the device's ceilings first and report each row's share of them.
     pub ceilings: bool,
+    /// Render frames (the reference's and each configuration's) that plan more MLS
+    /// evaluations than [`crate::render::WORK_BUDGET`]; without it such a frame ends the run
+    /// before its GPU work, naming the configuration.
+    pub force: bool,
 }
 
 /// What a run reports while it works.
@@ -290,6 +300,7 @@ pub fn run(
         set.extend(c.iter().cloned());
         scenes.push(Scene::load(opts.scene.as_deref(), &set)?);
     }
+    let budget = (!opts.force).then_some(crate::render::WORK_BUDGET);
     let mut ref_set = opts.set.clone();
     ref_set.push("render.method=\"reference\"".into());
     // [volume] cannot be swept, so every configuration has the base scene's volume.
@@ -321,6 +332,7 @@ pub fn run(
         ctx,
         &commit,
         opts.cache.as_deref(),
+        budget,
     )?;
     observe(Event::Reference(&reference));
     let compiler = ShaderCompiler::new()?;
@@ -355,7 +367,14 @@ pub fn run(
         let bytes0 = ctx.bytes_uploaded();
         let first_start = Instant::now();
         let mut renderer = Renderer::new(ctx, field.clone())?;
-        let (mut image, first) = renderer.render(&view, |_| {})?;
+        renderer.set_work_budget(budget);
+        let (mut image, first) = renderer.render(&view, |_| {}).map_err(|e| match e {
+            RenderError::Budget { .. } => BenchError::Budget {
+                what: format!("configuration {index} ({settings})"),
+                source: Box::new(e),
+            },
+            e => e.into(),
+        })?;
         let first_wall = first_start.elapsed().as_secs_f64() * 1e3;
         let bytes_first = ctx.bytes_uploaded() - bytes0;
         for _ in 0..opts.warmup {

@@ -98,9 +98,24 @@ fn describe(scene: &Scene, mode: ReferenceMode, ctx: &Context) -> String {
     )
 }
 
-/// Renders `scene` with the reference integrator (the caller has set `render.method`).
-fn render(scene: &Scene, mode: ReferenceMode, ctx: &Context) -> Result<Vec<[f32; 4]>, BenchError> {
+/// Renders `scene` with the reference integrator (the caller has set `render.method`), after
+/// checking its frame against `budget` (MLS evaluations; `None`: `--force`).
+fn render(
+    scene: &Scene,
+    mode: ReferenceMode,
+    ctx: &Context,
+    budget: Option<f64>,
+) -> Result<Vec<[f32; 4]>, BenchError> {
     let field = scene.field(|_| {})?;
+    if let Some(budget) = budget {
+        scene
+            .ray_setup(&field)?
+            .check_budget(budget)
+            .map_err(|source| BenchError::Budget {
+                what: "the reference".into(),
+                source: Box::new(source),
+            })?;
+    }
     match mode {
         ReferenceMode::Gpu => {
             let mut renderer = Renderer::new(ctx, field)?;
@@ -116,13 +131,15 @@ fn render(scene: &Scene, mode: ReferenceMode, ctx: &Context) -> Result<Vec<[f32;
 }
 
 /// The reference of `scene` (already set to the `reference` method), from `cache` when a file
-/// with its key is there, else rendered and stored there.
+/// with its key is there, else rendered (within `budget` MLS evaluations unless `None`) and
+/// stored there.
 pub fn reference_image(
     scene: &Scene,
     mode: ReferenceMode,
     ctx: &Context,
     commit: &str,
     cache: Option<&Path>,
+    budget: Option<f64>,
 ) -> Result<Reference, BenchError> {
     let (width, height) = (scene.camera.width, scene.camera.height);
     let description = describe(scene, mode, ctx);
@@ -146,7 +163,7 @@ pub fn reference_image(
             path: path.clone(),
         });
     }
-    let pixels = render(scene, mode, ctx)?;
+    let pixels = render(scene, mode, ctx, budget)?;
     if let Some(p) = &path {
         if let Some(dir) = p.parent() {
             std::fs::create_dir_all(dir).map_err(|e| BenchError::Io {

@@ -55,11 +55,14 @@ pub enum RenderError {
     #[error("{path}: {message}")]
     Output { path: String, message: String },
     #[error(
-        "the render plans up to {planned:.3e} MLS evaluations, more than the work budget of \
+        "the render plans up to {planned:.3e} {unit}, more than the work budget of \
          {budget:.1e} ({hint}); pass --force to render anyway"
     )]
     Budget {
         planned: f64,
+        /// What is counted: MLS evaluations (ray casting) or footprint-pixel evaluations
+        /// (splatting), which cost about the same on lavapipe.
+        unit: &'static str,
         budget: f64,
         hint: String,
     },
@@ -535,6 +538,7 @@ impl RaySetup {
         }
         Err(RenderError::Budget {
             planned,
+            unit: "MLS evaluations",
             budget,
             hint: format!(
                 "{} × {} rays over a box diagonal of {:.0} steps; take a longer {} or a smaller \
@@ -581,9 +585,10 @@ impl RaySetup {
 /// parameter at the far side of the box.
 pub const F32_STEP_RESOLUTION: f64 = 1.0 / (1u64 << 20) as f64;
 
-/// The work budget of a frame in MLS evaluations (see [`RaySetup::check_budget`]): about
-/// 2.5 minutes of the general path on lavapipe at 30 M evaluations/s, seconds on a GPU; the
-/// CLI's `--force` lifts it.
+/// The work budget of a frame in MLS evaluations (see [`RaySetup::check_budget`]) or
+/// footprint-pixel evaluations (`SplatSetup::check_budget`): about 2.5 minutes of the
+/// general path on lavapipe at 30 M evaluations/s, seconds on a GPU; the CLI's `--force`
+/// lifts it.
 pub const WORK_BUDGET: f64 = 4.0e9;
 
 /// How far from the eye any ray reaches inside the box: the farthest corner, plus the half

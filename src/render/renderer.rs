@@ -175,6 +175,9 @@ pub struct Renderer {
     /// Set from elsewhere (a Ctrl-C handler) to end a ray-casting frame after its current
     /// dispatch with [`RenderError::Interrupted`].
     stop: Option<Arc<AtomicBool>>,
+    /// MLS or footprint evaluations a frame may plan (`None`: no limit); see
+    /// [`Renderer::set_work_budget`].
+    budget: Option<f64>,
 }
 
 impl Renderer {
@@ -182,6 +185,16 @@ impl Renderer {
     /// in flight with [`RenderError::Interrupted`] and returns no image.
     pub fn set_stop(&mut self, flag: Arc<AtomicBool>) {
         self.stop = Some(flag);
+    }
+
+    /// Refuses frames that plan more than `budget` evaluations with
+    /// [`RenderError::Budget`] (`None`, the default: no limit; the CLI sets
+    /// [`crate::render::WORK_BUDGET`] unless `--force`). Ray casting is checked before any
+    /// work of the frame ([`RaySetup::check_budget`]); splatting checks its sheets before any
+    /// work and its binned footprints after the projection, before the accumulation
+    /// ([`SplatSetup::check_budget`]).
+    pub fn set_work_budget(&mut self, budget: Option<f64>) {
+        self.budget = budget;
     }
 
     /// Uploads the field's samples, octree and hull.
@@ -200,6 +213,7 @@ impl Renderer {
             splat_pipelines: Vec::new(),
             splat_targets: None,
             stop: None,
+            budget: None,
         })
     }
 
@@ -230,6 +244,9 @@ impl Renderer {
             view.lighting,
             &self.field,
         )?;
+        if let Some(budget) = self.budget {
+            setup.check_budget(budget)?;
+        }
         if setup.method.preintegrated() {
             check_table_size(
                 &setup.table_lengths(view.transfer),
@@ -357,6 +374,9 @@ impl Renderer {
             view.lighting,
             &self.field,
         )?;
+        if let Some(budget) = self.budget {
+            setup.check_budget(0, budget)?;
+        }
         let surfaces: &[Isosurface] = if setup.settings.surface {
             &setup.isosurfaces
         } else {
@@ -406,6 +426,7 @@ impl Renderer {
             &setup,
             view.transfer,
             &self.gpu_field.hull_bindings(),
+            self.budget,
         )?;
         let gpu_ms = image.gpu_ms();
         let n = image.pixels.len();

@@ -11,8 +11,8 @@
 use super::surface::KernelKind;
 use super::{Antialias, Shading, SplatCounts, SplatSetup, TILE};
 use crate::gpu_types::{SlabPush, Splat, SplatParams, binding};
-use crate::render::Field;
 use crate::render::transfer::TransferFunction;
+use crate::render::{Field, RenderError};
 use crate::vk::{
     BindGroup, Buffer, BufferUsage, ComputePipeline, Context, ShaderCompiler, ShaderSource, VkError,
 };
@@ -450,6 +450,9 @@ fn sum_ms(timings: &[crate::vk::DispatchTiming], stage_ms: &mut [f64; 4]) {
 
 /// Renders one frame; `targets` must fit the setup (see [`SplatTargets::fits`]); `hull` are the
 /// field's hull bindings (`GpuField::hull_bindings`), read by post-shaded frames over a hull.
+/// With a `budget`, a frame whose binned entries plan more evaluations
+/// ([`SplatSetup::check_budget`]) ends after the projection, before any accumulation.
+#[allow(clippy::too_many_arguments)]
 pub fn splat_frame(
     ctx: &Context,
     pipelines: &SplatPipelines,
@@ -458,11 +461,10 @@ pub fn splat_frame(
     setup: &SplatSetup,
     tf: &TransferFunction,
     hull: &[(u32, &Buffer)],
-) -> Result<SplatGpuImage, VkError> {
+    budget: Option<f64>,
+) -> Result<SplatGpuImage, RenderError> {
     if !targets.fits(setup, kernels) {
-        return Err(VkError::Usage(
-            "splat frame buffers do not fit the setup".into(),
-        ));
+        return Err(VkError::Usage("splat frame buffers do not fit the setup".into()).into());
     }
     let gpu_tf = tf.to_gpu();
     let p = params(setup, kernels, gpu_tf.len() as u32);
@@ -528,7 +530,8 @@ pub fn splat_frame(
                 "splatting: the rays of {n} pixels cross the domain's boundary into more than {} \
                  inside segments; post-shaded splatting keeps {0} per pixel: ray cast this mesh",
                 super::PIXEL_SEGMENTS
-            )));
+            ))
+            .into());
         }
     }
     sum_ms(&timings, &mut stage_ms);
@@ -538,7 +541,8 @@ pub fn splat_frame(
             "splatting: {oversized} kernels cover more than {} sheet × block entries each (one \
              invocation writes them); raise splat.slab or lower the image size",
             super::MAX_KERNEL_ENTRIES
-        )));
+        ))
+        .into());
     }
     let counts: Vec<u32> = t.counts.read(ctx)?;
     let mut offsets = Vec::with_capacity(counts.len());
@@ -549,12 +553,16 @@ pub fn splat_frame(
         args.extend([c.div_ceil(GROUP).min(65_535), 1, 1]);
         total += u64::from(c);
     }
+    if let Some(budget) = budget {
+        setup.check_budget(total, budget)?;
+    }
     let limit = ctx.info().max_storage_buffer_range / 8;
     if total > limit || total > u64::from(u32::MAX) {
         return Err(VkError::Usage(format!(
             "splatting: {total} binned footprints exceed the entry list's limit of {limit} \
              (maxStorageBufferRange); raise splat.slab or lower the image size"
-        )));
+        ))
+        .into());
     }
     t.offsets.write(ctx, bytemuck::cast_slice(&offsets))?;
     t.args.write(ctx, bytemuck::cast_slice(&args))?;
@@ -571,7 +579,7 @@ pub fn splat_frame(
     }
     let t = &*targets;
     let Some(list) = t.list.as_ref() else {
-        return Err(VkError::Usage("splat entry list missing".into()));
+        return Err(VkError::Usage("splat entry list missing".into()).into());
     };
 
     // Pass 2: bin, then accumulate and composite sheet after sheet.

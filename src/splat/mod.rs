@@ -282,6 +282,38 @@ impl SplatSetup {
         self.settings.exact && !self.orthographic()
     }
 
+    /// An upper bound of a frame's per-pixel evaluations once `splat_bin` counted `entries`
+    /// (kernel, sheet, block) entries: each entry evaluates at most BLOCK² footprint pixels in
+    /// `splat_accumulate`, and every sheet (plus the closing step of post-shading) clears and
+    /// composites every pixel. Footprint evaluations and MLS evaluations cost about the same
+    /// on lavapipe (BENCHMARKS.md: 0.13–0.35 M footprints/s of 100–150 pixels against 30 M
+    /// MLS evaluations/s), so both renderers share [`crate::render::WORK_BUDGET`].
+    pub fn work_bound(&self, entries: u64) -> f64 {
+        let pixels = f64::from(self.camera.width) * f64::from(self.camera.height);
+        let steps = f64::from(self.slabs) + f64::from(u8::from(self.shading == Shading::Post));
+        entries as f64 * f64::from(BLOCK * BLOCK) + steps * pixels
+    }
+
+    /// Refuses a frame whose [`SplatSetup::work_bound`] exceeds `budget`: with `entries` = 0
+    /// before any GPU work (the sheets alone), then with the binned count before the
+    /// accumulation.
+    pub fn check_budget(&self, entries: u64, budget: f64) -> Result<(), RenderError> {
+        let planned = self.work_bound(entries);
+        if planned <= budget {
+            return Ok(());
+        }
+        Err(RenderError::Budget {
+            planned,
+            unit: "footprint-pixel evaluations",
+            budget,
+            hint: format!(
+                "{} sheets of {} × {} pixels and {entries} binned footprint blocks; raise \
+                 splat.slab or take a smaller image",
+                self.slabs, self.camera.width, self.camera.height
+            ),
+        })
+    }
+
     /// Sheet k covers t in [slab0 + k·Δs, slab0 + (k+1)·Δs].
     pub fn slab_bounds(&self, k: u32) -> (f64, f64) {
         let a = self.slab0 + f64::from(k) * self.slab;

@@ -86,13 +86,17 @@ impl Buffer {
             })?;
         // SAFETY: `handle` was just created on this device.
         let requirements = unsafe { shared.device.get_buffer_memory_requirements(handle) };
-        let allocation = shared.allocator().allocate(&AllocationCreateDesc {
-            name,
-            requirements,
-            location,
-            linear: true,
-            allocation_scheme: AllocationScheme::GpuAllocatorManaged,
-        });
+        let allocation = if shared.injected_allocation_failure() {
+            Err(gpu_allocator::AllocationError::OutOfMemory)
+        } else {
+            shared.allocator().allocate(&AllocationCreateDesc {
+                name,
+                requirements,
+                location,
+                linear: true,
+                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+            })
+        };
         let allocation = match allocation {
             Ok(a) => a,
             Err(source) => {

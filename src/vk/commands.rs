@@ -214,26 +214,114 @@ impl Recorder<'_> {
     }
 }
 
-/// Owns the transient objects of one submission, destroyed in any exit path.
-struct Transient<'a> {
-    shared: &'a Shared,
+/// The command pool, command buffer, fence and timestamp pool of one submission. The context
+/// keeps finished ones ([`Shared::spare_submits`]) and later submissions reset and reuse them:
+/// creating a 16 384-query pool, a pool and a fence per frame costs driver time, and every
+/// object created and destroyed per frame is state a validation layer tracks.
+pub(crate) struct SubmitObjects {
     pool: vk::CommandPool,
+    cmd: vk::CommandBuffer,
     fence: vk::Fence,
     queries: Option<vk::QueryPool>,
 }
 
-impl Drop for Transient<'_> {
-    fn drop(&mut self) {
-        // SAFETY: the submission finished (we waited for the fence) or never happened; these
-        // objects are not used after this point.
+/// Spare submission objects kept per context; a burst of concurrent submissions beyond this
+/// destroys its extras.
+const MAX_SPARE_SUBMITS: usize = 4;
+
+impl SubmitObjects {
+    fn create(shared: &Shared) -> Result<Self, VkError> {
+        let device = &shared.device;
+        let what = || "a compute submission".to_string();
+        let pool_info = vk::CommandPoolCreateInfo::default()
+            .queue_family_index(shared.queue_family)
+            .flags(vk::CommandPoolCreateFlags::TRANSIENT);
+        // SAFETY: valid create info on a live device.
+        let pool = unsafe { device.create_command_pool(&pool_info, None) }
+            .call("vkCreateCommandPool", what)?;
+        // Every later failure destroys what exists so far through `Drop`.
+        let mut made = Lease {
+            shared,
+            objects: Some(Self {
+                pool,
+                cmd: vk::CommandBuffer::null(),
+                fence: vk::Fence::null(),
+                queries: None,
+            }),
+            reusable: false,
+        };
+        let objects = made
+            .objects
+            .as_mut()
+            .ok_or_else(|| VkError::Usage("submission objects vanished while being made".into()))?;
+        // SAFETY: as above.
+        objects.fence = unsafe { device.create_fence(&vk::FenceCreateInfo::default(), None) }
+            .call("vkCreateFence", what)?;
+        if shared.info.timestamp_period_ns.is_some() {
+            let info = vk::QueryPoolCreateInfo::default()
+                .query_type(vk::QueryType::TIMESTAMP)
+                .query_count(2 * MAX_TIMED_DISPATCHES);
+            // SAFETY: valid create info.
+            objects.queries = Some(
+                unsafe { device.create_query_pool(&info, None) }.call("vkCreateQueryPool", what)?,
+            );
+        }
+        let alloc = vk::CommandBufferAllocateInfo::default()
+            .command_pool(pool)
+            .level(vk::CommandBufferLevel::PRIMARY)
+            .command_buffer_count(1);
+        // SAFETY: the pool is live.
+        objects.cmd = unsafe { device.allocate_command_buffers(&alloc) }
+            .call("vkAllocateCommandBuffers", what)?
+            .into_iter()
+            .next()
+            .ok_or_else(|| VkError::Usage("no command buffer allocated".into()))?;
+        made.objects
+            .take()
+            .ok_or_else(|| VkError::Usage("submission objects vanished while being made".into()))
+    }
+
+    /// Destroys the objects (null handles are ignored by Vulkan's destroy calls).
+    ///
+    /// # Safety
+    /// No submission using them may be pending.
+    pub(crate) unsafe fn destroy(self, device: &ash::Device) {
+        // SAFETY: the caller guarantees nothing pending uses these objects; destroying the
+        // pool frees its command buffer.
         unsafe {
-            let device = &self.shared.device;
             if let Some(q) = self.queries {
                 device.destroy_query_pool(q, None);
             }
             device.destroy_fence(self.fence, None);
             device.destroy_command_pool(self.pool, None);
         }
+    }
+}
+
+/// One submission's hold on its objects: back to the context's spares when the submission
+/// finished (`reusable`), destroyed otherwise, on every exit path.
+struct Lease<'a> {
+    shared: &'a Shared,
+    objects: Option<SubmitObjects>,
+    reusable: bool,
+}
+
+impl Drop for Lease<'_> {
+    fn drop(&mut self) {
+        let Some(objects) = self.objects.take() else {
+            return;
+        };
+        if self.reusable {
+            let mut spares = self.shared.spare_submits();
+            if spares.len() < MAX_SPARE_SUBMITS {
+                spares.push(objects);
+                return;
+            }
+        }
+        // SAFETY: not reusable means the submission failed before or while executing; a
+        // failed wait (device lost) leaves nothing the device will still run, and an
+        // unsubmitted command buffer is not pending. Reusable extras finished executing.
+        unsafe { objects.destroy(&self.shared.device) };
     }
 }
 
@@ -247,62 +335,41 @@ impl Context {
         let shared = &*self.shared;
         let device = &shared.device;
         let what = || "a compute submission".to_string();
-        let pool_info = vk::CommandPoolCreateInfo::default()
-            .queue_family_index(shared.queue_family)
-            .flags(vk::CommandPoolCreateFlags::TRANSIENT);
-        // SAFETY: valid create info on a live device.
-        let pool = unsafe { device.create_command_pool(&pool_info, None) }
-            .call("vkCreateCommandPool", what)?;
-        // SAFETY: as above.
-        let fence = match unsafe { device.create_fence(&vk::FenceCreateInfo::default(), None) } {
-            Ok(f) => f,
-            Err(result) => {
-                // SAFETY: the pool is unused.
-                unsafe { device.destroy_command_pool(pool, None) };
-                return Err(VkError::Call {
-                    call: "vkCreateFence",
-                    what: what(),
-                    result,
-                });
+        let spare = shared.spare_submits().pop();
+        let objects = match spare {
+            Some(o) => {
+                // SAFETY: spares finished executing (their fence was waited for); resetting
+                // the pool returns its command buffer to the initial state.
+                unsafe {
+                    device
+                        .reset_command_pool(o.pool, vk::CommandPoolResetFlags::empty())
+                        .call("vkResetCommandPool", what)?;
+                    device
+                        .reset_fences(&[o.fence])
+                        .call("vkResetFences", what)?;
+                }
+                o
             }
+            None => SubmitObjects::create(shared)?,
         };
-        let mut transient = Transient {
+        let (cmd, fence, queries) = (objects.cmd, objects.fence, objects.queries);
+        let mut lease = Lease {
             shared,
-            pool,
-            fence,
-            queries: None,
+            objects: Some(objects),
+            reusable: false,
         };
-        if shared.info.timestamp_period_ns.is_some() {
-            let info = vk::QueryPoolCreateInfo::default()
-                .query_type(vk::QueryType::TIMESTAMP)
-                .query_count(2 * MAX_TIMED_DISPATCHES);
-            // SAFETY: valid create info.
-            transient.queries = Some(
-                unsafe { device.create_query_pool(&info, None) }.call("vkCreateQueryPool", what)?,
-            );
-        }
-        let alloc = vk::CommandBufferAllocateInfo::default()
-            .command_pool(pool)
-            .level(vk::CommandBufferLevel::PRIMARY)
-            .command_buffer_count(1);
-        // SAFETY: the pool is live.
-        let cmd = unsafe { device.allocate_command_buffers(&alloc) }
-            .call("vkAllocateCommandBuffers", what)?
-            .into_iter()
-            .next()
-            .ok_or_else(|| VkError::Usage("no command buffer allocated".into()))?;
         let begin = vk::CommandBufferBeginInfo::default()
             .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT);
         // SAFETY: fresh command buffer.
         unsafe { device.begin_command_buffer(cmd, &begin) }.call("vkBeginCommandBuffer", what)?;
-        if let Some(q) = transient.queries {
+        if let Some(q) = queries {
             // SAFETY: recording; the pool has this many queries.
             unsafe { device.cmd_reset_query_pool(cmd, q, 0, 2 * MAX_TIMED_DISPATCHES) };
         }
         let mut recorder = Recorder {
             shared,
             cmd,
-            queries: transient.queries,
+            queries,
             labels: Vec::new(),
             commands: 0,
         };
@@ -326,6 +393,10 @@ impl Context {
         };
         // SAFETY: recording.
         unsafe { device.end_command_buffer(cmd) }.call("vkEndCommandBuffer", what)?;
+        if recorded.is_err() {
+            // Never submitted: the pool reset on reuse discards the recording.
+            lease.reusable = true;
+        }
         recorded?;
         let cmds = [cmd];
         let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
@@ -338,6 +409,7 @@ impl Context {
         // SAFETY: the fence belongs to this submission.
         unsafe { device.wait_for_fences(&[fence], true, u64::MAX) }
             .call("vkWaitForFences", what)?;
+        lease.reusable = true;
         let mut timings: Vec<DispatchTiming> = labels
             .into_iter()
             .map(|label| DispatchTiming {
@@ -345,7 +417,7 @@ impl Context {
                 gpu_ms: None,
             })
             .collect();
-        if let (Some(q), Some(period)) = (transient.queries, shared.info.timestamp_period_ns) {
+        if let (Some(q), Some(period)) = (queries, shared.info.timestamp_period_ns) {
             let n = timings.len().min(MAX_TIMED_DISPATCHES as usize);
             if n > 0 {
                 let mut stamps = vec![0u64; 2 * n];
@@ -365,7 +437,47 @@ impl Context {
                 }
             }
         }
-        drop(transient);
+        drop(lease);
         Ok(timings)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{Buffer, BufferUsage, ContextOptions};
+    use super::*;
+
+    /// Synchronization validation is live in the test suite: two fills of one buffer with the
+    /// global barrier between them are clean, the same two fills with the barrier suppressed
+    /// (a write-after-write hazard) are reported. A test run whose layer missed hazards would
+    /// make every "zero validation messages" assertion meaningless.
+    #[test]
+    fn synchronization_validation_reports_a_missing_barrier() {
+        let ctx = Context::new(&ContextOptions {
+            validation: Some(true),
+            sync_validation: Some(true),
+            ..ContextOptions::default()
+        })
+        .unwrap_or_else(|e| panic!("no validated Vulkan device (run tools/setup): {e}"));
+        let buffer = Buffer::new(&ctx, "hazard", 256, BufferUsage::Storage).expect("buffer");
+        let fills = |suppress_barrier: bool| {
+            ctx.submit(|r| {
+                r.fill(&buffer, 1);
+                if suppress_barrier {
+                    // The recorder only skips its barrier before the first command.
+                    r.commands = 0;
+                }
+                r.fill(&buffer, 2);
+                Ok(())
+            })
+            .expect("submit");
+        };
+        fills(false);
+        assert_eq!(ctx.validation_errors(), 0, "clean fills reported");
+        fills(true);
+        assert!(
+            ctx.validation_errors() > 0,
+            "a write-after-write hazard went unreported: synchronization validation is off"
+        );
     }
 }

@@ -4,6 +4,7 @@
 //! gone, `Shared::drop` frees the allocator (after checking for leaked allocations), then the
 //! device, the debug messenger and the instance — the last three only when vmls created them.
 
+use super::commands::SubmitObjects;
 use super::{VkError, VkResultExt};
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
@@ -20,9 +21,7 @@ pub struct ContextOptions {
     /// Enable the Khronos validation layer (and synchronization validation). `None` reads the
     /// environment variable `VMLS_VALIDATION` (`1` = on).
     pub validation: Option<bool>,
-    /// With validation: also Khronos synchronization validation. `None` means yes. (Layer
-    /// 1.3.239, Debian 12's, grows by ~2.4 MB of host memory per frame with it; the memory
-    /// test measures vmls's own flatness with core validation only.)
+    /// With validation: also Khronos synchronization validation. `None` means yes.
     pub sync_validation: Option<bool>,
     /// Device index or case-insensitive name substring. `None` reads `VMLS_DEVICE`, else picks
     /// discrete > integrated > virtual > CPU.
@@ -81,6 +80,11 @@ pub(crate) struct Shared {
     /// Bytes written from the host into buffers (`Buffer::write`), for benchmarks.
     pub(crate) bytes_uploaded: std::sync::atomic::AtomicU64,
     allocator: ManuallyDrop<Mutex<Allocator>>,
+    /// Buffer allocations that may still succeed before every further one fails as out of
+    /// memory (`u64::MAX`: no fault injected); see [`Context::fail_allocations_after`].
+    allocations_before_fault: std::sync::atomic::AtomicU64,
+    /// Finished submissions' command pools, fences and query pools, reused by the next ones.
+    spare_submits: Mutex<Vec<SubmitObjects>>,
     messenger: Option<Messenger>,
     validation: Box<ValidationState>,
     owns_device: bool,
@@ -534,6 +538,8 @@ impl Context {
                 live_allocations: AtomicUsize::new(0),
                 bytes_uploaded: std::sync::atomic::AtomicU64::new(0),
                 allocator: ManuallyDrop::new(Mutex::new(allocator)),
+                allocations_before_fault: std::sync::atomic::AtomicU64::new(u64::MAX),
+                spare_submits: Mutex::new(Vec::new()),
                 messenger,
                 validation,
                 owns_device,
@@ -594,6 +600,16 @@ impl Context {
         self.shared.bytes_uploaded.load(Ordering::SeqCst)
     }
 
+    /// Fault injection for tests and audits: after `n` more successful buffer allocations, every
+    /// allocation fails as the device's being out of memory (`VkError::OutOfMemory`) until
+    /// called with `None`. Lets tests drive each allocation of a render into failure, which
+    /// a real device reaches only under memory pressure.
+    pub fn fail_allocations_after(&self, n: Option<u64>) {
+        self.shared
+            .allocations_before_fault
+            .store(n.unwrap_or(u64::MAX), Ordering::SeqCst);
+    }
+
     /// Buffers currently allocated from this context.
     pub fn live_allocations(&self) -> usize {
         self.shared.live_allocations.load(Ordering::SeqCst)
@@ -612,6 +628,28 @@ impl Shared {
         // A poisoned lock only means another thread panicked mid-allocation; the allocator's
         // state is still consistent for freeing, so keep going.
         self.allocator.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Whether an injected fault fails this buffer allocation (counting it down otherwise).
+    pub(crate) fn injected_allocation_failure(&self) -> bool {
+        let mut fail = false;
+        let _ = self.allocations_before_fault.fetch_update(
+            Ordering::SeqCst,
+            Ordering::SeqCst,
+            |left| match left {
+                u64::MAX => None,
+                0 => {
+                    fail = true;
+                    None
+                }
+                n => Some(n - 1),
+            },
+        );
+        fail
+    }
+
+    pub(crate) fn spare_submits(&self) -> MutexGuard<'_, Vec<SubmitObjects>> {
+        self.spare_submits.lock().unwrap_or_else(|p| p.into_inner())
     }
 
     pub(crate) fn queue(&self) -> MutexGuard<'_, vk::Queue> {
@@ -641,6 +679,14 @@ impl Drop for Shared {
         // command uses the device; the allocator is dropped exactly once, before the device.
         unsafe {
             let _ = self.device.device_wait_idle();
+            let spares = std::mem::take(
+                self.spare_submits
+                    .get_mut()
+                    .unwrap_or_else(|p| p.into_inner()),
+            );
+            for objects in spares {
+                objects.destroy(&self.device);
+            }
             ManuallyDrop::drop(&mut self.allocator);
             if self.owns_device {
                 self.device.destroy_device(None);

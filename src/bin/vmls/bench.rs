@@ -65,6 +65,10 @@ pub struct BenchArgs {
     /// Skip measuring the device's ceilings (FMA, gathers) and each row's share of them.
     #[arg(long)]
     no_ceilings: bool,
+    /// Measure frames past the work budget (4e9 MLS or footprint-pixel evaluations per
+    /// frame, reference included); without it such a frame ends the bench before its work.
+    #[arg(long)]
+    force: bool,
     #[command(flatten)]
     device: DeviceArgs,
 }
@@ -176,6 +180,7 @@ pub fn bench(args: &BenchArgs) -> Result<(), CliError> {
         print_variant: args.variant,
         dump_spirv: args.dump_spirv.clone(),
         ceilings: !args.no_ceilings,
+        force: args.force,
     };
     let mut measured_ceilings = None;
     let ctx = context(&args.device)?;

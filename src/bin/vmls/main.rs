@@ -68,9 +68,9 @@ enum Command {
         /// exact image splatting approximates).
         #[arg(long)]
         cpu: bool,
-        /// Render even when the frame plans more MLS evaluations than the work budget
-        /// (4e9, minutes on lavapipe): the budget keeps a mistyped step from occupying the
-        /// device for hours.
+        /// Render even when the frame plans more evaluations (MLS, or splatted footprint
+        /// pixels) than the work budget (4e9, minutes on lavapipe): the budget keeps a
+        /// mistyped step or sheet from occupying the device for hours.
         #[arg(long)]
         force: bool,
         #[command(flatten)]

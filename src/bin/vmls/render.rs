@@ -80,6 +80,7 @@ pub fn run_render(
     let upload_start = Instant::now();
     let mut renderer = Renderer::new(&ctx, field)?;
     renderer.set_stop(stop.clone());
+    renderer.set_work_budget((!force).then_some(vmls::render::WORK_BUDGET));
     let upload_ms = upload_start.elapsed().as_secs_f64() * 1e3;
     // Frame k turns the camera by 10°·k about its up axis through the target: later frames
     // show what a new camera costs with everything else kept on the GPU.

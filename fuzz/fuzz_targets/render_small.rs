@@ -1,0 +1,51 @@
+//! Shared by the targets that go past parsing: a dataset of at most 4096 points renders a 6×6
+//! image with the f64 CPU twins, within a small work budget, without NaN and without panicking.
+
+use std::path::Path;
+use vmls::data::dataset::Dataset;
+use vmls::scene::Scene;
+
+/// Renders `dataset` (parsed from the file `name`) as `vmls render` would, seen from outside
+/// its box; returns quietly where the scene or field refuses it (that is an error message, not a
+/// finding), asserts every pixel finite.
+pub fn render_small(name: &str, dataset: &Dataset) {
+    if dataset.geometry.point_count() > 4096 {
+        return;
+    }
+    let path = Path::new(name);
+    let overrides = [
+        format!("volume.file=\"{name}\""),
+        "camera.width=6".into(),
+        "camera.height=6".into(),
+        "render.step=0.5".into(),
+    ];
+    let Ok(mut scene) = Scene::parse("", "fuzz", Path::new("."), &overrides) else {
+        return;
+    };
+    let Ok(field) = scene.field_from_dataset(dataset, path, |_| {}) else {
+        return;
+    };
+    let (lo, hi) = field.bounds();
+    let centre = field.frame_origin + 0.5 * (lo + hi);
+    let reach = (hi - lo).length().max(1e-9);
+    scene.camera.target = centre.to_array();
+    scene.camera.eye = (centre + reach * glam::DVec3::new(1.6, 1.3, 1.1)).to_array();
+    let Ok(setup) = scene.ray_setup(&field) else {
+        return;
+    };
+    if setup.check_budget(2e5).is_err() {
+        return;
+    }
+    let tables = vmls::render::build_tables(
+        &setup,
+        &field,
+        &scene.transfer,
+        scene.render.table_resolution.min(64),
+        |_| {},
+    );
+    let image =
+        vmls::render::raycast::raycast_image(&setup, &field, &scene.transfer, tables.as_ref());
+    for p in &image {
+        assert!(p.rgba.iter().all(|c| c.is_finite()), "{name}: {:?}", p.rgba);
+    }
+}
