@@ -492,25 +492,28 @@ fn the_work_budget_refuses_and_force_lifts_it() {
     assert!(png.exists());
 }
 
+/// `vmls render -o png --set a --set b …`.
+fn render_with<'a>(png: &'a Path, sets: &[&'a str]) -> Vec<&'a str> {
+    let mut args = vec!["render", "-o", s(png)];
+    for set in sets {
+        args.extend(["--set", set]);
+    }
+    args
+}
+
 #[test]
 fn splatting_checks_its_budget_before_accumulating() {
     let d = dir("splat-budget");
     let png = d.join("x.png");
     // 764 sheets over 4096² pixels: refused before any work.
+    let sheets = [
+        "render.method=\"splat\"",
+        "camera.width=4096",
+        "camera.height=4096",
+        "splat.slab=0.1",
+    ];
     refused_quickly(
-        &[
-            "render",
-            "-o",
-            s(&png),
-            "--set",
-            "render.method=\"splat\"",
-            "--set",
-            "camera.width=4096",
-            "--set",
-            "camera.height=4096",
-            "--set",
-            "splat.slab=0.1",
-        ],
+        &render_with(&png, &sheets),
         &[
             "work budget",
             "footprint-pixel evaluations",
@@ -522,22 +525,15 @@ fn splatting_checks_its_budget_before_accumulating() {
     );
     // 100³ kernels over thin sheets bin some 3.8e8 footprint blocks into a 64² image: known
     // only after the projection, refused before the accumulation.
+    let blocks = [
+        "render.method=\"splat\"",
+        "volume.resolution=100",
+        "splat.slab=0.05",
+        "camera.width=64",
+        "camera.height=64",
+    ];
     refused_quickly(
-        &[
-            "render",
-            "-o",
-            s(&png),
-            "--set",
-            "render.method=\"splat\"",
-            "--set",
-            "volume.resolution=100",
-            "--set",
-            "splat.slab=0.05",
-            "--set",
-            "camera.width=64",
-            "--set",
-            "camera.height=64",
-        ],
+        &render_with(&png, &blocks),
         &["work budget", "binned footprint blocks", "--force"],
         &png,
     );
@@ -603,6 +599,45 @@ fn the_bench_checks_the_budget_of_the_reference_and_each_configuration() {
         String::from_utf8_lossy(&run.stderr)
     );
     assert!(results.exists());
+}
+
+#[test]
+fn out_of_memory_at_any_allocation_fails_cleanly_and_writes_nothing() {
+    let d = dir("oom");
+    let (png, stats) = (d.join("x.png"), d.join("stats.json"));
+    let run = |env: &str, method: &str| {
+        Command::new(env!("CARGO_BIN_EXE_vmls"))
+            .args(["render", "-o", s(&png), "--stats", s(&stats), "--set"])
+            .arg(format!("render.method=\"{method}\""))
+            .args(SMALL)
+            .env("VMLS_VALIDATION", "1")
+            .env_remove("VMLS_DEVICE")
+            .env(vmls::vk::FAIL_ALLOCATIONS_VAR, env)
+            .output()
+            .expect("run vmls")
+    };
+    // The first allocation (the upload), early and late ones of the first frame.
+    for method in ["fixed", "splat"] {
+        for n in ["0", "2", "5", "9"] {
+            let out = run(n, method);
+            assert_fails(&out, &["out of GPU memory", "buffer '"], &png);
+            assert_eq!(
+                listing(&d),
+                Vec::<String>::new(),
+                "{method}, {n}: files left"
+            );
+        }
+    }
+    let out = run("many", "fixed");
+    assert_fails(&out, &["VMLS_FAIL_ALLOCATIONS_AFTER", "\"many\""], &png);
+    // Far enough: every allocation succeeds.
+    let out = run("1000", "fixed");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(png.exists() && stats.exists());
 }
 
 #[cfg(unix)]

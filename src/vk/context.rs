@@ -381,8 +381,27 @@ fn device_info(
     }
 }
 
+/// The environment variable that injects an allocation failure into contexts made by
+/// [`Context::new`] (see [`Context::fail_allocations_after`]): lets end-to-end tests drive
+/// the CLI into out-of-memory at any allocation.
+pub const FAIL_ALLOCATIONS_VAR: &str = "VMLS_FAIL_ALLOCATIONS_AFTER";
+
+/// `VMLS_FAIL_ALLOCATIONS_AFTER` as a count, `None` when unset.
+fn allocation_fault_from_env() -> Result<Option<u64>, VkError> {
+    match std::env::var(FAIL_ALLOCATIONS_VAR) {
+        Err(_) => Ok(None),
+        Ok(text) => text.trim().parse().map(Some).map_err(|_| {
+            VkError::Usage(format!(
+                "{FAIL_ALLOCATIONS_VAR}: expected a number of buffer allocations, found {:?}",
+                text.chars().take(40).collect::<String>()
+            ))
+        }),
+    }
+}
+
 impl Context {
-    /// Creates an instance and a device of our own.
+    /// Creates an instance and a device of our own. Reads `VMLS_VALIDATION`, `VMLS_DEVICE`
+    /// (where the options leave them open) and [`FAIL_ALLOCATIONS_VAR`].
     pub fn new(options: &ContextOptions) -> Result<Self, VkError> {
         let validation = options
             .validation
@@ -391,6 +410,7 @@ impl Context {
             .device
             .clone()
             .or_else(|| std::env::var("VMLS_DEVICE").ok());
+        let fault = allocation_fault_from_env()?;
         let entry = load_entry()?;
         let sync = options.sync_validation.unwrap_or(true);
         let (instance, messenger, state) = create_instance(&entry, validation, sync)?;
@@ -453,6 +473,7 @@ impl Context {
             options.force_staging,
             validation,
         )
+        .inspect(|ctx| ctx.fail_allocations_after(fault))
     }
 
     /// Wraps a device created by the embedding application. vmls creates only its allocator and

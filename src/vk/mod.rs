@@ -19,7 +19,7 @@ mod shader;
 
 pub use buffer::{Buffer, BufferUsage};
 pub use commands::{DispatchTiming, Recorder};
-pub use context::{Context, ContextOptions, DeviceInfo, RawContext};
+pub use context::{Context, ContextOptions, DeviceInfo, FAIL_ALLOCATIONS_VAR, RawContext};
 pub use pipeline::{BindGroup, BindingKind, ComputePipeline};
 pub use shader::{ShaderCompiler, ShaderSource, shader_names, source_texts};
 
