@@ -767,3 +767,67 @@ fn geometry_and_values_beyond_f32_or_without_volume_are_refused_by_name() {
         refused_quickly(&["render", "-o", s(&png), "--set", &set(p)], needles, &png);
     }
 }
+
+/// Regression from fuzzing (`nifti_fields`): a constant field of 1e20 or beyond, within the
+/// accepted ±1e30, gave the preintegration tables a scalar range of zero width (a margin below
+/// f64's resolution at that magnitude) and the CPU twin rendered NaN. Now both renderers give
+/// finite images that agree, and show the field where the transfer function makes it opaque.
+#[test]
+fn constant_fields_far_from_zero_render_finite_on_both_renderers() {
+    use vmls::render::renderer::Renderer;
+    use vmls::scene::Scene;
+    let d = dir("constant");
+    let (ctx, _) = common::gpu();
+    for v in [1.0f32, 1e20, 1e30, -1e30] {
+        let file = d.join("c.nrrd");
+        nrrd(&file, [4, 4, 4], "", &[v; 64]);
+        for covering in [false, true] {
+            let mut set = vec![
+                format!("volume.file={:?}", s(&file)),
+                "camera.width=8".into(),
+                "camera.height=8".into(),
+            ];
+            if covering {
+                set.push("transfer.points=[[-1e30,0.2,0.4,0.6,0.5],[1e30,0.2,0.4,0.6,0.5]]".into());
+            }
+            let scene = Scene::load(None, &set).expect("scene");
+            let field = scene.field(|_| {}).expect("field");
+            let setup = scene.ray_setup(&field).expect("setup");
+            let tables = vmls::render::build_tables(
+                &setup,
+                &field,
+                &scene.transfer,
+                scene.render.table_resolution,
+                |_| {},
+            );
+            let cpu = vmls::render::raycast::raycast_image(
+                &setup,
+                &field,
+                &scene.transfer,
+                tables.as_ref(),
+            );
+            let mut renderer = Renderer::new(&ctx, field).expect("renderer");
+            let (gpu, _) = renderer.render(&scene.view(), |_| {}).expect("frame");
+            let mut worst: f64 = 0.0;
+            for (c, g) in cpu.iter().zip(&gpu.pixels) {
+                for (&x, &y) in c.rgba.iter().zip(g) {
+                    assert!(x.is_finite(), "{v}, covering {covering}: CPU {:?}", c.rgba);
+                    worst = worst.max((x - f64::from(y)).abs());
+                }
+            }
+            assert!(
+                worst <= 1e-4,
+                "{v}, covering {covering}: GPU and CPU differ by {worst}"
+            );
+            // The default transfer function clamps: transparent below 0, τ = 3 above 1.
+            let centre = cpu[4 * 8 + 4].rgba[3];
+            let visible = covering || v > 0.0;
+            assert_eq!(
+                centre > 0.1,
+                visible,
+                "{v}, covering {covering}: centre opacity {centre}"
+            );
+        }
+    }
+    common::finish(ctx);
+}

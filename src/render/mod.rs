@@ -704,9 +704,13 @@ impl TableCache {
     }
 }
 
-/// The tables' scalar range: the data range with a 5% margin each side.
+/// The tables' scalar range: the data range with a 5% margin each side. The margin is at
+/// least 5·10⁻⁶ of the values' magnitude, so that a constant field far from zero (fuzzing found
+/// 1e20 everywhere) keeps a range that f32 resolves on the GPU instead of one of zero width,
+/// which made the CPU twin divide 0 by 0.
 pub fn scalar_range(field: &Field) -> (f64, f64) {
     let (lo, hi) = field.value_range();
-    let margin = 0.05 * (hi - lo).max(1e-6);
+    let magnitude = lo.abs().max(hi.abs());
+    let margin = 0.05 * (hi - lo).max(1e-6).max(1e-4 * magnitude);
     (lo - margin, hi + margin)
 }
