@@ -7,7 +7,19 @@ use libfuzzer_sys::arbitrary::{Result, Unstructured};
 /// infinite), sometimes any bit pattern.
 pub fn float(u: &mut Unstructured) -> Result<f64> {
     const PICKS: [f64; 14] = [
-        1.0, 0.5, 2.0, 0.25, 3.0, -1.0, 0.0, -0.0, 1e-30, 1e30, 1e308, f64::NAN, f64::INFINITY,
+        1.0,
+        0.5,
+        2.0,
+        0.25,
+        3.0,
+        -1.0,
+        0.0,
+        -0.0,
+        1e-30,
+        1e30,
+        1e308,
+        f64::NAN,
+        f64::INFINITY,
         -7.5,
     ];
     Ok(match u.int_in_range(0u8..=9)? {

@@ -38,7 +38,11 @@ fn build(u: &mut Unstructured) -> Result<(Vec<u8>, bool)> {
         }
         h[at..at + b.len()].copy_from_slice(&b);
     };
-    let sizeof_hdr: i32 = if u.ratio(1u8, 16)? { u.arbitrary()? } else { 348 };
+    let sizeof_hdr: i32 = if u.ratio(1u8, 16)? {
+        u.arbitrary()?
+    } else {
+        348
+    };
     put(&mut h, 0, sizeof_hdr.to_le_bytes().to_vec());
     let rank: i16 = if u.ratio(1u8, 8)? {
         u.arbitrary()?
@@ -91,7 +95,8 @@ fn build(u: &mut Unstructured) -> Result<(Vec<u8>, bool)> {
     // quatern_b..d, qoffset_x..z, srow_x, srow_y, srow_z.
     for i in 0..18 {
         let identity = [
-            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0,
+            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
+            0.0,
         ];
         let v = if u.ratio(1u8, 3)? {
             fields::float(u)?
@@ -138,18 +143,7 @@ fn build(u: &mut Unstructured) -> Result<(Vec<u8>, bool)> {
 }
 
 libfuzzer_sys::fuzz_target!(|data: &[u8]| {
-    let Some((&first, data)) = data.split_first() else {
-        return;
-    };
-    let render = first % 16 == 7;
-    let mut u = Unstructured::new(data);
-    let Ok((file, gzip)) = build(&mut u) else {
-        return;
-    };
-    let name = if gzip { "fuzz.nii.gz" } else { "fuzz.nii" };
-    if let Ok(dataset) = vmls::data::parse_dataset_bytes(std::path::Path::new(name), &file) {
-        if render {
-            render_small::render_small(name, &dataset);
-        }
-    }
+    render_small::parse_built(data, |u| {
+        build(u).map(|(f, gzip)| (f, if gzip { "fuzz.nii.gz" } else { "fuzz.nii" }))
+    });
 });

@@ -90,7 +90,11 @@ fn build(u: &mut Unstructured) -> Result<Vec<u8>> {
     if u.ratio(1u8, 6)? {
         writeln!(h, "# a comment\nkey:=value\nkinds: domain domain domain").ok();
     }
-    let line_skip = if u.ratio(1u8, 8)? { u.int_in_range(0..=3)? } else { 0 };
+    let line_skip = if u.ratio(1u8, 8)? {
+        u.int_in_range(0..=3)?
+    } else {
+        0
+    };
     if line_skip > 0 {
         writeln!(h, "line skip: {line_skip}").ok();
     }
@@ -141,18 +145,5 @@ fn build(u: &mut Unstructured) -> Result<Vec<u8>> {
 }
 
 libfuzzer_sys::fuzz_target!(|data: &[u8]| {
-    let Some((&first, data)) = data.split_first() else {
-        return;
-    };
-    let render = first % 16 == 7;
-    let mut u = Unstructured::new(data);
-    let Ok(file) = build(&mut u) else {
-        return;
-    };
-    let name = "fuzz.nrrd";
-    if let Ok(dataset) = vmls::data::parse_dataset_bytes(std::path::Path::new(name), &file) {
-        if render {
-            render_small::render_small(name, &dataset);
-        }
-    }
+    render_small::parse_built(data, |u| build(u).map(|f| (f, "fuzz.nrrd")));
 });

@@ -49,3 +49,26 @@ pub fn render_small(name: &str, dataset: &Dataset) {
         assert!(p.rgba.iter().all(|c| c.is_finite()), "{name}: {:?}", p.rgba);
     }
 }
+
+/// The body of the structure-aware targets: the first byte decides whether a file that parses
+/// is also rendered (one input in 16: rendering costs some 20 parses), the rest feeds `build`,
+/// which returns the file and its name (the name picks the reader).
+pub fn parse_built(
+    data: &[u8],
+    build: impl FnOnce(
+        &mut libfuzzer_sys::arbitrary::Unstructured,
+    ) -> libfuzzer_sys::arbitrary::Result<(Vec<u8>, &'static str)>,
+) {
+    let Some((&first, data)) = data.split_first() else {
+        return;
+    };
+    let mut u = libfuzzer_sys::arbitrary::Unstructured::new(data);
+    let Ok((file, name)) = build(&mut u) else {
+        return;
+    };
+    if let Ok(dataset) = vmls::data::parse_dataset_bytes(Path::new(name), &file)
+        && first % 16 == 7
+    {
+        render_small(name, &dataset);
+    }
+}

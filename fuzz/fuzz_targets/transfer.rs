@@ -14,7 +14,10 @@ libfuzzer_sys::fuzz_target!(|data: &[u8]| {
     if let Ok(tf) = vmls::render::transfer::TransferFunction::from_toml(value) {
         for s in [-1e30, -1.0, 0.0, 0.25, 0.5, 1.0, 1e30] {
             let (rgb, tau) = tf.lookup(s);
-            assert!(rgb.iter().all(|c| c.is_finite()) && tau.is_finite(), "{s}: {rgb:?} {tau}");
+            assert!(
+                rgb.iter().all(|c| c.is_finite()) && tau.is_finite(),
+                "{s}: {rgb:?} {tau}"
+            );
         }
     }
 });

@@ -88,10 +88,18 @@ fn build(u: &mut Unstructured) -> Result<Vec<u8>> {
     let sizes: Vec<i64> = (0..3).map(|_| fields::size(u)).collect::<Result<_>>()?;
     let extent: Vec<String> = sizes.iter().map(|s| format!("0 {}", s - 1)).collect();
     let extent = extent.join(" ");
-    let origin: Vec<String> = (0..3).map(|_| fields::float(u).map(|v| v.to_string())).collect::<Result<_>>()?;
-    let spacing: Vec<String> = (0..3).map(|_| fields::float(u).map(|v| v.to_string())).collect::<Result<_>>()?;
+    let origin: Vec<String> = (0..3)
+        .map(|_| fields::float(u).map(|v| v.to_string()))
+        .collect::<Result<_>>()?;
+    let spacing: Vec<String> = (0..3)
+        .map(|_| fields::float(u).map(|v| v.to_string()))
+        .collect::<Result<_>>()?;
     let &(ty, kind, bytes) = u.choose(&TYPES)?;
-    let components: u8 = if u.ratio(1u8, 6)? { u.int_in_range(0..=4)? } else { 1 };
+    let components: u8 = if u.ratio(1u8, 6)? {
+        u.int_in_range(0..=4)?
+    } else {
+        1
+    };
     let count = sizes
         .iter()
         .map(|&d| usize::try_from(d).unwrap_or(0))
@@ -132,7 +140,11 @@ fn build(u: &mut Unstructured) -> Result<Vec<u8>> {
             }
         }
     };
-    let array_format = if appended.is_some() { "appended" } else { format };
+    let array_format = if appended.is_some() {
+        "appended"
+    } else {
+        format
+    };
     let offset = if appended.is_some() {
         if u.ratio(1u8, 10)? {
             format!(" offset=\"{}\"", u.arbitrary::<i32>()?)
@@ -182,18 +194,5 @@ fn build(u: &mut Unstructured) -> Result<Vec<u8>> {
 }
 
 libfuzzer_sys::fuzz_target!(|data: &[u8]| {
-    let Some((&first, data)) = data.split_first() else {
-        return;
-    };
-    let render = first % 16 == 7;
-    let mut u = Unstructured::new(data);
-    let Ok(file) = build(&mut u) else {
-        return;
-    };
-    let name = "fuzz.vti";
-    if let Ok(dataset) = vmls::data::parse_dataset_bytes(std::path::Path::new(name), &file) {
-        if render {
-            render_small::render_small(name, &dataset);
-        }
-    }
+    render_small::parse_built(data, |u| build(u).map(|f| (f, "fuzz.vti")));
 });
