@@ -461,27 +461,32 @@ fn keys_that_set_work_or_memory_are_range_checked_by_name() {
     }
 }
 
+/// `vmls render -o png --set a --set b …`.
+fn render_with<'a>(png: &'a Path, sets: &[&'a str]) -> Vec<&'a str> {
+    let mut args = vec!["render", "-o", s(png)];
+    for set in sets {
+        args.extend(["--set", set]);
+    }
+    args
+}
+
 #[test]
 fn the_work_budget_refuses_and_force_lifts_it() {
     let d = dir("budget");
     let png = d.join("x.png");
     // 1024² rays at a step of 0.01 spacings plan 7e9 evaluations; the camera looks away
     // from the volume, so that the forced render is quick although the bound is not.
-    let args = [
-        "render",
-        "-o",
-        s(&png),
-        "--set",
-        "render.step=0.01",
-        "--set",
-        "camera.width=1024",
-        "--set",
-        "camera.height=1024",
-        "--set",
-        "camera.target=[60, 40, 50]",
-    ];
+    let args = render_with(
+        &png,
+        &[
+            "render.step=0.01",
+            "camera.width=1024",
+            "camera.height=1024",
+            "camera.target=[60, 40, 50]",
+        ],
+    );
     refused_quickly(&args, &["work budget", "render.step", "--force"], &png);
-    let mut forced = args.to_vec();
+    let mut forced = args.clone();
     forced.push("--force");
     let out = vmls_within(&forced, Duration::from_secs(300));
     assert!(
@@ -490,15 +495,6 @@ fn the_work_budget_refuses_and_force_lifts_it() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(png.exists());
-}
-
-/// `vmls render -o png --set a --set b …`.
-fn render_with<'a>(png: &'a Path, sets: &[&'a str]) -> Vec<&'a str> {
-    let mut args = vec!["render", "-o", s(png)];
-    for set in sets {
-        args.extend(["--set", set]);
-    }
-    args
 }
 
 #[test]
@@ -793,18 +789,11 @@ fn constant_fields_far_from_zero_render_finite_on_both_renderers() {
             let scene = Scene::load(None, &set).expect("scene");
             let field = scene.field(|_| {}).expect("field");
             let setup = scene.ray_setup(&field).expect("setup");
-            let tables = vmls::render::build_tables(
+            let cpu = vmls::render::raycast::raycast_frame(
                 &setup,
                 &field,
                 &scene.transfer,
                 scene.render.table_resolution,
-                |_| {},
-            );
-            let cpu = vmls::render::raycast::raycast_image(
-                &setup,
-                &field,
-                &scene.transfer,
-                tables.as_ref(),
             );
             let mut renderer = Renderer::new(&ctx, field).expect("renderer");
             let (gpu, _) = renderer.render(&scene.view(), |_| {}).expect("frame");

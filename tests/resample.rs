@@ -155,14 +155,12 @@ struct Both {
 fn both(s: &Scene) -> Both {
     let field = s.field(|_| {}).expect("field");
     let setup = s.ray_setup(&field).expect("setup");
-    let tables = vmls::render::build_tables(
+    let cpu = vmls::render::raycast::raycast_frame(
         &setup,
         &field,
         &s.transfer,
         s.render.table_resolution,
-        |_| {},
     );
-    let cpu = vmls::render::raycast::raycast_image(&setup, &field, &s.transfer, tables.as_ref());
     let (ctx, _compiler) = gpu();
     let mut renderer = vmls::render::renderer::Renderer::new(&ctx, field).expect("renderer");
     let image = common::splat::scene_frame(&mut renderer, s);

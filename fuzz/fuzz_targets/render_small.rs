@@ -36,15 +36,12 @@ pub fn render_small(name: &str, dataset: &Dataset) {
     if setup.check_budget(2e5).is_err() {
         return;
     }
-    let tables = vmls::render::build_tables(
+    let image = vmls::render::raycast::raycast_frame(
         &setup,
         &field,
         &scene.transfer,
         scene.render.table_resolution.min(64),
-        |_| {},
     );
-    let image =
-        vmls::render::raycast::raycast_image(&setup, &field, &scene.transfer, tables.as_ref());
     for p in &image {
         assert!(p.rgba.iter().all(|c| c.is_finite()), "{name}: {:?}", p.rgba);
     }

@@ -302,6 +302,18 @@ pub fn skip_report(image: &[PixelResult]) -> SkipReport {
     r
 }
 
+/// The CPU twin of a whole frame: builds the preintegration tables the setup's method reads
+/// (at `resolution`, as the GPU renderer does) and ray casts every pixel with them.
+pub fn raycast_frame(
+    setup: &RaySetup,
+    field: &Field,
+    tf: &TransferFunction,
+    resolution: usize,
+) -> Vec<PixelResult> {
+    let tables = super::build_tables(setup, field, tf, resolution, |_| {});
+    raycast_image(setup, field, tf, tables.as_ref())
+}
+
 /// Renders the whole image on the CPU (rows split over the available cores).
 pub fn raycast_image(
     setup: &RaySetup,

@@ -238,18 +238,11 @@ pub fn run_render_cpu(
                 setup.check_budget(vmls::render::WORK_BUDGET)?;
             }
             check_stop(stop)?;
-            let tables = vmls::render::build_tables(
+            let image = vmls::render::raycast::raycast_frame(
                 &setup,
                 &field,
                 &scene.transfer,
                 scene.render.table_resolution,
-                |_| {},
-            );
-            let image = vmls::render::raycast::raycast_image(
-                &setup,
-                &field,
-                &scene.transfer,
-                tables.as_ref(),
             );
             let skip = setup
                 .skip
