@@ -81,3 +81,65 @@ fn later_frames_rebuild_only_what_changed() {
     drop(renderer);
     finish(ctx);
 }
+
+/// Ctrl-C's path through the library: a set stop flag ends a frame of either method with
+/// `Interrupted` and no image; splatting also stops when the flag is raised mid-frame (from
+/// its progress callback, after the first group of sheets), reports progress rising to 1, and
+/// the same renderer goes on to frames equal to an uninterrupted one's.
+#[test]
+fn a_stop_request_ends_frames_of_both_methods_and_the_renderer_goes_on() {
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use vmls::render::RenderError;
+    let (ctx, _compiler) = gpu();
+    for (extra, tolerance) in [
+        (vec![], 0.0f32),
+        // 0.1-spacing sheets: some 300 of them, so several submissions of 64.
+        (vec!["render.method=\"splat\"", "splat.slab=0.1"], 1e-5),
+    ] {
+        let s = scene(&extra);
+        let field = s.field(|_| {}).expect("field");
+        let view = s.view_with(&s.camera);
+        let stop = Arc::new(AtomicBool::new(false));
+        let mut renderer = Renderer::new(&ctx, field).expect("renderer");
+        renderer.set_stop(stop.clone());
+        let mut seen = Vec::new();
+        let (want, _) = renderer
+            .render(&view, |f| seen.push(f))
+            .expect("uninterrupted frame");
+        let splat = !extra.is_empty();
+        if splat {
+            assert!(seen.len() >= 3, "progress {seen:?}");
+            assert!(seen.windows(2).all(|w| w[0] < w[1]), "progress {seen:?}");
+            assert_eq!(seen.last().copied(), Some(1.0));
+        }
+
+        stop.store(true, Ordering::Relaxed);
+        let r = renderer.render(&view, |_| {});
+        assert!(matches!(r, Err(RenderError::Interrupted)), "{extra:?}");
+        stop.store(false, Ordering::Relaxed);
+
+        if splat {
+            let raise = stop.clone();
+            let mut calls = 0;
+            let r = renderer.render(&view, |_| {
+                calls += 1;
+                raise.store(true, Ordering::Relaxed);
+            });
+            assert!(matches!(r, Err(RenderError::Interrupted)));
+            assert_eq!(calls, 1, "the frame went on after the stop request");
+            stop.store(false, Ordering::Relaxed);
+        }
+
+        let (again, _) = renderer.render(&view, |_| {}).expect("frame after a stop");
+        let diff = want
+            .pixels
+            .iter()
+            .zip(&again.pixels)
+            .flat_map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y).abs()))
+            .fold(0.0f32, f32::max);
+        assert!(diff <= tolerance, "{extra:?}: {diff}");
+        drop(renderer);
+    }
+    finish(ctx);
+}

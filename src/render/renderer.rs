@@ -21,7 +21,9 @@ use super::{Field, RaySetup, RenderError, RenderSettings, TableCache, check_tabl
 use crate::render::camera::Camera;
 use crate::splat::SplatCounts;
 use crate::splat::SplatSetup;
-use crate::splat::gpu::{GpuKernels, SplatPipelines, SplatTargets, SplatVariant, splat_frame};
+use crate::splat::gpu::{
+    FrameControl, GpuKernels, SplatPipelines, SplatTargets, SplatVariant, splat_frame,
+};
 use crate::vk::{Buffer, ComputePipeline, Context, ShaderCompiler, VkError};
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
@@ -172,8 +174,8 @@ pub struct Renderer {
     splat_kernels: Option<GpuKernels>,
     splat_pipelines: Vec<SplatPipelines>,
     splat_targets: Option<SplatTargets>,
-    /// Set from elsewhere (a Ctrl-C handler) to end a ray-casting frame after its current
-    /// dispatch with [`RenderError::Interrupted`].
+    /// Set from elsewhere (a Ctrl-C handler) to end a frame after its current submission with
+    /// [`RenderError::Interrupted`].
     stop: Option<Arc<AtomicBool>>,
     /// MLS or footprint evaluations a frame may plan (`None`: no limit); see
     /// [`Renderer::set_work_budget`].
@@ -181,8 +183,9 @@ pub struct Renderer {
 }
 
 impl Renderer {
-    /// Lets `flag` stop frames: once it is set, a ray-casting frame ends after the dispatch
-    /// in flight with [`RenderError::Interrupted`] and returns no image.
+    /// Lets `flag` stop frames: once it is set, a frame ends after the submission in flight
+    /// (a ray-casting band, or a splatting frame's projection or group of sheets) with
+    /// [`RenderError::Interrupted`] and returns no image.
     pub fn set_stop(&mut self, flag: Arc<AtomicBool>) {
         self.stop = Some(flag);
     }
@@ -235,7 +238,7 @@ impl Renderer {
     ) -> Result<(GpuImage, FrameStats), RenderError> {
         let start = Instant::now();
         if let Some(shading) = view.settings.method.splat_shading() {
-            return self.render_splat(view, shading, start);
+            return self.render_splat(view, shading, start, &mut progress);
         }
         let setup = RaySetup::new(
             view.camera,
@@ -363,6 +366,7 @@ impl Renderer {
         view: &View<'_>,
         shading: crate::splat::Shading,
         start: Instant,
+        progress: &mut dyn FnMut(f64),
     ) -> Result<(GpuImage, FrameStats), RenderError> {
         let setup = SplatSetup::new(
             shading,
@@ -426,7 +430,11 @@ impl Renderer {
             &setup,
             view.transfer,
             &self.gpu_field.hull_bindings(),
-            self.budget,
+            FrameControl {
+                budget: self.budget,
+                stop: self.stop.as_deref(),
+                progress,
+            },
         )?;
         let gpu_ms = image.gpu_ms();
         let n = image.pixels.len();

@@ -6,7 +6,8 @@
 //! `MAX_SLABS` numbers), sizes the entry list and writes one indirect dispatch per sheet. The
 //! second runs `splat_bin`, then per sheet front to back an indirect `splat_accumulate` and a
 //! `splat_composite` (post-shaded: one more composite for the last sheet), in submissions of
-//! at most `SLABS_PER_SUBMISSION` sheets so that every dispatch is timed.
+//! at most `SLABS_PER_SUBMISSION` sheets so that every dispatch is timed and a stop request
+//! ([`FrameControl::stop`]) ends the frame within one submission.
 
 use super::surface::KernelKind;
 use super::{Antialias, Shading, SplatCounts, SplatSetup, TILE};
@@ -16,9 +17,13 @@ use crate::render::{Field, RenderError};
 use crate::vk::{
     BindGroup, Buffer, BufferUsage, ComputePipeline, Context, ShaderCompiler, ShaderSource, VkError,
 };
+use std::sync::atomic::{AtomicBool, Ordering};
 
-/// Sheets per submission of the second pass (two timed dispatches each).
-const SLABS_PER_SUBMISSION: u32 = 1024;
+/// Sheets per submission of the second pass (two timed dispatches each). Small enough that
+/// Ctrl-C and the progress bar act within a fraction of a long frame (a 4096² frame of 764
+/// sheets is 12 submissions), large enough that the wait for each submission's fence stays
+/// small beside the sheets' work.
+const SLABS_PER_SUBMISSION: u32 = 64;
 /// Invocations per workgroup of the one-dimensional kernels.
 const GROUP: u32 = 64;
 /// `SplatCounts` counters in the stats buffer.
@@ -448,10 +453,30 @@ fn sum_ms(timings: &[crate::vk::DispatchTiming], stage_ms: &mut [f64; 4]) {
     }
 }
 
+/// What the caller of [`splat_frame`] lets a frame do and hears from it.
+pub struct FrameControl<'a> {
+    /// With a budget, a frame whose binned entries plan more evaluations
+    /// ([`SplatSetup::check_budget`]) ends after the projection, before any accumulation.
+    pub budget: Option<f64>,
+    /// Once set, the frame ends after the submission in flight with
+    /// [`RenderError::Interrupted`]: checked after the projection and after each submission of
+    /// the second pass.
+    pub stop: Option<&'a AtomicBool>,
+    /// The fraction of the frame's submissions done, after each.
+    pub progress: &'a mut dyn FnMut(f64),
+}
+
+impl FrameControl<'_> {
+    fn check_stop(&self) -> Result<(), RenderError> {
+        match self.stop {
+            Some(s) if s.load(Ordering::Relaxed) => Err(RenderError::Interrupted),
+            _ => Ok(()),
+        }
+    }
+}
+
 /// Renders one frame; `targets` must fit the setup (see [`SplatTargets::fits`]); `hull` are the
 /// field's hull bindings (`GpuField::hull_bindings`), read by post-shaded frames over a hull.
-/// With a `budget`, a frame whose binned entries plan more evaluations
-/// ([`SplatSetup::check_budget`]) ends after the projection, before any accumulation.
 #[allow(clippy::too_many_arguments)]
 pub fn splat_frame(
     ctx: &Context,
@@ -461,7 +486,7 @@ pub fn splat_frame(
     setup: &SplatSetup,
     tf: &TransferFunction,
     hull: &[(u32, &Buffer)],
-    budget: Option<f64>,
+    control: FrameControl<'_>,
 ) -> Result<SplatGpuImage, RenderError> {
     if !targets.fits(setup, kernels) {
         return Err(VkError::Usage("splat frame buffers do not fit the setup".into()).into());
@@ -535,6 +560,7 @@ pub fn splat_frame(
         }
     }
     sum_ms(&timings, &mut stage_ms);
+    control.check_stop()?;
     let oversized = t.stats.read::<u32>(ctx)?.get(8).copied().unwrap_or(0);
     if oversized > 0 {
         return Err(VkError::Usage(format!(
@@ -553,7 +579,7 @@ pub fn splat_frame(
         args.extend([c.div_ceil(GROUP).min(65_535), 1, 1]);
         total += u64::from(c);
     }
-    if let Some(budget) = budget {
+    if let Some(budget) = control.budget {
         setup.check_budget(total, budget)?;
     }
     let limit = ctx.info().max_storage_buffer_range / 8;
@@ -667,6 +693,8 @@ pub fn splat_frame(
         sum_ms(&timings, &mut stage_ms);
         submissions += 1;
         k = end;
+        (control.progress)(f64::from(k) / f64::from(steps));
+        control.check_stop()?;
     }
     drop((bin, accumulate, composite));
     let image: Vec<[f32; 4]> = t.image.read(ctx)?;

@@ -231,8 +231,8 @@ fn json_to(
     }
 }
 
-/// The stop request of a long command: the first Ctrl-C sets it (a ray-casting frame ends
-/// after its current dispatch, and nothing is written); a second one removes every temporary
+/// The stop request of a long command: the first Ctrl-C sets it (a frame ends after its
+/// current submission, and nothing is written); a second one removes every temporary
 /// output and exits at once with status 130.
 fn interrupt_flag() -> Arc<AtomicBool> {
     let flag = Arc::new(AtomicBool::new(false));
