@@ -14,6 +14,7 @@
 //! direct lookup does; the table's own s-range is chosen by the caller (it must cover the data).
 
 use super::transfer::TransferFunction;
+use rayon::prelude::*;
 
 /// Gauss–Legendre nodes and weights on [−1, 1], 5 points.
 const GL_NODES: [f64; 5] = [
@@ -261,28 +262,23 @@ impl PreintegrationTables {
             tables: Vec::new(),
             limits: Vec::new(),
         };
-        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
         let rows_done = std::sync::atomic::AtomicUsize::new(0);
         let total_rows = (resolution * lengths.len()).max(1);
         for &l in lengths {
             let mut table = vec![[0.0f32; 4]; resolution * resolution];
-            let rows_per = resolution.div_ceil(threads);
-            std::thread::scope(|scope| {
-                for (chunk, rows) in table.chunks_mut(rows_per * resolution).enumerate() {
-                    let (t, done, progress) = (&tables, &rows_done, &progress);
-                    scope.spawn(move || {
-                        for (r, row) in rows.chunks_mut(resolution).enumerate() {
-                            let s_b = t.node(chunk * rows_per + r);
-                            for (f, entry) in row.iter_mut().enumerate() {
-                                let (c, a) = segment_integral(tf, t.node(f), s_b, l);
-                                *entry = [c[0] as f32, c[1] as f32, c[2] as f32, a as f32];
-                            }
-                            let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-                            progress(n as f64 / total_rows as f64);
-                        }
-                    });
-                }
-            });
+            let t = &tables;
+            table
+                .par_chunks_mut(resolution)
+                .enumerate()
+                .for_each(|(b, row)| {
+                    let s_b = t.node(b);
+                    for (f, entry) in row.iter_mut().enumerate() {
+                        let (c, a) = segment_integral(tf, t.node(f), s_b, l);
+                        *entry = [c[0] as f32, c[1] as f32, c[2] as f32, a as f32];
+                    }
+                    let n = rows_done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+                    progress(n as f64 / total_rows as f64);
+                });
             tables.tables.push(table);
         }
         let mut limits = Vec::with_capacity(resolution * resolution);

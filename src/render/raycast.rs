@@ -25,6 +25,7 @@ use crate::render::{IntervalModel, Method};
 use crate::samples::bvh::Segments;
 use glam::DVec3;
 use interval::{Knot, emit_crossings, emit_interval, hermite_segment, knot, knot_segment};
+use rayon::prelude::*;
 
 /// One pixel of the reference integrator.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -341,27 +342,25 @@ pub fn raycast_image(
         (Some(table), Some(blocks)) => Some(Skip { blocks, table }),
         _ => None,
     };
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let rows_per = h.div_ceil(threads).max(1);
-    std::thread::scope(|scope| {
-        for (chunk_index, chunk) in out.chunks_mut(rows_per * w).enumerate() {
-            scope.spawn(move || {
-                let neighbours = field.neighbours();
-                for (k, px) in chunk.iter_mut().enumerate() {
-                    let index = chunk_index * rows_per * w + k;
-                    *px = raycast(
-                        setup,
-                        field,
-                        neighbours.as_ref(),
-                        tf,
-                        tables,
-                        skip,
-                        (index % w) as u32,
-                        (index / w) as u32,
-                    );
-                }
-            });
-        }
-    });
+    // Rows on rayon's persistent workers: a frame spawns no threads, so it returns with no
+    // thread of its own still exiting (scoped threads could outlive `scope` by their exit,
+    // which LeakSanitizer in the fuzz targets reported as leaks).
+    out.par_chunks_mut(w.max(1)).enumerate().for_each_init(
+        || field.neighbours(),
+        |neighbours, (y, row)| {
+            for (x, px) in row.iter_mut().enumerate() {
+                *px = raycast(
+                    setup,
+                    field,
+                    neighbours.as_ref(),
+                    tf,
+                    tables,
+                    skip,
+                    x as u32,
+                    y as u32,
+                );
+            }
+        },
+    );
     out
 }
