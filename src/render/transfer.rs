@@ -90,6 +90,38 @@ impl TransferFunction {
         at(&p[p.len() - 1])
     }
 
+    /// (rgb, τ) at s as one-sided limits, by binary search: `right` is the value just above s
+    /// (what a segment leaving s upwards or arriving at s from above sees), else the value
+    /// just below it. They differ only at a step (two points with the same s). Equal to
+    /// [`TransferFunction::lookup`] wherever the function is continuous.
+    pub fn limit(&self, s: f64, right: bool) -> ([f64; 3], f64) {
+        let p = &self.points;
+        let i = if right {
+            p.partition_point(|q| q[0] <= s)
+        } else {
+            p.partition_point(|q| q[0] < s)
+        };
+        let at = |q: &[f64; 5]| ([q[1], q[2], q[3]], q[4]);
+        if i == 0 {
+            return at(&p[0]);
+        }
+        if i == p.len() {
+            return at(&p[p.len() - 1]);
+        }
+        let (a, b) = (&p[i - 1], &p[i]);
+        let t = ((s - a[0]) / (b[0] - a[0])).clamp(0.0, 1.0);
+        let m = |k: usize| a[k] + t * (b[k] - a[k]);
+        ([m(1), m(2), m(3)], m(4))
+    }
+
+    /// The indices of the points strictly inside (lo, hi), as a range into [`Self::points`].
+    pub fn inside(&self, lo: f64, hi: f64) -> std::ops::Range<usize> {
+        let p = &self.points;
+        let start = p.partition_point(|q| q[0] <= lo);
+        let end = p.partition_point(|q| q[0] < hi).max(start);
+        start..end
+    }
+
     /// Stage `transfer_sensitivity`: how far τ and τ·c can move when s departs by at most
     /// `deviation` from the line the preintegration tables assume, somewhere in [lo, hi]
     /// (DESIGN.md §4, the Hermite criterion). Over the pieces that meet [lo, hi], the largest
