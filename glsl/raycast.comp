@@ -690,6 +690,10 @@ void main() {
             break;
         }
     }
+    // A neighbour loop cut short corrupted some evaluation, whatever the outer loop saw.
+    if (g_loop_cut) {
+        outcome = CHUNK_TRUNCATED;
+    }
 #if SKIP == 1
     // z: the ray's length inside the domain, the denominator of the skipped fraction.
     float inside = 0.0;

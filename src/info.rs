@@ -4,40 +4,56 @@
 
 use crate::data::dataset::{Dataset, Geometry};
 use crate::gpu_types::Sample;
-use crate::recon::mls::Neighbours;
-use crate::recon::{Octree, OctreeSettings};
-use crate::render::RenderError;
+use crate::recon::{OctreeSettings, Reconstruction};
+use crate::render::{Field, RenderError};
 use crate::samples::{Domain, SampleSet, SampleSettings, metric_rho2, supports};
 use std::collections::BTreeMap;
 use std::fmt::Write;
 use std::path::Path;
 
+/// Longest name (file or array) the report prints, in characters.
+const MAX_NAME_CHARS: usize = 200;
+
+/// A name from a file as the report prints it: escaped and cut, as error lines quote input
+/// (a hostile file cannot put terminal escapes or a megabyte line on the screen).
+fn shown(name: &str) -> String {
+    crate::files::printable(name, MAX_NAME_CHARS)
+}
+
 fn v3(p: [f64; 3]) -> String {
     format!("({:.6}, {:.6}, {:.6})", p[0], p[1], p[2])
 }
 
-/// The report for one file (a multi-line text).
+/// The report for one file (a multi-line text). The sample set, its supports and the
+/// neighbour structure are built exactly as `render` builds them (the same domain check
+/// first, an octree only where the renderer would use one); a file `render` would refuse is
+/// still described, with a last line saying why nothing more was built.
 pub fn describe(
     path: &Path,
     array: Option<&str>,
     settings: &SampleSettings,
+    reconstruction: Reconstruction,
     octree: &OctreeSettings,
 ) -> Result<String, RenderError> {
     let dataset = crate::data::load_dataset(path)?;
     let mut out = String::new();
     describe_dataset(&mut out, path, &dataset);
+    if let Err(e) = dataset.geometry.check_domain(path) {
+        let _ = writeln!(out, "render: refused, so nothing more is built: {e}");
+        return Ok(out);
+    }
     let set = SampleSet::from_dataset(&dataset, path, array, settings).map_err(|e| match e {
         crate::samples::SampleError::Data(d) => RenderError::Data(d),
         other => RenderError::Samples(other),
     })?;
-    describe_samples(&mut out, &set, settings, octree)?;
+    describe_samples(&mut out, set, settings, reconstruction, octree)?;
     Ok(out)
 }
 
 fn describe_dataset(out: &mut String, path: &Path, d: &Dataset) {
     let g = &d.geometry;
     // Writing to a String cannot fail.
-    let _ = writeln!(out, "file: {}", path.display());
+    let _ = writeln!(out, "file: {}", shown(&path.display().to_string()));
     let _ = writeln!(out, "kind: {}", g.kind());
     match g {
         Geometry::Image {
@@ -88,7 +104,7 @@ fn describe_dataset(out: &mut String, path: &Path, d: &Dataset) {
         let _ = writeln!(
             out,
             "  {} ({} data, {} component{}): range [{lo}, {hi}]",
-            a.name,
+            shown(&a.name),
             a.location.name(),
             a.components,
             if a.components == 1 {
@@ -110,8 +126,9 @@ fn quantiles(mut v: Vec<f64>) -> [f64; 3] {
 
 fn describe_samples(
     out: &mut String,
-    set: &SampleSet,
+    set: SampleSet,
     settings: &SampleSettings,
+    reconstruction: Reconstruction,
     octree: &OctreeSettings,
 ) -> Result<(), RenderError> {
     let p = &set.provenance;
@@ -119,7 +136,7 @@ fn describe_samples(
         out,
         "samples: {} (array '{}' sampled at {}), merged duplicates: {}, inverted cells: {}",
         set.len(),
-        p.array,
+        shown(&p.array),
         match p.location {
             crate::data::dataset::Location::Point => "points",
             crate::data::dataset::Location::Cell => "cell centroids",
@@ -184,14 +201,16 @@ fn describe_samples(
         "  aspect ratio: min {:.2}, median {:.2}, max {:.2}",
         aspect[0], aspect[1], aspect[2]
     );
-    let tree = Octree::from_samples(set, octree, |_| {})?;
+    let field = Field::from_samples(set, reconstruction, octree, |_| {})?;
+    let set = &field.samples;
+    let neighbours = field.neighbours();
     let weighted = quantiles(
         picks
             .iter()
             .map(|&i| {
                 let x = set.position(i);
                 let mut count = 0.0;
-                tree.for_each(x, &mut |_, q, _, m| {
+                neighbours.for_each(x, &mut |_, q, _, m| {
                     if metric_rho2(m, [q[0] - x[0], q[1] - x[1], q[2] - x[2]]) < 1.0 {
                         count += 1.0;
                     }
@@ -205,17 +224,27 @@ fn describe_samples(
         "  samples with weight at a sample: min {}, median {}, max {}",
         weighted[0], weighted[1], weighted[2]
     );
-    let s = tree.stats(std::mem::size_of::<Sample>() as u64);
-    let _ = writeln!(
-        out,
-        "octree: {} nodes ({} leaves), {} references ({:.2} per sample), depth {}, {:.1} MiB, built in {:.0} ms",
-        s.nodes,
-        s.leaves,
-        s.references,
-        s.redundancy,
-        s.depth,
-        s.bytes as f64 / (1 << 20) as f64,
-        s.build_ms
-    );
+    match &field.octree {
+        Some(tree) => {
+            let s = tree.stats(std::mem::size_of::<Sample>() as u64);
+            let _ = writeln!(
+                out,
+                "octree: {} nodes ({} leaves), {} references ({:.2} per sample), depth {}, {:.1} MiB, built in {:.0} ms",
+                s.nodes,
+                s.leaves,
+                s.references,
+                s.redundancy,
+                s.depth,
+                s.bytes as f64 / (1 << 20) as f64,
+                s.build_ms
+            );
+        }
+        None => {
+            let _ = writeln!(
+                out,
+                "neighbours: implicit regular grid (no octree needed; octree with reconstruction.neighbours = \"octree\")"
+            );
+        }
+    }
     Ok(())
 }

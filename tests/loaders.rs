@@ -421,9 +421,15 @@ fn vtk_unknown_type_and_string_arrays() {
     let b = vtk_with(false, b"POINT_DATA 24\nSCALARS s quaternion 1\n");
     fails("type.vtk", &b, "Format", "line 9");
     fails("type.vtk", &b, "Format", "found 'quaternion'");
-    let b = vtk_with(false, b"POINT_DATA 24\nFIELD f 1\nnames 1 24 string\n");
-    let expected = "line 10: unsupported string array";
-    fails("string.vtk", &b, "Unsupported", expected);
+    let b = vtk_with(false, b"POINT_DATA 24\nFIELD f 1\nnames 1 24 variant\n");
+    let expected = "line 10: unsupported variant array";
+    fails("variant.vtk", &b, "Unsupported", expected);
+    // Strings are read past (tests/paraview_files.rs), but they must all be there.
+    let b = vtk_with(
+        false,
+        b"POINT_DATA 24\nFIELD f 1\nnames 1 24 string\na\nb\n",
+    );
+    fails("string.vtk", &b, "Truncated", "expected 24");
 }
 
 #[test]
@@ -581,8 +587,36 @@ fn nrrd_errors() {
     fails("noend.nrrd", b"NRRD0004\ntype: float\n", "Format", "line 2");
     let short = with("encoding: raw\n", &raw[..95]);
     fails("truncated.nrrd", &short, "Truncated", "expected 96");
-    let short_gz = with("encoding: gzip\n", &gzip(&raw)[..30]);
-    fails("truncgz.nrrd", &short_gz, "Truncated", "expected 96");
+    // A stream cut short, a flipped byte of its CRC-32 or length, or of its payload, is an
+    // error naming the stream's byte, never values read from the part that was there.
+    let gz = gzip(&raw);
+    let short_gz = with("encoding: gzip\n", &gz[..30]);
+    fails("truncgz.nrrd", &short_gz, "Format", "cut short");
+    let no_trailer = with("encoding: gzip\n", &gz[..gz.len() - 8]);
+    fails("notrailer.nrrd", &no_trailer, "Format", "cut short");
+    for at in [gz.len() - 8, gz.len() - 3, gz.len() / 2] {
+        let mut flipped = gz.clone();
+        flipped[at] ^= 0x10;
+        fails(
+            "crc.nrrd",
+            &with("encoding: gzip\n", &flipped),
+            "Format",
+            &gz_at,
+        );
+    }
+    // Data far beyond what the header declares is refused; a little is read past.
+    let big = gzip(&vec![0u8; 96 + (1 << 17)]);
+    fails(
+        "surplusgz.nrrd",
+        &with("encoding: gzip\n", &big),
+        "Format",
+        "header declares 96",
+    );
+    let path = file(
+        "slackgz.nrrd",
+        &with("encoding: gzip\n", &gzip(&[0u8; 100])),
+    );
+    data::load(&path, None).expect("4 bytes past the data are read past");
     let corrupt_gz = with("encoding: gzip\n", b"not gzip at all");
     fails("corruptgz.nrrd", &corrupt_gz, "Format", &gz_at);
     let surplus = nrrd_file(
@@ -724,7 +758,18 @@ fn nifti_errors() {
     fails("huge.nii", &huge, "TooLarge", "exceed the limit");
     fails("trunc.nii", &good[..352 + 50], "Truncated", "expected 96");
     let short_gz = &gz[..gz.len() - 20];
-    fails("trunc.nii.gz", short_gz, "Truncated", "expected 96");
+    fails("trunc.nii.gz", short_gz, "Format", "cut short");
+    for at in [gz.len() - 8, gz.len() - 1] {
+        let mut flipped = gz.clone();
+        flipped[at] ^= 0x01;
+        fails("crc.nii.gz", &flipped, "Format", "byte 0");
+    }
+    fails(
+        "notrailer.nii.gz",
+        &gz[..gz.len() - 8],
+        "Format",
+        "cut short",
+    );
     let bad_gz = [0x1f, 0x8b, 0, 1, 2, 3, 4, 5, 6, 7];
     fails("garbage.nii.gz", &bad_gz, "Format", "byte 0");
 

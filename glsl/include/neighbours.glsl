@@ -7,6 +7,11 @@
 
 #include "mls.glsl"
 
+// Set when an octree leaf's loop ended before its last reference: a device that cuts long
+// loops short (llvmpipe after 65 535 iterations, LAVAPIPE.md) would otherwise corrupt an
+// evaluation silently; the ray caster reports the ray as truncated instead.
+bool g_loop_cut = false;
+
 #if MLS_NEIGHBOURS == 0
 // The grid, GRID_PAD zeros first, through an rgba32f texel-buffer view (binding::kind): on
 // llvmpipe an imageLoad is one gather per 8 lanes where a storage-buffer load with a per-lane
@@ -218,7 +223,8 @@ void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float
     uvec3 leaf = octree_leaf(x);
     vec3 scale = vec3(uintBitsToFloat(leaf.z));
     s.inv_h = scale;
-    for (uint r = leaf.x; r < leaf.x + leaf.y; ++r) {
+    uint r = leaf.x;
+    for (; r < leaf.x + leaf.y; ++r) {
         int i = int(imageLoad(indices, int(r)).x);
         vec4 pos_value = imageLoad(samples, 3 * i);
         vec3 d = pos_value.xyz - x;
@@ -231,6 +237,9 @@ void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float
                 mls_visit_gradient(g, d * scale, rho2, pos_value.w, md, c);
             }
         }
+    }
+    if (r < leaf.x + leaf.y) {
+        g_loop_cut = true;
     }
 }
 #endif
@@ -269,7 +278,8 @@ MlsResult gaussian_evaluate(vec3 x) {
     }
 #else
     uvec3 leaf = octree_leaf(x);
-    for (uint r = leaf.x; r < leaf.x + leaf.y; ++r) {
+    uint r = leaf.x;
+    for (; r < leaf.x + leaf.y; ++r) {
         int i = int(imageLoad(indices, int(r)).x);
         vec4 pos_value = imageLoad(samples, 3 * i);
         vec3 d = pos_value.xyz - x;
@@ -282,6 +292,9 @@ MlsResult gaussian_evaluate(vec3 x) {
             grad += wf * md;
             ++count;
         }
+    }
+    if (r < leaf.x + leaf.y) {
+        g_loop_cut = true;
     }
 #endif
     return MlsResult(value, grad / (params.gauss_sigma * params.gauss_sigma), count,

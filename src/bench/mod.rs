@@ -15,13 +15,13 @@
 
 pub mod ceiling;
 pub mod metrics;
+pub mod outputs;
 pub mod peer;
 pub mod plot;
 pub mod reference;
 pub mod results;
 
 use crate::render::RenderError;
-use crate::render::output::write_image;
 use crate::render::renderer::{GpuImage, Renderer};
 use crate::scene::{Scene, SceneError};
 use crate::vk::{Context, ShaderCompiler, ShaderSource};
@@ -179,6 +179,8 @@ pub struct BenchOptions {
     pub dump_spirv: Option<PathBuf>,
     /// Measure the device's ceilings first and report each row's share of them.
     pub ceilings: bool,
+    /// Files whose rows are merged into the results (`--import`): inputs no output may be.
+    pub imports: Vec<PathBuf>,
     /// Render frames (the reference's and each configuration's) that plan more MLS
     /// evaluations than [`crate::render::WORK_BUDGET`]; without it such a frame ends the run
     /// before its GPU work, naming the configuration.
@@ -317,12 +319,9 @@ pub fn run(
     ref_set.push("render.skip=false".into());
     ref_set.extend(opts.reference_set.iter().cloned());
     let ref_scene = Scene::load(opts.scene.as_deref(), &ref_set)?;
-    // Images of an earlier run in the same directory must not pass for this run's.
-    let images = opts.out.join("images");
-    if images.is_dir() {
-        std::fs::remove_dir_all(&images).map_err(|e| io_err(&images, e))?;
-    }
-    std::fs::create_dir_all(&images).map_err(|e| io_err(&opts.out, e))?;
+    // Images of an earlier run in the same directory must not pass for this run's; only
+    // those are removed (outputs::ImagesDir).
+    let mut images = outputs::ImagesDir::prepare(&opts.out, inputs(opts, &ref_scene))?;
     if let Some(dir) = &opts.dump_spirv {
         std::fs::create_dir_all(dir).map_err(|e| io_err(dir, e))?;
     }
@@ -408,7 +407,12 @@ pub fn run(
                 let spirv = compiler.compile(ShaderSource::File(kernel), defines)?;
                 let stem = kernel.trim_end_matches(".comp");
                 let path = dir.join(format!("{index:03}-{stem}.spv"));
-                crate::files::write_output("SPIR-V", &path, &[], |out| {
+                let inputs: Vec<(&str, &Path)> = images
+                    .inputs()
+                    .iter()
+                    .map(|(r, p)| (r.as_str(), p.as_path()))
+                    .collect();
+                crate::files::write_output("--dump-spirv", &path, &inputs, |out| {
                     out.write_all(bytemuck::cast_slice::<u32, u8>(&spirv))
                 })?;
             }
@@ -433,10 +437,9 @@ pub fn run(
             (scene.camera.width, scene.camera.height) == (reference.width, reference.height);
         let error = metrics::image_error(&image.pixels, &reference.pixels, scene.camera.width)
             .filter(|_| same_size);
-        let image_path = opts.out.join("images").join(format!("{index:03}.exr"));
         if image.pixels.iter().all(|p| p.iter().all(|v| v.is_finite())) {
-            write_image(
-                &image_path,
+            images.write(
+                index,
                 scene.camera.width,
                 scene.camera.height,
                 &image.pixels,
@@ -512,6 +515,28 @@ pub fn run(
         rows.push(row);
     }
     Ok((rows, reference))
+}
+
+/// The files a run reads, which none of its outputs may be: the scene, its data file and
+/// the imported results.
+pub fn inputs(opts: &BenchOptions, scene: &Scene) -> outputs::Inputs {
+    let mut inputs: outputs::Inputs = opts
+        .scene
+        .iter()
+        .map(|p| ("scene".to_string(), p.clone()))
+        .collect();
+    inputs.extend(
+        scene
+            .input_files()
+            .into_iter()
+            .map(|(r, p)| (r.to_string(), p.to_path_buf())),
+    );
+    inputs.extend(
+        opts.imports
+            .iter()
+            .map(|p| ("--import".to_string(), p.clone())),
+    );
+    inputs
 }
 
 /// The run's context for `results.json`.

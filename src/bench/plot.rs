@@ -9,8 +9,6 @@ use super::BenchError;
 use super::results::{Row, pareto_front};
 use plotters::coord::Shift;
 use plotters::prelude::*;
-use std::io::Write;
-use std::path::Path;
 
 /// Smallest error drawn: a row identical to the reference sits on the bottom edge.
 const ERROR_FLOOR: f64 = 1e-7;
@@ -135,42 +133,37 @@ fn draw<DB: DrawingBackend>(
     root.present().map_err(err)
 }
 
-/// Writes the plot as `stem.svg` and `stem.png` (1100×750), both or neither.
-pub fn write_speed_error(stem: &Path, rows: &[Row], title: &str) -> Result<(), BenchError> {
+/// The plot as SVG text and as a 1100×750 PNG (`speed_error.svg`, `speed_error.png`).
+pub fn speed_error_files(rows: &[Row], title: &str) -> Result<(Vec<u8>, Vec<u8>), BenchError> {
     crate::render::output::register_fonts();
     let (w, h) = (1100, 750);
-    let svg = stem.with_extension("svg");
-    let png = stem.with_extension("png");
-    let mut outputs = crate::files::Outputs::new(&[("plot", &svg), ("plot", &png)], &[])?;
+    let err = |name: &str, message: String| BenchError::Io {
+        path: name.into(),
+        message,
+    };
     let mut text = String::new();
     draw(
         SVGBackend::with_string(&mut text, (w, h)).into_drawing_area(),
         rows,
         title,
     )
-    .map_err(|message| BenchError::Io {
-        path: svg.display().to_string(),
-        message,
-    })?;
+    .map_err(|m| err("speed_error.svg", m))?;
     let mut rgb = vec![0u8; (w * h * 3) as usize];
     draw(
         BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area(),
         rows,
         title,
     )
-    .map_err(|message| BenchError::Io {
-        path: png.display().to_string(),
-        message,
+    .map_err(|m| err("speed_error.png", m))?;
+    let image = image::RgbImage::from_raw(w, h, rgb).ok_or_else(|| {
+        err(
+            "speed_error.png",
+            "the plot's pixel buffer does not match its size".into(),
+        )
     })?;
-    let image = image::RgbImage::from_raw(w, h, rgb).ok_or_else(|| BenchError::Io {
-        path: png.display().to_string(),
-        message: "the plot's pixel buffer does not match its size".into(),
-    })?;
-    outputs.write(&svg, |out| out.write_all(text.as_bytes()))?;
-    outputs.write(&png, |out| {
-        image
-            .write_to(out, image::ImageFormat::Png)
-            .map_err(std::io::Error::other)
-    })?;
-    Ok(outputs.commit()?)
+    let mut png = Vec::new();
+    image
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .map_err(|e| err("speed_error.png", e.to_string()))?;
+    Ok((text.into_bytes(), png))
 }

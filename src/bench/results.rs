@@ -8,7 +8,6 @@
 
 use super::BenchError;
 use serde::{Deserialize, Serialize};
-use std::io::Write;
 use std::path::Path;
 
 /// One configuration's measurements.
@@ -89,29 +88,23 @@ impl Row {
     }
 }
 
-fn io_err(path: &Path, message: impl std::fmt::Display) -> BenchError {
-    BenchError::Io {
-        path: path.display().to_string(),
-        message: message.to_string(),
-    }
-}
-
-/// Writes the rows as CSV with a header line.
-pub fn write_csv(path: &Path, rows: &[Row]) -> Result<(), BenchError> {
+/// The rows as CSV with a header line (`results.csv`).
+pub fn csv_bytes(rows: &[Row]) -> Result<Vec<u8>, BenchError> {
     let mut w = csv::Writer::from_writer(Vec::new());
+    let err = |e: &dyn std::fmt::Display| BenchError::Io {
+        path: "results.csv".into(),
+        message: e.to_string(),
+    };
     for r in rows {
-        w.serialize(r).map_err(|e| io_err(path, e))?;
+        w.serialize(r).map_err(|e| err(&e))?;
     }
-    let bytes = w.into_inner().map_err(|e| io_err(path, e))?;
-    Ok(crate::files::write_output("CSV", path, &[], |out| {
-        out.write_all(&bytes)
-    })?)
+    w.into_inner().map_err(|e| err(&e))
 }
 
 /// Largest results file `read_csv` reads (a sweep writes a few hundred bytes per row).
 pub const MAX_CSV_BYTES: u64 = 256 << 20;
 
-/// Reads rows written by [`write_csv`] (by this or another machine, or by a peer script).
+/// Reads rows written as [`csv_bytes`] (by this or another machine, or by a peer script).
 pub fn read_csv(path: &Path) -> Result<Vec<Row>, BenchError> {
     let bytes = crate::files::read_input(path, MAX_CSV_BYTES)?;
     let mut r = csv::Reader::from_reader(bytes.as_slice());
@@ -127,18 +120,15 @@ pub fn read_csv(path: &Path) -> Result<Vec<Row>, BenchError> {
         .collect()
 }
 
-/// Writes the rows with the run's context as JSON.
-pub fn write_json(
-    path: &Path,
-    context: &serde_json::Value,
-    rows: &[Row],
-) -> Result<(), BenchError> {
+/// The rows with the run's context as pretty JSON and a newline (`results.json`).
+pub fn json_bytes(context: &serde_json::Value, rows: &[Row]) -> Result<Vec<u8>, BenchError> {
     let value = serde_json::json!({ "run": context, "rows": rows });
-    let text = serde_json::to_string_pretty(&value).map_err(|e| io_err(path, e))?;
-    Ok(crate::files::write_output("JSON", path, &[], |out| {
-        out.write_all(text.as_bytes())?;
-        out.write_all(b"\n")
-    })?)
+    let mut text = serde_json::to_vec_pretty(&value).map_err(|e| BenchError::Io {
+        path: "results.json".into(),
+        message: e.to_string(),
+    })?;
+    text.push(b'\n');
+    Ok(text)
 }
 
 /// The rows no other row beats on both GPU time and RMSE (ties kept), fastest first. Rows
@@ -234,7 +224,7 @@ mod tests {
         let mut rows = vec![row("fixed", 12.5, 0.03), row("splat", 3.0, 0.2)];
         rows[1].settings = "render.step=0.5;splat.slab=0.25".into();
         rows[1].gpu_ms = None;
-        write_csv(&path, &rows).expect("write");
+        std::fs::write(&path, csv_bytes(&rows).expect("csv")).expect("write");
         assert_eq!(read_csv(&path).expect("read"), rows);
         std::fs::write(&path, "source,method\nvmls,fixed\n").expect("write");
         let err = read_csv(&path).expect_err("missing columns");

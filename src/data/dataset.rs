@@ -402,9 +402,14 @@ impl Dataset {
                 .find(|a| a.location == Location::Point)
                 .or_else(|| self.arrays.first()),
         };
+        if name.is_none() && self.arrays.is_empty() {
+            return Err(DataError::NoArray {
+                path: path.to_path_buf(),
+            });
+        }
         found.ok_or_else(|| DataError::NoSuchArray {
             path: path.to_path_buf(),
-            name: name.unwrap_or("(any scalar array)").to_string(),
+            name: name.unwrap_or_default().to_string(),
             available: if self.arrays.is_empty() {
                 "none".into()
             } else {

@@ -153,7 +153,7 @@ pub enum DataError {
     },
     #[error(transparent)]
     File(#[from] crate::files::FileError),
-    #[error("{path}: dimensions {dims:?} are too large: {reason}")]
+    #[error("{path}: dimensions {dims:?} cannot be read: {reason}")]
     TooLarge {
         path: PathBuf,
         dims: [u64; 3],
@@ -202,6 +202,12 @@ pub enum DataError {
         id: u32,
         name: &'static str,
     },
+    #[error(
+        "{path}: no scalar values to render: the file holds positions only (a CSV needs a \
+         numeric column besides x, y, z; a PLY a scalar vertex property besides x, y, z; a VTK \
+         file point or cell data)"
+    )]
+    NoArray { path: PathBuf },
     #[error("{path}: no array named '{name}' (arrays in the file: {available})")]
     NoSuchArray {
         path: PathBuf,

@@ -25,7 +25,7 @@
 //!
 //! Errors name byte offsets; in a `.nii.gz` they are offsets in the decompressed stream.
 
-use super::nrrd::{Scalar, decode, gunzip};
+use super::nrrd::{Scalar, decode, gunzip, gunzip_head};
 use super::{DataError, Volume, check_finite, checked_sample_count};
 use std::path::Path;
 
@@ -44,10 +44,11 @@ pub fn parse(path: &Path, bytes: &[u8]) -> Result<Volume, DataError> {
     }
     // Inflate the header first, so that the header (checked against the limits) bounds how much
     // we inflate: a small corrupt or hostile file cannot make us allocate gigabytes.
-    let head = gunzip(path, bytes, 0, 352)?;
-    let limit = header(path, &head, "").map(|h| h.data_end).unwrap_or(352);
+    let suffix = " of the decompressed data";
+    let head = gunzip_head(path, bytes, 0, 352)?;
+    let limit = header(path, &head, suffix)?.data_end;
     let inflated = gunzip(path, bytes, 0, limit)?;
-    parse_plain(path, &inflated, " of the decompressed data")
+    parse_plain(path, &inflated, suffix)
 }
 
 /// What the header says about the data.

@@ -11,8 +11,9 @@
 //! - `encoding`: `raw`, `gzip`/`gz`, `ascii`/`text`/`txt`; `bzip2`/`bz2` and `hex` are
 //!   unsupported;
 //! - spacing per axis: the length of the `space directions` vector when present (orientation
-//!   and any rotation are ignored, only the length is kept), else `|spacings|`, else 1 (a `nan`,
-//!   zero or `none` entry also gives 1, as it means "not a spatial axis");
+//!   and any rotation are ignored, only the length is kept), else `|spacings|`, else 1 (a `nan`
+//!   spacing or a `none` direction also gives 1, as it means "not a spatial axis"); a direction
+//!   of infinite or zero length and an infinite or zero spacing are refused by line;
 //! - origin: `space origin` (first three components), else `axis mins`, else 0 (cell centring
 //!   is not applied to `axis mins`);
 //! - `line skip` and `byte skip` (lines are skipped in the file, bytes after decompression as
@@ -176,11 +177,57 @@ pub(crate) fn parse_text<T: Sample>(token: &str, ty: Scalar) -> Option<T> {
     }
 }
 
+/// Most bytes a gzip stream may hold past what its header declares: read (and discarded) so
+/// that the stream's trailer is reached and checked; more than this is refused.
+const GZIP_SLACK: u64 = 1 << 16;
+
 /// Inflates gzip data (all members), producing at most `limit` bytes so that a header cannot
-/// make us inflate, or allocate, more than it needs. A stream that ends early yields what it
-/// held: the caller compares the length with what it needs and reports `Truncated`.
-/// `offset` is where `data` starts in the file, for the error message.
+/// make us inflate, or allocate, more than it needs, and checks every member's trailer (CRC-32
+/// and length): a flipped byte or a stream cut short is an error naming the file, never wrong
+/// values. A complete stream that holds less than `limit` yields what it held: the caller
+/// compares the length with what it needs and reports `Truncated`. `offset` is where `data`
+/// starts in the file, for the error message.
 pub(crate) fn gunzip(
+    path: &Path,
+    data: &[u8],
+    offset: usize,
+    limit: u64,
+) -> Result<Vec<u8>, DataError> {
+    let err = |found: String| DataError::Format {
+        path: path.to_path_buf(),
+        location: format!("byte {offset}"),
+        expected: "gzip-compressed data ending in its CRC-32 and length".into(),
+        found,
+    };
+    let describe = |e: std::io::Error| {
+        if e.kind() == std::io::ErrorKind::UnexpectedEof {
+            err("a stream that ends early (the file is cut short)".into())
+        } else {
+            err(e.to_string())
+        }
+    };
+    let mut decoder = flate2::read::MultiGzDecoder::new(data);
+    let mut out = Vec::new();
+    (&mut decoder)
+        .take(limit)
+        .read_to_end(&mut out)
+        .map_err(describe)?;
+    if out.len() as u64 == limit {
+        // The trailer is checked only once the stream is read to its end.
+        let mut rest = (&mut decoder).take(GZIP_SLACK + 1);
+        let extra = std::io::copy(&mut rest, &mut std::io::sink()).map_err(describe)?;
+        if extra > GZIP_SLACK {
+            return Err(err(format!(
+                "more than {limit} + {GZIP_SLACK} bytes, where the header declares {limit}"
+            )));
+        }
+    }
+    Ok(out)
+}
+
+/// The first `limit` bytes of gzip data, without reading on to the trailer (to look at a
+/// header before deciding how much to inflate; the whole stream is then read by [`gunzip`]).
+pub(crate) fn gunzip_head(
     path: &Path,
     data: &[u8],
     offset: usize,
@@ -438,8 +485,33 @@ pub fn parse(path: &Path, bytes: &[u8]) -> Result<Volume, DataError> {
         }
     };
     let usable = |s: f64| s.is_finite() && s > 0.0;
+    // A direction or spacing that is given must be usable: `inf` or a zero vector silently
+    // becoming 1 would misplace every sample. `nan` spacings mark non-spatial axes (NRRD).
+    for a in 0..3 {
+        if let (Some(l), Some(d)) = (lengths.and_then(|l| l[a]), h.directions.as_ref())
+            && !usable(l)
+        {
+            let found = format!("a vector of length {l} for axis {a}");
+            return Err(err(
+                d.line,
+                "space direction vectors of finite, non-zero length",
+                found,
+            ));
+        }
+        if let (Some(s), Some(at)) = (spacings.map(|s| s[a]), h.spacings.as_ref())
+            && !s.is_nan()
+            && !usable(s.abs())
+        {
+            let found = format!("{s} for axis {a}");
+            return Err(err(
+                at.line,
+                "finite, non-zero spacings (nan for a non-spatial axis)",
+                found,
+            ));
+        }
+    }
     let spacing = [0, 1, 2].map(|a| {
-        let from_direction = lengths.and_then(|l| l[a]).filter(|&s| usable(s));
+        let from_direction = lengths.and_then(|l| l[a]);
         let from_spacings = spacings.map(|s| s[a].abs()).filter(|&s| usable(s));
         from_direction.or(from_spacings).unwrap_or(1.0)
     });

@@ -263,7 +263,41 @@ fn scalar_size(t: &ScalarType) -> u64 {
 }
 
 /// Parses PLY bytes; `path` only names the file in errors.
+/// Refuses a vertex element that names one property twice: the PLY parser keeps properties
+/// by name, so the second would silently shift every value after it.
+fn check_unique_properties(path: &Path, bytes: &[u8]) -> Result<(), DataError> {
+    let end = bytes
+        .windows(10)
+        .position(|w| w == b"end_header")
+        .unwrap_or(bytes.len().min(1 << 16));
+    let header = String::from_utf8_lossy(&bytes[..end]);
+    let mut in_vertex = false;
+    let mut seen: Vec<&str> = Vec::new();
+    for (i, line) in header.lines().enumerate() {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        match words.as_slice() {
+            ["element", name, ..] => in_vertex = *name == "vertex",
+            ["property", .., name] if in_vertex => {
+                if seen.contains(name) {
+                    let found = format!("'{}' twice", crate::files::excerpt_text(name, 40));
+                    let expected = "one vertex property per name";
+                    return Err(format_error(
+                        path,
+                        format!("line {}", i + 1),
+                        expected,
+                        found,
+                    ));
+                }
+                seen.push(name);
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
 pub fn parse_ply(path: &Path, bytes: &[u8]) -> Result<Dataset, DataError> {
+    check_unique_properties(path, bytes)?;
     let parser = Parser::<Row>::new();
     let mut cursor = Cursor::new(bytes);
     let header = parser

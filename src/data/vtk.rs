@@ -56,10 +56,12 @@ const KEYWORDS: &str = "POINT_DATA CELL_DATA SCALARS COLOR_SCALARS LOOKUP_TABLE 
                         TEXTURE_COORDINATES TENSORS TENSORS6 GLOBAL_IDS PEDIGREE_IDS EDGE_FLAGS \
                         FIELD METADATA";
 
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, PartialEq)]
 pub(super) enum Elem {
     Num(Scalar),
     Bit,
+    /// Strings (`string`, `utf8_string`, `unicode_string`): read past, never rendered.
+    Str,
 }
 
 /// A non-blank line split into whitespace-separated tokens.
@@ -232,7 +234,8 @@ impl<'a> Reader<'a> {
             "unsigned_long" | "vtktypeuint64" => Scalar::U64,
             "float" | "vtktypefloat32" => Scalar::F32,
             "double" | "vtktypefloat64" => Scalar::F64,
-            "string" | "utf8_string" | "unicode_string" | "variant" => {
+            "string" | "utf8_string" | "unicode_string" => return Ok(Elem::Str),
+            "variant" => {
                 return Err(self.unsupported(line.start, format!("{name} array")));
             }
             _ => {
@@ -260,10 +263,14 @@ impl<'a> Reader<'a> {
                 format!("{ntuples}×{ncomp}"),
             )
         })?;
+        if elem == Elem::Str {
+            self.skip_strings(total)?;
+            return Ok(Vec::new());
+        }
         if self.binary {
             let nbytes = match elem {
                 Elem::Num(t) => total.checked_mul(t.size() as u64),
-                Elem::Bit => Some(total.div_ceil(8)),
+                Elem::Bit | Elem::Str => Some(total.div_ceil(8)),
             };
             let nbytes = nbytes.ok_or_else(|| {
                 self.format(
@@ -285,7 +292,7 @@ impl<'a> Reader<'a> {
             return Ok(match (keep, elem) {
                 (false, _) => Vec::new(),
                 (true, Elem::Num(t)) => decode(data, t, true, ncomp as usize),
-                (true, Elem::Bit) => (0..ntuples)
+                (true, Elem::Bit | Elem::Str) => (0..ntuples)
                     .map(|i| {
                         let bit = i * ncomp;
                         let byte = data.get((bit / 8) as usize).copied().unwrap_or(0);
@@ -325,6 +332,7 @@ impl<'a> Reader<'a> {
                     let ty = match elem {
                         Elem::Num(t) => t.name(),
                         Elem::Bit => "bit",
+                        Elem::Str => "string",
                     };
                     let expected = format!("a {ty} value (value {} of {total})", i + 1);
                     return Err(self.format(at, expected, crate::files::excerpt(token)));
@@ -332,6 +340,46 @@ impl<'a> Reader<'a> {
             }
         }
         Ok(out)
+    }
+
+    /// Skips `total` strings as VTK writes them: in ASCII one per line (percent-encoded, so
+    /// an empty line is an empty string); in binary each after a big-endian length whose first
+    /// byte's top two bits give its size (11: 6 bits in that byte, 10: 14 bits in two bytes,
+    /// 01: 30 bits in four, 00: 62 bits in eight).
+    fn skip_strings(&mut self, total: u64) -> Result<(), DataError> {
+        let truncated = |found: u64| DataError::Truncated {
+            path: self.path.to_path_buf(),
+            expected: total,
+            found,
+        };
+        if !self.binary {
+            for i in 0..total {
+                self.raw_line().ok_or_else(|| truncated(i))?;
+            }
+            return Ok(());
+        }
+        for i in 0..total {
+            let first = *self.bytes.get(self.pos).ok_or_else(|| truncated(i))?;
+            let size = match first >> 6 {
+                3 => 1,
+                2 => 2,
+                1 => 4,
+                _ => 8,
+            };
+            let head = self
+                .bytes
+                .get(self.pos..self.pos + size)
+                .ok_or_else(|| truncated(i))?;
+            let len = head[1..]
+                .iter()
+                .fold(u64::from(first & 0x3f), |acc, &b| (acc << 8) | u64::from(b));
+            let end = (self.pos + size) as u64 + len;
+            if end > self.bytes.len() as u64 {
+                return Err(truncated(i));
+            }
+            self.pos = end as usize;
+        }
+        Ok(())
     }
 
     /// Skips a VTK 5.1 `METADATA` block (ended by an empty line) if one follows.
@@ -726,9 +774,11 @@ fn read_candidate(
         return Err(r.format(header.start, "a component count >= 1", "0"));
     }
     let location = within.map(|(l, _)| l);
+    // Strings are read past: metadata (ParaView's QA records, titles), never a field.
+    let renderable = c.scalar && c.elem != Elem::Str;
     let (keep, chosen) = match sink.pick {
         Pick::One(want) => {
-            let selectable = c.scalar && location == Some(Location::Point);
+            let selectable = renderable && location == Some(Location::Point);
             if selectable {
                 sink.seen.push(c.name.clone());
             }
@@ -741,7 +791,7 @@ fn read_candidate(
                 Some(Location::Cell) => cells,
                 None => false,
             };
-            (c.scalar && wanted, false)
+            (renderable && wanted, false)
         }
     };
     if let (true, Some((location, n))) = (keep, within)

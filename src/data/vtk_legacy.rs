@@ -299,6 +299,10 @@ fn cells(r: &mut Reader, line: &Line) -> Result<RawCells, DataError> {
         r.peek_line().is_some_and(|l| l.keyword() == "OFFSETS")
     };
     if modern {
+        if first == 0 {
+            let expected = format!("at least 1 offset after '{kw}' (one more than the cells)");
+            return Err(r.format(line.start, expected, "0"));
+        }
         let offsets = typed_array(r, "OFFSETS", first)?;
         let conn = typed_array(r, "CONNECTIVITY", size)?;
         let bad = |expected: String, found: String| r.format(line.start, expected, found);
@@ -353,13 +357,14 @@ fn cells(r: &mut Reader, line: &Line) -> Result<RawCells, DataError> {
 
 /// Reads a VTK 5.1 `OFFSETS type` or `CONNECTIVITY type` line and its `n` values.
 fn typed_array(r: &mut Reader, kw: &str, n: usize) -> Result<Vec<u64>, DataError> {
-    let line = r.line();
-    let Some(line) = line.filter(|l| l.keyword() == kw && l.tokens.len() == 2) else {
-        let found = r.peek_line();
-        return Err(r.unexpected(found.as_ref(), format!("'{kw} type'")));
-    };
-    let elem = r.elem(&line, &line.tokens[1])?;
-    whole(r, &line, elem, n)
+    match r.line() {
+        Some(line) if line.keyword() == kw && line.tokens.len() == 2 => {
+            let elem = r.elem(&line, &line.tokens[1])?;
+            whole(r, &line, elem, n)
+        }
+        // The error quotes the line that was read, not the one after it.
+        other => Err(r.unexpected(other.as_ref(), format!("'{kw} type'"))),
+    }
 }
 
 /// Builds the geometry from its sections; `at` is the line that ended them (`None`: end of

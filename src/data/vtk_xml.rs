@@ -64,6 +64,11 @@ pub fn parse(path: &Path, bytes: &[u8]) -> Result<Dataset, DataError> {
         return Err(root.format("a <VTKFile> root element", format!("<{}>", root.name())));
     }
     let kind = root.need_attr("type")?;
+    // The kind is judged first: an unsupported kind (a HyperTreeGrid, a multiblock) is named
+    // as such, not as a missing element or an unknown compressor.
+    if !KINDS.contains(&kind) {
+        return Err(unsupported_kind(&root, kind));
+    }
     let encoding = Encoding {
         big_endian: match root.attr("byte_order") {
             None | Some("LittleEndian") => false,
@@ -100,16 +105,27 @@ pub fn parse(path: &Path, bytes: &[u8]) -> Result<Dataset, DataError> {
         "StructuredGrid" => structured(&dec, body)?,
         "UnstructuredGrid" => unstructured(&dec, body, false)?,
         "PolyData" => unstructured(&dec, body, true)?,
-        other => {
-            let what = format!(
-                "VTKFile type {other} (vmls reads ImageData, RectilinearGrid, StructuredGrid, \
-                 UnstructuredGrid and PolyData)"
-            );
-            return Err(root.unsupported(what));
-        }
+        other => return Err(unsupported_kind(&root, other)),
     };
     dataset.validate(path)?;
     Ok(dataset)
+}
+
+/// The dataset kinds vmls reads.
+const KINDS: [&str; 5] = [
+    "ImageData",
+    "RectilinearGrid",
+    "StructuredGrid",
+    "UnstructuredGrid",
+    "PolyData",
+];
+
+fn unsupported_kind(root: &El<'_, '_>, kind: &str) -> DataError {
+    root.unsupported(format!(
+        "VTKFile type {} (vmls reads {})",
+        crate::files::excerpt_text(kind, 40),
+        KINDS.join(", ")
+    ))
 }
 
 /// Locates the data after the `_` marker of the `<AppendedData` tag at byte `at`.

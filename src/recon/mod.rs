@@ -63,6 +63,12 @@ pub enum ReconError {
         "octree: {refs} sample references exceed the limit of {limit}; raise octree.leaf_size or octree.leaf_budget, or lower reconstruction.support"
     )]
     TooManyReferences { refs: u64, limit: u64 },
+    #[error(
+        "octree: a leaf holds {refs} sample references, more than {limit} (every MLS evaluation \
+         loops over its leaf; devices such as lavapipe cut loops past 65 535 iterations): raise \
+         octree.max_depth, or lower octree.leaf_budget or octree.leaf_size"
+    )]
+    LeafTooLarge { refs: usize, limit: usize },
     #[error("octree: {key} = {value} is out of range ({expected})")]
     Setting {
         key: &'static str,

@@ -75,6 +75,14 @@ pub struct OctreeStats {
     pub build_ms: f64,
 }
 
+/// Most sample references one leaf may hold. An MLS evaluation loops over every reference of
+/// its leaf, so a leaf bounds the work of every evaluation; and a device may cut long loops
+/// short (llvmpipe ends every loop after 65 535 iterations per invocation, LAVAPIPE.md), which
+/// a leaf of tens of thousands of references reaches in one evaluation. Real data stays far
+/// below: splitting stops at `leaf_budget` (16) references unless a node is already smaller
+/// than the supports or at `max_depth`.
+pub const MAX_LEAF_REFERENCES: usize = 4096;
+
 /// The flattened octree plus its samples.
 #[derive(Debug, Clone)]
 pub struct Octree {
@@ -352,6 +360,12 @@ fn flatten(
     match built {
         Built::Leaf { members, scale } => {
             let begin = indices.len();
+            if members.len() > MAX_LEAF_REFERENCES {
+                return Err(ReconError::LeafTooLarge {
+                    refs: members.len(),
+                    limit: MAX_LEAF_REFERENCES,
+                });
+            }
             let refs = (begin + members.len()) as u64;
             if refs > max_references {
                 return Err(ReconError::TooManyReferences {

@@ -449,6 +449,26 @@ impl RaySetup {
             _ => render.step,
         };
         let unit = field.min_spacing();
+        let mls2008 =
+            render.method == Method::Adaptive && render.adaptive == AdaptiveCriterion::Mls2008;
+        if render.skip && field.reconstruction.resample == 0 {
+            return Err(RenderError::Setting {
+                key: "render.skip",
+                message: "true needs the fast path, which this field does not take \
+                          (reconstruction.resample is 0; skipping reads the fine grid's block \
+                          ranges: set reconstruction.resample = 2 or \"auto\" on a regular grid \
+                          with grid neighbours, or render.skip = false)"
+                    .into(),
+            });
+        }
+        if render.skip && mls2008 {
+            return Err(RenderError::Setting {
+                key: "render.skip",
+                message: "true does not apply to render.adaptive = \"mls2008\" (the paper's \
+                          criterion does not skip); use \"hermite\" or render.skip = false"
+                    .into(),
+            });
+        }
         let setup = Self {
             camera: *camera,
             basis,
@@ -464,11 +484,7 @@ impl RaySetup {
             epsilon: render.epsilon,
             spacing: unit,
             early_termination: render.early_termination,
-            // [MLS]'s criterion (the paper's integrator) does not skip.
-            skip: render.skip
-                && field.reconstruction.resample > 0
-                && !(render.method == Method::Adaptive
-                    && render.adaptive == AdaptiveCriterion::Mls2008),
+            skip: render.skip,
             background: render.background,
             min_transmittance: render.min_transmittance,
             isosurfaces: isosurfaces.to_vec(),

@@ -15,6 +15,12 @@ pub enum ImageFormat {
 
 /// The format of an output path, or an error naming the path and what was expected.
 pub fn format_of(path: &Path) -> Result<ImageFormat, RenderError> {
+    format_for(path, "output")
+}
+
+/// The format of an image `role` ("output", "input") by its extension, checked before a byte
+/// is read or written.
+pub fn format_for(path: &Path, role: &str) -> Result<ImageFormat, RenderError> {
     let ext = path
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase());
@@ -23,7 +29,7 @@ pub fn format_of(path: &Path) -> Result<ImageFormat, RenderError> {
         Some("exr") => Ok(ImageFormat::Exr),
         _ => Err(RenderError::Output {
             path: path.display().to_string(),
-            message: "unsupported output format: expected a .png or .exr file name".into(),
+            message: format!("unsupported {role} format: expected a .png or .exr file name"),
         }),
     }
 }
@@ -92,11 +98,12 @@ pub const MAX_IMAGE_BYTES: u64 = 16384 * 16384 * 16 + (1 << 20);
 /// Reads a `.png` or `.exr` image as linear RGBA floats (PNG bytes / 255, no gamma), row 0 at
 /// the top: the inverse of [`write_image`].
 pub fn read_image(path: &Path) -> Result<(u32, u32, Vec<[f32; 4]>), RenderError> {
-    let bytes = crate::files::read_input(path, MAX_IMAGE_BYTES)?;
-    let format = match format_of(path)? {
+    // The extension first: an unsupported file is refused before it is read.
+    let format = match format_for(path, "input")? {
         ImageFormat::Png => image::ImageFormat::Png,
         ImageFormat::Exr => image::ImageFormat::OpenExr,
     };
+    let bytes = crate::files::read_input(path, MAX_IMAGE_BYTES)?;
     let img =
         image::load_from_memory_with_format(&bytes, format).map_err(|e| RenderError::Output {
             path: path.display().to_string(),

@@ -385,6 +385,15 @@ fn apply_set(table: &mut Table, arg: &str) -> Result<(), SceneError> {
         arg: crate::files::excerpt_text(arg, 2 * crate::files::EXCERPT_CHARS),
         message,
     };
+    // One line: TOML would read what follows a newline as more keys, and the value would
+    // silently lose them.
+    if arg.contains(|c: char| c.is_control()) {
+        return Err(set_err(
+            "expected section.key=value on one line (found a newline or another control \
+             character)"
+                .into(),
+        ));
+    }
     let (path, raw) = arg
         .split_once('=')
         .ok_or_else(|| set_err("expected section.key=value".into()))?;
@@ -533,6 +542,14 @@ impl Scene {
                 array: vol.string("scalars")?.map(str::to_string),
             },
             (g, None) => {
+                if let Some(scalars) = vol.get("scalars") {
+                    return Err(vol.err(
+                        "scalars",
+                        "no value with a generated volume (volume.scalars picks an array of \
+                         volume.file)",
+                        scalars,
+                    ));
+                }
                 if let Some(g) = g.filter(|g| *g != "marschner-lobb") {
                     return Err(vol.err(
                         "generator",
@@ -788,6 +805,13 @@ impl Scene {
             table_resolution: ren.int("table_resolution", 512, 2, 4096)? as usize,
             splat: splat::parse(&section("splat"))?,
         };
+        if render.skip && render.method.splat_shading().is_some() {
+            return Err(section("render").err(
+                "skip",
+                "false with a splatting method (empty-space skipping serves ray casting)",
+                &Value::Boolean(true),
+            ));
+        }
         // "auto" chooses the direct solve wherever the fast path cannot serve, and for the
         // reference integrator, whose image is the ground truth of the scene's own field.
         if reconstruction.resample_auto

@@ -5,7 +5,9 @@
 //! work without rebuilding). Includes are resolved against the `glsl/` root and `glsl/include/`.
 //! Every variant is a set of macro definitions; results are cached per process by a hash of
 //! the kernel source and its definitions. `VMLS_SPIRV_DUMP=dir` writes every compiled variant
-//! there (for `spirv-dis`).
+//! there (for `spirv-dis`) through the output layer like every other writer (a planted symlink
+//! redirects nothing); a variable that names no directory, or a dump that cannot be written,
+//! fails the compilation with an error naming the variable, since the user asked for the files.
 
 use super::VkError;
 use std::collections::HashMap;
@@ -183,10 +185,11 @@ impl ShaderCompiler {
             .map_err(|e| shader_err(e.to_string()))?;
         let words = Arc::new(artifact.as_binary().to_vec());
         if let Some(dir) = std::env::var_os("VMLS_SPIRV_DUMP") {
-            // Best effort: a dump that cannot be written must not stop a render.
-            let path =
-                PathBuf::from(dir).join(format!("{}-{key:016x}.spv", name.replace('/', "_")));
-            let _ = std::fs::write(path, artifact.as_binary_u8());
+            dump_spirv(
+                &PathBuf::from(dir),
+                &format!("{}-{key:016x}.spv", name.replace('/', "_")),
+                artifact.as_binary_u8(),
+            )?;
         }
         self.cache
             .lock()
@@ -194,4 +197,23 @@ impl ShaderCompiler {
             .insert(key, words.clone());
         Ok(words)
     }
+}
+
+/// Writes one dump of `VMLS_SPIRV_DUMP` (see the module contract).
+fn dump_spirv(dir: &std::path::Path, name: &str, bytes: &[u8]) -> Result<(), VkError> {
+    let err = |message: String| {
+        VkError::Usage(format!(
+            "VMLS_SPIRV_DUMP={}: {message}",
+            crate::files::excerpt_text(&dir.to_string_lossy(), 200)
+        ))
+    };
+    match std::fs::metadata(dir) {
+        Ok(meta) if meta.is_dir() => {}
+        Ok(_) => return Err(err("expected a directory, found something else".into())),
+        Err(e) => return Err(err(format!("expected an existing directory: {e}"))),
+    }
+    crate::files::write_output("VMLS_SPIRV_DUMP", &dir.join(name), &[], |w| {
+        std::io::Write::write_all(w, bytes)
+    })
+    .map_err(|e| err(e.to_string()))
 }

@@ -6,8 +6,9 @@ use indicatif::{ProgressBar, ProgressStyle};
 use std::io::IsTerminal;
 use std::path::PathBuf;
 use vmls::bench::reference::ReferenceMode;
-use vmls::bench::results::{Row, read_csv, write_csv, write_json};
+use vmls::bench::results::{Row, csv_bytes, json_bytes, read_csv};
 use vmls::bench::{BenchOptions, Event, Sweep, plot, run, run_context, variant_defines};
+use vmls::files::Outputs;
 
 #[derive(clap::Args)]
 pub struct BenchArgs {
@@ -108,15 +109,13 @@ fn header() -> String {
 }
 
 fn line(i: usize, r: &Row) -> String {
-    let mut settings = r.short_settings();
-    if settings.len() > 38 {
-        settings.truncate(35);
-        settings.push_str("...");
-    }
+    // Rows may be imported: every text field is escaped and cut as error lines are.
+    let settings = vmls::files::printable(&r.short_settings(), 35);
+    let method = vmls::files::printable(&r.method, 10);
     format!(
         "{:<3} {:<10} {:<38} {:>10} {:>17} {:>10.1} {:>11} {:>9} {:>9} {:>7}  {}{}",
         i,
-        r.method,
+        method,
         settings,
         r.gpu_ms
             .map_or(format!("{:.2}w", r.wall_ms), |g| format!("{g:.2}")),
@@ -131,7 +130,7 @@ fn line(i: usize, r: &Row) -> String {
             r.fma_share.zip(r.memory_share).map(|(f, g)| f.max(g))
         ) {
             ("", _) | (_, None) => "-".to_string(),
-            (b, Some(x)) => format!("{b} {:.0}%", 100.0 * x),
+            (b, Some(x)) => format!("{} {:.0}%", vmls::files::printable(b, 12), 100.0 * x),
         },
         match r.non_finite {
             Some(n) if n > 0 => format!("  {n} NON-FINITE"),
@@ -181,7 +180,36 @@ pub fn bench(args: &BenchArgs) -> Result<(), CliError> {
         dump_spirv: args.dump_spirv.clone(),
         ceilings: !args.no_ceilings,
         force: args.force,
+        imports: args.import.clone(),
     };
+    // Every result file is planned before any work: one that is an input (the scene, its
+    // data file, an imported CSV) or an unwritable directory fails now, not after minutes.
+    std::fs::create_dir_all(&args.out).map_err(|e| {
+        CliError::from(vmls::files::FileError::Io {
+            path: args.out.clone(),
+            action: "create the directory",
+            source: e,
+        })
+    })?;
+    let base = vmls::scene::Scene::load(args.scene.as_deref(), &args.set)?;
+    let inputs = vmls::bench::inputs(&opts, &base);
+    let names = [
+        "results.csv",
+        "results.json",
+        "speed_error.svg",
+        "speed_error.png",
+    ];
+    let paths = names.map(|n| args.out.join(n));
+    let planned: Vec<(&str, &std::path::Path)> = names
+        .iter()
+        .zip(&paths)
+        .map(|(n, p)| (*n, p.as_path()))
+        .collect();
+    let input_refs: Vec<(&str, &std::path::Path)> = inputs
+        .iter()
+        .map(|(r, p)| (r.as_str(), p.as_path()))
+        .collect();
+    let outputs = Outputs::new(&planned, &input_refs)?;
     let mut measured_ceilings = None;
     let ctx = context(&args.device)?;
     println!("device: {} ({})", ctx.info().name, ctx.info().driver);
@@ -247,7 +275,22 @@ pub fn bench(args: &BenchArgs) -> Result<(), CliError> {
         }
     })?;
     bar.finish_and_clear();
-    let csv = args.out.join("results.csv");
+    let title = format!(
+        "{} on {}",
+        args.scene
+            .as_ref()
+            .map_or("built-in scene".into(), |p| p.display().to_string()),
+        ctx.info().name
+    );
+    let context = run_context(&ctx, &opts, &reference, measured_ceilings.as_ref());
+    let write_all = |mut outputs: Outputs, rows: &[Row]| -> Result<(), CliError> {
+        let (svg, png) = plot::speed_error_files(rows, &title)?;
+        let contents = [csv_bytes(rows)?, json_bytes(&context, rows)?, svg, png];
+        for (path, bytes) in paths.iter().zip(&contents) {
+            outputs.write(path, |w| std::io::Write::write_all(w, bytes))?;
+        }
+        Ok(outputs.commit()?)
+    };
     for name in &args.peer {
         match vmls::bench::peer::run_peer(name, &opts, &reference) {
             Ok(peer_rows) => {
@@ -258,30 +301,24 @@ pub fn bench(args: &BenchArgs) -> Result<(), CliError> {
             }
             Err(e) => {
                 // Keep what vmls measured: minutes of work.
-                write_csv(&csv, &rows)?;
-                eprintln!("vmls: wrote {} before the peer failed", csv.display());
+                write_all(outputs, &rows)?;
+                eprintln!(
+                    "vmls: wrote {} before the peer failed",
+                    args.out.join("results.csv").display()
+                );
                 return Err(e.into());
             }
         }
     }
     for (i, r) in imported.iter().enumerate() {
-        println!("{} (imported from {})", line(rows.len() + i, r), r.source);
+        println!(
+            "{} (imported from {})",
+            line(rows.len() + i, r),
+            vmls::files::printable(&r.source, 60)
+        );
     }
     rows.extend(imported);
-    write_csv(&csv, &rows)?;
-    write_json(
-        &args.out.join("results.json"),
-        &run_context(&ctx, &opts, &reference, measured_ceilings.as_ref()),
-        &rows,
-    )?;
-    let title = format!(
-        "{} on {}",
-        args.scene
-            .as_ref()
-            .map_or("built-in scene".into(), |p| p.display().to_string()),
-        ctx.info().name
-    );
-    plot::write_speed_error(&args.out.join("speed_error"), &rows, &title)?;
+    write_all(outputs, &rows)?;
     let front = vmls::bench::results::pareto_front(&rows);
     println!(
         "Pareto front: {}",
@@ -293,7 +330,7 @@ pub fn bench(args: &BenchArgs) -> Result<(), CliError> {
     );
     println!(
         "wrote {} (and results.json, speed_error.svg/.png, images/)",
-        csv.display()
+        args.out.join("results.csv").display()
     );
     Ok(())
 }

@@ -5,9 +5,12 @@ use std::path::Path;
 use vmls::bench::metrics::image_error;
 use vmls::files::Outputs;
 use vmls::render::RenderError;
-use vmls::render::output::{encode_image, format_of, read_image};
+use vmls::render::output::{encode_image, format_for, format_of, read_image};
 
 pub fn compare(image: &Path, reference: &Path, diff: Option<&Path>) -> Result<(), CliError> {
+    // Every name is checked before a byte is read: a wrong extension fails at once.
+    format_for(image, "input")?;
+    format_for(reference, "input")?;
     if let Some(d) = diff {
         format_of(d)?;
     }

@@ -8,12 +8,12 @@ mod check;
 mod compare;
 mod probe;
 mod render;
+mod signals;
 
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use vmls::files::Outputs;
 use vmls::render::RenderError;
@@ -61,7 +61,7 @@ enum Command {
         set: Vec<String>,
         /// Render this many frames with one persistent renderer, turning the camera 10° about
         /// its up axis each frame; the last is written, `--stats` lists every frame's cost.
-        #[arg(long, default_value_t = 1)]
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
         frames: u32,
         /// Render with the f64 CPU twins of the kernels instead of the GPU: slow, for ground
         /// truth (e.g. reconstruction.method = "gaussian" with render.method = "reference", the
@@ -231,23 +231,6 @@ fn json_to(
     }
 }
 
-/// The stop request of a long command: the first Ctrl-C sets it (a frame ends after its
-/// current submission, and nothing is written); a second one removes every temporary
-/// output and exits at once with status 130.
-fn interrupt_flag() -> Arc<AtomicBool> {
-    let flag = Arc::new(AtomicBool::new(false));
-    let seen = flag.clone();
-    // Without a handler (another one is installed) Ctrl-C keeps its default: exit at once.
-    let _ = ctrlc::set_handler(move || {
-        if seen.swap(true, Ordering::SeqCst) {
-            vmls::files::remove_temporaries();
-            std::process::exit(130);
-        }
-        eprintln!("vmls: interrupted: stopping without writing (Ctrl-C again to quit at once)");
-    });
-    flag
-}
-
 /// Fails with [`RenderError::Interrupted`] once a stop was requested.
 fn check_stop(stop: &AtomicBool) -> Result<(), CliError> {
     if stop.load(Ordering::SeqCst) {
@@ -282,6 +265,7 @@ fn chain(error: &dyn std::error::Error) -> String {
 
 fn main() {
     let cli = Cli::parse();
+    let stop = signals::install(matches!(cli.command, Command::Render { .. }));
     let result = match &cli.command {
         Command::Render {
             scene,
@@ -294,7 +278,6 @@ fn main() {
             force,
             device,
         } => {
-            let stop = interrupt_flag();
             if *cpu {
                 if eval_map.is_some() || *frames != 1 {
                     Err(CliError::Usage(
@@ -339,6 +322,7 @@ fn main() {
                     file,
                     array.as_deref(),
                     &scene.samples,
+                    scene.reconstruction,
                     &scene.octree,
                 )?)
             })
@@ -370,6 +354,10 @@ fn main() {
     if let Err(e) = result {
         eprintln!("vmls: error: {}", report(&e));
         let interrupted = matches!(e, CliError::Render(RenderError::Interrupted));
-        std::process::exit(if interrupted { 130 } else { 1 });
+        std::process::exit(if interrupted {
+            signals::exit_status()
+        } else {
+            1
+        });
     }
 }
