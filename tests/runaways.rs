@@ -44,3 +44,95 @@ fn degenerate_octrees_are_refused_by_name() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+fn stats_of(path: &std::path::Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).expect("stats")).expect("json")
+}
+
+#[test]
+fn auto_takes_the_fast_path_only_where_its_fine_grid_stays_moderate() {
+    let d = dir("auto-fast-path");
+    let (png, stats) = (d.join("x.png"), d.join("s.json"));
+    let render = |extra: &[&str]| {
+        let mut args = vec![
+            "render",
+            "-o",
+            s(&png),
+            "--stats",
+            s(&stats),
+            "--set",
+            "camera.width=8",
+            "--set",
+            "camera.height=8",
+        ];
+        args.extend_from_slice(extra);
+        vmls(&args)
+    };
+    // The built-in 41³ scene: 81³ fine points.
+    let out = render(&[]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let fast = &stats_of(&stats)["fast_path"];
+    assert_eq!(fast["factor"], 2, "{fast}");
+    assert_eq!(fast["fine_points"], 81 * 81 * 81, "{fast}");
+    // 130³: 259³ = 17.4 M fine points, past auto's 2^24: the general path, and --stats says why.
+    let out = render(&["--set", "volume.resolution=130"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let fast = &stats_of(&stats)["fast_path"];
+    assert_eq!(fast["factor"], 0, "{fast}");
+    let why = fast["declined"].as_str().unwrap_or_default();
+    assert!(
+        why.contains("17373979 points") && why.contains("resample = 2"),
+        "{why}"
+    );
+}
+
+#[test]
+fn loads_past_the_free_host_memory_are_refused_before_allocating() {
+    let d = dir("host-memory");
+    let png = d.join("x.png");
+    let run = |memory: &str, extra: &[&str]| {
+        let mut args = vec!["render", "-o", s(&png)];
+        args.extend_from_slice(extra);
+        std::process::Command::new(env!("CARGO_BIN_EXE_vmls"))
+            .args(&args)
+            .args(["--set", "camera.width=8", "--set", "camera.height=8"])
+            .env("VMLS_VALIDATION", "1")
+            .env("VMLS_HOST_MEMORY", memory)
+            .env_remove("VMLS_DEVICE")
+            .output()
+            .expect("run vmls")
+    };
+    // The generator: 41³ samples at 16 bytes need 1.1 MB.
+    let out = run("1000000", &[]);
+    assert_fails(
+        &out,
+        &[
+            "volume.resolution",
+            "1102736 bytes of host memory",
+            "1000000 available",
+        ],
+        &png,
+    );
+    // A file: a 30×30×30 NRRD needs 432 000 bytes.
+    let nrrd = d.join("v.nrrd");
+    let mut bytes =
+        b"NRRD0004\ntype: uint8\ndimension: 3\nsizes: 30 30 30\nencoding: raw\n\n".to_vec();
+    bytes.extend((0..27_000).map(|i| (i % 251) as u8));
+    std::fs::write(&nrrd, bytes).expect("write");
+    let key = format!("volume.file=\"{}\"", s(&nrrd));
+    let out = run("400000", &["--set", &key]);
+    assert_fails(&out, &["v.nrrd", "30×30×30 grid", "432000 bytes"], &png);
+    // Enough memory: both render; a bad value is named.
+    assert!(run("2000000", &["--set", &key]).status.success());
+    std::fs::remove_file(&png).expect("rendered");
+    let out = run("lots", &[]);
+    assert_fails(&out, &["VMLS_HOST_MEMORY", "byte count"], &png);
+}

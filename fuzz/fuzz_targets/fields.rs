@@ -68,7 +68,8 @@ pub fn store(out: &mut Vec<u8>, v: f64, kind: char, bytes: usize, big: bool) {
     out.extend(b);
 }
 
-/// Compresses with gzip (or zlib when `zlib`), at a fuzzer-chosen level; sometimes cut short.
+/// Compresses with gzip (or zlib when `zlib`), at a fuzzer-chosen level; sometimes cut short,
+/// sometimes with one byte flipped (a gzip trailer's CRC-32 and length must catch it).
 pub fn compress(u: &mut Unstructured, data: &[u8], zlib: bool) -> Result<Vec<u8>> {
     use std::io::Write;
     let level = flate2::Compression::new(u.int_in_range(0..=9)?);
@@ -84,6 +85,10 @@ pub fn compress(u: &mut Unstructured, data: &[u8], zlib: bool) -> Result<Vec<u8>
     if u.ratio(1u8, 16)? {
         let keep = u.int_in_range(0..=out.len())?;
         out.truncate(keep);
+    }
+    if !out.is_empty() && u.ratio(1u8, 16)? {
+        let at = u.int_in_range(0..=out.len() - 1)?;
+        out[at] ^= 1 << u.int_in_range(0..=7u8)?;
     }
     Ok(out)
 }

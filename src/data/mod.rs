@@ -202,6 +202,9 @@ pub enum DataError {
         id: u32,
         name: &'static str,
     },
+    /// Loading the file would take more host memory than the machine has free.
+    #[error("{path}: {message}")]
+    Memory { path: PathBuf, message: String },
     #[error(
         "{path}: no scalar values to render: the file holds positions only (a CSV needs a \
          numeric column besides x, y, z; a PLY a scalar vertex property besides x, y, z; a VTK \
@@ -240,10 +243,32 @@ pub fn checked_sample_count(path: &Path, dims: [u64; 3]) -> Result<usize, DataEr
             reason: format!("{n} samples exceed the limit of {MAX_SAMPLES}"),
         });
     }
-    usize::try_from(n).map_err(|_| DataError::TooLarge {
+    let n = usize::try_from(n).map_err(|_| DataError::TooLarge {
         path: path.to_path_buf(),
         dims,
         reason: "the sample count does not fit this machine's address space".into(),
+    })?;
+    check_grid_memory(path, dims, n)?;
+    Ok(n)
+}
+
+/// Host bytes a regular grid's sample costs on its way to the GPU, at the peak: the decoded
+/// f32 value, the sample set's copy and the upload's staging copy, with room for the file's
+/// own bytes of a compressed or 8-bit input.
+pub const HOST_BYTES_PER_GRID_SAMPLE: u64 = 16;
+
+/// Refuses a grid of `n` samples whose load would not fit in the host's free memory, before
+/// anything of that size is allocated (see [`crate::files::memory`]).
+fn check_grid_memory(path: &Path, dims: [u64; 3], n: usize) -> Result<(), DataError> {
+    let what = format!("a {}×{}×{} grid", dims[0], dims[1], dims[2]);
+    crate::files::memory::check(
+        &what,
+        n as u64 * HOST_BYTES_PER_GRID_SAMPLE,
+        "crop or downsample the volume",
+    )
+    .map_err(|message| DataError::Memory {
+        path: path.to_path_buf(),
+        message,
     })
 }
 

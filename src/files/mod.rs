@@ -17,6 +17,7 @@
 //!   excerpt, so no message carries terminal escapes or megabytes of a hostile file.
 
 mod input;
+pub mod memory;
 mod output;
 
 pub use input::{FileId, read_input};

@@ -36,6 +36,15 @@ pub const AUTO_FACTOR: u32 = 2;
 /// Largest number of fine points: 2 GiB of `vec4`s (checked before anything is built).
 pub const MAX_POINTS: u64 = 1 << 27;
 
+/// Most fine points `reconstruction.resample = "auto"` takes the fast path for: 2^24 (256 MiB on
+/// the device, and a first frame that builds them in seconds on lavapipe). A 200³ grid would
+/// need 63 M (18.8 s and 2.2 GB for its first 64² frame on lavapipe, issue 25), so "auto"
+/// renders it by the general path; an explicit factor still takes it.
+pub const AUTO_MAX_POINTS: u64 = 1 << 24;
+
+/// Device bytes per fine point: f and ∇f as one rgba32f texel.
+pub const FINE_POINT_DEVICE_BYTES: u64 = 16;
+
 /// Fine points per axis for a grid of `dims` points refined `factor` times.
 pub fn fine_dims(dims: [usize; 3], factor: u32) -> [usize; 3] {
     dims.map(|d| (d.max(1) - 1) * factor as usize + 1)

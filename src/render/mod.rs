@@ -23,7 +23,9 @@ use crate::data::{DataError, Volume};
 use crate::recon::ReconMethod;
 use crate::recon::gaussian::{KernelVolumes, gaussian_evaluate};
 use crate::recon::mls::{MlsSettings, MlsValue, Neighbours, Visit, mls_evaluate};
-use crate::recon::resample::{AUTO_FACTOR, MAX_POINTS, ResampledGrid, fine_points};
+use crate::recon::resample::{
+    AUTO_FACTOR, AUTO_MAX_POINTS, FINE_POINT_DEVICE_BYTES, MAX_POINTS, ResampledGrid, fine_points,
+};
 use crate::recon::{GridNeighbours, Octree, OctreeSettings, ReconError};
 use crate::recon::{NeighbourMode, Reconstruction};
 use crate::samples::bvh::HullBvh;
@@ -99,6 +101,8 @@ pub struct Field {
     resampled: std::sync::OnceLock<ResampledGrid>,
     /// Block ranges of the CPU fine grid, for empty-space skipping.
     blocks: std::sync::OnceLock<skip::Blocks>,
+    /// Why `reconstruction.resample = "auto"` chose the general path, where it did.
+    fast_path_declined: Option<String>,
 }
 
 impl Field {
@@ -166,6 +170,7 @@ impl Field {
             support_box: (DVec3::from(slo), DVec3::from(shi)),
             resampled: std::sync::OnceLock::new(),
             blocks: std::sync::OnceLock::new(),
+            fast_path_declined: None,
         };
         if let Domain::Hull(h) = &field.samples.domain {
             field.hull = Some(HullBvh::build(h));
@@ -176,14 +181,49 @@ impl Field {
         if field.reconstruction.resample_auto {
             field.reconstruction.resample_auto = false;
             field.reconstruction.resample = AUTO_FACTOR;
-            if field.check_resample().is_err() {
+            if let Err(e) = field.check_resample() {
                 field.reconstruction.resample = 0;
+                field.fast_path_declined = Some(e.to_string());
+            } else if let Some(g) = field.grid() {
+                // The fine grid's device memory and first-frame build grow with its points:
+                // "auto" takes the fast path only where both stay moderate.
+                let points = fine_points(g.dims, AUTO_FACTOR);
+                if points > AUTO_MAX_POINTS {
+                    field.reconstruction.resample = 0;
+                    field.fast_path_declined = Some(format!(
+                        "\"auto\" declined the fast path: its fine grid would hold {points} \
+                         points ({} bytes on the device, built in the first frame), more than \
+                         auto's {AUTO_MAX_POINTS}; set reconstruction.resample = {AUTO_FACTOR} \
+                         to take it anyway",
+                        points * FINE_POINT_DEVICE_BYTES
+                    ));
+                }
             }
         }
         if field.reconstruction.resample > 0 {
             field.check_resample()?;
         }
         Ok(field)
+    }
+
+    /// The fast path as `--stats` states it: its factor, fine points and device bytes, or why
+    /// `"auto"` declined it.
+    pub fn fast_path(&self) -> serde_json::Value {
+        let factor = self.reconstruction.resample;
+        match self.grid().filter(|_| factor > 0) {
+            Some(g) => {
+                let points = fine_points(g.dims, factor);
+                serde_json::json!({
+                    "factor": factor,
+                    "fine_points": points,
+                    "device_bytes": points * FINE_POINT_DEVICE_BYTES,
+                })
+            }
+            None => serde_json::json!({
+                "factor": 0,
+                "declined": self.fast_path_declined,
+            }),
+        }
     }
 
     /// Implicit grid neighbours, for a regular grid with one support.

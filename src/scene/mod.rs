@@ -870,7 +870,20 @@ impl Scene {
     pub fn field(&self, progress: impl FnMut(f64)) -> Result<Field, RenderError> {
         match &self.volume {
             VolumeSource::MarschnerLobb { resolution } => Ok(Field::new(
-                crate::data::marschner_lobb::generate(*resolution),
+                {
+                    let n = (*resolution as u64).pow(3);
+                    let what = format!("volume.resolution = {resolution} ({n} samples)");
+                    crate::files::memory::check(
+                        &what,
+                        n * crate::data::HOST_BYTES_PER_GRID_SAMPLE,
+                        "lower volume.resolution",
+                    )
+                    .map_err(|message| RenderError::Setting {
+                        key: "volume.resolution",
+                        message,
+                    })?;
+                    crate::data::marschner_lobb::generate(*resolution)
+                },
                 self.reconstruction,
                 &self.octree,
                 progress,

@@ -141,6 +141,7 @@ pub fn run_render(
             "method": scene.render.method.name(),
             "step_world": step_world,
             "neighbours": if field.uses_octree() { "octree" } else { "grid" },
+            "fast_path": field.fast_path(),
             "gpu_ms": match &image.splat {
                 None => serde_json::json!({ "raycast": first.gpu_ms }),
                 Some(r) => serde_json::json!({
