@@ -136,3 +136,27 @@ fn loads_past_the_free_host_memory_are_refused_before_allocating() {
     let out = run("lots", &[]);
     assert_fails(&out, &["VMLS_HOST_MEMORY", "byte count"], &png);
 }
+
+#[test]
+fn a_grid_the_device_cannot_bind_is_refused_before_it_is_built() {
+    let d = dir("device-grid");
+    let png = d.join("x.png");
+    // 330³ float samples: 144 MB, past lavapipe's 128 MiB maxStorageBufferRange (the limit
+    // CI's device has). Refused before generation, naming the buffer and the limit.
+    let out = vmls(&[
+        "render",
+        "-o",
+        s(&png),
+        "--set",
+        "volume.resolution=330",
+        "--set",
+        "camera.width=8",
+        "--set",
+        "camera.height=8",
+    ]);
+    assert_fails(
+        &out,
+        &["buffer 'grid'", "143748096 bytes", "maxStorageBufferRange"],
+        &png,
+    );
+}

@@ -356,7 +356,7 @@ pub fn run(
         let key = field_key(scene);
         if prepared.as_ref().map(|p| &p.0) != Some(&key) {
             let t = Instant::now();
-            let field = scene.field(|_| {})?;
+            let field = scene.field_on(Some(ctx.info()), |_| {})?;
             prepared = Some((key, field, t.elapsed().as_secs_f64() * 1e3));
         }
         let Some((_, field, prepare_ms)) = prepared.as_ref() else {

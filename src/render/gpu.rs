@@ -359,13 +359,19 @@ impl GpuField {
         Ok(gpu)
     }
 
+    /// Refuses a regular grid of `samples` values whose buffer the device cannot bind, before
+    /// the host builds the field (`Scene::field_on`): the same size [`GpuField::upload`] asks for.
+    pub fn check_grid(info: &crate::vk::DeviceInfo, samples: usize) -> Result<(), VkError> {
+        let bytes = (padded_grid_len(samples) * std::mem::size_of::<f32>()) as u64;
+        crate::vk::check_size(info, "grid", bytes, crate::vk::BufferUsage::Storage)
+    }
+
     fn upload_samples(ctx: &Context, field: &Field) -> Result<Self, VkError> {
         match &field.octree {
             None => {
-                // Padded front and back (GRID_PAD) and to a whole number of vec4s.
                 let mut padded = vec![0.0f32; GRID_PAD];
                 padded.extend_from_slice(&field.samples.values);
-                padded.resize((padded.len() + 2 * GRID_PAD).next_multiple_of(4), 0.0);
+                padded.resize(padded_grid_len(field.samples.values.len()), 0.0);
                 let grid = Buffer::from_slice(ctx, "grid", &padded)?;
                 let fine = super::resample::resample_grid(ctx, field, &grid)?;
                 let resample_ms = fine.as_ref().map_or(0.0, |f| f.1);
@@ -545,4 +551,9 @@ pub(super) fn groups_2d(count: u32, group: u32) -> [u32; 3] {
     } else {
         [groups, 1, 1]
     }
+}
+
+/// Values in the grid buffer: padded front and back (GRID_PAD) and to a whole number of vec4s.
+fn padded_grid_len(samples: usize) -> usize {
+    (samples + 3 * GRID_PAD).next_multiple_of(4)
 }

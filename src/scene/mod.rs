@@ -868,6 +868,22 @@ impl Scene {
     /// The scene's field: the generator's grid, or any supported file through its sample set
     /// (regular grids keep the implicit-grid path; everything else gets the octree).
     pub fn field(&self, progress: impl FnMut(f64)) -> Result<Field, RenderError> {
+        self.field_on(None, progress)
+    }
+
+    /// [`Scene::field`] for a device: a regular grid whose buffer the device cannot bind is
+    /// refused once its size is known (before generation; after a file is read, before the
+    /// sample set, supports and fast path are built), not after all of that host work.
+    pub fn field_on(
+        &self,
+        device: Option<&crate::vk::DeviceInfo>,
+        progress: impl FnMut(f64),
+    ) -> Result<Field, RenderError> {
+        let grid = self.reconstruction.neighbours == crate::recon::NeighbourMode::Grid;
+        let check = |samples: usize| match device {
+            Some(info) if grid => crate::render::gpu::GpuField::check_grid(info, samples),
+            _ => Ok(()),
+        };
         match &self.volume {
             VolumeSource::MarschnerLobb { resolution } => Ok(Field::new(
                 {
@@ -882,6 +898,7 @@ impl Scene {
                         key: "volume.resolution",
                         message,
                     })?;
+                    check(n as usize)?;
                     crate::data::marschner_lobb::generate(*resolution)
                 },
                 self.reconstruction,
@@ -890,6 +907,9 @@ impl Scene {
             )?),
             VolumeSource::File { path, .. } => {
                 let dataset = crate::data::load_dataset(path)?;
+                if let crate::data::dataset::Geometry::Image { dims, .. } = &dataset.geometry {
+                    check(dims.iter().product())?;
+                }
                 self.field_from_dataset(&dataset, path, progress)
             }
         }

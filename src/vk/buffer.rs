@@ -21,6 +21,34 @@ pub enum BufferUsage {
     Texel,
 }
 
+/// Refuses a buffer of `size` bytes that `info`'s device cannot hold or bind, naming it, the
+/// size and the limit: [`Buffer::new`] checks every buffer, and callers check the large ones
+/// before the host builds their contents.
+pub fn check_size(
+    info: &super::DeviceInfo,
+    name: &str,
+    size: u64,
+    usage: BufferUsage,
+) -> Result<(), VkError> {
+    if usage == BufferUsage::Storage && size > info.max_storage_buffer_range {
+        return Err(VkError::Limit {
+            resource: format!("buffer '{name}'"),
+            bytes: size,
+            limit: info.max_storage_buffer_range,
+            limit_name: "maxStorageBufferRange",
+        });
+    }
+    if size > info.max_heap_bytes {
+        return Err(VkError::Limit {
+            resource: format!("buffer '{name}'"),
+            bytes: size,
+            limit: info.max_heap_bytes,
+            limit_name: "the largest device-local memory heap",
+        });
+    }
+    Ok(())
+}
+
 /// A Vulkan buffer with its memory. Freed on drop.
 pub struct Buffer {
     shared: Arc<Shared>,
@@ -35,22 +63,7 @@ impl Buffer {
     pub fn new(ctx: &Context, name: &str, size: u64, usage: BufferUsage) -> Result<Self, VkError> {
         let shared = ctx.shared.clone();
         let size = size.max(4).next_multiple_of(4);
-        if usage == BufferUsage::Storage && size > shared.info.max_storage_buffer_range {
-            return Err(VkError::Limit {
-                resource: format!("buffer '{name}'"),
-                bytes: size,
-                limit: shared.info.max_storage_buffer_range,
-                limit_name: "maxStorageBufferRange",
-            });
-        }
-        if size > shared.info.max_heap_bytes {
-            return Err(VkError::Limit {
-                resource: format!("buffer '{name}'"),
-                bytes: size,
-                limit: shared.info.max_heap_bytes,
-                limit_name: "the largest device-local memory heap",
-            });
-        }
+        check_size(&shared.info, name, size, usage)?;
         let vk_usage = match usage {
             // Every storage buffer may also be read through a texel-buffer view or as a uniform
             // buffer (BindingKind).

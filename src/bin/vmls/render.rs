@@ -62,10 +62,10 @@ pub fn run_render(
             scene.render.method.name()
         )));
     }
-    let bar = progress_bar("octree");
-    let field = scene.field(|f| bar.set_position((f * 1000.0) as u64))?;
-    bar.finish_and_clear();
     let ctx = context(device)?;
+    let bar = progress_bar("octree");
+    let field = scene.field_on(Some(ctx.info()), |f| bar.set_position((f * 1000.0) as u64))?;
+    bar.finish_and_clear();
     let step_world = match scene.render.method.splat_shading() {
         None => {
             let setup = scene.ray_setup(&field)?;
