@@ -130,6 +130,17 @@ fn loads_past_the_free_host_memory_are_refused_before_allocating() {
     let key = format!("volume.file=\"{}\"", s(&nrrd));
     let out = run("400000", &["--set", &key]);
     assert_fails(&out, &["v.nrrd", "30×30×30 grid", "432000 bytes"], &png);
+    // A sparse file is not read into memory that is not there.
+    let sparse = d.join("sparse.nrrd");
+    let f = std::fs::File::create(&sparse).expect("create");
+    f.set_len(4 << 30).expect("sparse");
+    let key_sparse = format!("volume.file=\"{}\"", s(&sparse));
+    let out = run("1000000000", &["--set", &key_sparse]);
+    assert_fails(
+        &out,
+        &["sparse.nrrd", "4294967296 bytes of host memory"],
+        &png,
+    );
     // Enough memory: both render; a bad value is named.
     assert!(run("2000000", &["--set", &key]).status.success());
     std::fs::remove_file(&png).expect("rendered");

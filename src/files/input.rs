@@ -76,6 +76,13 @@ pub fn read_input(path: &Path, limit: u64) -> Result<Vec<u8>, FileError> {
             limit,
         });
     }
+    // The whole file is read into memory: a sparse or huge file must fit what is free.
+    super::memory::check("reading the whole file", size, "use a smaller file").map_err(
+        |message| FileError::Memory {
+            path: path.to_path_buf(),
+            message,
+        },
+    )?;
     let mut bytes = Vec::with_capacity(size as usize);
     file.take(size)
         .read_to_end(&mut bytes)

@@ -35,6 +35,8 @@ pub enum FileError {
         #[source]
         source: std::io::Error,
     },
+    #[error("{path}: {message}")]
+    Memory { path: PathBuf, message: String },
     #[error("{path}: expected a regular file, found {found}")]
     NotRegular { path: PathBuf, found: &'static str },
     #[error("{path}: the file holds {size} bytes, more than the {limit} bytes this input may have")]
