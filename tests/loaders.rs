@@ -617,6 +617,26 @@ fn nrrd_errors() {
         &with("encoding: gzip\n", &gzip(&[0u8; 100])),
     );
     data::load(&path, None).expect("4 bytes past the data are read past");
+    // Bytes after the last member that start no other one are ignored (as gzip -d does), and
+    // several members are read in turn, each checked.
+    let mut trailing = gz.clone();
+    trailing.extend(b"\n\0\0");
+    let path = file("trailgz.nrrd", &with("encoding: gzip\n", &trailing));
+    data::load(&path, None).expect("trailing bytes");
+    let mut members = gzip(&raw[..40]);
+    members.extend(gzip(&raw[40..]));
+    let path = file("membersgz.nrrd", &with("encoding: gzip\n", &members));
+    let v = data::load(&path, None).expect("two members");
+    check(&v, [1.0; 3], [0.0; 3], &ramp(T::F32));
+    let mut bad_second = members.clone();
+    let n = bad_second.len();
+    bad_second[n - 6] ^= 0x20;
+    fails(
+        "member2.nrrd",
+        &with("encoding: gzip\n", &bad_second),
+        "Format",
+        &gz_at,
+    );
     let corrupt_gz = with("encoding: gzip\n", b"not gzip at all");
     fails("corruptgz.nrrd", &corrupt_gz, "Format", &gz_at);
     let surplus = nrrd_file(

@@ -184,7 +184,8 @@ const GZIP_SLACK: u64 = 1 << 16;
 /// Inflates gzip data (all members), producing at most `limit` bytes so that a header cannot
 /// make us inflate, or allocate, more than it needs, and checks every member's trailer (CRC-32
 /// and length): a flipped byte or a stream cut short is an error naming the file, never wrong
-/// values. A complete stream that holds less than `limit` yields what it held: the caller
+/// values. Bytes after the last member that do not start another one are ignored, as `gzip
+/// -d` does. A complete stream that holds less than `limit` yields what it held: the caller
 /// compares the length with what it needs and reports `Truncated`. `offset` is where `data`
 /// starts in the file, for the error message.
 pub(crate) fn gunzip(
@@ -206,21 +207,33 @@ pub(crate) fn gunzip(
             err(e.to_string())
         }
     };
-    let mut decoder = flate2::read::MultiGzDecoder::new(data);
+    const MAGIC: [u8; 2] = [0x1f, 0x8b];
+    if !data.starts_with(&MAGIC) {
+        return Err(err(crate::files::excerpt(&data[..data.len().min(8)])));
+    }
+    let mut input = data;
     let mut out = Vec::new();
-    (&mut decoder)
-        .take(limit)
-        .read_to_end(&mut out)
+    let mut extra = 0u64;
+    while input.starts_with(&MAGIC) {
+        let mut member = flate2::bufread::GzDecoder::new(input);
+        let room = limit - out.len() as u64;
+        (&mut member)
+            .take(room)
+            .read_to_end(&mut out)
+            .map_err(describe)?;
+        // Read the member to its end, so that its trailer is checked; what lies past the
+        // declared data is counted and discarded.
+        extra += std::io::copy(
+            &mut (&mut member).take(GZIP_SLACK + 1 - extra),
+            &mut std::io::sink(),
+        )
         .map_err(describe)?;
-    if out.len() as u64 == limit {
-        // The trailer is checked only once the stream is read to its end.
-        let mut rest = (&mut decoder).take(GZIP_SLACK + 1);
-        let extra = std::io::copy(&mut rest, &mut std::io::sink()).map_err(describe)?;
         if extra > GZIP_SLACK {
             return Err(err(format!(
                 "more than {limit} + {GZIP_SLACK} bytes, where the header declares {limit}"
             )));
         }
+        input = member.into_inner();
     }
     Ok(out)
 }

@@ -262,7 +262,6 @@ fn scalar_size(t: &ScalarType) -> u64 {
     }
 }
 
-/// Parses PLY bytes; `path` only names the file in errors.
 /// Refuses a vertex element that names one property twice: the PLY parser keeps properties
 /// by name, so the second would silently shift every value after it.
 fn check_unique_properties(path: &Path, bytes: &[u8]) -> Result<(), DataError> {
@@ -296,6 +295,7 @@ fn check_unique_properties(path: &Path, bytes: &[u8]) -> Result<(), DataError> {
     Ok(())
 }
 
+/// Parses PLY bytes; `path` only names the file in errors.
 pub fn parse_ply(path: &Path, bytes: &[u8]) -> Result<Dataset, DataError> {
     check_unique_properties(path, bytes)?;
     let parser = Parser::<Row>::new();

@@ -248,6 +248,18 @@ impl<'a> Reader<'a> {
         Ok(Elem::Num(ty))
     }
 
+    /// [`Reader::elem`] for geometry and cell arrays, which must be numbers: strings are
+    /// unsupported there (they are read past only as data arrays).
+    pub(super) fn numeric_elem(&self, line: &Line, name: &str) -> Result<Elem, DataError> {
+        match self.elem(line, name)? {
+            Elem::Str => Err(self.unsupported(
+                line.start,
+                format!("{name} {} (expected numbers)", line.keyword()),
+            )),
+            elem => Ok(elem),
+        }
+    }
+
     /// Reads `ntuples` tuples of `ncomp` values; with `keep`, returns component 0 of each.
     pub(super) fn array<T: Sample>(
         &mut self,

@@ -202,7 +202,7 @@ fn geometry_line(
             if n == 0 {
                 return Err(r.format(line.start, "at least one point", "POINTS 0"));
             }
-            let elem = r.elem(line, &line.tokens[2])?;
+            let elem = r.numeric_elem(line, &line.tokens[2])?;
             let v = r.array::<f64>(elem, 1, 3 * n as u64, true)?;
             r.skip_metadata();
             let points = v.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
@@ -215,7 +215,7 @@ fn geometry_line(
             }
             r.expect_tokens(line, 3, &format!("{k} n type"))?;
             let n = count(r, line, 1, "coordinates")?;
-            let elem = r.elem(line, &line.tokens[2])?;
+            let elem = r.numeric_elem(line, &line.tokens[2])?;
             let v = r.array::<f64>(elem, 1, n as u64, true)?;
             r.skip_metadata();
             parts.coords[a] = Some((v, line.start));
@@ -359,7 +359,7 @@ fn cells(r: &mut Reader, line: &Line) -> Result<RawCells, DataError> {
 fn typed_array(r: &mut Reader, kw: &str, n: usize) -> Result<Vec<u64>, DataError> {
     match r.line() {
         Some(line) if line.keyword() == kw && line.tokens.len() == 2 => {
-            let elem = r.elem(&line, &line.tokens[1])?;
+            let elem = r.numeric_elem(&line, &line.tokens[1])?;
             whole(r, &line, elem, n)
         }
         // The error quotes the line that was read, not the one after it.

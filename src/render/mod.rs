@@ -494,11 +494,15 @@ impl RaySetup {
         if render.skip && field.reconstruction.resample == 0 {
             return Err(RenderError::Setting {
                 key: "render.skip",
-                message: "true needs the fast path, which this field does not take \
-                          (reconstruction.resample is 0; skipping reads the fine grid's block \
-                          ranges: set reconstruction.resample = 2 or \"auto\" on a regular grid \
-                          with grid neighbours, or render.skip = false)"
-                    .into(),
+                message: format!(
+                    "true needs the fast path, which this field does not take ({}; skipping \
+                     reads the fine grid's block ranges): render.skip = false, or the fast path \
+                     on a regular grid with grid neighbours",
+                    field
+                        .fast_path_declined
+                        .as_deref()
+                        .unwrap_or("reconstruction.resample is 0")
+                ),
             });
         }
         if render.skip && mls2008 {

@@ -138,7 +138,13 @@ fn segment_pieces(
     s_b: f64,
     mut visit: impl FnMut(f64, f64, Knot, Knot) -> bool,
 ) {
-    let up = s_b >= s_f;
+    if s_f == s_b {
+        // A constant scalar sees one value, the direct lookup's, even on a step.
+        let v = tf.lookup(s_f);
+        visit(0.0, 1.0, v, v);
+        return;
+    }
+    let up = s_b > s_f;
     let ds = s_b - s_f;
     let mut u0 = 0.0;
     let mut v0 = tf.limit(s_f, up);

@@ -845,6 +845,28 @@ impl Scene {
                 ));
             }
         }
+        // Skipping reads the fast path's block ranges: refused here, before any work (a bench
+        // checks every configuration at its start), where the scene already rules it out; the
+        // ray setup refuses it too where "auto" declines the fast path for the data.
+        if render.skip {
+            let why = if reconstruction.resample == 0 && !reconstruction.resample_auto {
+                Some(
+                    "false here: skipping needs the fast path, and reconstruction.resample is 0 \
+                     (or \"auto\" resolves to 0 for this method or reconstruction)",
+                )
+            } else if render.method == Method::Adaptive
+                && render.adaptive == AdaptiveCriterion::Mls2008
+            {
+                Some(
+                    "false with render.adaptive = \"mls2008\" (the paper's criterion does not skip)",
+                )
+            } else {
+                None
+            };
+            if let Some(expected) = why {
+                return Err(section("render").err("skip", expected, &Value::Boolean(true)));
+            }
+        }
         if render.l_min > render.l_max {
             return Err(ren.err(
                 "l_min",

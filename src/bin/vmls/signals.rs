@@ -8,6 +8,7 @@
 //! number (130, 143, 129), as a shell reports a process killed by it.
 
 use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+use std::io::Write;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicI32, Ordering};
 
@@ -40,15 +41,17 @@ pub fn install(graceful: bool) -> Arc<AtomicBool> {
         std::thread::spawn(move || {
             for signal in signals.forever() {
                 let _ = FIRST.compare_exchange(0, signal, Ordering::SeqCst, Ordering::SeqCst);
+                // Writes to stderr may fail (a closed terminal after SIGHUP): never panic here,
+                // or the thread dies and no later signal is handled.
+                let say = |text: String| {
+                    let _ = writeln!(std::io::stderr(), "vmls: {}: {text}", name(signal));
+                };
                 if !graceful || seen.swap(true, Ordering::SeqCst) {
                     vmls::files::remove_temporaries();
-                    eprintln!("vmls: {}: quit without writing", name(signal));
+                    say("quit without writing".into());
                     std::process::exit(exit_status());
                 }
-                eprintln!(
-                    "vmls: {}: stopping without writing (Ctrl-C again to quit at once)",
-                    name(signal)
-                );
+                say("stopping without writing (Ctrl-C again to quit at once)".into());
             }
         });
     }
