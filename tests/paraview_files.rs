@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::cli::{assert_fails, dir, s, vmls};
+use common::cli::{assert_fails, dir, quick_bench, s, small_render, vmls};
 use std::path::{Path, PathBuf};
 use vmls::data::dataset::Location;
 
@@ -229,13 +229,7 @@ fn malformed_inputs_get_one_clear_line() {
 fn scene_keys_that_would_be_ignored_are_refused() {
     let d = dir("ignored-keys");
     let png = d.join("x.png");
-    let small = ["--set", "camera.width=8", "--set", "camera.height=8"];
-    let run = |extra: &[&str]| {
-        let mut args = vec!["render", "-o", s(&png)];
-        args.extend_from_slice(&small);
-        args.extend_from_slice(extra);
-        vmls(&args)
-    };
+    let run = |extra: &[&str]| vmls(&small_render(&png, extra));
     let out = run(&[
         "--set",
         "render.skip=true",
@@ -292,25 +286,7 @@ fn imported_rows_are_printed_escaped() {
                ,,,,5.0,5.0,,0,,,,,,,,,,,ref,v,,,\"x\u{1b}[5m\"";
     std::fs::write(&csv, format!("{header}\n{row}\n")).expect("write");
     let out = d.join("out");
-    let run = vmls(&[
-        "bench",
-        "--methods",
-        "fixed",
-        "--repeat",
-        "1",
-        "--warmup",
-        "0",
-        "--no-cache",
-        "--no-ceilings",
-        "--out",
-        s(&out),
-        "--import",
-        s(&csv),
-        "--set",
-        "camera.width=8",
-        "--set",
-        "camera.height=8",
-    ]);
+    let run = vmls(&quick_bench(&out, &["--import", s(&csv)]));
     let text = String::from_utf8_lossy(&run.stdout);
     assert!(
         run.status.success(),

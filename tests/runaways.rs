@@ -1,43 +1,23 @@
 //! No runaway (issue 25 §2): settings that would make every evaluation loop over a whole
-//! dataset are refused by name, and a transfer function of the allowed maximum of points builds
-//! its tables as a small one does.
+//! dataset are refused by name; host memory and device limits are checked before the host
+//! builds; "auto" weighs the fast path's fine grid. (Tables for the allowed 1024 transfer-function
+//! points: `preintegration::tests`, times in BENCHMARKS.md.)
 
 mod common;
 
-use common::cli::{assert_fails, dir, s, vmls};
+use common::cli::{assert_fails, dir, s, small_render, vmls};
 
 #[test]
 fn degenerate_octrees_are_refused_by_name() {
     let d = dir("octree-degenerate");
     let png = d.join("x.png");
+    let octree = "reconstruction.neighbours=\"octree\"";
     for setting in ["octree.max_depth=0", "octree.leaf_budget=1000000"] {
-        let out = vmls(&[
-            "render",
-            "-o",
-            s(&png),
-            "--set",
-            "reconstruction.neighbours=\"octree\"",
-            "--set",
-            setting,
-            "--set",
-            "camera.width=8",
-            "--set",
-            "camera.height=8",
-        ]);
+        let out = vmls(&small_render(&png, &["--set", octree, "--set", setting]));
         assert_fails(&out, &["octree: a leaf holds", "octree.max_depth"], &png);
     }
     // The default octree renders.
-    let out = vmls(&[
-        "render",
-        "-o",
-        s(&png),
-        "--set",
-        "reconstruction.neighbours=\"octree\"",
-        "--set",
-        "camera.width=8",
-        "--set",
-        "camera.height=8",
-    ]);
+    let out = vmls(&small_render(&png, &["--set", octree]));
     assert!(
         out.status.success(),
         "{}",
@@ -54,19 +34,9 @@ fn auto_takes_the_fast_path_only_where_its_fine_grid_stays_moderate() {
     let d = dir("auto-fast-path");
     let (png, stats) = (d.join("x.png"), d.join("s.json"));
     let render = |extra: &[&str]| {
-        let mut args = vec![
-            "render",
-            "-o",
-            s(&png),
-            "--stats",
-            s(&stats),
-            "--set",
-            "camera.width=8",
-            "--set",
-            "camera.height=8",
-        ];
+        let mut args = vec!["--stats", s(&stats)];
         args.extend_from_slice(extra);
-        vmls(&args)
+        vmls(&small_render(&png, &args))
     };
     // The built-in 41³ scene: 81³ fine points.
     let out = render(&[]);
@@ -99,11 +69,8 @@ fn loads_past_the_free_host_memory_are_refused_before_allocating() {
     let d = dir("host-memory");
     let png = d.join("x.png");
     let run = |memory: &str, extra: &[&str]| {
-        let mut args = vec!["render", "-o", s(&png)];
-        args.extend_from_slice(extra);
         std::process::Command::new(env!("CARGO_BIN_EXE_vmls"))
-            .args(&args)
-            .args(["--set", "camera.width=8", "--set", "camera.height=8"])
+            .args(small_render(&png, extra))
             .env("VMLS_VALIDATION", "1")
             .env("VMLS_HOST_MEMORY", memory)
             .env_remove("VMLS_DEVICE")
@@ -154,17 +121,7 @@ fn a_grid_the_device_cannot_bind_is_refused_before_it_is_built() {
     let png = d.join("x.png");
     // 330³ float samples: 144 MB, past lavapipe's 128 MiB maxStorageBufferRange (the limit
     // CI's device has). Refused before generation, naming the buffer and the limit.
-    let out = vmls(&[
-        "render",
-        "-o",
-        s(&png),
-        "--set",
-        "volume.resolution=330",
-        "--set",
-        "camera.width=8",
-        "--set",
-        "camera.height=8",
-    ]);
+    let out = vmls(&small_render(&png, &["--set", "volume.resolution=330"]));
     assert_fails(
         &out,
         &["buffer 'grid'", "143748096 bytes", "maxStorageBufferRange"],

@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::cli::{dir, s, vmls};
+use common::cli::{dir, quick_bench, s, small_render, vmls};
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -21,25 +21,7 @@ fn listing(d: &Path) -> Vec<String> {
 
 /// A quick bench of the built-in scene at 8×8 into `out`, with `extra` arguments.
 fn bench(out: &Path, extra: &[&str]) -> Output {
-    let mut args = vec![
-        "bench",
-        "--methods",
-        "fixed",
-        "--repeat",
-        "1",
-        "--warmup",
-        "0",
-        "--no-cache",
-        "--no-ceilings",
-        "--out",
-        s(out),
-        "--set",
-        "camera.width=8",
-        "--set",
-        "camera.height=8",
-    ];
-    args.extend_from_slice(extra);
-    vmls(&args)
+    vmls(&quick_bench(out, extra))
 }
 
 fn stderr(out: &Output) -> String {
@@ -105,15 +87,7 @@ fn bench_refuses_outputs_that_are_its_inputs() {
 
 fn render_with_dump(dump: &Path, png: &Path) -> Output {
     Command::new(env!("CARGO_BIN_EXE_vmls"))
-        .args([
-            "render",
-            "-o",
-            s(png),
-            "--set",
-            "camera.width=8",
-            "--set",
-            "camera.height=8",
-        ])
+        .args(small_render(png, &[]))
         .env("VMLS_VALIDATION", "1")
         .env("VMLS_SPIRV_DUMP", dump)
         .env_remove("VMLS_DEVICE")

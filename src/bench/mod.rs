@@ -321,7 +321,9 @@ pub fn run(
     let ref_scene = Scene::load(opts.scene.as_deref(), &ref_set)?;
     // Images of an earlier run in the same directory must not pass for this run's; only
     // those are removed (outputs::ImagesDir).
-    let mut images = outputs::ImagesDir::prepare(&opts.out, inputs(opts, &ref_scene))?;
+    let inputs = inputs(opts, &ref_scene);
+    let input_refs = outputs::refs(&inputs);
+    let mut images = outputs::ImagesDir::prepare(&opts.out, inputs.clone())?;
     if let Some(dir) = &opts.dump_spirv {
         std::fs::create_dir_all(dir).map_err(|e| io_err(dir, e))?;
     }
@@ -407,12 +409,7 @@ pub fn run(
                 let spirv = compiler.compile(ShaderSource::File(kernel), defines)?;
                 let stem = kernel.trim_end_matches(".comp");
                 let path = dir.join(format!("{index:03}-{stem}.spv"));
-                let inputs: Vec<(&str, &Path)> = images
-                    .inputs()
-                    .iter()
-                    .map(|(r, p)| (r.as_str(), p.as_path()))
-                    .collect();
-                crate::files::write_output("--dump-spirv", &path, &inputs, |out| {
+                crate::files::write_output("--dump-spirv", &path, &input_refs, |out| {
                     out.write_all(bytemuck::cast_slice::<u32, u8>(&spirv))
                 })?;
             }

@@ -13,7 +13,7 @@
 //!   [`crate::files::Outputs`].
 
 use super::BenchError;
-use crate::files::{FileError, FileId};
+use crate::files::{FileError, check_not_input};
 use std::path::{Path, PathBuf};
 
 /// The record of the images a bench wrote, inside `images/`.
@@ -53,25 +53,12 @@ fn foreign(dir: &Path, name: &str, what: &str) -> BenchError {
     }
 }
 
-/// Refuses `path` (an output of role `role`) when it is one of `inputs`.
-pub fn check_not_input(role: &str, path: &Path, inputs: &Inputs) -> Result<(), BenchError> {
-    let Some(id) = FileId::of(path) else {
-        return Ok(());
-    };
-    if let Some((input_role, input)) = inputs
+/// The inputs as the output layer takes them.
+pub fn refs(inputs: &Inputs) -> Vec<(&str, &Path)> {
+    inputs
         .iter()
-        .find(|(_, p)| FileId::of(p).is_some_and(|i| i == id))
-    {
-        return Err(FileError::SameFile {
-            first: path.to_path_buf(),
-            first_role: role.to_string(),
-            second: input.clone(),
-            second_role: input_role.clone(),
-            what: "an input",
-        }
-        .into());
-    }
-    Ok(())
+        .map(|(r, p)| (r.as_str(), p.as_path()))
+        .collect()
 }
 
 impl ImagesDir {
@@ -117,7 +104,7 @@ impl ImagesDir {
                     "a recorded name is not a regular file",
                 ));
             }
-            check_not_input("stale bench image", &entry.path(), &inputs)?;
+            check_not_input("stale bench image", &entry.path(), &refs(&inputs))?;
             stale.push(entry.path());
         }
         for path in stale {
@@ -139,21 +126,12 @@ impl ImagesDir {
 
     fn save_record(&self) -> Result<(), BenchError> {
         let text: String = self.recorded.iter().map(|n| format!("{n}\n")).collect();
-        let inputs: Vec<(&str, &Path)> = self
-            .inputs
-            .iter()
-            .map(|(r, p)| (r.as_str(), p.as_path()))
-            .collect();
+        let inputs = refs(&self.inputs);
         crate::files::write_output("bench image record", &self.dir.join(RECORD), &inputs, |w| {
             use std::io::Write;
             w.write_all(text.as_bytes())
         })?;
         Ok(())
-    }
-
-    /// The inputs no output of this run may be.
-    pub fn inputs(&self) -> &Inputs {
-        &self.inputs
     }
 
     /// Writes configuration `index`'s image, recording its name first: a run stopped between
@@ -167,7 +145,7 @@ impl ImagesDir {
     ) -> Result<(), BenchError> {
         let name = image_name(index);
         let path = self.dir.join(&name);
-        check_not_input("bench image", &path, &self.inputs)?;
+        check_not_input("bench image", &path, &refs(&self.inputs))?;
         if !self.recorded.contains(&name) {
             self.recorded.push(name);
             self.save_record()?;

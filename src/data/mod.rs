@@ -257,18 +257,20 @@ pub fn checked_sample_count(path: &Path, dims: [u64; 3]) -> Result<usize, DataEr
 /// own bytes of a compressed or 8-bit input.
 pub const HOST_BYTES_PER_GRID_SAMPLE: u64 = 16;
 
-/// Refuses a grid of `n` samples whose load would not fit in the host's free memory, before
-/// anything of that size is allocated (see [`crate::files::memory`]).
+/// Refuses `what`, a regular grid of `samples` values, when loading it would not fit in the
+/// host's free memory (see [`crate::files::memory`]); `change` says what lowers the need.
+pub fn check_grid_host_memory(what: &str, samples: u64, change: &str) -> Result<(), String> {
+    crate::files::memory::check(what, samples * HOST_BYTES_PER_GRID_SAMPLE, change)
+}
+
+/// [`check_grid_host_memory`] for a file's grid, before anything of its size is allocated.
 fn check_grid_memory(path: &Path, dims: [u64; 3], n: usize) -> Result<(), DataError> {
     let what = format!("a {}×{}×{} grid", dims[0], dims[1], dims[2]);
-    crate::files::memory::check(
-        &what,
-        n as u64 * HOST_BYTES_PER_GRID_SAMPLE,
-        "crop or downsample the volume",
-    )
-    .map_err(|message| DataError::Memory {
-        path: path.to_path_buf(),
-        message,
+    check_grid_host_memory(&what, n as u64, "crop or downsample the volume").map_err(|message| {
+        DataError::Memory {
+            path: path.to_path_buf(),
+            message,
+        }
     })
 }
 

@@ -21,7 +21,7 @@ pub mod memory;
 mod output;
 
 pub use input::{FileId, read_input};
-pub use output::{Outputs, remove_temporaries, write_output};
+pub use output::{Outputs, check_not_input, remove_temporaries, write_output};
 
 use std::path::PathBuf;
 

@@ -80,10 +80,6 @@ impl Outputs {
     /// another output, or that names a directory, a device or a missing directory, then
     /// creates every temporary, so that an unwritable directory fails before any work.
     pub fn new(outputs: &[(&str, &Path)], inputs: &[(&str, &Path)]) -> Result<Self, FileError> {
-        let input_ids: Vec<(&str, &Path, FileId)> = inputs
-            .iter()
-            .filter_map(|&(role, p)| FileId::of(p).map(|id| (role, p, id)))
-            .collect();
         let mut planned: Vec<(&str, &Path, FileId)> = Vec::new();
         for &(role, target) in outputs {
             let bad = |found: String| FileError::BadTarget {
@@ -103,18 +99,15 @@ impl Outputs {
             let Some(id) = FileId::of(target) else {
                 return Err(bad("a directory that does not exist".into()));
             };
-            let same = |(other_role, other, _): &(&str, &Path, FileId), what| FileError::SameFile {
-                first: target.to_path_buf(),
-                first_role: role.to_string(),
-                second: other.to_path_buf(),
-                second_role: other_role.to_string(),
-                what,
-            };
-            if let Some(input) = input_ids.iter().find(|(_, _, i)| *i == id) {
-                return Err(same(input, "an input"));
-            }
-            if let Some(output) = planned.iter().find(|(_, _, o)| *o == id) {
-                return Err(same(output, "another output"));
+            check_not_input(role, target, inputs)?;
+            if let Some((other_role, other, _)) = planned.iter().find(|(_, _, o)| *o == id) {
+                return Err(FileError::SameFile {
+                    first: target.to_path_buf(),
+                    first_role: role.to_string(),
+                    second: other.to_path_buf(),
+                    second_role: other_role.to_string(),
+                    what: "another output",
+                });
             }
             planned.push((role, target, id));
         }
@@ -192,6 +185,31 @@ impl Outputs {
             })?;
         }
         Ok(())
+    }
+}
+
+/// Refuses `target` (an output of role `role`) when it is the same file as one of `inputs`
+/// (role, path), by identity ([`FileId`]): every spelling, symlink and hard link is caught.
+pub fn check_not_input(
+    role: &str,
+    target: &Path,
+    inputs: &[(&str, &Path)],
+) -> Result<(), FileError> {
+    let Some(id) = FileId::of(target) else {
+        return Ok(());
+    };
+    match inputs
+        .iter()
+        .find(|(_, p)| FileId::of(p).is_some_and(|i| i == id))
+    {
+        Some(&(input_role, input)) => Err(FileError::SameFile {
+            first: target.to_path_buf(),
+            first_role: role.to_string(),
+            second: input.to_path_buf(),
+            second_role: input_role.to_string(),
+            what: "an input",
+        }),
+        None => Ok(()),
     }
 }
 

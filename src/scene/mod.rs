@@ -12,19 +12,21 @@
 //! Where the issue text was ambiguous: `camera.height` is the image height in pixels, so the
 //! orthographic view height is `camera.view_height` (world units).
 
+mod field;
 mod splat;
+
+pub use field::load_volume;
 
 use crate::recon::{Basis, GradientMode, OctreeSettings, ReconMethod, Weight, resample};
 use crate::render::camera::{Camera, Projection};
 use crate::render::shading::{Isosurface, Lighting, MAX_ISOSURFACES};
 use crate::render::transfer::TransferFunction;
-use crate::render::{Field, RaySetup, RenderError};
 
 // The configuration types live with the layers that use them; the scene re-exports them so
 // that a scene file's vocabulary is in one place.
 pub use crate::recon::{NeighbourMode, Reconstruction};
 pub use crate::render::{AdaptiveCriterion, IntervalModel, Method, RenderSettings};
-use crate::samples::{SampleSet, SampleSettings};
+use crate::samples::SampleSettings;
 use std::path::{Path, PathBuf};
 use toml::{Table, Value};
 
@@ -885,138 +887,5 @@ impl Scene {
             camera,
             render,
         })
-    }
-
-    /// The scene's field: the generator's grid, or any supported file through its sample set
-    /// (regular grids keep the implicit-grid path; everything else gets the octree).
-    pub fn field(&self, progress: impl FnMut(f64)) -> Result<Field, RenderError> {
-        self.field_on(None, progress)
-    }
-
-    /// [`Scene::field`] for a device: a regular grid whose buffer the device cannot bind is
-    /// refused once its size is known (before generation; after a file is read, before the
-    /// sample set, supports and fast path are built), not after all of that host work.
-    pub fn field_on(
-        &self,
-        device: Option<&crate::vk::DeviceInfo>,
-        progress: impl FnMut(f64),
-    ) -> Result<Field, RenderError> {
-        let grid = self.reconstruction.neighbours == crate::recon::NeighbourMode::Grid;
-        let check = |samples: usize| match device {
-            Some(info) if grid => crate::render::gpu::GpuField::check_grid(info, samples),
-            _ => Ok(()),
-        };
-        match &self.volume {
-            VolumeSource::MarschnerLobb { resolution } => Ok(Field::new(
-                {
-                    let n = (*resolution as u64).pow(3);
-                    let what = format!("volume.resolution = {resolution} ({n} samples)");
-                    crate::files::memory::check(
-                        &what,
-                        n * crate::data::HOST_BYTES_PER_GRID_SAMPLE,
-                        "lower volume.resolution",
-                    )
-                    .map_err(|message| RenderError::Setting {
-                        key: "volume.resolution",
-                        message,
-                    })?;
-                    check(n as usize)?;
-                    crate::data::marschner_lobb::generate(*resolution)
-                },
-                self.reconstruction,
-                &self.octree,
-                progress,
-            )?),
-            VolumeSource::File { path, .. } => {
-                let dataset = crate::data::load_dataset(path)?;
-                if let crate::data::dataset::Geometry::Image { dims, .. } = &dataset.geometry {
-                    check(dims.iter().product())?;
-                }
-                self.field_from_dataset(&dataset, path, progress)
-            }
-        }
-    }
-
-    /// The field of a dataset already loaded (`path` names it in errors), with this scene's
-    /// `volume.scalars`, supports, reconstruction and octree.
-    pub fn field_from_dataset(
-        &self,
-        dataset: &crate::data::dataset::Dataset,
-        path: &Path,
-        progress: impl FnMut(f64),
-    ) -> Result<Field, RenderError> {
-        // Loaders describe flat or vast data (`vmls info`); rendering needs a volume the f32
-        // kernels can resolve.
-        dataset.geometry.check_domain(path)?;
-        let array = match &self.volume {
-            VolumeSource::File { array, .. } => array.as_deref(),
-            VolumeSource::MarschnerLobb { .. } => None,
-        };
-        let set =
-            SampleSet::from_dataset(dataset, path, array, &self.samples).map_err(|e| match e {
-                crate::samples::SampleError::Data(d) => RenderError::Data(d),
-                other => RenderError::Samples(other),
-            })?;
-        Ok(Field::from_samples(
-            set,
-            self.reconstruction,
-            &self.octree,
-            progress,
-        )?)
-    }
-
-    /// What the persistent renderer draws for this scene: its camera and everything else.
-    pub fn view(&self) -> crate::render::renderer::View<'_> {
-        self.view_with(&self.camera)
-    }
-
-    /// As [`Scene::view`] with another camera (an orbit, a nudged eye).
-    pub fn view_with<'a>(&'a self, camera: &'a Camera) -> crate::render::renderer::View<'a> {
-        crate::render::renderer::View {
-            camera,
-            settings: &self.render,
-            transfer: &self.transfer,
-            isosurfaces: &self.isosurfaces,
-            lighting: &self.lighting,
-        }
-    }
-
-    /// The splatting setup of this scene's camera and settings for a field.
-    pub fn splat_setup(
-        &self,
-        shading: crate::splat::Shading,
-        field: &Field,
-    ) -> Result<crate::splat::SplatSetup, RenderError> {
-        crate::splat::SplatSetup::new(
-            shading,
-            &self.render.splat,
-            &self.camera,
-            self.render.early_termination,
-            self.render.background,
-            &self.isosurfaces,
-            &self.lighting,
-            field,
-        )
-    }
-
-    /// The ray setup of this scene's camera, integrator, isosurfaces and lighting for a field.
-    pub fn ray_setup(&self, field: &Field) -> Result<RaySetup, RenderError> {
-        RaySetup::new(
-            &self.camera,
-            &self.render,
-            &self.isosurfaces,
-            &self.lighting,
-            field,
-        )
-    }
-}
-
-/// Loads or generates the scene's volume.
-pub fn load_volume(scene: &Scene) -> Result<crate::data::Volume, crate::data::DataError> {
-    match &scene.volume {
-        VolumeSource::MarschnerLobb { resolution } => {
-            Ok(crate::data::marschner_lobb::generate(*resolution))
-        }
-        VolumeSource::File { path, array } => crate::data::load(path, array.as_deref()),
     }
 }

@@ -42,3 +42,42 @@ pub fn assert_fails(out: &Output, needles: &[&str], image: &Path) {
     }
     assert!(!image.exists(), "an image was written despite the error");
 }
+
+/// `vmls render -o png` of the built-in scene at 8×8, then `extra`.
+pub fn small_render<'a>(png: &'a Path, extra: &[&'a str]) -> Vec<&'a str> {
+    let mut args = vec![
+        "render",
+        "-o",
+        s(png),
+        "--set",
+        "camera.width=8",
+        "--set",
+        "camera.height=8",
+    ];
+    args.extend_from_slice(extra);
+    args
+}
+
+/// A quick `vmls bench` of the built-in scene at 8×8 into `out` (the fixed method, one timed
+/// frame, no cache, no ceilings), then `extra`.
+pub fn quick_bench<'a>(out: &'a Path, extra: &[&'a str]) -> Vec<&'a str> {
+    let mut args = vec![
+        "bench",
+        "--methods",
+        "fixed",
+        "--repeat",
+        "1",
+        "--warmup",
+        "0",
+        "--no-cache",
+        "--no-ceilings",
+        "--out",
+        s(out),
+        "--set",
+        "camera.width=8",
+        "--set",
+        "camera.height=8",
+    ];
+    args.extend_from_slice(extra);
+    args
+}

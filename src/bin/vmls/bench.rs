@@ -205,11 +205,7 @@ pub fn bench(args: &BenchArgs) -> Result<(), CliError> {
         .zip(&paths)
         .map(|(n, p)| (*n, p.as_path()))
         .collect();
-    let input_refs: Vec<(&str, &std::path::Path)> = inputs
-        .iter()
-        .map(|(r, p)| (r.as_str(), p.as_path()))
-        .collect();
-    let outputs = Outputs::new(&planned, &input_refs)?;
+    let outputs = Outputs::new(&planned, &vmls::bench::outputs::refs(&inputs))?;
     let mut measured_ceilings = None;
     let ctx = context(&args.device)?;
     println!("device: {} ({})", ctx.info().name, ctx.info().driver);
