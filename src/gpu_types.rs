@@ -83,6 +83,9 @@ pub mod binding {
     /// Empty-space skipping's report per pixel, `vec4(ray length skipped, evaluations saved,
     /// ray length inside the domain, 0)` (written by raycast.comp's skipping variants).
     pub const SKIP_STATS: u32 = 33;
+    /// The grid of 8- or 16-bit samples, kept at their size (`data::Values`), as `r32ui`
+    /// words (read-only): the twin of GRID for `GRID_BITS` < 32.
+    pub const GRID_WORDS: u32 = 34;
 
     /// How kernels read a binding: the grid and the octree's samples, nodes and references
     /// through texel-buffer views (one AVX2 gather per 8 lanes on llvmpipe instead of a per-lane
@@ -94,14 +97,14 @@ pub mod binding {
             SAMPLES | GRID | RESAMPLED | RESAMPLE_TARGET | PREINT | SKIP_BLOCKS
             | TRANSFER_TEXELS => BindingKind::TexelRgba32Float,
             NODES => BindingKind::TexelRgba32Uint,
-            INDICES | PROBE_TEXELS | SKIP_TABLE => BindingKind::TexelR32Uint,
+            INDICES | PROBE_TEXELS | SKIP_TABLE | GRID_WORDS => BindingKind::TexelR32Uint,
             PARAMS => BindingKind::Uniform,
             _ => BindingKind::Storage,
         }
     }
 
     /// Every binding with its macro name.
-    pub const ALL: [(&str, u32); 34] = [
+    pub const ALL: [(&str, u32); 35] = [
         ("BINDING_PARAMS", PARAMS),
         ("BINDING_GRID", GRID),
         ("BINDING_SAMPLES", SAMPLES),
@@ -136,6 +139,7 @@ pub mod binding {
         ("BINDING_SKIP_TABLE", SKIP_TABLE),
         ("BINDING_SKIP_STATS", SKIP_STATS),
         ("BINDING_TRANSFER_TEXELS", TRANSFER_TEXELS),
+        ("BINDING_GRID_WORDS", GRID_WORDS),
     ];
 }
 

@@ -99,7 +99,7 @@ fn exact_field_follows_a_moved_grid_on_both_twins() {
         .zip([[0, 0, 0], [3, 5, 7], [8, 8, 8]])
         .enumerate()
     {
-        let sample = f64::from(volume.values[volume.index(ijk[0], ijk[1], ijk[2])]);
+        let sample = f64::from(volume.values.get(volume.index(ijk[0], ijk[1], ijk[2])));
         let cpu = field
             .evaluate(neighbours.as_ref(), *p)
             .expect("defined")

@@ -203,7 +203,7 @@ fn check(v: &Volume, spacing: [f64; 3], origin: [f64; 3], expected: &[f64]) {
             v.origin
         );
     }
-    for (i, (&got, &want)) in v.values.iter().zip(expected).enumerate() {
+    for (i, (got, &want)) in v.values.iter().zip(expected).enumerate() {
         assert!(close(got as f64, want), "sample {i}: {got} != {want}");
     }
 }

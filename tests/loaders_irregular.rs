@@ -89,7 +89,7 @@ fn check_fixture_arrays(d: &Dataset, cell_data: bool) {
     for i in 0..n {
         let [x, y, z] = d.geometry.point(i);
         assert_eq!(
-            f.values[i],
+            f.values.get(i),
             (x + 2.0 * y + 3.0 * z) as f32,
             "f at point {i}"
         );
@@ -135,7 +135,7 @@ fn vtk_fixture_structured_points() {
     });
     // The volume API still reads it, taking the first scalar point array.
     let v = vtk::load(&fixture("image-51-binary.vtk"), None).unwrap();
-    assert_eq!((v.dims, v.values[1]), ([3, 4, 2], 6.5));
+    assert_eq!((v.dims, v.values.get(1)), ([3, 4, 2], 6.5));
 }
 
 #[test]

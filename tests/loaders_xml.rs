@@ -47,21 +47,21 @@ fn check_arrays(name: &str, d: &Dataset, per_piece: usize, cells: Option<usize>)
     for i in 0..n {
         let [x, y, z] = d.geometry.point(i);
         assert_eq!(
-            f.values[i],
+            f.values.get(i),
             (x + 2.0 * y + 3.0 * z) as f32,
             "{name}: f at point {i}"
         );
     }
     let g = &d.arrays[1];
     assert_eq!((g.location, g.components), (Location::Point, 3), "{name}");
-    for (i, &v) in g.values.iter().enumerate() {
+    for (i, v) in g.values.iter().enumerate() {
         assert_eq!(v, (i % per_piece) as f32, "{name}: g at point {i}");
     }
     if let Some(per_piece) = cells {
         let c = &d.arrays[2];
         assert_eq!(c.location, Location::Cell, "{name}");
         assert_eq!(c.values.len(), d.geometry.cell_count(), "{name}");
-        for (i, &v) in c.values.iter().enumerate() {
+        for (i, v) in c.values.iter().enumerate() {
             assert_eq!(v, (i % per_piece) as f32, "{name}: cell_id at cell {i}");
         }
     }

@@ -35,7 +35,7 @@ fn compare(field: &Field, points: &[[f64; 3]]) -> Comparison {
         .samples
         .values
         .iter()
-        .fold((f64::MAX, f64::MIN), |(l, h), &v| {
+        .fold((f64::MAX, f64::MIN), |(l, h), v| {
             (l.min(f64::from(v)), h.max(f64::from(v)))
         });
     let range = (hi - lo).max(1e-30);
@@ -421,4 +421,97 @@ fn quadratic_solves_the_full_basis_in_the_interior() {
         points.len(),
         "interior points that fell back below the quadratic basis"
     );
+}
+
+/// 8- and 16-bit grids stay at their size on the device (issue 25 §4) and the kernel converts
+/// them: the GPU result must equal, bit for bit, the same values uploaded as f32 (the
+/// conversion is exact and the arithmetic after it is the same), and match the CPU twin within
+/// the f32 tolerances above. Odd dimensions put rows at every offset within a word.
+#[test]
+fn integer_grids_match_f32_grids_and_the_cpu() {
+    use vmls::data::{Storage, Values};
+    let base = vmls::data::marschner_lobb::generate(13);
+    let (lo, hi) = base.value_range();
+    let quantised = |a: f32, b: f32| -> Vec<f32> {
+        let scale = (b - a) / (hi - lo);
+        base.values
+            .iter()
+            .map(|v| (a + (v - lo) * scale).round())
+            .collect()
+    };
+    let cases = [
+        (Storage::U8, quantised(0.0, 255.0)),
+        (Storage::I8, quantised(-128.0, 127.0)),
+        (Storage::U16, quantised(0.0, 65535.0)),
+        (Storage::I16, quantised(-32768.0, 32767.0)),
+    ];
+    let shapes = [
+        (Basis::Constant, 1.6, 2e-6),
+        (Basis::Linear, 2.4, 5e-6),
+        (Basis::Quadratic, 1.8, 5e-5),
+    ];
+    for (storage, values) in cases {
+        let stored = match storage {
+            Storage::U8 => Values::U8(values.iter().map(|&v| v as u8).collect()),
+            Storage::I8 => Values::I8(values.iter().map(|&v| v as i8).collect()),
+            Storage::U16 => Values::U16(values.iter().map(|&v| v as u16).collect()),
+            Storage::I16 => Values::I16(values.iter().map(|&v| v as i16).collect()),
+            Storage::F32 => unreachable!("the cases are integer storages"),
+        };
+        assert_eq!(
+            stored, values,
+            "{storage:?}: the quantised values fit the type"
+        );
+        for (basis, support, tol) in shapes {
+            let r = recon(
+                basis,
+                Weight::Wendland,
+                GradientMode::Analytic,
+                NeighbourMode::Grid,
+                support,
+            );
+            let volume = |values: Values| Volume {
+                values,
+                ..base.clone()
+            };
+            let int_field = field_of(volume(stored.clone()), r);
+            let f32_field = field_of(volume(Values::F32(values.clone())), r);
+            assert_eq!(int_field.samples.values.storage(), storage);
+            let points = random_points(&int_field, 800, -0.03, 5);
+            let (ctx, compiler) = gpu();
+            let run = |field: &Field| {
+                let g = GpuField::upload(&ctx, field).expect("upload");
+                evaluate(&ctx, &compiler, field, &g, &points, 1)
+                    .expect("mls_eval")
+                    .0
+            };
+            let (a, b) = (run(&int_field), run(&f32_field));
+            finish(ctx);
+            let label = format!("{storage:?}/{basis:?}");
+            for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+                assert_eq!(
+                    (x.value.to_bits(), x.gradient.map(f32::to_bits), x.terms),
+                    (y.value.to_bits(), y.gradient.map(f32::to_bits), y.terms),
+                    "{label}: point {i} differs from the f32 grid"
+                );
+            }
+            let c = compare(&int_field, &points);
+            eprintln!("{label}: value {:.2e}", c.max_value_error);
+            assert!(
+                c.defined > 500,
+                "{label}: only {} defined points",
+                c.defined
+            );
+            assert!(
+                c.terms_mismatch <= 3,
+                "{label}: {} mismatches",
+                c.terms_mismatch
+            );
+            assert!(
+                c.max_value_error <= tol,
+                "{label}: value error {:.2e} > {tol:.0e}",
+                c.max_value_error
+            );
+        }
+    }
 }

@@ -37,7 +37,7 @@ fn field_data_of_every_type_is_read_past() {
             .unwrap_or_else(|| panic!("{name}: no 'f'"));
         assert_eq!(f.location, Location::Point, "{name}");
         assert_eq!(f.values.len(), 27, "{name}");
-        for (i, &v) in f.values.iter().enumerate() {
+        for (i, v) in f.values.iter().enumerate() {
             let (x, y, z) = ((i % 3) as f32, (i / 3 % 3) as f32, (i / 9) as f32);
             let expected = 0.5 * x + 2.0 * 0.5 * y + 3.0 * 0.5 * z;
             assert_eq!(v, expected, "{name}: f[{i}]");

@@ -13,17 +13,52 @@
 bool g_loop_cut = false;
 
 #if MLS_NEIGHBOURS == 0
-// The grid, GRID_PAD zeros first, through an rgba32f texel-buffer view (binding::kind): on
-// llvmpipe an imageLoad is one gather per 8 lanes where a storage-buffer load with a per-lane
-// index is a loop over the lanes; the linear ray caster ran 3× faster for it (BENCHMARKS.md).
-// Row windows read whole vec4s; single values pick their component.
+// The grid, GRID_PAD zeros first, read through texel-buffer views (binding::kind): on llvmpipe
+// an imageLoad is one gather per 8 lanes where a storage-buffer load with a per-lane index is a
+// loop over the lanes; the linear ray caster ran 3× faster for it (BENCHMARKS.md). A view is
+// bounded by maxTexelBufferElements, not by maxStorageBufferRange (LAVAPIPE.md: 2 GiB of
+// rgba32f texels against 128 MiB), which is what lets a 512³ grid in. Row windows read whole
+// units of GRID_UNIT values (grid_unit); single values pick theirs (grid_value).
+#if GRID_BITS == 32
+// f32 samples: a unit is one rgba32f texel.
 layout(binding = BINDING_GRID, rgba32f) uniform readonly imageBuffer grid_texels;
-#define grid4(i) imageLoad(grid_texels, int(i))
+#define GRID_UNIT 4
+void grid_unit(int q, out float u[GRID_UNIT]) {
+    vec4 v = imageLoad(grid_texels, q);
+    u[0] = v.x;
+    u[1] = v.y;
+    u[2] = v.z;
+    u[3] = v.w;
+}
 float grid_value(int i) {
     vec4 v = imageLoad(grid_texels, i >> 2);
     int c = i & 3;
     return c == 0 ? v.x : c == 1 ? v.y : c == 2 ? v.z : v.w;
 }
+#else
+// 8- and 16-bit samples kept at their size (data::values; issue 25 §4), GRID_UNIT to an r32ui
+// texel, little end first, converted here: float() of such an integer is exact, so the CPU
+// twin's Values::get agrees bit for bit. One 32-bit gather per unit (R16 formats lose the
+// gather on llvmpipe, LAVAPIPE.md).
+layout(binding = BINDING_GRID_WORDS, r32ui) uniform readonly uimageBuffer grid_words;
+#define GRID_UNIT (32 / GRID_BITS)
+float grid_decode(uint word, int slot) {
+#if GRID_SIGNED
+    return float(bitfieldExtract(int(word), slot * GRID_BITS, GRID_BITS));
+#else
+    return float(bitfieldExtract(word, slot * GRID_BITS, GRID_BITS));
+#endif
+}
+void grid_unit(int q, out float u[GRID_UNIT]) {
+    uint w = imageLoad(grid_words, q).x;
+    [[unroll]] for (int s = 0; s < GRID_UNIT; ++s) {
+        u[s] = grid_decode(w, s);
+    }
+}
+float grid_value(int i) {
+    return grid_decode(imageLoad(grid_words, i / GRID_UNIT).x, i % GRID_UNIT);
+}
+#endif
 #else
 // Texel-buffer views (binding::kind): imageLoad compiles to one gather per 8 lanes on llvmpipe,
 // where a storage-buffer load with a per-lane index is a loop over the lanes. `Sample` i is the
@@ -79,11 +114,11 @@ void mls_gather_rows(vec3 x, inout MlsSystem s) {
         xs[ii] = (float(i) - gp.x) * inv_sc;
         xin[ii] = i >= 0 && i < dims.x;
     }
-    // A row's MLS_GRID_BOX values sit in a window of MLS_GRID_WINDOW vec4s starting at the
-    // vec4 holding the first one: vector loads instead of per-sample scalar gathers, which were
+    // A row's MLS_GRID_BOX values sit in a window of MLS_GRID_WINDOW units starting at the
+    // unit holding the first one: vector loads instead of per-sample scalar gathers, which were
     // 3/4 of the kernel's time on lavapipe. Out-of-row values in the window have zero weight;
     // the start is clamped into the buffer for points far outside the grid (all weights 0).
-    int last4 = (GRID_PAD + dims.x * dims.y * dims.z + GRID_PAD) / 4 - MLS_GRID_WINDOW;
+    int last_unit = (GRID_PAD + dims.x * dims.y * dims.z + GRID_PAD) / GRID_UNIT - MLS_GRID_WINDOW;
     int x0 = GRID_PAD + clamp(base.x, -GRID_PAD, dims.x);
     uint count = 0u;
     for (int kk = 0; kk < MLS_GRID_BOX; ++kk) {
@@ -100,22 +135,26 @@ void mls_gather_rows(vec3 x, inout MlsSystem s) {
                 continue;
             }
             int start = dims.x * (j + dims.y * k) + x0;
-            int q = min(start >> 2, last4);
-            int o = start - 4 * q;
-            float win[4 * MLS_GRID_WINDOW];
+            int q = min(start / GRID_UNIT, last_unit);
+            int o = start - GRID_UNIT * q;
+            float win[GRID_UNIT * MLS_GRID_WINDOW];
             [[unroll]] for (int v = 0; v < MLS_GRID_WINDOW; ++v) {
-                vec4 g4 = grid4(q + v);
-                win[4 * v] = g4.x;
-                win[4 * v + 1] = g4.y;
-                win[4 * v + 2] = g4.z;
-                win[4 * v + 3] = g4.w;
+                float u[GRID_UNIT];
+                grid_unit(q + v, u);
+                [[unroll]] for (int s = 0; s < GRID_UNIT; ++s) {
+                    win[GRID_UNIT * v + s] = u[s];
+                }
             }
             float s0 = 0.0, sx = 0.0, sxx = 0.0, sf = 0.0, sxf = 0.0;
             [[unroll]] for (int ii = 0; ii < MLS_GRID_BOX; ++ii) {
                 float rho2 = xs[ii] * xs[ii] + r2;
                 float w = xin[ii] ? mls_weight(rho2).x : 0.0;
                 // win[o + ii] with constant indices only (a dynamic index would spill win).
+#if GRID_UNIT == 2
+                float f = o == 0 ? win[ii] : win[ii + 1];
+#else
                 float f = o == 0 ? win[ii] : o == 1 ? win[ii + 1] : o == 2 ? win[ii + 2] : win[ii + 3];
+#endif
 #if MLS_WEIGHT == 1
                 if (w > 0.0 && rho2 < RHO_MIN * RHO_MIN) {
                     s.exact = true;

@@ -86,7 +86,7 @@ fn value_scale(env: &Env<'_>) -> Result<Vec<Outcome>, BenchError> {
     let base = env.render_scene(&scene)?;
     let mut out = Vec::new();
     for k in [1e-6, 1e6] {
-        let volume = scaled_volume(|v| v.values.iter_mut().for_each(|x| *x *= k as f32));
+        let volume = scaled_volume(|v| v.values = v.values.iter().map(|x| x * k as f32).collect());
         let field = Field::new(volume, scene.reconstruction, &scene.octree, |_| {})?;
         let mut scaled = scene.clone();
         scaled.transfer = TransferFunction::new(

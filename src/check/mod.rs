@@ -148,7 +148,7 @@ pub fn grid_volume(n: usize, f: impl Fn([f64; 3]) -> f64) -> crate::data::Volume
         dims: [n; 3],
         origin: [-1.0; 3],
         spacing: [h; 3],
-        values,
+        values: values.into(),
     }
 }
 

@@ -41,17 +41,13 @@ pub struct DataArray {
     pub location: Location,
     /// Components per tuple in the file (only the first is kept).
     pub components: usize,
-    pub values: Vec<f32>,
+    pub values: super::Values,
 }
 
 impl DataArray {
     /// Smallest and largest value.
     pub fn range(&self) -> (f32, f32) {
-        self.values
-            .iter()
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
-                (lo.min(v), hi.max(v))
-            })
+        self.values.range()
     }
 }
 
@@ -516,12 +512,12 @@ impl Dataset {
                     &a.values.len().to_string(),
                 ));
             }
-            if let Some(i) = a.values.iter().position(|v| !super::renderable_value(*v)) {
+            if let Some(i) = a.values.iter().position(|v| !super::renderable_value(v)) {
                 return Err(DataError::NonFiniteValue {
                     path: path.to_path_buf(),
                     array: a.name.clone(),
                     index: i,
-                    value: a.values[i],
+                    value: a.values.get(i),
                 });
             }
         }

@@ -60,7 +60,7 @@ pub fn generate(n: usize) -> Volume {
         dims: [n; 3],
         origin: [-1.0; 3],
         spacing: [h; 3],
-        values,
+        values: values.into(),
     }
 }
 
@@ -74,7 +74,7 @@ mod tests {
         let (lo, hi) = v.value_range();
         assert!(lo >= 0.0 && hi <= 1.0, "ML is in [0,1], got [{lo}, {hi}]");
         // At the origin: r = 0, cos(0)=1 → ρ_r = cos(12π) = 1 → (1 + 0.25·2)/2.5 = 0.6.
-        let c = v.values[v.index(20, 20, 20)];
+        let c = v.values.get(v.index(20, 20, 20));
         assert!((c - 0.6).abs() < 1e-6, "centre value {c}");
         assert_eq!(v.bounds(), ([-1.0; 3], [1.0; 3]));
     }

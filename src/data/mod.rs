@@ -16,6 +16,7 @@ pub mod marschner_lobb;
 pub mod nifti;
 pub mod nrrd;
 pub mod points;
+pub mod values;
 pub mod vtk;
 pub mod vtk_legacy;
 pub mod vtk_xml;
@@ -23,6 +24,7 @@ mod vtk_xml_decode;
 mod vtk_xml_tree;
 
 use std::path::{Path, PathBuf};
+pub use values::{Storage, Values};
 
 /// Largest grid we accept from a file: 2^30 samples (4 GiB of f32). Larger grids exceed every
 /// Vulkan storage-buffer limit we know of and would only fail later, less clearly.
@@ -69,7 +71,7 @@ pub struct Volume {
     /// Distance between neighbouring samples per axis, each > 0.
     pub spacing: [f64; 3],
     /// `dims[0]·dims[1]·dims[2]` finite values, x fastest.
-    pub values: Vec<f32>,
+    pub values: Values,
 }
 
 impl Volume {
@@ -108,11 +110,7 @@ impl Volume {
 
     /// Smallest and largest value.
     pub fn value_range(&self) -> (f32, f32) {
-        self.values
-            .iter()
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
-                (lo.min(v), hi.max(v))
-            })
+        self.values.range()
     }
 }
 
@@ -219,8 +217,20 @@ pub enum DataError {
     },
 }
 
-/// Checks dims for zero, overflow and [`MAX_SAMPLES`]; returns the sample count.
+/// Checks dims for zero, overflow, [`MAX_SAMPLES`] and the host memory of an f32 grid read from
+/// f32 data; returns the sample count.
 pub fn checked_sample_count(path: &Path, dims: [u64; 3]) -> Result<usize, DataError> {
+    checked_grid_count(path, dims, 4, Storage::F32)
+}
+
+/// [`checked_sample_count`] for a grid whose file holds `file_bytes` per sample (decoded, for a
+/// compressed stream) and whose values are kept as `storage`.
+pub fn checked_grid_count(
+    path: &Path,
+    dims: [u64; 3],
+    file_bytes: u64,
+    storage: Storage,
+) -> Result<usize, DataError> {
     if dims.contains(&0) {
         return Err(DataError::TooLarge {
             path: path.to_path_buf(),
@@ -248,30 +258,32 @@ pub fn checked_sample_count(path: &Path, dims: [u64; 3]) -> Result<usize, DataEr
         dims,
         reason: "the sample count does not fit this machine's address space".into(),
     })?;
-    check_grid_memory(path, dims, n)?;
+    let what = format!("a {}×{}×{} grid", dims[0], dims[1], dims[2]);
+    let per_sample = grid_host_bytes(file_bytes, storage);
+    crate::files::memory::check(
+        &what,
+        n as u64 * per_sample,
+        "crop or downsample the volume",
+    )
+    .map_err(|message| DataError::Memory {
+        path: path.to_path_buf(),
+        message,
+    })?;
     Ok(n)
 }
 
-/// Host bytes a regular grid's sample costs on its way to the GPU, at the peak: the decoded
-/// f32 value, the sample set's copy and the upload's staging copy, with room for the file's
-/// own bytes of a compressed or 8-bit input.
-pub const HOST_BYTES_PER_GRID_SAMPLE: u64 = 16;
-
-/// Refuses `what`, a regular grid of `samples` values, when loading it would not fit in the
-/// host's free memory (see [`crate::files::memory`]); `change` says what lowers the need.
-pub fn check_grid_host_memory(what: &str, samples: u64, change: &str) -> Result<(), String> {
-    crate::files::memory::check(what, samples * HOST_BYTES_PER_GRID_SAMPLE, change)
+/// Host bytes a regular grid's sample costs on its way to the GPU, at the peak: the file's
+/// bytes (or the inflated stream's) beside the decoded value, then the sample set's copy and the
+/// device's (host memory on unified devices, a staging copy on discrete ones), each at the size
+/// the values are kept at ([`Storage`]: 8- and 16-bit data stays at its size).
+pub fn grid_host_bytes(file_bytes: u64, storage: Storage) -> u64 {
+    file_bytes + 3 * storage.bytes() as u64
 }
 
-/// [`check_grid_host_memory`] for a file's grid, before anything of its size is allocated.
-fn check_grid_memory(path: &Path, dims: [u64; 3], n: usize) -> Result<(), DataError> {
-    let what = format!("a {}×{}×{} grid", dims[0], dims[1], dims[2]);
-    check_grid_host_memory(&what, n as u64, "crop or downsample the volume").map_err(|message| {
-        DataError::Memory {
-            path: path.to_path_buf(),
-            message,
-        }
-    })
+/// Refuses `what`, a generated f32 grid of `samples` values, when building it would not fit in
+/// the host's free memory (see [`crate::files::memory`]); `change` says what lowers the need.
+pub fn check_grid_host_memory(what: &str, samples: u64, change: &str) -> Result<(), String> {
+    crate::files::memory::check(what, samples * grid_host_bytes(4, Storage::F32), change)
 }
 
 /// Rejects the first value that is not [`renderable_value`], naming its grid position.

@@ -25,8 +25,8 @@
 //!
 //! Errors name byte offsets; in a `.nii.gz` they are offsets in the decompressed stream.
 
-use super::nrrd::{Scalar, decode, gunzip, gunzip_head};
-use super::{DataError, Volume, check_finite, checked_sample_count};
+use super::nrrd::{Scalar, decode, decode_values, gunzip, gunzip_head};
+use super::{DataError, Values, Volume, check_finite, checked_grid_count};
 use std::path::Path;
 
 const HEADER_SIZE: usize = 348;
@@ -173,7 +173,14 @@ fn header(path: &Path, b: &[u8], suffix: &str) -> Result<Header, DataError> {
         return Err(format(108, expected, vox_offset.to_string()));
     }
     let data_start = vox_offset as usize;
-    let count = checked_sample_count(path, dims.map(|d| d as u64))?;
+    // What parse_plain keeps: 8- and 16-bit data at its size unless scaled.
+    let storage = if identity_scaling(f32_at(112, big_endian), f32_at(116, big_endian)) {
+        ty.storage()
+    } else {
+        crate::data::Storage::F32
+    };
+    let dims64 = dims.map(|d| d as u64);
+    let count = checked_grid_count(path, dims64, ty.size() as u64, storage)?;
     let data_end = (data_start as u64)
         .checked_add(count as u64 * ty.size() as u64)
         .ok_or_else(|| format(108, "a vox_offset inside the file", vox_offset.to_string()))?;
@@ -184,6 +191,14 @@ fn header(path: &Path, b: &[u8], suffix: &str) -> Result<Header, DataError> {
         data_start,
         data_end,
     })
+}
+
+/// Whether scl_slope and scl_inter leave values unchanged: a slope of 0 or not finite means "no
+/// scaling" (NIfTI-1), and so does slope 1 with no finite, non-zero intercept. Such data keeps
+/// its 8- or 16-bit size.
+fn identity_scaling(slope: f32, inter: f32) -> bool {
+    let scaled = slope.is_finite() && slope != 0.0;
+    !scaled || (slope == 1.0 && (inter == 0.0 || !inter.is_finite()))
 }
 
 fn parse_plain(path: &Path, b: &[u8], suffix: &str) -> Result<Volume, DataError> {
@@ -199,11 +214,13 @@ fn parse_plain(path: &Path, b: &[u8], suffix: &str) -> Result<Volume, DataError>
             found: (b.len() as u64).saturating_sub(h.data_start as u64),
         });
     }
-    let mut values = decode(&b[h.data_start..h.data_end as usize], h.ty, h.big_endian, 1);
-
+    let data = &b[h.data_start..h.data_end as usize];
     let slope = f32_at(112);
     let inter = f32_at(116);
-    if slope.is_finite() && slope != 0.0 {
+    let values = if identity_scaling(slope, inter) {
+        decode_values(data, h.ty, h.big_endian)
+    } else {
+        let mut values: Vec<f32> = decode(data, h.ty, h.big_endian, 1);
         let slope = f64::from(slope);
         let inter = if inter.is_finite() {
             f64::from(inter)
@@ -213,8 +230,11 @@ fn parse_plain(path: &Path, b: &[u8], suffix: &str) -> Result<Volume, DataError>
         for v in &mut values {
             *v = (slope * f64::from(*v) + inter) as f32;
         }
+        Values::F32(values)
+    };
+    if let Values::F32(v) = &values {
+        check_finite(path, h.dims, v)?;
     }
-    check_finite(path, h.dims, &values)?;
 
     let spacing = [80, 84, 88].map(|offset| {
         let s = f64::from(f32_at(offset)).abs();

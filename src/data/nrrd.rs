@@ -29,7 +29,7 @@
 //! which we accept because rendering works in f32; a double outside the f32 range becomes
 //! infinite and is rejected like any non-finite value.
 
-use super::{DataError, Volume, check_finite, checked_sample_count};
+use super::{DataError, Storage, Values, Volume, check_finite, checked_grid_count};
 use std::io::Read;
 use std::path::Path;
 
@@ -70,6 +70,17 @@ impl Scalar {
             Scalar::U64 => "uint64",
             Scalar::F32 => "float32",
             Scalar::F64 => "float64",
+        }
+    }
+
+    /// How a grid of this type is kept ([`decode_values`]).
+    pub(crate) fn storage(self) -> Storage {
+        match self {
+            Scalar::U8 => Storage::U8,
+            Scalar::I8 => Storage::I8,
+            Scalar::U16 => Storage::U16,
+            Scalar::I16 => Storage::I16,
+            _ => Storage::F32,
         }
     }
 
@@ -155,6 +166,36 @@ pub(crate) fn decode<T: Sample>(data: &[u8], ty: Scalar, big_endian: bool, ncomp
         Scalar::U64 => convert!(u64, from_u64, u64),
         Scalar::F32 => convert!(f32, from_f64, f64),
         Scalar::F64 => convert!(f64, from_f64, f64),
+    }
+}
+
+/// Decodes one-component binary samples for a grid: 8- and 16-bit integers stay at their size
+/// (the device converts them, [`super::values`]), every other type becomes f32 as in [`decode`].
+pub(crate) fn decode_values(data: &[u8], ty: Scalar, big_endian: bool) -> Values {
+    macro_rules! keep {
+        ($t:ty, $variant:ident) => {{
+            const N: usize = std::mem::size_of::<$t>();
+            Values::$variant(
+                data.chunks_exact(N)
+                    .map(|b| {
+                        let mut raw = [0u8; N];
+                        raw.copy_from_slice(b);
+                        if big_endian {
+                            <$t>::from_be_bytes(raw)
+                        } else {
+                            <$t>::from_le_bytes(raw)
+                        }
+                    })
+                    .collect(),
+            )
+        }};
+    }
+    match ty {
+        Scalar::U8 => Values::U8(data.to_vec()),
+        Scalar::I8 => keep!(i8, I8),
+        Scalar::U16 => keep!(u16, U16),
+        Scalar::I16 => keep!(i16, I16),
+        _ => Values::F32(decode(data, ty, big_endian, 1)),
     }
 }
 
@@ -465,7 +506,12 @@ pub fn parse(path: &Path, bytes: &[u8]) -> Result<Volume, DataError> {
         }
     };
     let dims = axes.map(|a| sizes.value[a]);
-    let count = checked_sample_count(path, dims)?;
+    // Text is parsed to f32; binary 8- and 16-bit data stays at its size.
+    let storage = match encoding {
+        Encoding::Text => Storage::F32,
+        _ => ty.storage(),
+    };
+    let count = checked_grid_count(path, dims, ty.size() as u64, storage)?;
     let big_endian = match (h.big_endian, ty.size(), encoding) {
         (Some(b), _, _) => b,
         (None, 1, _) | (None, _, Encoding::Text) => false,
@@ -556,7 +602,7 @@ pub fn parse(path: &Path, bytes: &[u8]) -> Result<Volume, DataError> {
                 return Err(truncated(path, needed, found));
             }
             let from = start + skip as usize;
-            decode(&bytes[from..from + needed as usize], ty, big_endian, 1)
+            decode_values(&bytes[from..from + needed as usize], ty, big_endian)
         }
         Encoding::Gzip => {
             if let Some(b) = h.byte_skip.as_ref().filter(|b| b.value == -1) {
@@ -568,7 +614,8 @@ pub fn parse(path: &Path, bytes: &[u8]) -> Result<Volume, DataError> {
             if found < needed {
                 return Err(truncated(path, needed, found));
             }
-            decode(&inflated[skip as usize..], ty, big_endian, 1)
+            let end = (skip as u64 + needed) as usize;
+            decode_values(&inflated[skip as usize..end], ty, big_endian)
         }
         Encoding::Text => {
             if let Some(b) = h.byte_skip.as_ref().filter(|b| b.value == -1) {
@@ -576,10 +623,12 @@ pub fn parse(path: &Path, bytes: &[u8]) -> Result<Volume, DataError> {
                 return Err(unsupported(b.line, what));
             }
             let from = start.saturating_add(skip as usize).min(bytes.len());
-            parse_text_values(path, bytes, from, ty, count)?
+            Values::F32(parse_text_values(path, bytes, from, ty, count)?)
         }
     };
-    check_finite(path, dims.map(|d| d as usize), &values)?;
+    if let Values::F32(v) = &values {
+        check_finite(path, dims.map(|d| d as usize), v)?;
+    }
     Ok(Volume {
         dims: dims.map(|d| d as usize),
         origin,

@@ -159,6 +159,8 @@ pub fn parse_csv(path: &Path, bytes: &[u8]) -> Result<Dataset, DataError> {
     let mut columns: Vec<Column> = Vec::new();
     let mut points: Vec<[f64; 3]> = Vec::new();
     let mut arrays: Vec<DataArray> = Vec::new();
+    // Each numeric column's values, moved into its array at the end.
+    let mut column_values: Vec<Vec<f32>> = Vec::new();
     let mut record = csv::StringRecord::new();
     while reader.read_record(&mut record).map_err(csv_error)? {
         let line = record.position().map_or(0, |p| p.line());
@@ -180,8 +182,9 @@ pub fn parse_csv(path: &Path, bytes: &[u8]) -> Result<Dataset, DataError> {
                             },
                             location: Location::Point,
                             components: 1,
-                            values: Vec::new(),
+                            values: Default::default(),
                         });
+                        column_values.push(Vec::new());
                         Column::Array(arrays.len() - 1)
                     }
                     None => Column::Text,
@@ -208,7 +211,7 @@ pub fn parse_csv(path: &Path, bytes: &[u8]) -> Result<Dataset, DataError> {
             })?;
             match *column {
                 Column::Axis(a) => p[a] = value,
-                Column::Array(i) => arrays[i].values.push(value as f32),
+                Column::Array(i) => column_values[i].push(value as f32),
                 Column::Text => {}
             }
         }
@@ -222,6 +225,9 @@ pub fn parse_csv(path: &Path, bytes: &[u8]) -> Result<Dataset, DataError> {
             "at least one point",
             found,
         ));
+    }
+    for (array, values) in arrays.iter_mut().zip(column_values) {
+        array.values = values.into();
     }
     Ok(Dataset {
         geometry: Geometry::Points { points },

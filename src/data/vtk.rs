@@ -611,7 +611,7 @@ pub fn parse(path: &Path, bytes: &[u8], array: Option<&str>) -> Result<Volume, D
                         dims: d,
                         origin,
                         spacing,
-                        values,
+                        values: values.into(),
                     });
                 }
             }
@@ -828,7 +828,7 @@ fn read_candidate(
         name: c.name,
         location: location.unwrap_or(Location::Point),
         components: usize::try_from(c.ncomp).unwrap_or(usize::MAX),
-        values,
+        values: values.into(),
     });
     Ok(None)
 }

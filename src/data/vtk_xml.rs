@@ -288,7 +288,7 @@ fn attributes(
             name: d.name,
             location,
             components: d.components,
-            values,
+            values: values.into(),
         });
     }
     Ok(())
@@ -472,7 +472,7 @@ fn unstructured(dec: &Decoder, body: El, poly: bool) -> Result<Dataset, DataErro
             return Err(piece.format(expected, format!("piece {p} with {}", list(&piece_arrays))));
         }
         for (a, b) in arrays.iter_mut().zip(piece_arrays) {
-            a.values.extend(b.values);
+            a.values = a.values.iter().chain(b.values.iter()).collect();
         }
     }
     let geometry = if poly {

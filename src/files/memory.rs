@@ -48,6 +48,22 @@ pub fn check(what: &str, bytes: u64, change: &str) -> Result<(), String> {
     }
 }
 
+/// This process's peak resident memory in bytes (`VmHWM` of `/proc/self/status`), for
+/// `--stats`; `None` where unknown. On a unified-memory device (lavapipe) it includes the
+/// device's buffers.
+pub fn peak_resident() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let kib = status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmHWM:"))?
+        .trim()
+        .trim_end_matches("kB")
+        .trim()
+        .parse::<u64>()
+        .ok()?;
+    Some(kib * 1024)
+}
+
 #[cfg(test)]
 mod tests {
     #[cfg(target_os = "linux")]

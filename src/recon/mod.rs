@@ -86,7 +86,7 @@ pub struct GridNeighbours<'a> {
     pub dims: [usize; 3],
     pub origin: [f64; 3],
     pub spacing: [f64; 3],
-    pub values: &'a [f32],
+    pub values: &'a crate::data::Values,
     /// Support radius in sample spacings (h = support × spacing per axis).
     pub support: f64,
 }
@@ -131,7 +131,7 @@ impl Neighbours for GridNeighbours<'_> {
                         self.origin[2] + k as f64 * self.spacing[2],
                     ];
                     let index = i + self.dims[0] * (j + self.dims[1] * k);
-                    visit(index, p, f64::from(self.values[index]), &metric);
+                    visit(index, p, f64::from(self.values.get(index)), &metric);
                 }
             }
         }

@@ -207,7 +207,7 @@ impl Octree {
         let points = (0..set.len())
             .map(|i| SamplePoint {
                 position: set.position(i),
-                value: f64::from(set.values[i]),
+                value: f64::from(set.values.get(i)),
                 metric: set.metric(i),
             })
             .collect();

@@ -12,6 +12,7 @@ use super::raycast::adaptive;
 pub use super::renderer::{GpuImage, default_chunk, outer_steps, render};
 use super::shading::MAX_ISOSURFACES;
 use super::{Field, RaySetup};
+use crate::data::Storage;
 use crate::gpu_types::{
     CountPush, GRID_PAD, MlsOut, RenderParams, Sample, binding, binding_defines,
 };
@@ -59,6 +60,9 @@ pub struct Variant {
     pub resampled: bool,
     /// Empty-space skipping in the ray caster ([`super::skip`]).
     pub skip: bool,
+    /// How the grid's values are stored on the device (`GRID_BITS`, `GRID_SIGNED`): 8- and
+    /// 16-bit samples stay at their size and the kernel converts them. F32 off the grid path.
+    pub grid: Storage,
 }
 
 impl Variant {
@@ -87,6 +91,21 @@ impl Variant {
             adaptive: AdaptiveCriterion::Mls2008,
             interval: IntervalModel::Linear,
             isosurfaces: 0,
+            grid: if field.uses_octree() {
+                Storage::F32
+            } else {
+                field.samples.values.storage()
+            },
+        }
+    }
+
+    /// The binding the grid is read through: rgba32f texels of f32 samples, or r32ui words of
+    /// 8- and 16-bit ones.
+    pub fn grid_binding(&self) -> u32 {
+        if self.grid == Storage::F32 {
+            binding::GRID
+        } else {
+            binding::GRID_WORDS
         }
     }
 
@@ -112,13 +131,20 @@ impl Variant {
             "MLS_GRID_BOX".into(),
             ((2.0 * self.support).floor() as u32 + 1).to_string(),
         ));
-        // vec4s covering a row window: up to 3 leading values plus the box.
+        // Units (an rgba32f texel of f32 samples, an r32ui word of 8- or 16-bit ones) covering
+        // a row window: up to unit − 1 leading values plus the box.
+        let unit = if self.grid == Storage::F32 {
+            4
+        } else {
+            32 / self.grid.bits()
+        };
         d.push((
             "MLS_GRID_WINDOW".into(),
-            ((2.0 * self.support).floor() as u32 + 1 + 3)
-                .div_ceil(4)
+            ((2.0 * self.support).floor() as u32 + unit)
+                .div_ceil(unit)
                 .to_string(),
         ));
+        d.push(("GRID_BITS".into(), self.grid.bits().to_string()));
         let flag = |b: bool| if b { "1" } else { "0" }.to_string();
         d.push(("MLS_TERMS".into(), self.basis.terms().to_string()));
         d.push((
@@ -134,6 +160,7 @@ impl Variant {
             flag(self.neighbours == NeighbourMode::Octree),
         ));
         d.push(("MLS_FULL_METRIC".into(), flag(self.full_metric)));
+        d.push(("GRID_SIGNED".into(), flag(self.grid.signed())));
         d.push(("MLS_GAUSSIAN".into(), flag(self.gaussian)));
         d.push(("MLS_EXACT".into(), flag(self.exact)));
         d.push((
@@ -221,6 +248,11 @@ impl Variant {
                 String::new()
             }
             + if self.skip { "-skip" } else { "" }
+            + &if self.grid == Storage::F32 {
+                String::new()
+            } else {
+                format!("-{}", self.grid.name())
+            }
             + &if self.isosurfaces > 0 {
                 format!("-iso{}", self.isosurfaces)
             } else {
@@ -314,6 +346,8 @@ pub(super) fn table_params(p: &mut RenderParams, tables: &PreintegrationTables) 
 /// The field's data on the GPU: grid values, or samples + octree.
 pub struct GpuField {
     grid: Option<Buffer>,
+    /// The grid's binding ([`Variant::grid_binding`]).
+    grid_binding: u32,
     /// The fast path's fine grid (`reconstruction.resample`), computed on the GPU at upload.
     resampled: Option<Buffer>,
     /// GPU milliseconds recon_resample took.
@@ -359,20 +393,36 @@ impl GpuField {
         Ok(gpu)
     }
 
-    /// Refuses a regular grid of `samples` values whose buffer the device cannot bind, before
-    /// the host builds the field (`Scene::field_on`): the same size [`GpuField::upload`] asks for.
-    pub fn check_grid(info: &crate::vk::DeviceInfo, samples: usize) -> Result<(), VkError> {
-        let bytes = (padded_grid_len(samples) * std::mem::size_of::<f32>()) as u64;
-        crate::vk::check_size(info, "grid", bytes, crate::vk::BufferUsage::Storage)
+    /// Refuses a regular grid of `samples` values stored as `storage` whose buffer the device
+    /// cannot hold or view, before the host builds the field (`Scene::field_on`): the same
+    /// buffer and view [`GpuField::upload`] and the kernels' bind groups ask for.
+    pub fn check_grid(
+        info: &crate::vk::DeviceInfo,
+        samples: usize,
+        storage: Storage,
+    ) -> Result<(), VkError> {
+        let bytes = (padded_grid_len(samples) * storage.bytes()) as u64;
+        crate::vk::check_size(info, "grid", bytes, BufferUsage::Texel)?;
+        let variant_binding = if storage == Storage::F32 {
+            binding::GRID
+        } else {
+            binding::GRID_WORDS
+        };
+        crate::vk::check_texel_view(info, "grid", bytes, binding::kind(variant_binding))
     }
 
     fn upload_samples(ctx: &Context, field: &Field) -> Result<Self, VkError> {
         match &field.octree {
             None => {
-                let mut padded = vec![0.0f32; GRID_PAD];
-                padded.extend_from_slice(&field.samples.values);
-                padded.resize(padded_grid_len(field.samples.values.len()), 0.0);
-                let grid = Buffer::from_slice(ctx, "grid", &padded)?;
+                // GRID_PAD zeros, the values as stored, zeros to the padded length: written
+                // into the buffer part by part, without a padded host copy of the grid.
+                let values = &field.samples.values;
+                let size = values.storage().bytes();
+                let total = padded_grid_len(values.len()) * size;
+                let front = vec![0u8; GRID_PAD * size];
+                let back = vec![0u8; total - front.len() - values.bytes().len()];
+                let grid = Buffer::new(ctx, "grid", total as u64, BufferUsage::Texel)?;
+                grid.write_parts(ctx, &[&front, values.bytes(), &back])?;
                 let fine = super::resample::resample_grid(ctx, field, &grid)?;
                 let resample_ms = fine.as_ref().map_or(0.0, |f| f.1);
                 let blocks = match &fine {
@@ -380,6 +430,7 @@ impl GpuField {
                     None => None,
                 };
                 Ok(Self {
+                    grid_binding: Variant::of(field).grid_binding(),
                     grid: Some(grid),
                     resampled: fine.map(|f| f.0),
                     resample_ms,
@@ -410,6 +461,7 @@ impl GpuField {
                     })
                     .collect();
                 Ok(Self {
+                    grid_binding: binding::GRID,
                     grid: None,
                     resampled: None,
                     resample_ms: 0.0,
@@ -429,7 +481,7 @@ impl GpuField {
     pub(super) fn bindings(&self) -> Vec<(u32, &Buffer)> {
         let mut b = Vec::new();
         if let Some(g) = &self.grid {
-            b.push((binding::GRID, g));
+            b.push((self.grid_binding, g));
         }
         if let Some(r) = &self.resampled {
             b.push((binding::RESAMPLED, r));
@@ -553,7 +605,52 @@ pub(super) fn groups_2d(count: u32, group: u32) -> [u32; 3] {
     }
 }
 
-/// Values in the grid buffer: padded front and back (GRID_PAD) and to a whole number of vec4s.
+/// Values in the grid buffer: padded front and back (GRID_PAD) and to a whole number of 4-value
+/// units (a vec4 of f32 samples; r32ui words hold 2 or 4 smaller ones).
 fn padded_grid_len(samples: usize) -> usize {
     (samples + 3 * GRID_PAD).next_multiple_of(4)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Lavapipe's limits (LAVAPIPE.md): 128 MiB storage bindings, 128 M texels per view.
+    fn lavapipe() -> crate::vk::DeviceInfo {
+        crate::vk::DeviceInfo {
+            name: "llvmpipe".into(),
+            device_type: "cpu".into(),
+            driver: "test".into(),
+            api_version: "1.3".into(),
+            max_storage_buffer_range: 1 << 27,
+            max_uniform_buffer_range: 1 << 16,
+            max_texel_buffer_elements: 1 << 27,
+            max_workgroup_count: [65535; 3],
+            max_heap_bytes: 1 << 31,
+            timestamp_period_ns: Some(1.0),
+        }
+    }
+
+    #[test]
+    fn grids_are_bounded_by_their_texel_view_not_a_storage_binding() {
+        let info = lavapipe();
+        let n = |side: usize| side * side * side;
+        // 512³ float (512 MiB) and 16-bit (256 MiB): past one storage binding, inside a view.
+        GpuField::check_grid(&info, n(512), Storage::F32).expect("512³ float fits a view");
+        GpuField::check_grid(&info, n(512), Storage::U16).expect("512³ 16-bit fits a view");
+        // 1024³ 8-bit: 1 GiB of r32ui words is 256 M texels, past the 128 M a view may span.
+        let err = GpuField::check_grid(&info, n(1024), Storage::U8).expect_err("1024³ u8");
+        let text = err.to_string();
+        assert!(
+            text.contains("'grid'") && text.contains("maxTexelBufferElements"),
+            "{text}"
+        );
+        assert!(
+            text.contains(&(padded_grid_len(n(1024)) as u64).to_string()),
+            "{text}"
+        );
+        // 1024³ float: 4 GiB, more than the heap.
+        let err = GpuField::check_grid(&info, n(1024), Storage::F32).expect_err("1024³ f32");
+        assert!(err.to_string().contains("heap"), "{err}");
+    }
 }

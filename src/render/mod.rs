@@ -153,7 +153,7 @@ impl Field {
         let range = samples
             .values
             .iter()
-            .fold((f64::MAX, f64::MIN), |(l, h), &v| {
+            .fold((f64::MAX, f64::MIN), |(l, h), v| {
                 (l.min(f64::from(v)), h.max(f64::from(v)))
             });
         let full_metric = samples.has_full_metric();

@@ -34,7 +34,7 @@ pub fn resample_grid(
         gradient: crate::recon::GradientMode::Analytic,
         ..Variant::of(field)
     };
-    let ids = [binding::GRID, binding::RESAMPLE_TARGET];
+    let ids = [variant.grid_binding(), binding::RESAMPLE_TARGET];
     let pipeline = pipeline_for(
         ctx,
         &compiler,
@@ -49,7 +49,7 @@ pub fn resample_grid(
         ctx,
         &pipeline,
         &[
-            (binding::GRID, grid),
+            (variant.grid_binding(), grid),
             (binding::RESAMPLE_TARGET, &fine),
             (binding::PARAMS, &params),
         ],

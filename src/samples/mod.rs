@@ -152,7 +152,7 @@ pub struct Provenance {
 #[derive(Debug, Clone, PartialEq)]
 pub struct SampleSet {
     pub positions: Positions,
-    pub values: Vec<f32>,
+    pub values: crate::data::Values,
     pub supports: Supports,
     pub domain: Domain,
     /// Typical distance between samples, the unit of `render.step`: a grid's smallest spacing,
@@ -347,7 +347,7 @@ impl SampleSet {
                 };
                 Ok(Self {
                     positions: Positions::Scattered(positions),
-                    values: data.values.clone(),
+                    values: data.values.as_f32().into_owned().into(),
                     supports: Supports::PerSample(metrics),
                     domain: Domain::Box { lo, hi },
                     spacing: 0.0,
@@ -370,7 +370,7 @@ impl SampleSet {
                 };
                 Ok(Self {
                     positions: Positions::Scattered(points),
-                    values: data.values.clone(),
+                    values: data.values.as_f32().into_owned().into(),
                     supports: Supports::PerSample(metrics),
                     domain: hull,
                     spacing: 0.0,
@@ -381,9 +381,9 @@ impl SampleSet {
                 let checked = mesh::check_cells(points, cells, &source_name)?;
                 provenance.inverted_cells = checked.inverted;
                 let (positions, values) = if cell_data {
-                    (checked.centroids.clone(), data.values.clone())
+                    (checked.centroids.clone(), data.values.as_f32().into_owned())
                 } else {
-                    (points.clone(), data.values.clone())
+                    (points.clone(), data.values.as_f32().into_owned())
                 };
                 let merged = merge_duplicates(positions, values);
                 provenance.merged = merged.merged;
@@ -401,7 +401,7 @@ impl SampleSet {
                 };
                 Ok(Self {
                     positions: Positions::Scattered(merged.positions),
-                    values: merged.values,
+                    values: merged.values.into(),
                     supports: Supports::PerSample(metrics),
                     domain: Domain::Hull(hull),
                     spacing: 0.0,
@@ -409,7 +409,7 @@ impl SampleSet {
                 })
             }
             Geometry::Points { points } => {
-                let merged = merge_duplicates(points.clone(), data.values.clone());
+                let merged = merge_duplicates(points.clone(), data.values.as_f32().into_owned());
                 provenance.merged = merged.merged;
                 if merged.positions.len() < 2 {
                     return Err(SampleError::Invalid {
@@ -423,7 +423,7 @@ impl SampleSet {
                 let metrics = derive_scattered(&merged.positions, settings, &mut provenance);
                 let mut set = Self {
                     positions: Positions::Scattered(merged.positions),
-                    values: merged.values,
+                    values: merged.values.into(),
                     supports: Supports::PerSample(metrics),
                     domain: Domain::Box {
                         lo: [0.0; 3],

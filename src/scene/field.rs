@@ -24,8 +24,8 @@ impl Scene {
         progress: impl FnMut(f64),
     ) -> Result<Field, RenderError> {
         let grid = self.reconstruction.neighbours == crate::recon::NeighbourMode::Grid;
-        let check = |samples: usize| match device {
-            Some(info) if grid => crate::render::gpu::GpuField::check_grid(info, samples),
+        let check = |samples: usize, storage| match device {
+            Some(info) if grid => crate::render::gpu::GpuField::check_grid(info, samples, storage),
             _ => Ok(()),
         };
         match &self.volume {
@@ -38,7 +38,7 @@ impl Scene {
                         message,
                     },
                 )?;
-                check(n as usize)?;
+                check(n as usize, crate::data::Storage::F32)?;
                 let volume = crate::data::marschner_lobb::generate(*resolution);
                 Ok(Field::new(
                     volume,
@@ -47,10 +47,14 @@ impl Scene {
                     progress,
                 )?)
             }
-            VolumeSource::File { path, .. } => {
+            VolumeSource::File { path, array } => {
                 let dataset = crate::data::load_dataset(path)?;
-                if let crate::data::dataset::Geometry::Image { dims, .. } = &dataset.geometry {
-                    check(dims.iter().product())?;
+                // The array the sample set will take (an unknown name is refused there).
+                let values = dataset.array(path, array.as_deref()).map(|a| &a.values);
+                if let (crate::data::dataset::Geometry::Image { .. }, Ok(v)) =
+                    (&dataset.geometry, values)
+                {
+                    check(v.len(), v.storage())?;
                 }
                 self.field_from_dataset(&dataset, path, progress)
             }

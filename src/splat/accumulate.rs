@@ -41,7 +41,7 @@ pub fn kernels(field: &Field) -> impl Iterator<Item = Kernel> + '_ {
     let s = &field.samples;
     (0..s.len()).map(move |i| Kernel {
         position: s.position(i),
-        value: f64::from(s.values[i]),
+        value: f64::from(s.values.get(i)),
         metric: s.metric(i),
         volume: volumes.get(i),
         kind: KernelKind::Volume,

@@ -61,7 +61,7 @@ pub fn surface_kernels(field: &Field, isosurfaces: &[Isosurface]) -> Vec<Kernel>
         for (i, g) in gradients.iter().enumerate() {
             let Some(g) = g else { continue };
             let len2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
-            let f = f64::from(s.values[i]);
+            let f = f64::from(s.values.get(i));
             if len2 <= 0.0 || !len2.is_finite() || (f - iso.value).abs() >= 0.5 * band * len2.sqrt()
             {
                 continue;

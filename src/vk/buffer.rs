@@ -49,6 +49,29 @@ pub fn check_size(
     Ok(())
 }
 
+/// Refuses a texel-buffer view of `bytes` bytes read as `kind` that `info`'s device cannot make
+/// (maxTexelBufferElements), naming the buffer: bind groups check every view, and callers check
+/// the large ones before the host builds their contents.
+pub fn check_texel_view(
+    info: &super::DeviceInfo,
+    name: &str,
+    bytes: u64,
+    kind: super::BindingKind,
+) -> Result<(), VkError> {
+    let Some((_, texel_bytes)) = kind.texel() else {
+        return Ok(());
+    };
+    if bytes / texel_bytes > info.max_texel_buffer_elements {
+        return Err(VkError::Limit {
+            resource: format!("texel view of buffer '{name}'"),
+            bytes,
+            limit: info.max_texel_buffer_elements * texel_bytes,
+            limit_name: "maxTexelBufferElements",
+        });
+    }
+    Ok(())
+}
+
 /// A Vulkan buffer with its memory. Freed on drop.
 pub struct Buffer {
     shared: Arc<Shared>,
@@ -189,37 +212,47 @@ impl Buffer {
 
     /// Copies `bytes` to the start of the buffer, directly when mapped, else through staging.
     pub fn write(&self, ctx: &Context, bytes: &[u8]) -> Result<(), VkError> {
-        if bytes.len() as u64 > self.size {
+        self.write_parts(ctx, &[bytes])
+    }
+
+    /// Copies `parts`, one after the other, to the start of the buffer: what [`Buffer::write`]
+    /// of their concatenation does, without that concatenation on the host (a padded grid of
+    /// hundreds of MiB).
+    pub fn write_parts(&self, ctx: &Context, parts: &[&[u8]]) -> Result<(), VkError> {
+        let len: usize = parts.iter().map(|p| p.len()).sum();
+        if len as u64 > self.size {
             return Err(VkError::Usage(format!(
-                "upload of {} bytes into buffer '{}' of {} bytes",
-                bytes.len(),
-                self.name,
-                self.size
+                "upload of {len} bytes into buffer '{}' of {} bytes",
+                self.name, self.size
             )));
         }
         self.shared
             .bytes_uploaded
-            .fetch_add(bytes.len() as u64, Ordering::Relaxed);
-        if self.mapped() {
-            let ptr = self.mapped_ptr()?;
-            // SAFETY: the mapping covers `size` ≥ bytes.len() bytes; no GPU work uses the buffer
+            .fetch_add(len as u64, Ordering::Relaxed);
+        let staging = if self.mapped() {
+            None
+        } else {
+            let name = format!("{} (upload)", self.name);
+            Some(Buffer::new(ctx, &name, len as u64, BufferUsage::Staging)?)
+        };
+        let ptr = match &staging {
+            None => self.mapped_ptr()?,
+            Some(s) => s.mapped_ptr()?,
+        };
+        let mut at = 0;
+        for part in parts {
+            // SAFETY: the mapping (this buffer's, of `size` ≥ len bytes, or the staging
+            // buffer's, of len bytes) covers at + part.len() ≤ len bytes; no GPU work uses it
             // now because every submission is waited for before returning.
-            unsafe { std::ptr::copy_nonoverlapping(bytes.as_ptr(), ptr, bytes.len()) };
-            return Ok(());
+            unsafe { std::ptr::copy_nonoverlapping(part.as_ptr(), ptr.add(at), part.len()) };
+            at += part.len();
         }
-        let staging = Buffer::new(
-            ctx,
-            &format!("{} (upload)", self.name),
-            bytes.len() as u64,
-            BufferUsage::Staging,
-        )?;
-        let ptr = staging.mapped_ptr()?;
-        // SAFETY: the staging mapping holds at least bytes.len() bytes and is not in use.
-        unsafe { std::ptr::copy_nonoverlapping(bytes.as_ptr(), ptr, bytes.len()) };
-        ctx.submit(|rec| {
-            rec.copy_buffer(&staging, self, bytes.len() as u64);
-            Ok(())
-        })?;
+        if let Some(staging) = &staging {
+            ctx.submit(|rec| {
+                rec.copy_buffer(staging, self, len as u64);
+                Ok(())
+            })?;
+        }
         Ok(())
     }
 

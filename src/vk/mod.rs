@@ -17,7 +17,7 @@ mod context;
 mod pipeline;
 mod shader;
 
-pub use buffer::{Buffer, BufferUsage, check_size};
+pub use buffer::{Buffer, BufferUsage, check_size, check_texel_view};
 pub use commands::{DispatchTiming, Recorder};
 pub use context::{Context, ContextOptions, DeviceInfo, FAIL_ALLOCATIONS_VAR, RawContext};
 pub use pipeline::{BindGroup, BindingKind, ComputePipeline};

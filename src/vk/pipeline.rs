@@ -40,7 +40,7 @@ impl BindingKind {
     }
 
     /// The view's format and its element size in bytes.
-    fn texel(self) -> Option<(vk::Format, u64)> {
+    pub(crate) fn texel(self) -> Option<(vk::Format, u64)> {
         match self {
             BindingKind::Storage | BindingKind::Uniform => None,
             BindingKind::TexelR32Uint => Some((vk::Format::R32_UINT, 4)),
@@ -280,19 +280,16 @@ impl<'a> BindGroup<'a> {
                     limit_name: "maxUniformBufferRange",
                 });
             }
-            let Some((format, texel_bytes)) = kind_of(*binding).texel() else {
+            let Some((format, _)) = kind_of(*binding).texel() else {
                 views.push(None);
                 continue;
             };
-            let elements = buffer.size() / texel_bytes;
-            if elements > shared.info.max_texel_buffer_elements {
-                return Err(VkError::Limit {
-                    resource: format!("texel view of buffer '{}'", buffer.name()),
-                    bytes: buffer.size(),
-                    limit: shared.info.max_texel_buffer_elements * texel_bytes,
-                    limit_name: "maxTexelBufferElements",
-                });
-            }
+            super::buffer::check_texel_view(
+                &shared.info,
+                buffer.name(),
+                buffer.size(),
+                kind_of(*binding),
+            )?;
             let info = vk::BufferViewCreateInfo::default()
                 .buffer(buffer.handle)
                 .format(format)

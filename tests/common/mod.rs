@@ -104,7 +104,7 @@ pub fn volume_from(
         dims,
         origin,
         spacing,
-        values,
+        values: values.into(),
     }
 }
 

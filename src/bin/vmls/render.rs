@@ -142,6 +142,8 @@ pub fn run_render(
             "step_world": step_world,
             "neighbours": if field.uses_octree() { "octree" } else { "grid" },
             "fast_path": field.fast_path(),
+            "sample_storage": field.samples.values.storage().name(),
+            "host_peak_bytes": vmls::files::memory::peak_resident(),
             "gpu_ms": match &image.splat {
                 None => serde_json::json!({ "raycast": first.gpu_ms }),
                 Some(r) => serde_json::json!({
