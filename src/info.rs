@@ -103,7 +103,7 @@ fn describe_dataset(out: &mut String, path: &Path, d: &Dataset) {
         let (lo, hi) = a.range();
         let _ = writeln!(
             out,
-            "  {} ({} data, {} component{}): range [{lo}, {hi}]",
+            "  {} ({} data, {} component{}, kept as {}): range [{lo}, {hi}]",
             shown(&a.name),
             a.location.name(),
             a.components,
@@ -111,7 +111,8 @@ fn describe_dataset(out: &mut String, path: &Path, d: &Dataset) {
                 ""
             } else {
                 "s, first used"
-            }
+            },
+            a.values.storage().name()
         );
     }
 }

@@ -114,7 +114,14 @@ fn integer_grids_render_exactly_as_their_f32_twins() {
         let variant = a["variant"].as_str().expect("variant");
         assert!(variant.ends_with(&format!("-{storage}")), "{ty}: {variant}");
         // The fast path's fine grid is computed from the packed grid too.
-        assert_eq!(a["fast_path"], b["fast_path"], "{ty}");
+        assert_eq!(
+            a["fast_path"]["fine_points"], b["fast_path"]["fine_points"],
+            "{ty}"
+        );
+        assert!(
+            a["fast_path"]["fine_points"].as_u64() > Some(0),
+            "{ty}: {a}"
+        );
         let (pa, pb) = (
             std::fs::read(&int_png).expect("png"),
             std::fs::read(&f32_png).expect("png"),
@@ -153,4 +160,38 @@ fn a_grid_past_one_storage_binding_renders() {
     let lit = img.pixels().filter(|p| p.0[..3] != [0, 0, 0]).count();
     assert!(lit > 20, "only {lit} of 256 pixels show the slab");
     let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn a_grid_the_device_cannot_hold_is_refused_from_its_header() {
+    let d = dir("capacity-header");
+    // The header declares 1024³ uint8 (1 GiB: 256 M r32ui texels, past lavapipe's 128 M per
+    // view); the file holds 4 bytes of data. Refused from the header, naming the samples, the
+    // bytes and the limit: the data is never read (it would be "cut short" otherwise).
+    let file = d.join("huge.nrrd");
+    std::fs::write(
+        &file,
+        "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 1024 1024 1024\nencoding: raw\n\n\0\0\0\0",
+    )
+    .expect("write");
+    let png = d.join("x.png");
+    let volume = format!("volume.file={:?}", s(&file));
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_vmls"))
+        .args(small_render(&png, &["--set", &volume]))
+        .env("VMLS_VALIDATION", "1")
+        .env("VMLS_HOST_MEMORY", "1000000000000")
+        .env_remove("VMLS_DEVICE")
+        .output()
+        .expect("run vmls");
+    common::cli::assert_fails(
+        &out,
+        &[
+            "huge.nrrd",
+            "1073741824 uint8 samples",
+            "1073741848 bytes",
+            "maxTexelBufferElements",
+            "crop or downsample",
+        ],
+        &png,
+    );
 }

@@ -514,6 +514,83 @@ fn nrrd_raw_both_endians_every_type() {
     }
 }
 
+/// Files past the first MiB stream their raw data from disk chunk by chunk (nrrd::load, issue
+/// 25 §4): values, byte skips (also -1), big-endian data and truncation must come out exactly
+/// as parsing the whole file gives them, kept at their 16-bit size.
+#[test]
+fn large_raw_nrrd_streams_as_it_parses() {
+    // 2.6 MB of int16: past the 1 MiB head (several chunks: the 12.6 MB float case below).
+    let dims = [700, 611, 3];
+    let n = dims.iter().product::<usize>();
+    let values: Vec<i16> = (0..n).map(|i| ((i * 7919) % 65536) as u16 as i16).collect();
+    for (skip, big) in [("0", false), ("5", true), ("-1", false)] {
+        let mut data: Vec<u8> = Vec::new();
+        if skip == "5" {
+            data.extend([9u8; 5]);
+        }
+        for v in &values {
+            data.extend(if big {
+                v.to_be_bytes()
+            } else {
+                v.to_le_bytes()
+            });
+        }
+        let endian = if big { "big" } else { "little" };
+        let fields = format!(
+            "type: int16\ndimension: 3\nsizes: {} {} {}\nendian: {endian}\nencoding: raw\n\
+             byte skip: {skip}\n",
+            dims[0], dims[1], dims[2]
+        );
+        let mut b = nrrd_file(&fields, &data);
+        if skip == "-1" {
+            // -1: the data is the file's last bytes, whatever comes before it.
+            let at = b.len() - data.len();
+            b.splice(at..at, [1u8; 3]);
+        }
+        let p = file(&format!("stream-{skip}.nrrd"), &b);
+        let streamed = nrrd::load(&p).expect("streamed");
+        let parsed = nrrd::parse(&p, &b).expect("parsed");
+        assert!(
+            streamed == parsed,
+            "skip {skip}: streamed and parsed volumes differ"
+        );
+        assert!(
+            streamed.values == data::Values::I16(values.clone()),
+            "skip {skip}: values differ"
+        );
+        // Cut short: the same error as parsing reports.
+        let short = file(
+            &format!("stream-{skip}-short.nrrd"),
+            &b[..b.len() - data.len() / 2],
+        );
+        match nrrd::load(&short) {
+            Ok(_) => panic!("skip {skip}: a truncated file was accepted"),
+            Err(e) => assert!(matches!(e, DataError::Truncated { .. }), "skip {skip}: {e}"),
+        }
+    }
+    // Floats over several 8 MiB chunks, non-finite values still refused.
+    let dims = [1024, 1024, 3];
+    let n = dims.iter().product::<usize>();
+    let mut data: Vec<u8> = (0..n)
+        .flat_map(|i| (i as f32 * 0.5).to_le_bytes())
+        .collect();
+    let fields = "type: float\ndimension: 3\nsizes: 1024 1024 3\nendian: little\nencoding: raw\n";
+    let b = nrrd_file(fields, &data);
+    let v = nrrd::load(&file("stream-float.nrrd", &b)).expect("streamed floats");
+    assert_eq!(v.values.len(), n);
+    assert!(
+        (0..n)
+            .step_by(9973)
+            .all(|i| v.values.get(i) == i as f32 * 0.5)
+    );
+    let last = data.len() - 4;
+    data[last..].copy_from_slice(&f32::NAN.to_le_bytes());
+    match nrrd::load(&file("stream-nan.nrrd", &nrrd_file(fields, &data))) {
+        Ok(_) => panic!("a NaN was accepted"),
+        Err(e) => assert!(matches!(e, DataError::NonFinite { .. }), "{e}"),
+    }
+}
+
 #[test]
 fn nrrd_gzip_text_directions_and_skips() {
     let t = T::I16;

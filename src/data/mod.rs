@@ -12,6 +12,7 @@
 //! - every error names the file and the line or byte offset where the input stopped making sense.
 
 pub mod dataset;
+pub(crate) mod encoding;
 pub mod marschner_lobb;
 pub mod nifti;
 pub mod nrrd;
@@ -340,16 +341,42 @@ pub fn load(path: &Path, array: Option<&str>) -> Result<Volume, DataError> {
 /// and PLY points. Regular-grid formats (NRRD, NIfTI) give an image with one point array
 /// named "scalars".
 pub fn load_dataset(path: &Path) -> Result<dataset::Dataset, DataError> {
+    if lower_name(path).ends_with(".nrrd") {
+        // Streamed: raw data never sits in memory beside its values (nrrd::load).
+        let dataset = dataset::Dataset::from_volume(nrrd::load(path)?, "scalars");
+        dataset.validate(path)?;
+        return Ok(dataset);
+    }
     parse_dataset_bytes(path, &read_file(path)?)
+}
+
+/// A file name in lower case, for choosing its reader.
+fn lower_name(path: &Path) -> String {
+    path.file_name()
+        .map(|n| n.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default()
+}
+
+/// The dimensions of a regular-grid file (NRRD, NIfTI) and how its values will be kept, read
+/// from its header alone, so that a caller can check the device (and the header's own checks,
+/// host memory included, run) before the data is read: a 1 GiB volume the device cannot hold is
+/// refused without reading it. `None` for other formats, and where the header cannot be read
+/// on its own (the full load then reports what is wrong).
+pub fn grid_shape(path: &Path) -> Result<Option<([u64; 3], Storage)>, DataError> {
+    let name = lower_name(path);
+    if name.ends_with(".nrrd") {
+        nrrd::grid_shape(path)
+    } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
+        nifti::grid_shape(path)
+    } else {
+        Ok(None)
+    }
 }
 
 /// [`load_dataset`] on bytes already read: the reader is chosen by `path`'s extension, and
 /// `path` names the file in errors (the fuzz targets enter here).
 pub fn parse_dataset_bytes(path: &Path, bytes: &[u8]) -> Result<dataset::Dataset, DataError> {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().to_ascii_lowercase())
-        .unwrap_or_default();
+    let name = lower_name(path);
     let dataset = if name.ends_with(".vtk") {
         vtk_legacy::parse_dataset(path, bytes)?
     } else if name.ends_with(".csv") {

@@ -25,8 +25,9 @@
 //!
 //! Errors name byte offsets; in a `.nii.gz` they are offsets in the decompressed stream.
 
-use super::nrrd::{Scalar, decode, decode_values, gunzip, gunzip_head};
-use super::{DataError, Values, Volume, check_finite, checked_grid_count};
+use super::encoding::{Scalar, decode, decode_values, gunzip, gunzip_head};
+use super::{DataError, Storage, Values, Volume, check_finite, checked_grid_count};
+use std::io::Read;
 use std::path::Path;
 
 const HEADER_SIZE: usize = 348;
@@ -35,6 +36,39 @@ const HEADER_SIZE: usize = 348;
 pub fn load(path: &Path) -> Result<Volume, DataError> {
     let bytes = super::read_file(path)?;
     parse(path, &bytes)
+}
+
+/// Bytes of a `.nii.gz` read to inflate its header: far more than any deflate stream needs for
+/// 352 bytes of output.
+const GZIP_HEAD_BYTES: u64 = 64 << 10;
+
+/// The grid's dimensions and how its values will be kept, from the header alone (see
+/// [`super::grid_shape`]); `None` where the head does not hold a whole header.
+pub fn grid_shape(path: &Path) -> Result<Option<([u64; 3], Storage)>, DataError> {
+    let (file, _) = crate::files::open_input(path, super::MAX_FILE_BYTES)?;
+    let mut head = Vec::new();
+    file.take(GZIP_HEAD_BYTES)
+        .read_to_end(&mut head)
+        .map_err(|source| {
+            DataError::File(crate::files::FileError::Io {
+                path: path.to_path_buf(),
+                action: "read",
+                source,
+            })
+        })?;
+    let (head, suffix) = if head.starts_with(&[0x1f, 0x8b]) {
+        (
+            gunzip_head(path, &head, 0, 352)?,
+            " of the decompressed data",
+        )
+    } else {
+        (head, "")
+    };
+    if head.len() < HEADER_SIZE {
+        return Ok(None);
+    }
+    let h = header(path, &head, suffix)?;
+    Ok(Some((h.dims.map(|d| d as u64), h.storage)))
 }
 
 /// Parses NIfTI-1 bytes, gzip-compressed or not; `path` only names the file in errors.
@@ -56,6 +90,8 @@ struct Header {
     big_endian: bool,
     dims: [usize; 3],
     ty: Scalar,
+    /// How the values will be kept (`parse_plain`).
+    storage: Storage,
     data_start: usize,
     data_end: u64,
 }
@@ -177,7 +213,7 @@ fn header(path: &Path, b: &[u8], suffix: &str) -> Result<Header, DataError> {
     let storage = if identity_scaling(f32_at(112, big_endian), f32_at(116, big_endian)) {
         ty.storage()
     } else {
-        crate::data::Storage::F32
+        Storage::F32
     };
     let dims64 = dims.map(|d| d as u64);
     let count = checked_grid_count(path, dims64, ty.size() as u64, storage)?;
@@ -188,6 +224,7 @@ fn header(path: &Path, b: &[u8], suffix: &str) -> Result<Header, DataError> {
         big_endian,
         dims,
         ty,
+        storage,
         data_start,
         data_end,
     })

@@ -170,6 +170,29 @@ impl Values {
             })
     }
 
+    /// No values yet, room for `n`, stored as `storage`.
+    pub fn with_capacity(storage: Storage, n: usize) -> Values {
+        match storage {
+            Storage::F32 => Values::F32(Vec::with_capacity(n)),
+            Storage::U8 => Values::U8(Vec::with_capacity(n)),
+            Storage::I8 => Values::I8(Vec::with_capacity(n)),
+            Storage::U16 => Values::U16(Vec::with_capacity(n)),
+            Storage::I16 => Values::I16(Vec::with_capacity(n)),
+        }
+    }
+
+    /// Appends `more`: kept as stored when both are stored alike, else both become f32.
+    pub fn append(&mut self, more: Values) {
+        match (&mut *self, more) {
+            (Values::F32(a), Values::F32(b)) => a.extend(b),
+            (Values::U8(a), Values::U8(b)) => a.extend(b),
+            (Values::I8(a), Values::I8(b)) => a.extend(b),
+            (Values::U16(a), Values::U16(b)) => a.extend(b),
+            (Values::I16(a), Values::I16(b)) => a.extend(b),
+            (a, b) => *a = a.iter().chain(b.iter()).collect(),
+        }
+    }
+
     /// The values at `indices`, stored the same way.
     pub fn select(&self, indices: impl Iterator<Item = usize>) -> Values {
         match self {

@@ -41,7 +41,7 @@
 pub use super::vtk_legacy::{load_dataset, parse_dataset};
 
 use super::dataset::{DataArray, Location};
-use super::nrrd::{Sample, Scalar, decode, parse_text};
+use super::encoding::{Sample, Scalar, decode, parse_text};
 use super::{DataError, Volume, check_finite, checked_sample_count};
 use std::path::Path;
 

@@ -44,7 +44,7 @@
 //! point counts per cell type, indices in range).
 
 use super::dataset::{CellType, Cells, Dataset, Geometry, Location, vtk_cell_name};
-use super::nrrd::Scalar;
+use super::encoding::Scalar;
 use super::vtk::{Elem, Line, Pick, Reader, Sink, attribute, open};
 use super::{DataError, MAX_SAMPLES, checked_sample_count};
 use std::path::Path;

@@ -43,7 +43,7 @@
 //! data that `offset` attributes point into. Errors name the byte offset in the file.
 
 use super::dataset::{CellType, Cells, DataArray, Dataset, Geometry, Location, vtk_cell_name};
-use super::nrrd::Scalar;
+use super::encoding::Scalar;
 use super::vtk_xml_decode::{Appended, ArrayDesc, Decoder, Encoding, Form, Keep};
 use super::vtk_xml_tree::{El, build};
 use super::{DataError, MAX_SAMPLES};

@@ -25,7 +25,7 @@
 //! `Dataset::validate`, naming the element); errors give the byte offset of the bad token.
 
 use super::DataError;
-use super::nrrd::Scalar;
+use super::encoding::Scalar;
 use base64::Engine;
 use std::borrow::Cow;
 use std::io::Read;

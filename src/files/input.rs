@@ -46,8 +46,11 @@ fn open_nonblocking(path: &Path) -> std::io::Result<File> {
     options.open(path)
 }
 
-/// Reads a whole regular file of at most `limit` bytes (see the module contract).
-pub fn read_input(path: &Path, limit: u64) -> Result<Vec<u8>, FileError> {
+/// Opens a regular file of at most `limit` bytes for reading (see the module contract): a FIFO,
+/// a device or a directory is refused before any read. Returns the file and its size. Readers
+/// that stream a large payload (NRRD raw data) use it instead of [`read_input`], and check
+/// their own memory.
+pub fn open_input(path: &Path, limit: u64) -> Result<(File, u64), FileError> {
     let io = |action, source| FileError::Io {
         path: path.to_path_buf(),
         action,
@@ -76,6 +79,12 @@ pub fn read_input(path: &Path, limit: u64) -> Result<Vec<u8>, FileError> {
             limit,
         });
     }
+    Ok((file, size))
+}
+
+/// Reads a whole regular file of at most `limit` bytes (see the module contract).
+pub fn read_input(path: &Path, limit: u64) -> Result<Vec<u8>, FileError> {
+    let (file, size) = open_input(path, limit)?;
     // The whole file is read into memory: a sparse or huge file must fit what is free.
     super::memory::check("reading the whole file", size, "use a smaller file").map_err(
         |message| FileError::Memory {
@@ -86,7 +95,11 @@ pub fn read_input(path: &Path, limit: u64) -> Result<Vec<u8>, FileError> {
     let mut bytes = Vec::with_capacity(size as usize);
     file.take(size)
         .read_to_end(&mut bytes)
-        .map_err(|e| io("read", e))?;
+        .map_err(|source| FileError::Io {
+            path: path.to_path_buf(),
+            action: "read",
+            source,
+        })?;
     Ok(bytes)
 }
 

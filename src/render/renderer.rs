@@ -225,6 +225,12 @@ impl Renderer {
         &self.field
     }
 
+    /// GPU milliseconds the fast path's fine grid took to build at upload (0 without it): a
+    /// cost of the first frame only.
+    pub fn fast_path_build_ms(&self) -> f64 {
+        self.gpu_field.resample_ms
+    }
+
     /// The preintegration tables of the last frame that used any.
     pub fn tables(&self) -> Option<&PreintegrationTables> {
         self.tables.current()

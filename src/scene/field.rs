@@ -48,13 +48,31 @@ impl Scene {
                 )?)
             }
             VolumeSource::File { path, array } => {
+                // A grid the device cannot hold is refused naming the file and what it needs:
+                // from the header alone where the format allows (NRRD, NIfTI: before the data
+                // is read), else once the file is loaded.
+                let refused = |samples: usize, storage: crate::data::Storage| {
+                    check(samples, storage).map_err(|e| {
+                        RenderError::Data(crate::data::DataError::Memory {
+                            path: path.clone(),
+                            message: format!(
+                                "its grid of {samples} {} samples cannot be held by the \
+                                 device: {e}; crop or downsample the volume",
+                                storage.name()
+                            ),
+                        })
+                    })
+                };
+                if let Some((dims, storage)) = crate::data::grid_shape(path)? {
+                    refused(dims.iter().product::<u64>() as usize, storage)?;
+                }
                 let dataset = crate::data::load_dataset(path)?;
                 // The array the sample set will take (an unknown name is refused there).
                 let values = dataset.array(path, array.as_deref()).map(|a| &a.values);
                 if let (crate::data::dataset::Geometry::Image { .. }, Ok(v)) =
                     (&dataset.geometry, values)
                 {
-                    check(v.len(), v.storage())?;
+                    refused(v.len(), v.storage())?;
                 }
                 self.field_from_dataset(&dataset, path, progress)
             }

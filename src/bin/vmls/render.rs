@@ -131,6 +131,13 @@ pub fn run_render(
     if let Some(stats) = stats {
         let evaluations: u64 = image.counts.iter().map(|&c| u64::from(c)).sum();
         let rays = image.counts.len() as u64;
+        let mut fast_path = field.fast_path();
+        if let Some(o) = fast_path
+            .as_object_mut()
+            .filter(|_| field.reconstruction.resample > 0)
+        {
+            o.insert("build_gpu_ms".into(), renderer.fast_path_build_ms().into());
+        }
         let value = serde_json::json!({
             "device": ctx.info().name,
             "device_type": ctx.info().device_type,
@@ -141,7 +148,7 @@ pub fn run_render(
             "method": scene.render.method.name(),
             "step_world": step_world,
             "neighbours": if field.uses_octree() { "octree" } else { "grid" },
-            "fast_path": field.fast_path(),
+            "fast_path": fast_path,
             "sample_storage": field.samples.values.storage().name(),
             "host_peak_bytes": vmls::files::memory::peak_resident(),
             "gpu_ms": match &image.splat {
