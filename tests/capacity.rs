@@ -195,3 +195,54 @@ fn a_grid_the_device_cannot_hold_is_refused_from_its_header() {
         &png,
     );
 }
+
+/// VTK files keep 8- and 16-bit scalars at their size too: legacy BINARY (big-endian) and XML
+/// ImageData inline base64, with the values exactly as written; ASCII stays f32.
+#[test]
+fn vtk_files_keep_8_and_16_bit_scalars() {
+    use base64::Engine;
+    use vmls::data::{Storage, Values, load_dataset};
+    let d = dir("capacity-vtk");
+    let values: Vec<u16> = (0..60).map(|i| (i * 1097 % 65536) as u16).collect();
+    let header = "# vtk DataFile Version 3.0\nt\nBINARY\nDATASET STRUCTURED_POINTS\n\
+                  DIMENSIONS 5 4 3\nSPACING 1 1 1\nORIGIN 0 0 0\nPOINT_DATA 60\n\
+                  SCALARS s unsigned_short 1\nLOOKUP_TABLE default\n";
+    let mut legacy = header.as_bytes().to_vec();
+    legacy.extend(values.iter().flat_map(|v| v.to_be_bytes()));
+    let legacy_path = d.join("u16.vtk");
+    std::fs::write(&legacy_path, &legacy).expect("write");
+    let ascii = header.replace("BINARY", "ASCII")
+        + &values
+            .iter()
+            .map(u16::to_string)
+            .collect::<Vec<_>>()
+            .join(" ");
+    let ascii_path = d.join("u16-ascii.vtk");
+    std::fs::write(&ascii_path, ascii).expect("write");
+    let mut payload = ((values.len() * 2) as u32).to_le_bytes().to_vec();
+    payload.extend(values.iter().flat_map(|v| v.to_le_bytes()));
+    let xml = format!(
+        "<?xml version=\"1.0\"?>\n<VTKFile type=\"ImageData\" version=\"1.0\" \
+         byte_order=\"LittleEndian\" header_type=\"UInt32\">\n<ImageData WholeExtent=\"0 4 0 3 \
+         0 2\" Origin=\"0 0 0\" Spacing=\"1 1 1\">\n<Piece Extent=\"0 4 0 3 0 2\">\n<PointData \
+         Scalars=\"s\">\n<DataArray type=\"UInt16\" Name=\"s\" format=\"binary\">{}</DataArray>\n\
+         </PointData>\n</Piece>\n</ImageData>\n</VTKFile>\n",
+        base64::engine::general_purpose::STANDARD.encode(&payload)
+    );
+    let xml_path = d.join("u16.vti");
+    std::fs::write(&xml_path, xml).expect("write");
+    let want: Vec<f32> = values.iter().map(|&v| f32::from(v)).collect();
+    for (path, storage) in [
+        (&legacy_path, Storage::U16),
+        (&xml_path, Storage::U16),
+        (&ascii_path, Storage::F32),
+    ] {
+        let set = load_dataset(path).expect("load");
+        let a = &set.arrays[0];
+        assert_eq!(a.values.storage(), storage, "{}", path.display());
+        assert!(a.values == want, "{}: values differ", path.display());
+        if storage == Storage::U16 {
+            assert!(a.values == Values::U16(values.clone()));
+        }
+    }
+}

@@ -41,8 +41,9 @@
 pub use super::vtk_legacy::{load_dataset, parse_dataset};
 
 use super::dataset::{DataArray, Location};
-use super::encoding::{Sample, Scalar, decode, parse_text};
+use super::encoding::{Sample, Scalar, decode, decode_values, parse_text};
 use super::{DataError, Volume, check_finite, checked_sample_count};
+use super::{Storage, Values};
 use std::path::Path;
 
 /// Reads and parses a legacy `.vtk` file; see the module documentation for `array`.
@@ -260,6 +261,37 @@ impl<'a> Reader<'a> {
         }
     }
 
+    /// The next `nbytes` binary bytes, or `Truncated`.
+    fn take(&mut self, nbytes: u64) -> Result<&'a [u8], DataError> {
+        let avail = (self.bytes.len() - self.pos) as u64;
+        if nbytes > avail {
+            return Err(DataError::Truncated {
+                path: self.path.to_path_buf(),
+                expected: nbytes,
+                found: avail,
+            });
+        }
+        let data = &self.bytes[self.pos..self.pos + nbytes as usize];
+        self.pos += nbytes as usize;
+        Ok(data)
+    }
+
+    /// [`Reader::array`] of scalars: one-component binary 8- and 16-bit integers keep their
+    /// size ([`super::values`]); everything else becomes f32.
+    fn scalars(&mut self, elem: Elem, ncomp: u64, ntuples: u64) -> Result<Values, DataError> {
+        match elem {
+            Elem::Num(t) if self.binary && ncomp == 1 && t.storage() != Storage::F32 => {
+                let nbytes = ntuples.checked_mul(t.size() as u64).ok_or_else(|| {
+                    let found = format!("{ntuples} values");
+                    self.format(self.pos, "a byte count that fits 64 bits", found)
+                })?;
+                // Legacy binary data is big-endian.
+                Ok(decode_values(self.take(nbytes)?, t, true))
+            }
+            _ => Ok(self.array::<f32>(elem, ncomp, ntuples, true)?.into()),
+        }
+    }
+
     /// Reads `ntuples` tuples of `ncomp` values; with `keep`, returns component 0 of each.
     pub(super) fn array<T: Sample>(
         &mut self,
@@ -291,16 +323,7 @@ impl<'a> Reader<'a> {
                     format!("{total} values"),
                 )
             })?;
-            let avail = (self.bytes.len() - self.pos) as u64;
-            if nbytes > avail {
-                return Err(DataError::Truncated {
-                    path: self.path.to_path_buf(),
-                    expected: nbytes,
-                    found: avail,
-                });
-            }
-            let data = &self.bytes[self.pos..self.pos + nbytes as usize];
-            self.pos += nbytes as usize;
+            let data = self.take(nbytes)?;
             return Ok(match (keep, elem) {
                 (false, _) => Vec::new(),
                 (true, Elem::Num(t)) => decode(data, t, true, ncomp as usize),
@@ -606,12 +629,14 @@ pub fn parse(path: &Path, bytes: &[u8], array: Option<&str>) -> Result<Volume, D
                 let found = attribute(&mut r, &line, within, &mut sink)?;
                 if let Some(values) = found {
                     let d = dims.unwrap_or([1; 3]).map(|v| v as usize);
-                    check_finite(path, d, &values)?;
+                    if let Values::F32(v) = &values {
+                        check_finite(path, d, v)?;
+                    }
                     return Ok(Volume {
                         dims: d,
                         origin,
                         spacing,
-                        values: values.into(),
+                        values,
                     });
                 }
             }
@@ -649,7 +674,7 @@ pub(super) fn attribute(
     line: &Line,
     within: Option<(Location, u64)>,
     sink: &mut Sink,
-) -> Result<Option<Vec<f32>>, DataError> {
+) -> Result<Option<Values>, DataError> {
     let kw = line.keyword();
     let tuples = within.map_or(0, |(_, n)| n);
     let t = &line.tokens;
@@ -781,7 +806,7 @@ fn read_candidate(
     within: Option<(Location, u64)>,
     sink: &mut Sink,
     field_arrays_left: u64,
-) -> Result<Option<Vec<f32>>, DataError> {
+) -> Result<Option<Values>, DataError> {
     if c.ncomp == 0 {
         return Err(r.format(header.start, "a component count >= 1", "0"));
     }
@@ -812,14 +837,18 @@ fn read_candidate(
         let expected = format!("{n} tuples (one per {})", location.name());
         return Err(r.format(header.start, expected, c.ntuples.to_string()));
     }
-    let mut values = r.array::<f32>(c.elem, c.ncomp, c.ntuples, keep)?;
-    r.skip_metadata();
     if !keep {
+        r.array::<f32>(c.elem, c.ncomp, c.ntuples, false)?;
+        r.skip_metadata();
         return Ok(None);
     }
-    if c.scale_bytes {
-        values.iter_mut().for_each(|v| *v /= 255.0);
-    }
+    let values = if c.scale_bytes {
+        let values = r.array::<f32>(c.elem, c.ncomp, c.ntuples, true)?;
+        values.into_iter().map(|v| v / 255.0).collect()
+    } else {
+        r.scalars(c.elem, c.ncomp, c.ntuples)?
+    };
+    r.skip_metadata();
     if chosen {
         r.check_follows(field_arrays_left, c.ntuples * c.ncomp)?;
         return Ok(Some(values));
@@ -828,7 +857,7 @@ fn read_candidate(
         name: c.name,
         location: location.unwrap_or(Location::Point),
         components: usize::try_from(c.ncomp).unwrap_or(usize::MAX),
-        values: values.into(),
+        values,
     });
     Ok(None)
 }

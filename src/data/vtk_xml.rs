@@ -283,12 +283,12 @@ fn attributes(
         let Some(d) = desc(el)? else {
             continue;
         };
-        let values = dec.values(&d, Some(tuples), Keep::First, |v| v as f32)?;
+        let values = dec.scalars(&d, tuples)?;
         out.push(DataArray {
             name: d.name,
             location,
             components: d.components,
-            values: values.into(),
+            values,
         });
     }
     Ok(())
@@ -472,7 +472,7 @@ fn unstructured(dec: &Decoder, body: El, poly: bool) -> Result<Dataset, DataErro
             return Err(piece.format(expected, format!("piece {p} with {}", list(&piece_arrays))));
         }
         for (a, b) in arrays.iter_mut().zip(piece_arrays) {
-            a.values = a.values.iter().chain(b.values.iter()).collect();
+            a.values.append(b.values);
         }
     }
     let geometry = if poly {

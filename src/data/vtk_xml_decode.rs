@@ -146,7 +146,47 @@ impl Decoder<'_> {
         if let Form::Ascii = a.form {
             return self.ascii(a, count, keep, f);
         }
-        let tuple_bytes = (a.ty.size() * stride) as u64;
+        let bytes = self.binary(a, count)?;
+        Ok(convert(
+            &bytes,
+            a.ty,
+            self.encoding.big_endian,
+            stride,
+            keep,
+            f,
+        ))
+    }
+
+    /// Decodes a scalar array (component 0 of each of `tuples` tuples, as [`Decoder::values`]
+    /// with [`Keep::First`]): a one-component binary array of 8- or 16-bit integers keeps that
+    /// size (the grid kernels convert it, [`super::values`]); anything else becomes f32.
+    pub fn scalars(&self, a: &ArrayDesc, tuples: u64) -> Result<super::Values, DataError> {
+        let binary = !matches!(a.form, Form::Ascii);
+        if a.components == 1 && binary && a.ty.storage() != super::Storage::F32 {
+            if let Some(declared) = a.tuples.filter(|&d| d != tuples) {
+                return Err(self.format(
+                    format!("byte {} (array '{}')", a.at, a.name),
+                    format!("NumberOfTuples=\"{tuples}\""),
+                    format!("NumberOfTuples=\"{declared}\""),
+                ));
+            }
+            let bytes = self.binary(a, Some(tuples))?;
+            return Ok(super::encoding::decode_values(
+                &bytes,
+                a.ty,
+                self.encoding.big_endian,
+            ));
+        }
+        Ok(self
+            .values(a, Some(tuples), Keep::First, |v| v as f32)?
+            .into())
+    }
+
+    /// The bytes of binary array `a` (`count` values, when known), decoded from base64 and
+    /// inflated as its encoding says, every size checked against what is there.
+    fn binary(&self, a: &ArrayDesc, count: Option<u64>) -> Result<Cow<'_, [u8]>, DataError> {
+        let here = || format!("byte {} (array '{}')", a.at, a.name);
+        let tuple_bytes = (a.ty.size() * a.components.max(1)) as u64;
         let want_bytes = match count {
             Some(c) => Some(c.checked_mul(a.ty.size() as u64).ok_or_else(|| {
                 self.format(
@@ -225,14 +265,7 @@ impl Decoder<'_> {
             );
             return Err(self.format(here(), "the end of the array's base64 data", found));
         }
-        Ok(convert(
-            &bytes,
-            a.ty,
-            self.encoding.big_endian,
-            stride,
-            keep,
-            f,
-        ))
+        Ok(bytes)
     }
 
     fn header_int(&self, s: &mut Source) -> Result<u64, DataError> {
