@@ -27,7 +27,6 @@
 
 use super::encoding::{Scalar, decode, decode_values, gunzip, gunzip_head};
 use super::{DataError, Storage, Values, Volume, check_finite, checked_grid_count};
-use std::io::Read;
 use std::path::Path;
 
 const HEADER_SIZE: usize = 348;
@@ -45,17 +44,7 @@ const GZIP_HEAD_BYTES: u64 = 64 << 10;
 /// The grid's dimensions and how its values will be kept, from the header alone (see
 /// [`super::grid_shape`]); `None` where the head does not hold a whole header.
 pub fn grid_shape(path: &Path) -> Result<Option<([u64; 3], Storage)>, DataError> {
-    let (file, _) = crate::files::open_input(path, super::MAX_FILE_BYTES)?;
-    let mut head = Vec::new();
-    file.take(GZIP_HEAD_BYTES)
-        .read_to_end(&mut head)
-        .map_err(|source| {
-            DataError::File(crate::files::FileError::Io {
-                path: path.to_path_buf(),
-                action: "read",
-                source,
-            })
-        })?;
+    let (_, _, head) = crate::files::read_head(path, super::MAX_FILE_BYTES, GZIP_HEAD_BYTES)?;
     let (head, suffix) = if head.starts_with(&[0x1f, 0x8b]) {
         (
             gunzip_head(path, &head, 0, 352)?,

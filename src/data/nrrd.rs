@@ -44,20 +44,8 @@ const CHUNK_BYTES: usize = 8 << 20;
 /// host never holds the file's payload and the values at once (issue 25 §4: a 512³ 16-bit CT
 /// peaks at its size, not twice it); gzip and text are read whole.
 pub fn load(path: &Path) -> Result<Volume, DataError> {
-    let (file, size) = crate::files::open_input(path, super::MAX_FILE_BYTES)?;
-    let io = |source| {
-        DataError::File(crate::files::FileError::Io {
-            path: path.to_path_buf(),
-            action: "read",
-            source,
-        })
-    };
-    let mut head = Vec::with_capacity(HEAD_BYTES.min(size as usize));
-    let mut file = file;
-    (&mut file)
-        .take(HEAD_BYTES as u64)
-        .read_to_end(&mut head)
-        .map_err(io)?;
+    let (file, size, head) =
+        crate::files::read_head(path, super::MAX_FILE_BYTES, HEAD_BYTES as u64)?;
     if head.len() as u64 == size {
         return parse(path, &head);
     }
@@ -76,17 +64,7 @@ pub fn load(path: &Path) -> Result<Volume, DataError> {
 /// [`HEAD_BYTES`] read): lets the caller check the device before the payload is read. `None`
 /// when the head does not hold the whole header.
 pub fn grid_shape(path: &Path) -> Result<Option<([u64; 3], Storage)>, DataError> {
-    let (file, _) = crate::files::open_input(path, super::MAX_FILE_BYTES)?;
-    let mut head = Vec::new();
-    file.take(HEAD_BYTES as u64)
-        .read_to_end(&mut head)
-        .map_err(|source| {
-            DataError::File(crate::files::FileError::Io {
-                path: path.to_path_buf(),
-                action: "read",
-                source,
-            })
-        })?;
+    let (_, _, head) = crate::files::read_head(path, super::MAX_FILE_BYTES, HEAD_BYTES as u64)?;
     Ok(layout(path, &head).ok().map(|l| (l.dims, l.storage())))
 }
 

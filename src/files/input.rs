@@ -82,6 +82,23 @@ pub fn open_input(path: &Path, limit: u64) -> Result<(File, u64), FileError> {
     Ok((file, size))
 }
 
+/// [`open_input`], then reads at most `head` bytes from the start: a header, read before the
+/// reader decides how to read the rest. Returns the file (positioned after the head), its size
+/// and the head.
+pub fn read_head(path: &Path, limit: u64, head: u64) -> Result<(File, u64, Vec<u8>), FileError> {
+    let (mut file, size) = open_input(path, limit)?;
+    let mut bytes = Vec::with_capacity(head.min(size) as usize);
+    (&mut file)
+        .take(head)
+        .read_to_end(&mut bytes)
+        .map_err(|source| FileError::Io {
+            path: path.to_path_buf(),
+            action: "read",
+            source,
+        })?;
+    Ok((file, size, bytes))
+}
+
 /// Reads a whole regular file of at most `limit` bytes (see the module contract).
 pub fn read_input(path: &Path, limit: u64) -> Result<Vec<u8>, FileError> {
     let (file, size) = open_input(path, limit)?;
