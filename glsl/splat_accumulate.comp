@@ -13,9 +13,7 @@ layout(local_size_x = 64) in;
 #include "types.glsl"
 
 layout(push_constant) uniform PushBlock { SlabPush push; };
-// A uniform block (binding::kind): one load per SIMD row on llvmpipe. std140 and std430
-// agree on SplatParams, which has no arrays.
-layout(std140, binding = BINDING_PARAMS) uniform ParamsBuf { SplatParams params; };
+#include "splat_params.glsl"
 
 #include "splat.glsl"
 layout(std430, binding = BINDING_SPLATS) readonly buffer SplatBuf { Splat splats[]; };
@@ -65,6 +63,7 @@ bool occluded(ivec4 b) {
 }
 
 void main() {
+    load_params();
     uint k = push.slab;
     uint count = slab_counts[k];
     uint first = slab_offsets[k];

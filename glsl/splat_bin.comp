@@ -8,15 +8,14 @@ layout(local_size_x = 64) in;
 
 #include "types.glsl"
 
-// A uniform block (binding::kind): one load per SIMD row on llvmpipe. std140 and std430
-// agree on SplatParams, which has no arrays.
-layout(std140, binding = BINDING_PARAMS) uniform ParamsBuf { SplatParams params; };
+#include "splat_params.glsl"
 layout(std430, binding = BINDING_SPLATS) readonly buffer SplatBuf { Splat splats[]; };
 layout(std430, binding = BINDING_SLAB_OFFSETS) readonly buffer OffsetBuf { uint slab_offsets[]; };
 layout(std430, binding = BINDING_SLAB_CURSORS) buffer CursorBuf { uint slab_cursors[]; };
 layout(std430, binding = BINDING_SPLAT_LIST) writeonly buffer ListBuf { uvec2 list[]; };
 
 void main() {
+    load_params();
     uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
     for (uint i = gl_GlobalInvocationID.x; i < params.kernel_count; i += stride) {
         uvec4 r = splats[i].slabs;

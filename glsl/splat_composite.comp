@@ -16,9 +16,7 @@ layout(local_size_x = 8, local_size_y = 8) in;
 #include "types.glsl"
 
 layout(push_constant) uniform PushBlock { SlabPush push; };
-// A uniform block (binding::kind): one load per SIMD row on llvmpipe. std140 and std430
-// agree on SplatParams, which has no arrays.
-layout(std140, binding = BINDING_PARAMS) uniform ParamsBuf { SplatParams params; };
+#include "splat_params.glsl"
 
 #include "splat.glsl"
 layout(std430, binding = BINDING_SHEETS) buffer SheetBuf { uint sheets[]; };
@@ -97,6 +95,7 @@ float slab_overlap(int j, float t_in, float t_out, uint p) {
 shared uint tile_open;
 
 void main() {
+    load_params();
     uvec2 px = gl_GlobalInvocationID.xy;
     bool inside = px.x < params.width && px.y < params.height;
     uint p = px.y * params.width + px.x;

@@ -12,9 +12,7 @@ layout(local_size_x = 64) in;
 
 #include "types.glsl"
 
-// A uniform block (binding::kind): one load per SIMD row on llvmpipe. std140 and std430
-// agree on SplatParams, which has no arrays.
-layout(std140, binding = BINDING_PARAMS) uniform ParamsBuf { SplatParams params; };
+#include "splat_params.glsl"
 layout(std430, binding = BINDING_SPLAT_KERNELS) readonly buffer KernelBuf { Sample kernels[]; };
 layout(std430, binding = BINDING_SPLATS) writeonly buffer SplatBuf { Splat splats[]; };
 layout(std430, binding = BINDING_SLAB_COUNTS) buffer CountBuf { uint slab_counts[]; };
@@ -282,6 +280,7 @@ Splat project(Sample k) {
 }
 
 void main() {
+    load_params();
     uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
     for (uint i = gl_GlobalInvocationID.x; i < params.kernel_count; i += stride) {
         atomicAdd(stats[0], 1u);

@@ -9,9 +9,7 @@ layout(local_size_x = 8, local_size_y = 8) in;
 
 #include "types.glsl"
 
-// A uniform block (binding::kind): one load per SIMD row on llvmpipe. std140 and std430
-// agree on SplatParams, which has no arrays.
-layout(std140, binding = BINDING_PARAMS) uniform ParamsBuf { SplatParams params; };
+#include "splat_params.glsl"
 layout(std430, binding = BINDING_PIXEL_SEGMENTS) writeonly buffer SegBuf { vec2 pixel_segments[]; };
 layout(std430, binding = BINDING_SPLAT_STATS) buffer StatsBuf { uint stats[]; };
 
@@ -22,6 +20,7 @@ layout(std430, binding = BINDING_SPLAT_STATS) buffer StatsBuf { uint stats[]; };
 const uint STAT_SEGMENT_OVERFLOW = 5u;
 
 void main() {
+    load_params();
     uvec2 px = gl_GlobalInvocationID.xy;
     if (px.x >= params.width || px.y >= params.height) {
         return;

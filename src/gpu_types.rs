@@ -148,6 +148,17 @@ pub mod binding {
 /// and must stay inside the buffer.
 pub const GRID_PAD: usize = 8;
 
+/// Copies of `RenderParams`/`SplatParams` in the parameters' uniform buffer: kernels index the
+/// block by `gl_WorkGroupID.z` (always 0) so that lavapipe cannot inline its values and recompile
+/// the kernel at every dispatch (glsl/include/params.glsl says why); NIR would fold the index of
+/// a one-element array, so the block holds two.
+pub const PARAMS_COPIES: usize = 2;
+
+/// The contents of a parameters uniform buffer: `p`, [`PARAMS_COPIES`] times.
+pub fn params_copies<T: Copy>(p: T) -> [T; PARAMS_COPIES] {
+    [p; PARAMS_COPIES]
+}
+
 /// raycast.comp's per-pixel count word: evaluations in the low bits, and flags.
 pub mod ray_count {
     /// The ray is complete; its pixel holds the final colour.
@@ -169,6 +180,7 @@ pub fn binding_defines() -> Vec<(String, String)> {
         .map(|(k, v)| (k.to_string(), v.to_string()))
         .collect();
     d.push(("GRID_PAD".into(), GRID_PAD.to_string()));
+    d.push(("PARAMS_COPIES".into(), PARAMS_COPIES.to_string()));
     d.push((
         "HULL_MAX_HITS".into(),
         crate::samples::bvh::MAX_HITS.to_string(),

@@ -13,7 +13,7 @@ use super::shading::Isosurface;
 use super::skip::{SkipReport, SkipTable};
 use super::transfer::TransferFunction;
 use super::{Field, Method, RaySetup};
-use crate::gpu_types::{IsoSurface, RayPush, binding, ray_count};
+use crate::gpu_types::{IsoSurface, RayPush, binding, params_copies, ray_count};
 use crate::vk::{
     BindGroup, Buffer, BufferUsage, ComputePipeline, Context, ShaderCompiler, VkError,
 };
@@ -145,7 +145,7 @@ pub(super) fn frame_constants(
     }
     let isos = iso_buffer_data(&setup.isosurfaces);
     Ok(FrameConstants {
-        params: Buffer::from_slice(ctx, "render params", &[params])?,
+        params: Buffer::from_slice(ctx, "render params", &params_copies(params))?,
         tf: Buffer::from_slice(ctx, "transfer function", &gpu_tf)?,
         iso: Buffer::from_slice(ctx, "isosurfaces", &isos)?,
         skip,

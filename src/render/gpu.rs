@@ -14,7 +14,7 @@ use super::shading::MAX_ISOSURFACES;
 use super::{Field, RaySetup};
 use crate::data::Storage;
 use crate::gpu_types::{
-    CountPush, GRID_PAD, MlsOut, RenderParams, Sample, binding, binding_defines,
+    CountPush, GRID_PAD, MlsOut, RenderParams, Sample, binding, binding_defines, params_copies,
 };
 use crate::recon::NeighbourMode;
 use crate::recon::mls::{Basis, GradientMode, Weight};
@@ -555,7 +555,11 @@ pub fn evaluate(
         .iter()
         .map(|p| [p[0] as f32, p[1] as f32, p[2] as f32, 0.0])
         .collect();
-    let params_buf = Buffer::from_slice(ctx, "mls params", &[render_params(field, None, 0)])?;
+    let params_buf = Buffer::from_slice(
+        ctx,
+        "mls params",
+        &params_copies(render_params(field, None, 0)),
+    )?;
     let points_buf = Buffer::from_slice(ctx, "mls points", &gpu_points)?;
     let results = Buffer::new(
         ctx,

@@ -43,7 +43,11 @@ pub fn resample_grid(
         &ids,
         std::mem::size_of::<CountPush>() as u32,
     )?;
-    let params = Buffer::from_slice(ctx, "resample params", &[render_params(field, None, 0)])?;
+    let params = Buffer::from_slice(
+        ctx,
+        "resample params",
+        &crate::gpu_types::params_copies(render_params(field, None, 0)),
+    )?;
     let fine = Buffer::new(ctx, "resampled grid", points * 16, BufferUsage::Texel)?;
     let group = BindGroup::new(
         ctx,

@@ -11,7 +11,7 @@
 
 use super::surface::KernelKind;
 use super::{Antialias, Shading, SplatCounts, SplatSetup, TILE};
-use crate::gpu_types::{SlabPush, Splat, SplatParams, binding};
+use crate::gpu_types::{SlabPush, Splat, SplatParams, binding, params_copies};
 use crate::render::transfer::TransferFunction;
 use crate::render::{Field, RenderError};
 use crate::vk::{
@@ -493,7 +493,7 @@ pub fn splat_frame(
     }
     let gpu_tf = tf.to_gpu();
     let p = params(setup, kernels, gpu_tf.len() as u32);
-    let params_buf = Buffer::from_slice(ctx, "splat params", &[p])?;
+    let params_buf = Buffer::from_slice(ctx, "splat params", &params_copies(p))?;
     let tf_buf = Buffer::from_slice(ctx, "transfer function", &gpu_tf)?;
     let isos = crate::render::renderer::iso_buffer_data(&setup.isosurfaces);
     let iso_buf = Buffer::from_slice(ctx, "isosurfaces", &isos)?;

@@ -34,6 +34,7 @@ static SOURCES: &[(&str, &str)] = embed![
     "include/interval.glsl",
     "include/hull.glsl",
     "include/splat.glsl",
+    "include/splat_params.glsl",
     "include/skip.glsl",
     "raycast.comp",
     "splat_project.comp",

@@ -1,0 +1,16 @@
+// The splatting kernels' SplatParams, read once into registers: kernels include this after
+// types.glsl and call load_params() first thing in main. Indexed by gl_WorkGroupID.z (0 in
+// every dispatch) for the reason params.glsl gives: lavapipe's uniform inlining. std140 and
+// std430 agree on SplatParams, which has no arrays.
+#ifndef VMLS_SPLAT_PARAMS_GLSL
+#define VMLS_SPLAT_PARAMS_GLSL
+
+layout(std140, binding = BINDING_PARAMS) uniform ParamsBuf { SplatParams params_block[PARAMS_COPIES]; };
+
+SplatParams params;
+
+void load_params() {
+    params = params_block[gl_WorkGroupID.z];
+}
+
+#endif
