@@ -13,12 +13,13 @@ use base64::Engine;
 use libfuzzer_sys::arbitrary::{Result, Unstructured};
 use std::fmt::Write as _;
 
-const TYPES: [(&str, char, usize); 8] = [
+const TYPES: [(&str, char, usize); 9] = [
     ("Float32", 'f', 4),
     ("Float64", 'f', 8),
     ("Int8", 'i', 1),
     ("UInt8", 'u', 1),
     ("Int16", 'i', 2),
+    ("UInt16", 'u', 2),
     ("UInt32", 'u', 4),
     ("Int64", 'i', 8),
     ("String", 'u', 1),
