@@ -87,30 +87,14 @@ pub fn open_input(path: &Path, limit: u64) -> Result<(File, u64), FileError> {
 /// and the head.
 pub fn read_head(path: &Path, limit: u64, head: u64) -> Result<(File, u64, Vec<u8>), FileError> {
     let (mut file, size) = open_input(path, limit)?;
-    let mut bytes = Vec::with_capacity(head.min(size) as usize);
-    (&mut file)
-        .take(head)
-        .read_to_end(&mut bytes)
-        .map_err(|source| FileError::Io {
-            path: path.to_path_buf(),
-            action: "read",
-            source,
-        })?;
+    let bytes = read_up_to(path, &mut file, head.min(size))?;
     Ok((file, size, bytes))
 }
 
-/// Reads a whole regular file of at most `limit` bytes (see the module contract).
-pub fn read_input(path: &Path, limit: u64) -> Result<Vec<u8>, FileError> {
-    let (file, size) = open_input(path, limit)?;
-    // The whole file is read into memory: a sparse or huge file must fit what is free.
-    super::memory::check("reading the whole file", size, "use a smaller file").map_err(
-        |message| FileError::Memory {
-            path: path.to_path_buf(),
-            message,
-        },
-    )?;
-    let mut bytes = Vec::with_capacity(size as usize);
-    file.take(size)
+/// At most `n` bytes from `file`'s position (fewer at its end), read errors naming `path`.
+fn read_up_to(path: &Path, file: &mut File, n: u64) -> Result<Vec<u8>, FileError> {
+    let mut bytes = Vec::with_capacity(n as usize);
+    file.take(n)
         .read_to_end(&mut bytes)
         .map_err(|source| FileError::Io {
             path: path.to_path_buf(),
@@ -118,6 +102,19 @@ pub fn read_input(path: &Path, limit: u64) -> Result<Vec<u8>, FileError> {
             source,
         })?;
     Ok(bytes)
+}
+
+/// Reads a whole regular file of at most `limit` bytes (see the module contract).
+pub fn read_input(path: &Path, limit: u64) -> Result<Vec<u8>, FileError> {
+    let (mut file, size) = open_input(path, limit)?;
+    // The whole file is read into memory: a sparse or huge file must fit what is free.
+    super::memory::check("reading the whole file", size, "use a smaller file").map_err(
+        |message| FileError::Memory {
+            path: path.to_path_buf(),
+            message,
+        },
+    )?;
+    read_up_to(path, &mut file, size)
 }
 
 /// The identity of a file: what a path resolves to, independent of its spelling.
