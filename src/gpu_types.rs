@@ -143,10 +143,12 @@ pub mod binding {
     ];
 }
 
-/// Zeros stored before the first grid value (and at least as many after the last): kernels load
-/// a grid row as an 8-float window of two `vec4`s that may start up to 8 floats before a row
-/// and must stay inside the buffer.
-pub const GRID_PAD: usize = 8;
+/// Zeros stored before the first grid value (and twice as many after the last): the grid
+/// kernels read a row through a window that starts up to ⌈support⌉ ≤ 16 values before the row
+/// (`reconstruction.support` ≤ 16) and, at the last row, ends up to 2·GRID_PAD values past it
+/// (a window of `MLS_GRID_WINDOW` units, at most 33 values, is never clamped for a point inside
+/// the grid: tests/mls.rs `row_windows_hold_at_the_grid_corners_for_every_support`).
+pub const GRID_PAD: usize = 16;
 
 /// Copies of `RenderParams`/`SplatParams` in the parameters' uniform buffer: kernels index the
 /// block by `gl_WorkGroupID.z` (always 0) so that lavapipe cannot inline its values and recompile

@@ -188,7 +188,7 @@ fn a_grid_the_device_cannot_hold_is_refused_from_its_header() {
         &[
             "huge.nrrd",
             "1073741824 uint8 samples",
-            "1073741848 bytes",
+            "1073741872 bytes",
             "maxTexelBufferElements",
             "crop or downsample",
         ],

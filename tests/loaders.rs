@@ -568,6 +568,38 @@ fn large_raw_nrrd_streams_as_it_parses() {
             Err(e) => assert!(matches!(e, DataError::Truncated { .. }), "skip {skip}: {e}"),
         }
     }
+    // A CRLF header whose blank line's "\r" is the last byte of the first MiB, and a `line skip`
+    // line across that boundary: the streamed read must not start the data early.
+    let head = 1usize << 20;
+    let data: Vec<u8> = (0..600_000u32).map(|i| (i % 251) as u8).collect();
+    for skip_line in [false, true] {
+        let fields = format!(
+            "NRRD0004\r\ntype: uint8\r\ndimension: 3\r\nsizes: 600 1000 1\r\nencoding: raw\r\n{}",
+            if skip_line { "line skip: 1\r\n" } else { "" }
+        );
+        let mut b = fields.into_bytes();
+        // A comment that puts the boundary where wanted: in the blank line ("\r" | "\n"),
+        // or inside the skipped line.
+        let tail = if skip_line { 2 + 10 } else { 1 };
+        let fill = head - b.len() - tail;
+        b.extend(b"#");
+        b.extend(std::iter::repeat_n(b'x', fill - 3));
+        b.extend(b"\r\n");
+        if skip_line {
+            b.extend(b"\r\nskipped line crossing the boundary\r\n");
+        } else {
+            b.extend(b"\r\n");
+        }
+        b.extend(&data);
+        let p = file(&format!("stream-boundary-{skip_line}.nrrd"), &b);
+        let streamed = nrrd::load(&p).expect("streamed");
+        let parsed = nrrd::parse(&p, &b).expect("parsed");
+        assert!(
+            streamed == parsed,
+            "line skip {skip_line}: streamed data misplaced"
+        );
+        assert!(streamed.values == data::Values::U8(data.clone()));
+    }
     // Floats over several 8 MiB chunks, non-finite values still refused.
     let dims = [1024, 1024, 3];
     let n = dims.iter().product::<usize>();

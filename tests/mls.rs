@@ -515,3 +515,77 @@ fn integer_grids_match_f32_grids_and_the_cpu() {
         }
     }
 }
+
+/// The grid kernels' row windows hold at the grid's corners for every allowed support and every
+/// storage: points within two cells of the first and of the last grid point, where a window
+/// starts before the first row or is clamped at the buffer's end, against the CPU twin. (The
+/// clamp once used the unpadded length and read the wrong sample there from support 2.5.)
+#[test]
+fn row_windows_hold_at_the_grid_corners_for_every_support() {
+    use vmls::data::Values;
+    let dims = [65usize, 11, 12];
+    let n = dims.iter().product::<usize>();
+    let raw: Vec<f32> = (0..n).map(|i| ((i * 7919) % 251) as f32).collect();
+    let base = Volume {
+        dims,
+        origin: [0.0; 3],
+        spacing: [1.0; 3],
+        values: Values::F32(raw.clone()),
+    };
+    let far = dims.map(|d| (d - 1) as f64);
+    let mut rng = 0x9e37_79b9_7f4a_7c15u64;
+    let mut next = || {
+        rng ^= rng << 13;
+        rng ^= rng >> 7;
+        rng ^= rng << 17;
+        (rng >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut corner_points = Vec::new();
+    for _ in 0..120 {
+        let low = [0, 1, 2].map(|_| 2.0 * next());
+        let high = [0, 1, 2].map(|a| far[a] - 2.0 * next());
+        corner_points.push(low);
+        corner_points.push(high);
+    }
+    for support in [2.5, 6.5, 9.0, 16.0] {
+        for values in [
+            Values::F32(raw.clone()),
+            Values::U16(raw.iter().map(|&v| v as u16).collect()),
+            Values::U8(raw.iter().map(|&v| v as u8).collect()),
+        ] {
+            let storage = values.storage();
+            let r = recon(
+                Basis::Linear,
+                Weight::Wendland,
+                GradientMode::Local,
+                NeighbourMode::Grid,
+                support,
+            );
+            let field = field_of(
+                Volume {
+                    values,
+                    ..base.clone()
+                },
+                r,
+            );
+            // Frame-relative positions, as the kernels take them.
+            let shift = field.frame_origin.to_array();
+            let points: Vec<[f64; 3]> = corner_points
+                .iter()
+                .map(|p| [0, 1, 2].map(|a| p[a] - shift[a]))
+                .collect();
+            let c = compare(&field, &points);
+            let label = format!("{storage:?}, support {support}");
+            assert!(
+                c.terms_mismatch <= 2,
+                "{label}: {} mismatches",
+                c.terms_mismatch
+            );
+            assert!(
+                c.max_value_error <= 1e-5,
+                "{label}: value error {:.2e} > 1e-5",
+                c.max_value_error
+            );
+        }
+    }
+}

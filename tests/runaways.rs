@@ -131,7 +131,7 @@ fn a_grid_the_device_cannot_bind_is_refused_before_it_is_built() {
         .env_remove("VMLS_DEVICE")
         .output()
         .expect("run vmls");
-    assert_fails(&out, &["buffer 'grid'", "2205472096 bytes"], &png);
+    assert_fails(&out, &["buffer 'grid'", "2205472192 bytes"], &png);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
         stderr.contains("heap") || stderr.contains("maxTexelBufferElements"),

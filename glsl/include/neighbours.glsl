@@ -118,7 +118,10 @@ void mls_gather_rows(vec3 x, inout MlsSystem s) {
     // unit holding the first one: vector loads instead of per-sample scalar gathers, which were
     // 3/4 of the kernel's time on lavapipe. Out-of-row values in the window have zero weight;
     // the start is clamped into the buffer for points far outside the grid (all weights 0).
-    int last_unit = (GRID_PAD + dims.x * dims.y * dims.z + GRID_PAD) / GRID_UNIT - MLS_GRID_WINDOW;
+    // The last unit a window may start at: the buffer's padded length (padded_grid_len in
+    // src/render/gpu.rs) in units, less the window.
+    int padded = (dims.x * dims.y * dims.z + 3 * GRID_PAD + 3) / 4 * 4;
+    int last_unit = padded / GRID_UNIT - MLS_GRID_WINDOW;
     int x0 = GRID_PAD + clamp(base.x, -GRID_PAD, dims.x);
     uint count = 0u;
     for (int kk = 0; kk < MLS_GRID_BOX; ++kk) {

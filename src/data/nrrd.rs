@@ -50,7 +50,11 @@ pub fn load(path: &Path) -> Result<Volume, DataError> {
         return parse(path, &head);
     }
     match layout(path, &head) {
-        Ok(l) if l.encoding == Encoding::Raw => stream_raw(path, file, size, &l),
+        // The header and its skipped lines must end inside the head: a line cut at the head's
+        // end (a `line skip` line, or "\r" of a blank "\r\n") would misplace the data.
+        Ok(l) if l.encoding == Encoding::Raw && l.start < head.len() => {
+            stream_raw(path, file, size, &l)
+        }
         // gzip, text, or a header the head does not hold (its error, if any, is the whole
         // file's): read whole.
         _ => {
@@ -65,7 +69,10 @@ pub fn load(path: &Path) -> Result<Volume, DataError> {
 /// when the head does not hold the whole header.
 pub fn grid_shape(path: &Path) -> Result<Option<([u64; 3], Storage)>, DataError> {
     let (_, _, head) = crate::files::read_head(path, super::MAX_FILE_BYTES, HEAD_BYTES as u64)?;
-    Ok(layout(path, &head).ok().map(|l| (l.dims, l.storage())))
+    Ok(layout(path, &head)
+        .ok()
+        .filter(|l| l.start < head.len())
+        .map(|l| (l.dims, l.storage())))
 }
 
 /// Reads the raw payload described by `l` from `file` (of `size` bytes, its first bytes the

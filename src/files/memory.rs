@@ -43,13 +43,23 @@ pub fn available() -> Result<Option<u64>, String> {
     })
 }
 
-/// What this process's memory cgroup still allows (limit − usage), from `/proc/self/cgroup`'s
-/// text and a file reader; `None` without a limit (v1 reports "no limit" as a number near
-/// 2^63) or where the files cannot be read.
+/// What this process's memory cgroup still allows (limit − usage, where usage leaves out the
+/// inactive file cache the kernel reclaims first), from `/proc/self/cgroup`'s text and a file
+/// reader; `None` without a limit (v1 reports "no limit" as a number near 2^63) or where the
+/// files cannot be read. Limits set on parent groups are not looked at.
 fn cgroup_headroom(cgroup: &str, read: impl Fn(&str) -> Option<String>) -> Option<u64> {
     let number = |p: String| read(&p)?.trim().parse::<u64>().ok();
-    let headroom = |limit: Option<u64>, usage: Option<u64>| match (limit, usage) {
-        (Some(l), Some(u)) if l < 1 << 62 => Some(l.saturating_sub(u)),
+    // memory.stat's inactive file cache: "inactive_file N" (v2), "total_inactive_file N" (v1).
+    let cache = |dir: &str, key: &str| {
+        read(&format!("{dir}/memory.stat"))
+            .and_then(|s| {
+                s.lines()
+                    .find_map(|l| l.strip_prefix(key)?.trim().parse::<u64>().ok())
+            })
+            .unwrap_or(0)
+    };
+    let headroom = |limit: Option<u64>, usage: Option<u64>, cache: u64| match (limit, usage) {
+        (Some(l), Some(u)) if l < 1 << 62 => Some(l.saturating_sub(u.saturating_sub(cache))),
         _ => None,
     };
     for line in cgroup.lines() {
@@ -65,6 +75,7 @@ fn cgroup_headroom(cgroup: &str, read: impl Fn(&str) -> Option<String>) -> Optio
             if let Some(found) = headroom(
                 number(format!("{dir}/memory.max")),
                 number(format!("{dir}/memory.current")),
+                cache(&dir, "inactive_file "),
             ) {
                 return Some(found);
             }
@@ -78,6 +89,7 @@ fn cgroup_headroom(cgroup: &str, read: impl Fn(&str) -> Option<String>) -> Optio
                 if let Some(found) = headroom(
                     number(format!("{dir}/memory.limit_in_bytes")),
                     number(format!("{dir}/memory.usage_in_bytes")),
+                    cache(&dir, "total_inactive_file "),
                 ) {
                     return Some(found);
                 }
@@ -127,12 +139,16 @@ mod tests {
                     .map(|(_, text)| text.to_string())
             }
         };
-        // v2: 2 GiB limit, 0.5 GiB used.
+        // v2: 2 GiB limit, 0.5 GiB used of which 0.25 GiB is inactive file cache.
         let v2 = files(&[
             ("/sys/fs/cgroup/job/memory.max", "2147483648\n"),
             ("/sys/fs/cgroup/job/memory.current", "536870912\n"),
+            (
+                "/sys/fs/cgroup/job/memory.stat",
+                "anon 1000\nactive_file 5\ninactive_file 268435456\n",
+            ),
         ]);
-        assert_eq!(super::cgroup_headroom("0::/job\n", v2), Some(1610612736));
+        assert_eq!(super::cgroup_headroom("0::/job\n", v2), Some(1879048192));
         // v2 without a limit.
         let unlimited = files(&[
             ("/sys/fs/cgroup/memory.max", "max\n"),
