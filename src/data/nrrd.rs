@@ -169,10 +169,7 @@ impl Layout {
     /// How the values are kept: text is parsed to f32, binary 8- and 16-bit data stays at its
     /// size.
     fn storage(&self) -> Storage {
-        match self.encoding {
-            Encoding::Text => Storage::F32,
-            _ => self.ty.storage(),
-        }
+        kept_as(self.encoding, self.ty)
     }
 
     /// The volume of `values` decoded from this layout's data, finite values checked.
@@ -187,6 +184,15 @@ impl Layout {
             spacing: self.spacing,
             values,
         })
+    }
+}
+
+/// How values of type `ty` in `encoding` are kept: text is parsed to f32, binary 8- and 16-bit
+/// data stays at its size.
+fn kept_as(encoding: Encoding, ty: Scalar) -> Storage {
+    match encoding {
+        Encoding::Text => Storage::F32,
+        _ => ty.storage(),
     }
 }
 
@@ -411,11 +417,7 @@ fn layout(path: &Path, bytes: &[u8]) -> Result<Layout, DataError> {
         }
     };
     let dims = axes.map(|a| sizes.value[a]);
-    let storage = match encoding {
-        Encoding::Text => Storage::F32,
-        _ => ty.storage(),
-    };
-    let count = checked_grid_count(path, dims, ty.size() as u64, storage)?;
+    let count = checked_grid_count(path, dims, ty.size() as u64, kept_as(encoding, ty))?;
     let big_endian = match (h.big_endian, ty.size(), encoding) {
         (Some(b), _, _) => b,
         (None, 1, _) | (None, _, Encoding::Text) => false,

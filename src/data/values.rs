@@ -192,17 +192,6 @@ impl Values {
             (a, b) => *a = a.iter().chain(b.iter()).collect(),
         }
     }
-
-    /// The values at `indices`, stored the same way.
-    pub fn select(&self, indices: impl Iterator<Item = usize>) -> Values {
-        match self {
-            Values::F32(v) => Values::F32(indices.map(|i| v[i]).collect()),
-            Values::U8(v) => Values::U8(indices.map(|i| v[i]).collect()),
-            Values::I8(v) => Values::I8(indices.map(|i| v[i]).collect()),
-            Values::U16(v) => Values::U16(indices.map(|i| v[i]).collect()),
-            Values::I16(v) => Values::I16(indices.map(|i| v[i]).collect()),
-        }
-    }
 }
 
 #[cfg(test)]
@@ -219,9 +208,5 @@ mod tests {
         assert_eq!(v.get(1), -1.0);
         let u = Values::U8(vec![0, 255]);
         assert_eq!(u.as_f32().as_ref(), &[0.0, 255.0]);
-        assert_eq!(
-            u.select([1, 1, 0].into_iter()),
-            Values::U8(vec![255, 255, 0])
-        );
     }
 }

@@ -47,10 +47,8 @@ fn open_nonblocking(path: &Path) -> std::io::Result<File> {
 }
 
 /// Opens a regular file of at most `limit` bytes for reading (see the module contract): a FIFO,
-/// a device or a directory is refused before any read. Returns the file and its size. Readers
-/// that stream a large payload (NRRD raw data) use it instead of [`read_input`], and check
-/// their own memory.
-pub fn open_input(path: &Path, limit: u64) -> Result<(File, u64), FileError> {
+/// a device or a directory is refused before any read. Returns the file and its size.
+fn open_input(path: &Path, limit: u64) -> Result<(File, u64), FileError> {
     let io = |action, source| FileError::Io {
         path: path.to_path_buf(),
         action,
@@ -84,7 +82,8 @@ pub fn open_input(path: &Path, limit: u64) -> Result<(File, u64), FileError> {
 
 /// [`open_input`], then reads at most `head` bytes from the start: a header, read before the
 /// reader decides how to read the rest. Returns the file (positioned after the head), its size
-/// and the head.
+/// and the head. Readers that stream a large payload (NRRD raw data) use it instead of
+/// [`read_input`], and check their own memory.
 pub fn read_head(path: &Path, limit: u64, head: u64) -> Result<(File, u64, Vec<u8>), FileError> {
     let (mut file, size) = open_input(path, limit)?;
     let bytes = read_up_to(path, &mut file, head.min(size))?;

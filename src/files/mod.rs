@@ -20,7 +20,7 @@ mod input;
 pub mod memory;
 mod output;
 
-pub use input::{FileId, open_input, read_head, read_input};
+pub use input::{FileId, read_head, read_input};
 pub use output::{Outputs, check_not_input, remove_temporaries, write_output};
 
 use std::path::PathBuf;

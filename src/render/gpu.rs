@@ -99,14 +99,9 @@ impl Variant {
         }
     }
 
-    /// The binding the grid is read through: rgba32f texels of f32 samples, or r32ui words of
-    /// 8- and 16-bit ones.
+    /// The binding the grid is read through ([`grid_binding`]).
     pub fn grid_binding(&self) -> u32 {
-        if self.grid == Storage::F32 {
-            binding::GRID
-        } else {
-            binding::GRID_WORDS
-        }
+        grid_binding(self.grid)
     }
 
     /// The ray caster's variant for a field and a ray setup.
@@ -403,12 +398,7 @@ impl GpuField {
     ) -> Result<(), VkError> {
         let bytes = (padded_grid_len(samples) * storage.bytes()) as u64;
         crate::vk::check_size(info, "grid", bytes, BufferUsage::Texel)?;
-        let variant_binding = if storage == Storage::F32 {
-            binding::GRID
-        } else {
-            binding::GRID_WORDS
-        };
-        crate::vk::check_texel_view(info, "grid", bytes, binding::kind(variant_binding))
+        crate::vk::check_texel_view(info, "grid", bytes, binding::kind(grid_binding(storage)))
     }
 
     fn upload_samples(ctx: &Context, field: &Field) -> Result<Self, VkError> {
@@ -430,7 +420,7 @@ impl GpuField {
                     None => None,
                 };
                 Ok(Self {
-                    grid_binding: Variant::of(field).grid_binding(),
+                    grid_binding: grid_binding(values.storage()),
                     grid: Some(grid),
                     resampled: fine.map(|f| f.0),
                     resample_ms,
@@ -606,6 +596,16 @@ pub(super) fn groups_2d(count: u32, group: u32) -> [u32; 3] {
         [65535, groups.div_ceil(65535), 1]
     } else {
         [groups, 1, 1]
+    }
+}
+
+/// The binding a grid of `storage` values is read through: rgba32f texels of f32 samples, or
+/// r32ui words of 8- and 16-bit ones.
+fn grid_binding(storage: Storage) -> u32 {
+    if storage == Storage::F32 {
+        binding::GRID
+    } else {
+        binding::GRID_WORDS
     }
 }
 
