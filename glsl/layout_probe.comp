@@ -17,7 +17,8 @@ layout(std430, binding = BINDING_PROBE) writeonly buffer ProbeBuf {
     IsoSurface iso_surface;
     SplatParams splat_params;
     Splat splat;
-    SlabPush slab_push;
+    ScanPush scan_push;
+    RasterPush raster_push;
 };
 
 vec4 v(float k) { return vec4(k, k + 0.25, k + 0.5, k + 0.75); }
@@ -97,7 +98,7 @@ void main() {
     splat_params.tan_half_fov = 14.0;
     splat_params.ortho_half_height = 15.0;
     splat_params.lateral_y = 16.0;
-    splat_params._pad0 = 17.0;
+    splat_params.zero_extinction = 17.0;
     splat_params.slabs = 18u;
     splat_params.tiles_x = 19u;
     splat_params.kernel_count = 20u;
@@ -111,5 +112,6 @@ void main() {
     splat.bbox = ivec4(6, 7, 8, 9);
     splat.slabs = uvec4(10u, 11u, 12u, 13u);
 
-    slab_push = SlabPush(1u, 2u, 3u, 4u);
+    scan_push = ScanPush(1u, 2u, 3u, 4u);
+    raster_push = RasterPush(5u, 6u, 7u, 8u);
 }

@@ -1,28 +1,38 @@
 #version 450
-// Stage splat_bin (twin: splat_bin in src/splat/accumulate.rs): the scatter of a counting sort
-// by sheet. Each kept splat writes one entry (splat, block) per sheet of its range and per pixel
-// block of its box, at the sheet's offset (prefix sum from the host) plus an atomic cursor.
-// The order inside a sheet does not matter: sheets are sums.
+// Stage splat_bin (twin: splat_bin in src/splat/raster.rs): the scatter of the counting sort
+// by (tile, sheet) bucket. Each kept splat writes (its index, the sheet) once per tile its box
+// (with the apron) meets and per sheet of its range, at its bucket's atomic cursor (which splat_scan
+// set to the bucket's first entry). The order inside a bucket does not matter: a sheet is a
+// sum.
 
 layout(local_size_x = 64) in;
 
 #include "types.glsl"
 
 #include "splat_params.glsl"
-layout(std430, binding = BINDING_SPLATS) readonly buffer SplatBuf { Splat splats[]; };
-layout(std430, binding = BINDING_SLAB_OFFSETS) readonly buffer OffsetBuf { uint slab_offsets[]; };
-layout(std430, binding = BINDING_SLAB_CURSORS) buffer CursorBuf { uint slab_cursors[]; };
-layout(std430, binding = BINDING_SPLAT_LIST) writeonly buffer ListBuf { uvec2 list[]; };
+layout(rgba32ui, binding = BINDING_SPLAT_WORDS) readonly uniform uimageBuffer splat_words;
+layout(std430, binding = BINDING_BUCKET_CURSORS) buffer CursorBuf { uint cursors[]; };
+layout(r32ui, binding = BINDING_SPLAT_LIST) writeonly uniform uimageBuffer list;
+
+#include "splat.glsl"
 
 void main() {
     load_params();
     uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
     for (uint i = gl_GlobalInvocationID.x; i < params.kernel_count; i += stride) {
-        uvec4 r = splats[i].slabs;
-        for (uint k = r.x; k <= r.y; ++k) {
-            uint at = slab_offsets[k] + atomicAdd(slab_cursors[k], r.w);
-            for (uint b = 0u; b < r.w; ++b) {
-                list[at + b] = uvec2(i, b);
+        uvec4 slabs = imageLoad(splat_words, int(7u * i + 6u));
+        if (slabs.x > slabs.y) {
+            continue;
+        }
+        uvec4 r = tile_rect(ivec4(imageLoad(splat_words, int(7u * i + 5u))));
+        for (uint ty = r.y; ty <= r.w; ++ty) {
+            for (uint tx = r.x; tx <= r.z; ++tx) {
+                uint first = (ty * params.tiles_x + tx) * params.slabs;
+                for (uint k = slabs.x; k <= slabs.y; ++k) {
+                    int at = int(2u * atomicAdd(cursors[first + k], 1u));
+                    imageStore(list, at, uvec4(i));
+                    imageStore(list, at + 1, uvec4(k));
+                }
             }
         }
     }

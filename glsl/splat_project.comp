@@ -1,7 +1,8 @@
 #version 450
 // Stage splat_project: f32 twin of src/splat/project.rs ([EWA] §4-6). One invocation per
 // kernel: ray-space Jacobian, footprint, resampling filter, conic, bounding box, depth and
-// sheet range, culling guards; counts each sheet's binned entries.
+// sheet range, culling guards; counts one entry per (image tile, sheet) it touches into the
+// bucket tile * sheets + sheet (splat_scan and splat_bin sort by it).
 // Variant macros: SPLAT_POST (0 pre-shaded, 1 post-shaded), SPLAT_ANTIALIAS (0 ewa, 1 swan,
 // 2 none), SPLAT_ORTHO (0 perspective, 1 orthographic), SPLAT_EXACT (per-pixel ray integrals
 // instead of the affine footprint; perspective only), SPLAT_SURFACES (surface splats of
@@ -13,9 +14,11 @@ layout(local_size_x = 64) in;
 #include "types.glsl"
 
 #include "splat_params.glsl"
-layout(std430, binding = BINDING_SPLAT_KERNELS) readonly buffer KernelBuf { Sample kernels[]; };
-layout(std430, binding = BINDING_SPLATS) writeonly buffer SplatBuf { Splat splats[]; };
-layout(std430, binding = BINDING_SLAB_COUNTS) buffer CountBuf { uint slab_counts[]; };
+layout(rgba32f, binding = BINDING_SPLAT_KERNELS) readonly uniform imageBuffer kernel_texels;
+layout(rgba32f, binding = BINDING_SPLATS) writeonly uniform imageBuffer splat_texels;
+layout(rgba32ui, binding = BINDING_SPLAT_WORDS) writeonly uniform uimageBuffer splat_words;
+#define SPLAT_WRITE
+layout(std430, binding = BINDING_BUCKET_COUNTS) buffer CountBuf { uint bucket_counts[]; };
 layout(std430, binding = BINDING_SPLAT_STATS) buffer StatsBuf { uint stats[]; };
 
 #include "splat.glsl"
@@ -253,12 +256,17 @@ Splat project(Sample k) {
     if (bbox.x > bbox.z || bbox.y > bbox.w || last < 0.0 || first >= float(params.slabs)) {
         return culled(CULL_OUTSIDE);
     }
-    uint bx = uint(bbox.z - bbox.x) / uint(SPLAT_BLOCK) + 1u;
-    uint by = uint(bbox.w - bbox.y) / uint(SPLAT_BLOCK) + 1u;
+    uvec4 rect = tile_rect(bbox);
+    uint tiles = (rect.z - rect.x + 1u) * (rect.w - rect.y + 1u);
     uint s0 = uint(max(first, 0.0));
     uint s1 = uint(min(last, float(params.slabs - 1u)));
+#if SPLAT_SPLIT == 0
+    // Whole kernels go to the sheet of their centre.
+    s0 = uint(clamp(floor((t - slab0) / slab), 0.0, float(params.slabs - 1u)));
+    s1 = s0;
+#endif
     // splat_bin writes a kernel's entries in one invocation: bounded (src/splat/mod.rs).
-    if (float(s1 - s0 + 1u) * float(bx * by) > float(SPLAT_MAX_KERNEL_ENTRIES)) {
+    if (float(s1 - s0 + 1u) * float(tiles) > float(SPLAT_MAX_KERNEL_ENTRIES)) {
         return culled(CULL_OVERSIZED);
     }
     Splat s;
@@ -275,7 +283,7 @@ Splat project(Sample k) {
 #endif
     s.color = vec4(color, opacity);
     s.bbox = bbox;
-    s.slabs = uvec4(s0, s1, bx, bx * by);
+    s.slabs = uvec4(s0, s1, tiles, (s1 - s0 + 1u) * tiles);
     return s;
 }
 
@@ -284,10 +292,23 @@ void main() {
     uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
     for (uint i = gl_GlobalInvocationID.x; i < params.kernel_count; i += stride) {
         atomicAdd(stats[0], 1u);
-        Splat s = project(kernels[i]);
-        splats[i] = s;
-        for (uint k = s.slabs.x; k <= s.slabs.y; ++k) {
-            atomicAdd(slab_counts[k], s.slabs.w);
+        Sample k;
+        k.pos_value = imageLoad(kernel_texels, int(3u * i));
+        k.metric = imageLoad(kernel_texels, int(3u * i + 1u));
+        k.metric_off = imageLoad(kernel_texels, int(3u * i + 2u));
+        Splat s = project(k);
+        store_splat(i, s);
+        if (s.slabs.x > s.slabs.y) {
+            continue;
+        }
+        uvec4 r = tile_rect(s.bbox);
+        for (uint ty = r.y; ty <= r.w; ++ty) {
+            for (uint tx = r.x; tx <= r.z; ++tx) {
+                uint first = (ty * params.tiles_x + tx) * params.slabs;
+                for (uint k = s.slabs.x; k <= s.slabs.y; ++k) {
+                    atomicAdd(bucket_counts[first + k], 1u);
+                }
+            }
         }
     }
 }

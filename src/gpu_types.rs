@@ -44,22 +44,28 @@ pub mod binding {
     pub const HULL_NODES: u32 = 14;
     /// Hull triangles, three `vec4` vertices each, in BVH leaf order (read-only).
     pub const HULL_TRIS: u32 = 15;
-    /// Splatting: the kernels, one `Sample` each with its volume in `metric_off.z` (read-only).
+    /// Splatting: the kernels, one `Sample` each with its volume in `metric_off.z`, as three
+    /// rgba32f texels (read-only). Splatting's large buffers are all read and written through
+    /// texel views: bounded by maxTexelBufferElements rather than a storage binding, and read
+    /// by one gather per 8 lanes on llvmpipe where a storage-buffer read is a loop over them.
     pub const SPLAT_KERNELS: u32 = 16;
-    /// Splatting: one `Splat` per kernel (written by splat_project).
+    /// Splatting: one `Splat` per kernel, seven rgba32f texels (written by splat_project; the
+    /// integer texels through SPLAT_WORDS).
     pub const SPLATS: u32 = 17;
-    /// Splatting: entries per sheet (atomic counts of splat_project).
-    pub const SLAB_COUNTS: u32 = 18;
-    /// Splatting: first entry of each sheet in the list (written by the host).
-    pub const SLAB_OFFSETS: u32 = 19;
-    /// Splatting: entries written so far per sheet (atomic cursors of splat_bin).
-    pub const SLAB_CURSORS: u32 = 20;
-    /// Splatting: the binned entries, `uvec2(splat, block)`, sheet after sheet.
+    /// Splatting: entries per (tile, sheet) bucket (atomic counts of splat_project).
+    pub const BUCKET_COUNTS: u32 = 18;
+    /// Splatting: first entry of each bucket in the list, one more for the total (splat_scan).
+    pub const BUCKET_OFFSETS: u32 = 19;
+    /// Splatting: entries written so far per bucket (atomic cursors of splat_bin).
+    pub const BUCKET_CURSORS: u32 = 20;
+    /// Splatting: the sorted entries, one splat index each, bucket after bucket (`r32ui`
+    /// texels).
     pub const SPLAT_LIST: u32 = 21;
-    /// Splatting: sheet buffers (f32 bits in `uint`s, added to by compare-and-swap).
-    pub const SHEETS: u32 = 22;
-    /// Splatting: one `uint` per occlusion tile, 1 when every pixel in it is opaque.
-    pub const OCCLUSION: u32 = 23;
+    /// Splatting: splat_scan's block sums.
+    pub const SCAN_SUMS: u32 = 22;
+    /// Splatting: the same buffer as SPLATS through an `rgba32ui` view, for the `Splat`s'
+    /// integer texels (a float view could flush their bits as denormals).
+    pub const SPLAT_WORDS: u32 = 23;
     /// Splatting: `SplatCounts` counters (atomic).
     pub const SPLAT_STATS: u32 = 24;
     /// Post-shaded splatting over a hull: each pixel's inside segments, `SPLAT_SEGMENTS` ×
@@ -86,6 +92,8 @@ pub mod binding {
     /// The grid of 8- or 16-bit samples, kept at their size (`data::Values`), as `r32ui`
     /// words (read-only): the twin of GRID for `GRID_BITS` < 32.
     pub const GRID_WORDS: u32 = 34;
+    /// Splatting: BUCKET_OFFSETS as `r32ui` texels, as splat_raster reads them.
+    pub const OFFSET_TEXELS: u32 = 35;
 
     /// How kernels read a binding: the grid and the octree's samples, nodes and references
     /// through texel-buffer views (one AVX2 gather per 8 lanes on llvmpipe instead of a per-lane
@@ -95,16 +103,18 @@ pub mod binding {
         use crate::vk::BindingKind;
         match b {
             SAMPLES | GRID | RESAMPLED | RESAMPLE_TARGET | PREINT | SKIP_BLOCKS
-            | TRANSFER_TEXELS => BindingKind::TexelRgba32Float,
-            NODES => BindingKind::TexelRgba32Uint,
-            INDICES | PROBE_TEXELS | SKIP_TABLE | GRID_WORDS => BindingKind::TexelR32Uint,
+            | TRANSFER_TEXELS | SPLAT_KERNELS | SPLATS => BindingKind::TexelRgba32Float,
+            NODES | SPLAT_WORDS => BindingKind::TexelRgba32Uint,
+            INDICES | PROBE_TEXELS | SKIP_TABLE | GRID_WORDS | SPLAT_LIST | OFFSET_TEXELS => {
+                BindingKind::TexelR32Uint
+            }
             PARAMS => BindingKind::Uniform,
             _ => BindingKind::Storage,
         }
     }
 
     /// Every binding with its macro name.
-    pub const ALL: [(&str, u32); 35] = [
+    pub const ALL: [(&str, u32); 36] = [
         ("BINDING_PARAMS", PARAMS),
         ("BINDING_GRID", GRID),
         ("BINDING_SAMPLES", SAMPLES),
@@ -123,12 +133,12 @@ pub mod binding {
         ("BINDING_HULL_TRIS", HULL_TRIS),
         ("BINDING_SPLAT_KERNELS", SPLAT_KERNELS),
         ("BINDING_SPLATS", SPLATS),
-        ("BINDING_SLAB_COUNTS", SLAB_COUNTS),
-        ("BINDING_SLAB_OFFSETS", SLAB_OFFSETS),
-        ("BINDING_SLAB_CURSORS", SLAB_CURSORS),
+        ("BINDING_BUCKET_COUNTS", BUCKET_COUNTS),
+        ("BINDING_BUCKET_OFFSETS", BUCKET_OFFSETS),
+        ("BINDING_BUCKET_CURSORS", BUCKET_CURSORS),
         ("BINDING_SPLAT_LIST", SPLAT_LIST),
-        ("BINDING_SHEETS", SHEETS),
-        ("BINDING_OCCLUSION", OCCLUSION),
+        ("BINDING_SCAN_SUMS", SCAN_SUMS),
+        ("BINDING_SPLAT_WORDS", SPLAT_WORDS),
         ("BINDING_SPLAT_STATS", SPLAT_STATS),
         ("BINDING_PIXEL_SEGMENTS", PIXEL_SEGMENTS),
         ("BINDING_PROBE_SOURCE", PROBE_SOURCE),
@@ -140,6 +150,7 @@ pub mod binding {
         ("BINDING_SKIP_STATS", SKIP_STATS),
         ("BINDING_TRANSFER_TEXELS", TRANSFER_TEXELS),
         ("BINDING_GRID_WORDS", GRID_WORDS),
+        ("BINDING_OFFSET_TEXELS", OFFSET_TEXELS),
     ];
 }
 
@@ -385,7 +396,9 @@ pub struct SplatParams {
     pub ortho_half_height: f32,
     /// Lateral clamp of u₁/u₂.
     pub lateral_y: f32,
-    pub _pad0: f32,
+    /// Post-shaded: the transfer function's extinction at value 0 (0: sheets holding no value
+    /// composite nothing, and splat_raster skips them).
+    pub zero_extinction: f32,
     /// Sheets in the frame.
     pub slabs: u32,
     /// Occlusion tiles per image row.
@@ -419,12 +432,25 @@ pub struct Splat {
 }
 const _: () = assert!(std::mem::size_of::<Splat>() == 112);
 
-/// Push constants of the per-sheet splatting kernels. GLSL twin: `SlabPush`.
+/// Push constants of `splat_scan`. GLSL twin: `ScanPush`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
-pub struct SlabPush {
-    /// The sheet accumulated (splat_accumulate) or just completed (splat_composite).
-    pub slab: u32,
+pub struct ScanPush {
+    /// (tile, sheet) buckets.
+    pub buckets: u32,
+    /// Blocks of `SCAN_BLOCK` buckets.
+    pub blocks: u32,
+    pub _pad: [u32; 2],
+}
+const _: () = assert!(std::mem::size_of::<ScanPush>() == 16);
+
+/// Push constants of `splat_raster`: the frame is rasterized in bands of tile rows, one
+/// submission each. GLSL twin: `RasterPush`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct RasterPush {
+    /// The band's first tile row.
+    pub tile_row: u32,
     pub _pad: [u32; 3],
 }
-const _: () = assert!(std::mem::size_of::<SlabPush>() == 16);
+const _: () = assert!(std::mem::size_of::<RasterPush>() == 16);

@@ -166,7 +166,7 @@ fn sweep_writes_rows_plot_and_caches_the_reference() {
     assert!(truth[0].reference.contains("analytic"), "{:?}", truth[0]);
     assert!(finite(truth[0].rmse) > finite(rows[0].rmse), "{truth:?}");
 
-    // Splatting rows are measured on splat_accumulate against the FMA and atomic ceilings.
+    // Splatting rows are measured on splat_raster against the FMA and streaming ceilings.
     let out4 = d.join("out4");
     let mut args = vec![
         "bench",
@@ -186,15 +186,15 @@ fn sweep_writes_rows_plot_and_caches_the_reference() {
     let splat: Vec<Row> = read_csv(&out4.join("results.csv")).expect("rows");
     let r = &splat[0];
     assert!(
-        r.kernel_ms.contains("splat_accumulate=") && r.evaluations.is_none(),
+        r.kernel_ms.contains("splat_raster=") && r.evaluations.is_none(),
         "{r:?}"
     );
-    let (fma, atomic) = (finite(r.fma_share), finite(r.memory_share));
+    let (fma, stream) = (finite(r.fma_share), finite(r.memory_share));
     assert!(
-        fma > 0.0 && atomic > 0.0 && fma < 10.0 && atomic < 10.0,
+        fma > 0.0 && stream > 0.0 && fma < 10.0 && stream < 10.0,
         "{r:?}"
     );
-    assert_eq!(r.bound_by, if fma >= atomic { "fma" } else { "atomic" });
+    assert_eq!(r.bound_by, if fma >= stream { "fma" } else { "stream" });
 }
 
 #[test]

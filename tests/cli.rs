@@ -456,7 +456,7 @@ fn splatting_from_the_command_line() {
         serde_json::from_str(&std::fs::read_to_string(&st).expect("stats")).expect("json");
     assert_eq!(stats["method"], "splat-post");
     assert_eq!(stats["splat"]["kernels_projected"], 729);
-    assert!(stats["gpu_ms"]["splat_accumulate"].as_f64().expect("ms") > 0.0);
+    assert!(stats["gpu_ms"]["splat_raster"].as_f64().expect("ms") > 0.0);
     assert!(
         stats["variant"]
             .as_str()

@@ -504,12 +504,26 @@ fn the_work_budget_refuses_and_force_lifts_it() {
 fn splatting_checks_its_budget_before_accumulating() {
     let d = dir("splat-budget");
     let png = d.join("x.png");
-    // 764 sheets over 4096² pixels: refused before any work.
+    // 764 sheets over 4096² pixels in 16² tiles: 5·10⁷ (tile, sheet) buckets, past the
+    // counting sort's limit; refused by the key at fault before any work.
+    let buckets = [
+        "render.method=\"splat\"",
+        "camera.width=4096",
+        "camera.height=4096",
+        "splat.slab=0.1",
+    ];
+    refused_quickly(
+        &render_with(&png, &buckets),
+        &["splat.slab", "(tile, sheet) buckets", "splat.tile"],
+        &png,
+    );
+    // In 32² tiles the buckets fit, and the sheets alone are past the work budget.
     let sheets = [
         "render.method=\"splat\"",
         "camera.width=4096",
         "camera.height=4096",
         "splat.slab=0.1",
+        "splat.tile=32",
     ];
     refused_quickly(
         &render_with(&png, &sheets),
@@ -522,8 +536,8 @@ fn splatting_checks_its_budget_before_accumulating() {
         ],
         &png,
     );
-    // 100³ kernels over thin sheets bin some 3.8e8 footprint blocks into a 64² image: known
-    // only after the projection, refused before the accumulation.
+    // 100³ kernels over thin sheets bin some 10⁸ (tile, sheet) footprints into a 64² image:
+    // known only after the projection, refused before the rasterization.
     let blocks = [
         "render.method=\"splat\"",
         "volume.resolution=100",
@@ -533,7 +547,7 @@ fn splatting_checks_its_budget_before_accumulating() {
     ];
     refused_quickly(
         &render_with(&png, &blocks),
-        &["work budget", "binned footprint blocks", "--force"],
+        &["work budget", "binned (tile, sheet) footprints", "--force"],
         &png,
     );
 }

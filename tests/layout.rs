@@ -152,7 +152,7 @@ fn glsl_and_rust_layouts_agree() {
             tan_half_fov: 14.0,
             ortho_half_height: 15.0,
             lateral_y: 16.0,
-            _pad0: 17.0,
+            zero_extinction: 17.0,
             slabs: 18,
             tiles_x: 19,
             kernel_count: 20,
@@ -174,14 +174,24 @@ fn glsl_and_rust_layouts_agree() {
         },
         "Splat"
     );
-    let sp: &SlabPush = take(bytes, &mut at);
+    let sp: &ScanPush = take(bytes, &mut at);
     assert_eq!(
         *sp,
-        SlabPush {
-            slab: 1,
-            _pad: [2, 3, 4]
+        ScanPush {
+            buckets: 1,
+            blocks: 2,
+            _pad: [3, 4]
         },
-        "SlabPush"
+        "ScanPush"
+    );
+    let rp: &RasterPush = take(bytes, &mut at);
+    assert_eq!(
+        *rp,
+        RasterPush {
+            tile_row: 5,
+            _pad: [6, 7, 8]
+        },
+        "RasterPush"
     );
 
     drop(group);

@@ -94,8 +94,8 @@ fn a_stop_request_ends_frames_of_both_methods_and_the_renderer_goes_on() {
     let (ctx, _compiler) = gpu();
     for (extra, tolerance) in [
         (vec![], 0.0f32),
-        // 0.1-spacing sheets: some 300 of them, so several submissions of 64.
-        (vec!["render.method=\"splat\"", "splat.slab=0.1"], 1e-5),
+        // 8² tiles: two bands of tile rows, so three submissions.
+        (vec!["render.method=\"splat\"", "splat.tile=8"], 1e-5),
     ] {
         let s = scene(&extra);
         let field = s.field(|_| {}).expect("field");

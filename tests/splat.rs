@@ -11,8 +11,8 @@ use vmls::render::camera::Projection;
 use vmls::render::renderer::Renderer;
 use vmls::samples::Metric;
 use vmls::splat::Shading;
-use vmls::splat::accumulate::splat_image;
 use vmls::splat::project::{Kernel, splat_footprint, splat_project};
+use vmls::splat::raster::splat_image;
 use vmls::splat::surface::KernelKind;
 
 /// ∫ w·G_V(o + t d − p) dt over the whole line, V = σ²M⁻¹ (P = V⁻¹ = M/σ²).
@@ -228,7 +228,7 @@ fn gpu_splatting_matches_its_cpu_twin_on_a_grid() {
         // (surface splats: 1.1% of updates measured).
         for (what, g, c) in [
             ("evaluated", c.evaluated, k.evaluated),
-            ("updates", c.updates, k.updates),
+            ("contributions", c.contributions, k.contributions),
         ] {
             let rel = (g as f64 - c as f64).abs() / (c as f64).max(1.0);
             assert!(

@@ -11,8 +11,8 @@ use vmls::render::raycast::raycast_image;
 use vmls::render::renderer::Renderer;
 use vmls::render::{Field, RenderError};
 use vmls::scene::Scene;
-use vmls::splat::accumulate::splat_image;
 use vmls::splat::project::{Cull, Kernel, splat_project};
+use vmls::splat::raster::splat_image;
 use vmls::splat::surface::KernelKind;
 use vmls::splat::{Antialias, Shading, SplatSettings, SplatSetup};
 

@@ -4,15 +4,21 @@
 #ifndef VMLS_SPLAT_GLSL
 #define VMLS_SPLAT_GLSL
 
-// SPLAT_BLOCK (pixel blocks per binned entry), SPLAT_TILE (occlusion tiles) and
-// SPLAT_MAX_KERNEL_ENTRIES come from src/splat/mod.rs as macros.
+// SPLAT_TILE (image tile edge), SPLAT_APRON (0, or 1 when post-shaded isosurfaces need
+// neighbours) and SPLAT_MAX_KERNEL_ENTRIES come from src/splat/mod.rs as macros.
+
+// e^x through exp2, which is what lavapipe computes either way; written out so that the
+// scaling is one multiply the compiler can fold.
+float exp_e(float x) {
+    return exp2(x * 1.4426950408889634);
+}
 
 // erfc(x) for x >= 0, Abramowitz & Stegun 7.1.26 (|error| <= 1.5e-7).
 float erfc_pos(float x) {
     float t = 1.0 / (1.0 + 0.3275911 * x);
     float poly = t * (0.254829592 + t * (-0.284496736 + t * (1.421413741
                  + t * (-1.453152027 + t * 1.061405429))));
-    return poly * exp(-x * x);
+    return poly * exp_e(-x * x);
 }
 
 // Phi(zb) - Phi(za) for za <= zb; each branch subtracts tails so f32 keeps its precision.
@@ -40,8 +46,12 @@ float splat_footprint(Splat s, float cutoff, vec2 pixel, float ta, float tb) {
         return 0.0;
     }
     float m = s.footprint0.z + dot(s.footprint2.xy, d);
+#if SPLAT_SPLIT == 1
     float inv = 1.0 / s.footprint0.w;
-    return c.w * exp(-0.5 * q) * phi_between((ta - m) * inv, (tb - m) * inv);
+    return c.w * exp_e(-0.5 * q) * phi_between((ta - m) * inv, (tb - m) * inv);
+#else
+    return c.w * exp_e(-0.5 * q);
+#endif
 #else
     float f = params.forward.w;
     float dx = (pixel.x - params.right.w) / f;
@@ -67,17 +77,55 @@ float splat_footprint(Splat s, float cutoff, vec2 pixel, float ta, float tb) {
     }
     float len = sqrt(1.0 + dx * dx + dy * dy);
     float inv_sqrt_a = inversesqrt(a);
+#if SPLAT_SPLIT == 1
     float m = -b * len / a;
     float inv = 1.0 / (len * inv_sqrt_a);
-    return j1.w * len * inv_sqrt_a * exp(-0.5 * e) * phi_between((ta - m) * inv, (tb - m) * inv);
+    return j1.w * len * inv_sqrt_a * exp_e(-0.5 * e) * phi_between((ta - m) * inv, (tb - m) * inv);
+#else
+    return j1.w * len * inv_sqrt_a * exp_e(-0.5 * e);
+#endif
 #endif
 }
 
-// Inclusive pixel box of block b of a splat's bounding box.
-ivec4 block_box(ivec4 bbox, uint blocks_x, uint b) {
-    int x0 = bbox.x + int(b % blocks_x) * SPLAT_BLOCK;
-    int y0 = bbox.y + int(b / blocks_x) * SPLAT_BLOCK;
-    return ivec4(x0, y0, min(x0 + SPLAT_BLOCK - 1, bbox.z), min(y0 + SPLAT_BLOCK - 1, bbox.w));
+// A Splat is seven texels of the SPLATS buffer: footprint0..3 and color as rgba32f, bbox and
+// slabs as rgba32ui (SPLAT_WORDS, the same buffer). Kernels that read or write splats declare
+// `splat_texels` and `splat_words` (with their access qualifiers) before including this file
+// and define SPLAT_READ or SPLAT_WRITE.
+#ifdef SPLAT_READ
+Splat load_splat(uint i) {
+    int b = int(i) * 7;
+    Splat s;
+    s.footprint0 = imageLoad(splat_texels, b);
+    s.footprint1 = imageLoad(splat_texels, b + 1);
+    s.footprint2 = imageLoad(splat_texels, b + 2);
+    s.footprint3 = imageLoad(splat_texels, b + 3);
+    s.color = imageLoad(splat_texels, b + 4);
+    s.bbox = ivec4(imageLoad(splat_words, b + 5));
+    s.slabs = imageLoad(splat_words, b + 6);
+    return s;
+}
+#endif
+#ifdef SPLAT_WRITE
+void store_splat(uint i, Splat s) {
+    int b = int(i) * 7;
+    imageStore(splat_texels, b, s.footprint0);
+    imageStore(splat_texels, b + 1, s.footprint1);
+    imageStore(splat_texels, b + 2, s.footprint2);
+    imageStore(splat_texels, b + 3, s.footprint3);
+    imageStore(splat_texels, b + 4, s.color);
+    imageStore(splat_words, b + 5, uvec4(s.bbox));
+    imageStore(splat_words, b + 6, s.slabs);
+}
+#endif
+
+// The inclusive tile range (tx0, ty0, tx1, ty1) whose pixels or aprons meet a pixel box
+// (twin: SplatSetup::tile_rect).
+uvec4 tile_rect(ivec4 bbox) {
+    int tiles_y = int((params.height + uint(SPLAT_TILE) - 1u) / uint(SPLAT_TILE));
+    return uvec4(uint(max(bbox.x - SPLAT_APRON, 0) / SPLAT_TILE),
+                 uint(max(bbox.y - SPLAT_APRON, 0) / SPLAT_TILE),
+                 uint(min((bbox.z + SPLAT_APRON) / SPLAT_TILE, int(params.tiles_x) - 1)),
+                 uint(min((bbox.w + SPLAT_APRON) / SPLAT_TILE, tiles_y - 1)));
 }
 
 #endif

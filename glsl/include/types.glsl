@@ -100,7 +100,7 @@ struct SplatParams {
     float tan_half_fov;
     float ortho_half_height;
     float lateral_y;
-    float _pad0;
+    float zero_extinction;
     uint slabs;
     uint tiles_x;
     uint kernel_count;
@@ -117,11 +117,18 @@ struct Splat {
     uvec4 slabs;
 };
 
-struct SlabPush {
-    uint slab;
+struct RasterPush {
+    uint tile_row;
     uint _pad0;
     uint _pad1;
     uint _pad2;
+};
+
+struct ScanPush {
+    uint buckets;
+    uint blocks;
+    uint _pad0;
+    uint _pad1;
 };
 
 #endif

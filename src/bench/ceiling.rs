@@ -20,11 +20,13 @@
 //! - k is measured, not modelled: the mean weighted neighbours of `mls_eval` at random points
 //!   of the domain (`probe::mls_probe`).
 //!
-//! - Splatting rows are measured on `splat_accumulate`, nine tenths of a splatting frame: per
+//! - Splatting rows are measured on `splat_raster`, the main kernel of a splatting frame: per
 //!   pixel whose footprint it evaluates, 110 flops for exact footprints and 65 for affine ones
-//!   (the operations of `splat_footprint`, a transcendental function counted as 10), against
-//!   `probe_fma`; per sheet update one compare-and-swap add, against
-//!   `probe_memory:atomic-add`. Both counts come from the kernel's own counters.
+//!   (the operations of `splat_footprint`, a transcendental function counted as 10), plus per
+//!   entry walked 8 per invocation of the tile (the box test and the loop), against
+//!   `probe_fma`; and per entry walked and per 8-invocation subgroup of the tile one broadcast
+//!   load of the 116 bytes of its index and record, against the streaming bandwidth. Both
+//!   counts come from the kernel's own counters.
 
 use crate::probe::Ceilings;
 use crate::recon::{Basis, GradientMode, ReconMethod};
@@ -120,16 +122,22 @@ pub fn footprint_flops(exact: bool) -> f64 {
     if exact { 110.0 } else { 65.0 }
 }
 
-/// (FMA share, atomic share) of a splatting frame's `splat_accumulate`.
+/// (FMA share, broadcast-load share) of a splatting frame's `splat_raster`, whose workgroups
+/// have `group` invocations.
 pub fn splat_shares(
     c: &Ceilings,
     report: &crate::render::renderer::SplatReport,
     exact: bool,
+    group: u32,
 ) -> (f64, f64) {
     let seconds = report.stage_ms[2] * 1e-3;
+    let walked = report.counts.accumulated as f64;
+    let flops =
+        report.counts.evaluated as f64 * footprint_flops(exact) + walked * 8.0 * f64::from(group);
+    let bytes = walked * 116.0 * f64::from(group.div_ceil(8));
     (
-        report.counts.evaluated as f64 * footprint_flops(exact) / seconds / (c.fma_gflops * 1e9),
-        report.counts.updates as f64 / seconds / c.atomic_adds_per_s,
+        flops / seconds / (c.fma_gflops * 1e9),
+        bytes / seconds / c.stream_bytes_per_s,
     )
 }
 

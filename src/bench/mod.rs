@@ -243,12 +243,11 @@ pub fn variant_defines(defines: &[(String, String)]) -> Vec<(String, String)> {
 fn kernel_ms(image: &GpuImage) -> Vec<(&'static str, f64)> {
     match &image.splat {
         None => vec![("raycast", image.gpu_ms)],
-        Some(r) => vec![
-            ("splat_project", r.stage_ms[0]),
-            ("splat_bin", r.stage_ms[1]),
-            ("splat_accumulate", r.stage_ms[2]),
-            ("splat_composite", r.stage_ms[3]),
-        ],
+        Some(r) => crate::splat::gpu::STAGES
+            .iter()
+            .copied()
+            .zip(r.stage_ms)
+            .collect(),
     }
 }
 
@@ -464,8 +463,8 @@ pub fn run(
                     .shaders
                     .iter()
                     .any(|(_, d)| d.contains(&("SPLAT_EXACT".into(), "1".into())));
-                let (f, a) = ceiling::splat_shares(c, report, exact);
-                Some((f, a, "atomic"))
+                let (f, a) = ceiling::splat_shares(c, report, exact, report.group_size);
+                Some((f, a, "stream"))
             }
             _ => None,
         };

@@ -59,9 +59,10 @@ pub struct Row {
     /// of [`super::ceiling`] against `probe_fma` and the gather ceiling of its loads
     /// (`probe_memory:coherent-texel-gather`, or `march-texel-gather` for the fast path),
     /// measured in the same run.
-    /// Splatting rows: `splat_accumulate`'s shares of the FMA and atomic-add ceilings.
+    /// Splatting rows: `splat_raster`'s shares of the FMA ceiling and of the streaming
+    /// bandwidth (its broadcast record loads).
     /// `bound_by` names the larger (`fma`, `gather`, `texel-gather`, `march-texel-gather`,
-    /// `atomic`); all three are
+    /// `stream`); all three are
     /// empty when the run skipped the ceilings.
     /// These three columns may be missing from imported files (rows written before them).
     #[serde(default)]

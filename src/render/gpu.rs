@@ -632,6 +632,8 @@ mod tests {
             max_workgroup_count: [65535; 3],
             max_heap_bytes: 1 << 31,
             timestamp_period_ns: Some(1.0),
+            subgroup_size: 8,
+            subgroup_ops: true,
         }
     }
 

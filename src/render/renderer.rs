@@ -54,11 +54,14 @@ pub struct GpuImage {
 #[derive(Debug, Clone, PartialEq)]
 pub struct SplatReport {
     pub counts: SplatCounts,
-    /// GPU ms of splat_project, splat_bin, splat_accumulate (all sheets), splat_composite.
+    /// GPU ms of `crate::splat::gpu::STAGES`.
     pub stage_ms: [f64; 4],
     /// Sheets in the frame and their thickness in world units.
     pub slabs: u32,
     pub slab: f64,
+    /// Image tile edge in pixels, and invocations per `splat_raster` workgroup.
+    pub tile: u32,
+    pub group_size: u32,
 }
 
 fn check_tables(setup: &RaySetup, tables: Option<&PreintegrationTables>) -> Result<(), VkError> {
@@ -403,7 +406,7 @@ impl Renderer {
         let Some(kernels) = self.splat_kernels.as_ref() else {
             return Err(VkError::Usage("splat kernels missing".into()).into());
         };
-        let variant = SplatVariant::of(&setup);
+        let variant = SplatVariant::of(&setup, self.ctx.info());
         let cached = self
             .splat_pipelines
             .iter()
@@ -461,6 +464,8 @@ impl Renderer {
                     stage_ms: image.stage_ms,
                     slabs: setup.slabs,
                     slab: setup.slab,
+                    tile: setup.settings.tile,
+                    group_size: setup.group_size(),
                 }),
                 skip: None,
             },

@@ -13,6 +13,8 @@ pub(super) const KEYS: &[&str] = &[
     "occlusion",
     "surface",
     "footprint",
+    "tile",
+    "split",
 ];
 
 /// Reads `[splat]`; every key is optional.
@@ -34,6 +36,12 @@ pub(super) fn parse(sec: &Section<'_>) -> Result<SplatSettings, SceneError> {
         occlusion: flag(sec, "occlusion", d.occlusion)?,
         surface: flag(sec, "surface", d.surface)?,
         exact: sec.choice("footprint", d.exact, &[("exact", true), ("affine", false)])?,
+        split: flag(sec, "split", d.split)?,
+        tile: match sec.get("tile") {
+            None => d.tile,
+            Some(Value::Integer(t)) if [8, 16, 32].contains(t) => *t as u32,
+            Some(v) => return Err(sec.err("tile", "8, 16 or 32 (pixels)", v)),
+        },
     })
 }
 

@@ -1,17 +1,16 @@
 //! Driving the splatting kernels (`glsl/splat_*.comp`): uploads, frame buffers, the variant of
 //! a setup, and one frame.
 //!
-//! A frame is two submissions. The first clears the counters and runs `splat_project`; the host
-//! reads one count per sheet back, turns them into offsets (a prefix sum over at most
-//! `MAX_SLABS` numbers), sizes the entry list and writes one indirect dispatch per sheet. The
-//! second runs `splat_bin`, then per sheet front to back an indirect `splat_accumulate` and a
-//! `splat_composite` (post-shaded: one more composite for the last sheet), in submissions of
-//! at most `SLABS_PER_SUBMISSION` sheets so that every dispatch is timed and a stop request
-//! ([`FrameControl::stop`]) ends the frame within one submission.
+//! A frame is a few submissions. The first clears the counters and runs `splat_project`
+//! (which counts the (tile, sheet) buckets) and the three levels of `splat_scan`; the host
+//! reads one number back, the total of entries, to check the work budget and size the entry
+//! list. The second runs `splat_bin`; then `splat_raster` runs in bands of tile rows, one
+//! submission each, so that every band is timed and a stop request ([`FrameControl::stop`])
+//! ends the frame within one band.
 
 use super::surface::KernelKind;
-use super::{Antialias, Shading, SplatCounts, SplatSetup, TILE};
-use crate::gpu_types::{SlabPush, Splat, SplatParams, binding, params_copies};
+use super::{Antialias, SCAN_BLOCK, Shading, SplatCounts, SplatSetup};
+use crate::gpu_types::{RasterPush, ScanPush, Splat, SplatParams, binding, params_copies};
 use crate::render::transfer::TransferFunction;
 use crate::render::{Field, RenderError};
 use crate::vk::{
@@ -19,16 +18,16 @@ use crate::vk::{
 };
 use std::sync::atomic::{AtomicBool, Ordering};
 
-/// Sheets per submission of the second pass (two timed dispatches each). Small enough that
-/// Ctrl-C and the progress bar act within a fraction of a long frame (a 4096² frame of 764
-/// sheets is 12 submissions), large enough that the wait for each submission's fence stays
-/// small beside the sheets' work.
-const SLABS_PER_SUBMISSION: u32 = 64;
+/// Bands of tile rows per frame of `splat_raster` (at most): each band is one submission, so
+/// that Ctrl-C and the progress bar act within a fraction of a long frame, while the wait for
+/// each submission's fence stays small beside the band's work.
+const RASTER_BANDS: u32 = 8;
 /// Invocations per workgroup of the one-dimensional kernels.
 const GROUP: u32 = 64;
 /// `SplatCounts` counters in the stats buffer.
-/// Counter slots: 0–8 one word each, 9–10 the low and 11–12 the high words of two 64-bit ones.
-const STATS: usize = 13;
+/// Counter slots: 0–5 and 8 one word each; 64-bit ones: 9 and 10 with high words 11 and 12,
+/// 6 and 7 with high words 13 and 14.
+const STATS: usize = 15;
 
 /// The kernels uploaded once per dataset: one `Sample` each, volume in `metric_off.z`.
 pub struct GpuKernels {
@@ -48,7 +47,7 @@ impl GpuKernels {
         isosurfaces: &[crate::render::shading::Isosurface],
     ) -> Result<Self, VkError> {
         let surfaces = super::surface::surface_kernels(field, isosurfaces);
-        let data: Vec<crate::gpu_types::Sample> = super::accumulate::kernels(field)
+        let data: Vec<crate::gpu_types::Sample> = super::raster::kernels(field)
             .chain(surfaces)
             .map(|k| {
                 let m = k.metric.map(|v| v as f32);
@@ -66,8 +65,11 @@ impl GpuKernels {
             .collect();
         let count = u32::try_from(data.len())
             .map_err(|_| VkError::Usage(format!("{} kernels exceed 2³² − 1", data.len())))?;
+        let bytes: &[u8] = bytemuck::cast_slice(&data);
+        let buffer = Buffer::new(ctx, "splat kernels", bytes.len() as u64, BufferUsage::Texel)?;
+        buffer.write(ctx, bytes)?;
         Ok(Self {
-            buffer: Buffer::from_slice(ctx, "splat kernels", &data)?,
+            buffer,
             count,
             surface_values: isosurfaces.iter().map(|i| i.value).collect(),
         })
@@ -92,26 +94,43 @@ pub struct SplatVariant {
     pub orthographic: bool,
     /// Per-pixel ray integrals (perspective, `splat.footprint = "exact"`).
     pub exact: bool,
+    /// Kernels split among sheets (`splat.split`).
+    pub split: bool,
     pub occlusion: bool,
     pub isosurfaces: bool,
     /// Surface splats (pre-shaded isosurfaces).
     pub surfaces: bool,
     /// Post-shaded over a hull: per-pixel inside segments bound the domain.
     pub hull: bool,
+    /// Image tile edge and apron in pixels.
+    pub tile: u32,
+    pub apron: u32,
+    /// Invocations of a `splat_raster` workgroup: the tile and its apron, rounded up to whole
+    /// subgroups (so that every subgroup is full and may broadcast).
+    pub group: u32,
+    /// The device has the subgroup operations `DeviceInfo::subgroup_ops` names: a subgroup
+    /// stops by itself once its pixels are opaque (a vote, no barrier) and sums its counters.
+    pub subgroup_ops: bool,
 }
 
 impl SplatVariant {
-    /// The variant a setup needs.
-    pub fn of(setup: &SplatSetup) -> Self {
+    /// The variant a setup needs on a device.
+    pub fn of(setup: &SplatSetup, device: &crate::vk::DeviceInfo) -> Self {
+        let subgroup = device.subgroup_size.clamp(1, 128);
         Self {
             shading: setup.shading,
             antialias: setup.settings.antialias,
             orthographic: setup.orthographic(),
             exact: setup.exact_footprints(),
+            split: setup.settings.split,
             occlusion: setup.settings.occlusion,
             isosurfaces: !setup.isosurfaces.is_empty(),
             surfaces: setup.settings.surface && !setup.isosurfaces.is_empty(),
             hull: setup.hull && setup.shading == Shading::Post,
+            tile: setup.settings.tile,
+            apron: setup.apron(),
+            group: setup.group_size().next_multiple_of(subgroup.max(8)),
+            subgroup_ops: device.subgroup_ops,
         }
     }
 
@@ -132,12 +151,16 @@ impl SplatVariant {
             ),
             ("SPLAT_ORTHO".into(), flag(self.orthographic)),
             ("SPLAT_EXACT".into(), flag(self.exact)),
+            ("SPLAT_SPLIT".into(), flag(self.split)),
             ("SPLAT_OCCLUSION".into(), flag(self.occlusion)),
             ("SPLAT_ISOSURFACES".into(), flag(self.isosurfaces)),
             ("SPLAT_SURFACES".into(), flag(self.surfaces)),
             ("SPLAT_HULL".into(), flag(self.hull)),
-            ("SPLAT_BLOCK".into(), super::BLOCK.to_string()),
-            ("SPLAT_TILE".into(), super::TILE.to_string()),
+            ("SPLAT_TILE".into(), self.tile.to_string()),
+            ("SPLAT_APRON".into(), self.apron.to_string()),
+            ("SPLAT_GROUP".into(), self.group.to_string()),
+            ("SPLAT_SUBGROUP_OPS".into(), flag(self.subgroup_ops)),
+            ("SPLAT_SCAN_BLOCK".into(), SCAN_BLOCK.to_string()),
             (
                 "SPLAT_MAX_KERNEL_ENTRIES".into(),
                 super::MAX_KERNEL_ENTRIES.to_string(),
@@ -155,9 +178,9 @@ impl SplatVariant {
         }
         k.extend([
             "splat_project.comp",
+            "splat_scan.comp",
             "splat_bin.comp",
-            "splat_accumulate.comp",
-            "splat_composite.comp",
+            "splat_raster.comp",
         ]);
         k
     }
@@ -165,7 +188,7 @@ impl SplatVariant {
     /// Human-readable name for `--stats`.
     pub fn name(&self) -> String {
         format!(
-            "splat {} {} {}{}{}{}",
+            "splat {} {} {}{}{}{} tile {}{}",
             match self.shading {
                 Shading::Pre => "pre-shaded",
                 Shading::Post => "post-shaded",
@@ -182,6 +205,8 @@ impl SplatVariant {
             },
             if self.exact { " exact-footprints" } else { "" },
             if self.occlusion { " occlusion" } else { "" },
+            if self.split { "" } else { " whole-kernels" },
+            self.tile,
             if self.surfaces {
                 " surface-splats"
             } else if self.isosurfaces {
@@ -193,13 +218,13 @@ impl SplatVariant {
     }
 }
 
-/// The four pipelines of a variant.
+/// The pipelines of a variant.
 pub struct SplatPipelines {
     variant: SplatVariant,
     project: ComputePipeline,
+    scan: [ComputePipeline; 3],
     bin: ComputePipeline,
-    accumulate: ComputePipeline,
-    composite: ComputePipeline,
+    raster: ComputePipeline,
     segments: Option<ComputePipeline>,
 }
 
@@ -213,57 +238,83 @@ impl SplatPipelines {
         use binding::*;
         let defines = variant.defines();
         let post = variant.shading == Shading::Post;
-        let make = |kernel: &str, bindings: &[u32], push: u32| {
-            let spirv = compiler.compile(ShaderSource::File(kernel), &defines)?;
+        let make = |kernel: &str, extra: &[(String, String)], bindings: &[u32], push: u32| {
+            let mut d = defines.clone();
+            d.extend_from_slice(extra);
+            let spirv = compiler.compile(ShaderSource::File(kernel), &d)?;
             let kinds: Vec<(u32, crate::vk::BindingKind)> =
                 bindings.iter().map(|&b| (b, binding::kind(b))).collect();
             ComputePipeline::with_kinds(ctx, kernel, &spirv, &kinds, push)
         };
-        let push = std::mem::size_of::<SlabPush>() as u32;
-        let mut project = vec![PARAMS, SPLAT_KERNELS, SPLATS, SLAB_COUNTS, SPLAT_STATS];
+        let mut project = vec![
+            PARAMS,
+            SPLAT_KERNELS,
+            SPLATS,
+            SPLAT_WORDS,
+            BUCKET_COUNTS,
+            SPLAT_STATS,
+        ];
         if !post {
             project.push(TRANSFER);
         }
         if variant.surfaces {
             project.push(ISO);
         }
-        let mut composite = vec![PARAMS, SHEETS, IMAGE, OCCLUSION];
+        let mut raster = vec![
+            PARAMS,
+            SPLATS,
+            SPLAT_WORDS,
+            OFFSET_TEXELS,
+            SPLAT_LIST,
+            IMAGE,
+            SPLAT_STATS,
+        ];
         if post {
-            composite.push(TRANSFER);
+            raster.extend([TRANSFER, TRANSFER_TEXELS]);
             if variant.isosurfaces {
-                composite.push(ISO);
+                raster.push(ISO);
             }
         }
         if variant.hull {
-            composite.push(PIXEL_SEGMENTS);
+            raster.push(PIXEL_SEGMENTS);
         }
+        let push = |size: usize| size as u32;
+        let scan_push = push(std::mem::size_of::<ScanPush>());
+        let scan = |pass: u32, bindings: &[u32]| {
+            make(
+                "splat_scan.comp",
+                &[("SCAN_PASS".into(), pass.to_string())],
+                bindings,
+                scan_push,
+            )
+        };
         Ok(Self {
             variant: variant.clone(),
-            project: make("splat_project.comp", &project, 0)?,
+            project: make("splat_project.comp", &[], &project, 0)?,
+            scan: [
+                scan(0, &[BUCKET_COUNTS, SCAN_SUMS])?,
+                scan(1, &[BUCKET_COUNTS, SCAN_SUMS, BUCKET_OFFSETS])?,
+                scan(
+                    2,
+                    &[BUCKET_COUNTS, SCAN_SUMS, BUCKET_OFFSETS, BUCKET_CURSORS],
+                )?,
+            ],
             bin: make(
                 "splat_bin.comp",
-                &[PARAMS, SPLATS, SLAB_OFFSETS, SLAB_CURSORS, SPLAT_LIST],
+                &[],
+                &[PARAMS, SPLAT_WORDS, BUCKET_CURSORS, SPLAT_LIST],
                 0,
             )?,
-            accumulate: make(
-                "splat_accumulate.comp",
-                &[
-                    PARAMS,
-                    SPLATS,
-                    SLAB_COUNTS,
-                    SLAB_OFFSETS,
-                    SPLAT_LIST,
-                    SHEETS,
-                    IMAGE,
-                    OCCLUSION,
-                    SPLAT_STATS,
-                ],
-                push,
+            raster: make(
+                "splat_raster.comp",
+                &[],
+                &raster,
+                push(std::mem::size_of::<RasterPush>()),
             )?,
-            composite: make("splat_composite.comp", &composite, push)?,
             segments: if variant.hull {
                 Some(make(
                     "splat_segments.comp",
+                    &[],
                     &[PARAMS, PIXEL_SEGMENTS, SPLAT_STATS, HULL_NODES, HULL_TRIS],
                     0,
                 )?)
@@ -279,32 +330,31 @@ impl SplatPipelines {
     }
 }
 
-/// Frame buffers of one image size and kernel count, for up to `slab_capacity` sheets (a new
-/// camera changes the sheet count: a quarter more is allocated); the entry list grows.
+/// Frame buffers of one image size, tile size and kernel count, for up to `bucket_capacity`
+/// (tile, sheet) buckets (a new camera changes the sheet count: a quarter more is allocated);
+/// the entry list grows.
 pub struct SplatTargets {
-    key: (u32, u32, u32, Shading, bool),
-    slab_capacity: u32,
+    key: (u32, u32, u32, u32, bool),
+    bucket_capacity: u64,
     splats: Buffer,
     counts: Buffer,
     offsets: Buffer,
     cursors: Buffer,
-    args: Buffer,
-    sheets: Buffer,
+    sums: Buffer,
     image: Buffer,
-    occlusion: Buffer,
     stats: Buffer,
     list: Option<Buffer>,
     segments: Option<Buffer>,
 }
 
 impl SplatTargets {
-    fn key(setup: &SplatSetup, kernels: &GpuKernels) -> (u32, u32, u32, Shading, bool) {
+    fn key(setup: &SplatSetup, kernels: &GpuKernels) -> (u32, u32, u32, u32, bool) {
         (
             setup.camera.width,
             setup.camera.height,
             kernels.count,
-            setup.shading,
-            SplatVariant::of(setup).surfaces,
+            setup.settings.tile,
+            setup.hull && setup.shading == Shading::Post,
         )
     }
 
@@ -316,7 +366,7 @@ impl SplatTargets {
 
     /// Whether these buffers fit a setup.
     pub fn fits(&self, setup: &SplatSetup, kernels: &GpuKernels) -> bool {
-        self.key == Self::key(setup, kernels) && setup.slabs <= self.slab_capacity
+        self.key == Self::key(setup, kernels) && setup.buckets() <= self.bucket_capacity
     }
 
     /// Allocates the buffers of a setup.
@@ -326,37 +376,26 @@ impl SplatTargets {
             u64::from(setup.camera.height),
         );
         let pixels = w * h;
-        let capacity = setup
-            .slabs
-            .saturating_add(setup.slabs / 4)
-            .min(super::MAX_SLABS);
-        let slabs = u64::from(capacity);
-        let tiles = w.div_ceil(u64::from(TILE)) * h.div_ceil(u64::from(TILE));
-        let sheet_floats = match setup.shading {
-            Shading::Pre if SplatVariant::of(setup).surfaces => {
-                super::accumulate::SHEET as u64 * pixels
-            }
-            Shading::Pre => 4 * pixels,
-            Shading::Post => super::accumulate::RING as u64 * pixels,
-        };
+        let buckets = (setup.buckets() + setup.buckets() / 4).min(super::MAX_BUCKETS);
+        let blocks = buckets.div_ceil(u64::from(SCAN_BLOCK));
         let storage = |name: &str, bytes: u64| Buffer::new(ctx, name, bytes, BufferUsage::Storage);
         Ok(Self {
             key: Self::key(setup, kernels),
-            slab_capacity: capacity,
-            splats: storage(
+            bucket_capacity: buckets,
+            splats: Buffer::new(
+                ctx,
                 "splats",
-                u64::from(kernels.count) * std::mem::size_of::<Splat>() as u64,
+                u64::from(kernels.count).max(1) * std::mem::size_of::<Splat>() as u64,
+                BufferUsage::Texel,
             )?,
-            counts: storage("sheet entry counts", 4 * slabs)?,
-            offsets: storage("sheet offsets", 4 * slabs)?,
-            cursors: storage("sheet cursors", 4 * slabs)?,
-            args: storage("sheet dispatch arguments", 12 * slabs)?,
-            sheets: storage("sheet buffers", 4 * sheet_floats)?,
+            counts: storage("bucket counts", 4 * buckets)?,
+            offsets: storage("bucket offsets", 4 * (buckets + 1))?,
+            cursors: storage("bucket cursors", 4 * buckets)?,
+            sums: storage("scan block sums", 4 * blocks)?,
             image: storage("splat image", 16 * pixels)?,
-            occlusion: storage("occlusion map", 4 * tiles)?,
             stats: storage("splat counters", 4 * STATS as u64)?,
             list: None,
-            segments: if SplatVariant::of(setup).hull {
+            segments: if setup.hull && setup.shading == Shading::Post {
                 Some(storage(
                     "pixel hull segments",
                     8 * super::PIXEL_SEGMENTS as u64 * pixels,
@@ -374,12 +413,19 @@ pub struct SplatGpuImage {
     /// (C + T·background, 1 − T) per pixel, row 0 at the top.
     pub pixels: Vec<[f32; 4]>,
     pub counts: SplatCounts,
-    /// GPU milliseconds of project, bin (with splat_segments), accumulate (all sheets), composite
-    /// (all sheets).
+    /// GPU milliseconds of `STAGES`.
     pub stage_ms: [f64; 4],
     pub submissions: u32,
     pub variant: String,
 }
+
+/// The names of [`SplatGpuImage::stage_ms`]: `splat_sort` is `splat_scan` and `splat_bin`.
+pub const STAGES: [&str; 4] = [
+    "splat_project",
+    "splat_sort",
+    "splat_raster",
+    "splat_segments",
+];
 
 impl SplatGpuImage {
     /// GPU milliseconds of the whole frame.
@@ -388,7 +434,8 @@ impl SplatGpuImage {
     }
 }
 
-fn params(setup: &SplatSetup, kernels: &GpuKernels, tf_count: u32) -> SplatParams {
+fn params(setup: &SplatSetup, kernels: &GpuKernels, tf: &TransferFunction) -> SplatParams {
+    let tf_count = tf.to_gpu().len() as u32;
     let v = |d: glam::DVec3, w: f64| [d.x as f32, d.y as f32, d.z as f32, w as f32];
     let b = &setup.basis;
     let l = &setup.lighting;
@@ -433,9 +480,9 @@ fn params(setup: &SplatSetup, kernels: &GpuKernels, tf_count: u32) -> SplatParam
         tan_half_fov: tan as f32,
         ortho_half_height: half as f32,
         lateral_y: setup.lateral[1].min(f64::from(f32::MAX)) as f32,
-        _pad0: 0.0,
+        zero_extinction: tf.lookup(0.0).1 as f32,
         slabs: setup.slabs,
-        tiles_x: setup.camera.width.div_ceil(TILE),
+        tiles_x: setup.tiles().0,
         kernel_count: kernels.count,
         iso_count: setup.isosurfaces.len() as u32,
     }
@@ -445,8 +492,8 @@ fn sum_ms(timings: &[crate::vk::DispatchTiming], stage_ms: &mut [f64; 4]) {
     for t in timings {
         let i = match t.label.as_str() {
             "splat_project" => 0,
-            "splat_bin" | "splat_segments" => 1,
-            "splat_accumulate" => 2,
+            "splat_scan" | "splat_bin" => 1,
+            "splat_raster" => 2,
             _ => 3,
         };
         stage_ms[i] += t.gpu_ms.unwrap_or(0.0);
@@ -492,21 +539,30 @@ pub fn splat_frame(
         return Err(VkError::Usage("splat frame buffers do not fit the setup".into()).into());
     }
     let gpu_tf = tf.to_gpu();
-    let p = params(setup, kernels, gpu_tf.len() as u32);
+    let p = params(setup, kernels, tf);
     let params_buf = Buffer::from_slice(ctx, "splat params", &params_copies(p))?;
     let tf_buf = Buffer::from_slice(ctx, "transfer function", &gpu_tf)?;
     let isos = crate::render::renderer::iso_buffer_data(&setup.isosurfaces);
     let iso_buf = Buffer::from_slice(ctx, "isosurfaces", &isos)?;
     let mut stage_ms = [0.0; 4];
     let groups = kernels.count.div_ceil(GROUP).clamp(1, 65_535);
+    let buckets = setup.buckets();
+    let blocks = buckets.div_ceil(u64::from(SCAN_BLOCK)) as u32;
+    let scan_push = ScanPush {
+        buckets: buckets as u32,
+        blocks,
+        _pad: [0; 2],
+    };
+    let (tiles_x, tiles_y) = setup.tiles();
 
-    // Pass 1: project and count.
+    // Pass 1: project and count, then the scan of the bucket counts.
     let t = &*targets;
     let mut project_bind = vec![
         (binding::PARAMS, &params_buf),
         (binding::SPLAT_KERNELS, &kernels.buffer),
         (binding::SPLATS, &t.splats),
-        (binding::SLAB_COUNTS, &t.counts),
+        (binding::SPLAT_WORDS, &t.splats),
+        (binding::BUCKET_COUNTS, &t.counts),
         (binding::SPLAT_STATS, &t.stats),
     ];
     if setup.shading == Shading::Pre {
@@ -516,10 +572,34 @@ pub fn splat_frame(
         project_bind.push((binding::ISO, &iso_buf));
     }
     let group = BindGroup::new(ctx, &pipelines.project, &project_bind)?;
-    let tiles = [
-        setup.camera.width.div_ceil(TILE),
-        setup.camera.height.div_ceil(TILE),
-        1,
+    let scan = [
+        BindGroup::new(
+            ctx,
+            &pipelines.scan[0],
+            &[
+                (binding::BUCKET_COUNTS, &t.counts),
+                (binding::SCAN_SUMS, &t.sums),
+            ],
+        )?,
+        BindGroup::new(
+            ctx,
+            &pipelines.scan[1],
+            &[
+                (binding::BUCKET_COUNTS, &t.counts),
+                (binding::SCAN_SUMS, &t.sums),
+                (binding::BUCKET_OFFSETS, &t.offsets),
+            ],
+        )?,
+        BindGroup::new(
+            ctx,
+            &pipelines.scan[2],
+            &[
+                (binding::BUCKET_COUNTS, &t.counts),
+                (binding::SCAN_SUMS, &t.sums),
+                (binding::BUCKET_OFFSETS, &t.offsets),
+                (binding::BUCKET_CURSORS, &t.cursors),
+            ],
+        )?,
     ];
     let segments = match &pipelines.segments {
         Some(p) => {
@@ -533,11 +613,16 @@ pub fn splat_frame(
         }
         None => None,
     };
+    let pixel_groups = [
+        setup.camera.width.div_ceil(8),
+        setup.camera.height.div_ceil(8),
+        1,
+    ];
     let timings = ctx.submit(|rec| {
         rec.fill(&t.counts, 0);
         rec.fill(&t.stats, 0);
         if let Some((p, g)) = &segments {
-            rec.dispatch(p, g, &[], tiles, "splat_segments")?;
+            rec.dispatch(p, g, &[], pixel_groups, "splat_segments")?;
         }
         rec.dispatch(
             &pipelines.project,
@@ -545,53 +630,66 @@ pub fn splat_frame(
             &[],
             [groups, 1, 1],
             "splat_project",
+        )?;
+        let push = bytemuck::bytes_of(&scan_push);
+        rec.dispatch(
+            &pipelines.scan[0],
+            &scan[0],
+            push,
+            [blocks, 1, 1],
+            "splat_scan",
+        )?;
+        rec.dispatch(&pipelines.scan[1], &scan[1], push, [1, 1, 1], "splat_scan")?;
+        rec.dispatch(
+            &pipelines.scan[2],
+            &scan[2],
+            push,
+            [blocks, 1, 1],
+            "splat_scan",
         )
     })?;
-    drop((group, segments));
-    if pipelines.segments.is_some() {
-        let stats: Vec<u32> = t.stats.read(ctx)?;
-        if let Some(&n) = stats.get(5).filter(|&&n| n > 0) {
-            return Err(VkError::Usage(format!(
-                "splatting: the rays of {n} pixels cross the domain's boundary into more than {} \
-                 inside segments; post-shaded splatting keeps {0} per pixel: ray cast this mesh",
-                super::PIXEL_SEGMENTS
-            ))
-            .into());
-        }
-    }
+    drop((group, scan, segments));
     sum_ms(&timings, &mut stage_ms);
+    let band = tiles_y.div_ceil(RASTER_BANDS).max(1);
+    let submissions_planned = 1 + tiles_y.div_ceil(band);
+    (control.progress)(1.0 / f64::from(submissions_planned));
+    let stats: Vec<u32> = t.stats.read(ctx)?;
+    if let Some(&n) = stats
+        .get(5)
+        .filter(|&&n| n > 0 && pipelines.segments.is_some())
+    {
+        return Err(VkError::Usage(format!(
+            "splatting: the rays of {n} pixels cross the domain's boundary into more than {} \
+             inside segments; post-shaded splatting keeps {0} per pixel: ray cast this mesh",
+            super::PIXEL_SEGMENTS
+        ))
+        .into());
+    }
     control.check_stop()?;
-    let oversized = t.stats.read::<u32>(ctx)?.get(8).copied().unwrap_or(0);
+    let oversized = stats.get(8).copied().unwrap_or(0);
     if oversized > 0 {
         return Err(VkError::Usage(format!(
-            "splatting: {oversized} kernels cover more than {} sheet × block entries each (one \
-             invocation writes them); raise splat.slab or lower the image size",
+            "splatting: {oversized} kernels cover more than {} tile × sheet entries each (one \
+             invocation writes them); raise splat.slab or splat.tile, or lower the image size",
             super::MAX_KERNEL_ENTRIES
         ))
         .into());
     }
-    let counts: Vec<u32> = t.counts.read(ctx)?;
-    let mut offsets = Vec::with_capacity(counts.len());
-    let mut args = Vec::with_capacity(3 * counts.len());
-    let mut total: u64 = 0;
-    for &c in counts.iter().take(setup.slabs as usize) {
-        offsets.push(total as u32);
-        args.extend([c.div_ceil(GROUP).min(65_535), 1, 1]);
-        total += u64::from(c);
-    }
+    // The one number the host needs: how many entries the sort will write.
+    let total: Vec<u32> = t.offsets.read_range(ctx, buckets as usize, 1)?;
+    let total = u64::from(total.first().copied().unwrap_or(0));
     if let Some(budget) = control.budget {
         setup.check_budget(total, budget)?;
     }
-    let limit = ctx.info().max_storage_buffer_range / 8;
-    if total > limit || total > u64::from(u32::MAX) {
+    // Two r32ui texels per entry: the splat and the sheet.
+    let limit = (ctx.info().max_texel_buffer_elements / 2).min(ctx.info().max_heap_bytes / 8);
+    if total > limit {
         return Err(VkError::Usage(format!(
             "splatting: {total} binned footprints exceed the entry list's limit of {limit} \
-             (maxStorageBufferRange); raise splat.slab or lower the image size"
+             (maxTexelBufferElements); raise splat.slab or splat.tile, or lower the image size"
         ))
         .into());
     }
-    t.offsets.write(ctx, bytemuck::cast_slice(&offsets))?;
-    t.args.write(ctx, bytemuck::cast_slice(&args))?;
     let needed = 8 * total.max(1);
     if targets.list.as_ref().is_none_or(|l| l.size() < needed) {
         targets.list = None;
@@ -600,7 +698,7 @@ pub fn splat_frame(
             ctx,
             "splat entries",
             grown,
-            BufferUsage::Storage,
+            BufferUsage::Texel,
         )?);
     }
     let t = &*targets;
@@ -608,95 +706,65 @@ pub fn splat_frame(
         return Err(VkError::Usage("splat entry list missing".into()).into());
     };
 
-    // Pass 2: bin, then accumulate and composite sheet after sheet.
+    // Pass 2: the scatter, then the tiles in bands of rows.
     let bin = BindGroup::new(
         ctx,
         &pipelines.bin,
         &[
             (binding::PARAMS, &params_buf),
-            (binding::SPLATS, &t.splats),
-            (binding::SLAB_OFFSETS, &t.offsets),
-            (binding::SLAB_CURSORS, &t.cursors),
+            (binding::SPLAT_WORDS, &t.splats),
+            (binding::BUCKET_CURSORS, &t.cursors),
             (binding::SPLAT_LIST, list),
         ],
     )?;
-    let accumulate = BindGroup::new(
-        ctx,
-        &pipelines.accumulate,
-        &[
-            (binding::PARAMS, &params_buf),
-            (binding::SPLATS, &t.splats),
-            (binding::SLAB_COUNTS, &t.counts),
-            (binding::SLAB_OFFSETS, &t.offsets),
-            (binding::SPLAT_LIST, list),
-            (binding::SHEETS, &t.sheets),
-            (binding::IMAGE, &t.image),
-            (binding::OCCLUSION, &t.occlusion),
-            (binding::SPLAT_STATS, &t.stats),
-        ],
-    )?;
-    let mut composite_bind = vec![
+    let mut raster_bind = vec![
         (binding::PARAMS, &params_buf),
-        (binding::SHEETS, &t.sheets),
+        (binding::SPLATS, &t.splats),
+        (binding::SPLAT_WORDS, &t.splats),
+        (binding::OFFSET_TEXELS, &t.offsets),
+        (binding::SPLAT_LIST, list),
         (binding::IMAGE, &t.image),
-        (binding::OCCLUSION, &t.occlusion),
+        (binding::SPLAT_STATS, &t.stats),
     ];
     if setup.shading == Shading::Post {
-        composite_bind.push((binding::TRANSFER, &tf_buf));
+        raster_bind.push((binding::TRANSFER, &tf_buf));
+        raster_bind.push((binding::TRANSFER_TEXELS, &tf_buf));
         if !setup.isosurfaces.is_empty() {
-            composite_bind.push((binding::ISO, &iso_buf));
+            raster_bind.push((binding::ISO, &iso_buf));
         }
     }
     if pipelines.variant.hull {
-        composite_bind.push((binding::PIXEL_SEGMENTS, t.segments()?));
+        raster_bind.push((binding::PIXEL_SEGMENTS, t.segments()?));
     }
-    let composite = BindGroup::new(ctx, &pipelines.composite, &composite_bind)?;
-    let steps = setup.slabs + u32::from(setup.shading == Shading::Post);
+    let raster = BindGroup::new(ctx, &pipelines.raster, &raster_bind)?;
     let mut submissions = 1;
-    let mut k = 0;
-    while k < steps {
-        let end = (k + SLABS_PER_SUBMISSION).min(steps);
-        let first = k == 0;
+    let mut row = 0;
+    while row < tiles_y {
+        let rows = band.min(tiles_y - row);
+        let first = row == 0;
+        let push = RasterPush {
+            tile_row: row,
+            _pad: [0; 3],
+        };
         let timings = ctx.submit(|rec| {
             if first {
-                rec.fill(&t.cursors, 0);
-                rec.fill(&t.sheets, 0);
-                rec.fill(&t.image, 0);
-                rec.fill(&t.occlusion, 0);
                 rec.dispatch(&pipelines.bin, &bin, &[], [groups, 1, 1], "splat_bin")?;
             }
-            for s in k..end {
-                let push = SlabPush {
-                    slab: s,
-                    _pad: [0; 3],
-                };
-                if s < setup.slabs {
-                    rec.dispatch_indirect(
-                        &pipelines.accumulate,
-                        &accumulate,
-                        bytemuck::bytes_of(&push),
-                        &t.args,
-                        12 * u64::from(s),
-                        "splat_accumulate",
-                    )?;
-                }
-                rec.dispatch(
-                    &pipelines.composite,
-                    &composite,
-                    bytemuck::bytes_of(&push),
-                    tiles,
-                    "splat_composite",
-                )?;
-            }
-            Ok(())
+            rec.dispatch(
+                &pipelines.raster,
+                &raster,
+                bytemuck::bytes_of(&push),
+                [tiles_x, rows, 1],
+                "splat_raster",
+            )
         })?;
         sum_ms(&timings, &mut stage_ms);
         submissions += 1;
-        k = end;
-        (control.progress)(f64::from(k) / f64::from(steps));
+        row += rows;
+        (control.progress)(f64::from(submissions) / f64::from(submissions_planned));
         control.check_stop()?;
     }
-    drop((bin, accumulate, composite));
+    drop((bin, raster));
     let image: Vec<[f32; 4]> = t.image.read(ctx)?;
     let stats: Vec<u32> = t.stats.read(ctx)?;
     let bg = setup.background.map(|c| c as f32);
@@ -715,6 +783,8 @@ pub fn splat_frame(
         })
         .collect();
     let s = |i: usize| u64::from(stats.get(i).copied().unwrap_or(0));
+    // splat_raster counts entries once per invocation of the tile's workgroup.
+    let per_group = |n: u64| n / u64::from(pipelines.variant.group);
     Ok(SplatGpuImage {
         pixels,
         counts: SplatCounts {
@@ -724,11 +794,11 @@ pub fn splat_frame(
             culled_degenerate: s(3),
             culled_empty: s(4),
             entries: total,
-            skipped_occluded: s(6),
-            accumulated: s(7),
+            skipped_occluded: per_group(s(6) | s(13) << 32),
+            accumulated: per_group(s(7) | s(14) << 32),
             oversized: s(8),
             evaluated: s(9) | s(11) << 32,
-            updates: s(10) | s(12) << 32,
+            contributions: s(10) | s(12) << 32,
         },
         stage_ms,
         submissions,

@@ -1,27 +1,32 @@
-//! EWA volume splatting ([EWA]), pre-shaded and post-shaded with image-aligned sheet buffers
+//! EWA volume splatting ([EWA]), pre-shaded and post-shaded with image-aligned sheets
 //! ([BLUR]): the second renderer. It reads the same sample set as ray casting.
 //!
 //! Every sample becomes a Gaussian kernel of covariance `V_i = σ² M_i⁻¹` and weight `v_i`
 //! (`recon::gaussian`: the splatted extinction or density is the Gaussian-sum field that
 //! `reconstruction.method = "gaussian"` ray casts, up to where each is cut: the field at ρ = 1,
 //! i.e. 1/σ standard deviations in 3D, a footprint at `splat.cutoff` deviations across the ray
-//! and not along it). A frame runs these stages, each with
-//! an f64 CPU twin here and a GLSL kernel of the same name:
+//! and not along it). A frame runs these stages, each with an f64 CPU twin here and a GLSL
+//! kernel of the same name; its shape is 3D Gaussian splatting's tile rasterizer, with
+//! [BLUR]'s sheets where 3DGS has depth order:
 //! - `splat_setup` (host, [`SplatSetup::new`]): camera frame, focal length in pixels, and the
 //!   sheets: slabs of thickness Δs = `splat.slab` × spacing in the distance t from the eye
 //!   (spherical shells for a perspective camera, planes for an orthographic one), so that every
 //!   pixel's ray is cut at the same t as a ray caster with step Δs would cut it;
 //! - `splat_project` ([`project`]): per kernel, the ray-space Jacobian, footprint, conic,
-//!   resampling filter, bounding box, depth and slab range, with the culling guards;
-//! - `splat_bin`: a counting sort of (kernel, slab, pixel block) entries by slab (counts and
-//!   scatter on the GPU, the prefix sum of one number per slab on the host);
-//! - per slab, front to back: `splat_accumulate` adds each footprint's share of the slab to the
-//!   sheet, and `splat_composite` classifies (post-shaded) or resolves (pre-shaded) the sheet
-//!   and composites it into the image, updating the occlusion map ([`accumulate`]).
-
-pub mod accumulate;
+//!   resampling filter, bounding box, depth and sheet range, with the culling guards; counts
+//!   one entry per (image tile, sheet) the kernel touches into the bucket `tile · sheets +
+//!   sheet`;
+//! - `splat_scan` and `splat_bin` ([`raster::splat_bin`]): a counting sort of the entries by
+//!   bucket, all on the GPU (an exclusive scan of the bucket counts, then a scatter), so that
+//!   each tile's entries lie together, sheet after sheet;
+//! - `splat_raster` ([`raster`]): one workgroup per tile for the whole frame, one invocation
+//!   per pixel. The tile walks its sheets front to back; each sheet's entries are read at an
+//!   index that is the same in every lane (one load, broadcast), accumulated in registers and
+//!   composited when the sheet ends; the tile stops once every pixel in it is opaque, and
+//!   writes each pixel once. No atomics on pixels, no sheet buffers in memory.
 pub mod gpu;
 pub mod project;
+pub mod raster;
 pub mod surface;
 
 use crate::render::camera::{Camera, Projection, ViewBasis};
@@ -29,16 +34,19 @@ use crate::render::shading::{Isosurface, Lighting, MAX_ISOSURFACES};
 use crate::render::{Field, RenderError};
 use glam::DVec3;
 
-/// Pixel blocks of one binned entry are at most this many pixels on a side, so that one
-/// invocation never loops over more than BLOCK² pixels (llvmpipe ends loops after 65 535
-/// iterations, LAVAPIPE.md).
-pub const BLOCK: u32 = 32;
-/// Occlusion-map tiles are this many pixels on a side.
-pub const TILE: u32 = 8;
-/// At most this many (sheet × block) entries per kernel: `splat_bin` writes them in one
-/// invocation's loops, which llvmpipe ends after 65 535 iterations. More is an error naming
-/// `splat.slab` and the image size, never a silently truncated list.
+/// Image tile sizes (`splat.tile`): one workgroup rasterizes one tile, one invocation per
+/// pixel (plus a one-pixel apron when post-shaded isosurfaces need gradients; 32² + apron
+/// would pass the 1024 invocations a workgroup may have on lavapipe).
+pub const TILE_SIZES: [u32; 3] = [8, 16, 32];
+/// At most this many (tile × sheet) entries per kernel: `splat_project` counts and `splat_bin`
+/// writes them in one invocation's loops, which llvmpipe ends after 65 535 iterations. More is
+/// an error naming `splat.slab` and the image size, never a silently truncated list.
 pub const MAX_KERNEL_ENTRIES: u64 = 60_000;
+/// At most this many (tile × sheet) buckets: the scan's second level is one workgroup of
+/// `SCAN_GROUP` invocations, each summing at most 64 blocks of `SCAN_BLOCK` buckets.
+pub const MAX_BUCKETS: u64 = 1 << 24;
+/// Buckets per workgroup of `splat_scan`'s first and third levels.
+pub const SCAN_BLOCK: u32 = 1024;
 /// At most this many sheets per frame.
 pub const MAX_SLABS: u32 = 16_384;
 /// 3DGS's guard: the Jacobian's lateral terms are evaluated at most this far outside the view
@@ -80,7 +88,8 @@ pub struct SplatSettings {
     /// Variance of the low-pass filter in px² (1: the identity of [EWA] §6).
     pub lowpass: f64,
     pub antialias: Antialias,
-    /// Early splat elimination with the occlusion map.
+    /// Early splat elimination: a tile stops walking its sheets once every pixel in it is
+    /// opaque.
     pub occlusion: bool,
     /// Isosurfaces as surface splats (pre-shaded splatting).
     pub surface: bool,
@@ -88,6 +97,14 @@ pub struct SplatSettings {
     /// (about half the accumulation time; errs where kernels are large or thin for their
     /// distance).
     pub exact: bool,
+    /// Image tile edge in pixels (one of `TILE_SIZES`).
+    pub tile: u32,
+    /// Each kernel split among the sheets its depth range crosses, by the share of its line
+    /// integral in each ([BLUR]'s sheets; exact emission–absorption as the sheets thin), or
+    /// (pre-shaded only) composited whole in the sheet of its centre: [EWA]'s image model
+    /// and 3D Gaussian splatting's, one footprint per kernel and tile instead of one per
+    /// sheet it crosses.
+    pub split: bool,
 }
 
 impl Default for SplatSettings {
@@ -100,6 +117,8 @@ impl Default for SplatSettings {
             occlusion: true,
             surface: false,
             exact: true,
+            tile: 16,
+            split: true,
         }
     }
 }
@@ -246,6 +265,39 @@ impl SplatSetup {
                 ),
             });
         }
+        if shading == Shading::Post && !settings.split {
+            return Err(RenderError::Setting {
+                key: "splat.split",
+                message: "post-shaded splatting classifies sheets of the field, so every kernel \
+                          is split among the sheets it crosses: splat.split = false belongs to \
+                          pre-shaded splatting (render.method = \"splat\")"
+                    .into(),
+            });
+        }
+        if !TILE_SIZES.contains(&settings.tile)
+            || (settings.tile == 32 && shading == Shading::Post && !isosurfaces.is_empty())
+        {
+            return Err(RenderError::Setting {
+                key: "splat.tile",
+                message: format!(
+                    "{}: one of 8, 16 or 32 pixels (post-shaded isosurfaces: 8 or 16, since a \
+                     tile and its one-pixel apron are one workgroup of at most 1024 invocations)",
+                    settings.tile
+                ),
+            });
+        }
+        let tiles = u64::from(camera.width.div_ceil(settings.tile))
+            * u64::from(camera.height.div_ceil(settings.tile));
+        if tiles * count as u64 > MAX_BUCKETS {
+            return Err(RenderError::Setting {
+                key: "splat.slab",
+                message: format!(
+                    "{tiles} image tiles × {count} sheets are {} (tile, sheet) buckets; at most \
+                     {MAX_BUCKETS}: raise splat.slab or splat.tile, or take a smaller image",
+                    tiles * count as u64
+                ),
+            });
+        }
         Ok(Self {
             shading,
             settings: *settings,
@@ -282,16 +334,15 @@ impl SplatSetup {
         self.settings.exact && !self.orthographic()
     }
 
-    /// An upper bound of a frame's per-pixel evaluations once `splat_bin` counted `entries`
-    /// (kernel, sheet, block) entries: each entry evaluates at most BLOCK² footprint pixels in
-    /// `splat_accumulate`, and every sheet (plus the closing step of post-shading) clears and
-    /// composites every pixel. Footprint evaluations and MLS evaluations cost about the same
-    /// on lavapipe (BENCHMARKS.md: 0.13–0.35 M footprints/s of 100–150 pixels against 30 M
-    /// MLS evaluations/s), so both renderers share [`crate::render::WORK_BUDGET`].
+    /// An upper bound of a frame's per-pixel evaluations once `splat_project` counted
+    /// `entries` (kernel, tile, sheet) entries: `splat_raster` evaluates each entry on every
+    /// invocation of its tile's workgroup, and composites every pixel once per sheet (plus the
+    /// closing step of post-shading). Footprint evaluations and MLS evaluations cost about the
+    /// same on lavapipe, so both renderers share [`crate::render::WORK_BUDGET`].
     pub fn work_bound(&self, entries: u64) -> f64 {
         let pixels = f64::from(self.camera.width) * f64::from(self.camera.height);
         let steps = f64::from(self.slabs) + f64::from(u8::from(self.shading == Shading::Post));
-        entries as f64 * f64::from(BLOCK * BLOCK) + steps * pixels
+        entries as f64 * f64::from(self.group_size()) + steps * pixels
     }
 
     /// Refuses a frame whose [`SplatSetup::work_bound`] exceeds `budget`: with `entries` = 0
@@ -307,8 +358,8 @@ impl SplatSetup {
             unit: "footprint-pixel evaluations",
             budget,
             hint: format!(
-                "{} sheets of {} × {} pixels and {entries} binned footprint blocks; raise \
-                 splat.slab or take a smaller image",
+                "{} sheets of {} × {} pixels and {entries} binned (tile, sheet) footprints; \
+                 raise splat.slab or take a smaller image",
                 self.slabs, self.camera.width, self.camera.height
             ),
         })
@@ -319,13 +370,47 @@ impl SplatSetup {
         let a = self.slab0 + f64::from(k) * self.slab;
         (a, a + self.slab)
     }
-}
 
-/// Blocks of at most BLOCK × BLOCK pixels covering a bounding box [x0, x1] × [y0, y1].
-pub fn blocks(bbox: [i32; 4]) -> (u32, u32) {
-    let bx = ((bbox[2] - bbox[0]) as u32 / BLOCK) + 1;
-    let by = ((bbox[3] - bbox[1]) as u32 / BLOCK) + 1;
-    (bx, by)
+    /// The apron of a tile: post-shaded isosurfaces need every pixel's neighbours in the
+    /// sheet for their gradients, so a tile also splats the ring of pixels around it.
+    pub fn apron(&self) -> u32 {
+        u32::from(self.shading == Shading::Post && !self.isosurfaces.is_empty())
+    }
+
+    /// Invocations of one `splat_raster` workgroup: the tile and its apron.
+    pub fn group_size(&self) -> u32 {
+        let e = self.settings.tile + 2 * self.apron();
+        e * e
+    }
+
+    /// Tiles across and down the image.
+    pub fn tiles(&self) -> (u32, u32) {
+        let t = self.settings.tile;
+        (
+            self.camera.width.div_ceil(t),
+            self.camera.height.div_ceil(t),
+        )
+    }
+
+    /// (tile, sheet) buckets of the counting sort.
+    pub fn buckets(&self) -> u64 {
+        let (x, y) = self.tiles();
+        u64::from(x) * u64::from(y) * u64::from(self.slabs)
+    }
+
+    /// The inclusive tile range [tx0, ty0, tx1, ty1] whose pixels or aprons meet a pixel box.
+    pub fn tile_rect(&self, bbox: [i32; 4]) -> [u32; 4] {
+        let t = self.settings.tile as i32;
+        let a = self.apron() as i32;
+        let (tx, ty) = self.tiles();
+        let lo = |v: i32| ((v - a).max(0) / t) as u32;
+        [
+            lo(bbox[0]),
+            lo(bbox[1]),
+            (((bbox[2] + a) / t) as u32).min(tx - 1),
+            (((bbox[3] + a) / t) as u32).min(ty - 1),
+        ]
+    }
 }
 
 /// What a frame did with its kernels (`--stats`).
@@ -341,18 +426,19 @@ pub struct SplatCounts {
     pub culled_degenerate: u64,
     /// Culled: zero weight (transparent or zero-valued).
     pub culled_empty: u64,
-    /// Binned entries (kernel × sheet × pixel block).
+    /// Binned entries (kernel × image tile × sheet).
     pub entries: u64,
-    /// Entries skipped because every pixel they cover was opaque.
+    /// Entries never walked: their tile had stopped, every pixel in it opaque.
     pub skipped_occluded: u64,
-    /// Entries accumulated into a sheet.
+    /// Entries a tile walked (rasterized into its sheet).
     pub accumulated: u64,
     /// Kernels with more than `MAX_KERNEL_ENTRIES` entries (the frame fails).
     pub oversized: u64,
-    /// Pixels whose footprint `splat_accumulate` evaluated.
+    /// Pixels (with apron pixels) whose footprint `splat_raster` evaluated: inside the
+    /// kernel's pixel box and, pre-shaded, not yet opaque.
     pub evaluated: u64,
-    /// Sheet values it added to (one compare-and-swap loop each).
-    pub updates: u64,
+    /// Evaluations that added to a pixel's sheet in registers (footprint ≠ 0).
+    pub contributions: u64,
 }
 
 impl SplatCounts {

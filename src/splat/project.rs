@@ -400,12 +400,21 @@ pub fn splat_project(
     if bbox[0] > bbox[2] || bbox[1] > bbox[3] || last < 0.0 || first >= f64::from(setup.slabs) {
         return Err(Cull::Outside);
     }
-    let slabs = [
-        first.max(0.0) as u32,
-        last.min(f64::from(setup.slabs - 1)) as u32,
-    ];
-    let (bx, by) = super::blocks(bbox);
-    if u64::from(slabs[1] - slabs[0] + 1) * u64::from(bx * by) > super::MAX_KERNEL_ENTRIES {
+    let slabs = if setup.settings.split {
+        [
+            first.max(0.0) as u32,
+            last.min(f64::from(setup.slabs - 1)) as u32,
+        ]
+    } else {
+        // Whole kernels go to the sheet of their centre.
+        let k = ((t - setup.slab0) / setup.slab)
+            .floor()
+            .clamp(0.0, f64::from(setup.slabs - 1)) as u32;
+        [k, k]
+    };
+    let r = setup.tile_rect(bbox);
+    let tiles = u64::from(r[2] - r[0] + 1) * u64::from(r[3] - r[1] + 1);
+    if u64::from(slabs[1] - slabs[0] + 1) * tiles > super::MAX_KERNEL_ENTRIES {
         return Err(Cull::Oversized);
     }
     let x = exact.unwrap_or(Exact {

@@ -48,6 +48,11 @@ pub struct DeviceInfo {
     pub max_heap_bytes: u64,
     /// Nanoseconds per timestamp tick; `None` when the queue has no timestamps.
     pub timestamp_period_ns: Option<f64>,
+    /// Invocations per subgroup, and whether compute shaders have the basic, vote and
+    /// arithmetic subgroup operations (`splat_raster` stops subgroups by vote and sums its
+    /// counters with them).
+    pub subgroup_size: u32,
+    pub subgroup_ops: bool,
 }
 
 /// Handles of a Vulkan device created by the embedding application.
@@ -344,7 +349,10 @@ fn device_info(
     // SAFETY: as above.
     let families = unsafe { instance.get_physical_device_queue_family_properties(physical) };
     let mut driver = vk::PhysicalDeviceDriverProperties::default();
-    let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut driver);
+    let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
+    let mut props2 = vk::PhysicalDeviceProperties2::default()
+        .push_next(&mut driver)
+        .push_next(&mut subgroup);
     // SAFETY: Vulkan 1.1+ query with a valid pNext chain of locals.
     unsafe { instance.get_physical_device_properties2(physical, &mut props2) };
     let driver_name = driver
@@ -378,6 +386,15 @@ fn device_info(
         max_heap_bytes,
         timestamp_period_ns: (valid_bits > 0 && props.limits.timestamp_period > 0.0)
             .then_some(f64::from(props.limits.timestamp_period)),
+        subgroup_size: subgroup.subgroup_size.max(1),
+        subgroup_ops: subgroup
+            .supported_stages
+            .contains(vk::ShaderStageFlags::COMPUTE)
+            && subgroup.supported_operations.contains(
+                vk::SubgroupFeatureFlags::BASIC
+                    | vk::SubgroupFeatureFlags::VOTE
+                    | vk::SubgroupFeatureFlags::ARITHMETIC,
+            ),
     }
 }
 

@@ -11,7 +11,7 @@ use vmls::render::renderer::{GpuImage, Renderer, SplatReport};
 use vmls::samples::Metric;
 use vmls::samples::{SampleSet, SampleSettings};
 use vmls::scene::Scene;
-use vmls::splat::accumulate::splat_image;
+use vmls::splat::raster::splat_image;
 use vmls::splat::{Shading, SplatSetup};
 
 pub fn scene(extra: &[&str]) -> Scene {

@@ -153,12 +153,13 @@ pub fn run_render(
             "host_peak_bytes": vmls::files::memory::peak_resident(),
             "gpu_ms": match &image.splat {
                 None => serde_json::json!({ "raycast": first.gpu_ms }),
-                Some(r) => serde_json::json!({
-                    "splat_project": r.stage_ms[0],
-                    "splat_bin": r.stage_ms[1],
-                    "splat_accumulate": r.stage_ms[2],
-                    "splat_composite": r.stage_ms[3],
-                }),
+                Some(r) => serde_json::Value::Object(
+                    vmls::splat::gpu::STAGES
+                        .iter()
+                        .zip(r.stage_ms)
+                        .map(|(n, ms)| (n.to_string(), ms.into()))
+                        .collect(),
+                ),
             },
             "splat": image.splat.as_ref().map(|r| serde_json::json!({
                 "sheets": r.slabs,
@@ -169,14 +170,16 @@ pub fn run_render(
                 "kernels_culled_degenerate": r.counts.culled_degenerate,
                 "kernels_culled_empty": r.counts.culled_empty,
                 "kernels_kept": r.counts.kept(),
+                "tile": r.tile,
                 "footprints_binned": r.counts.entries,
                 "footprints_skipped_by_occlusion": r.counts.skipped_occluded,
                 "footprints_accumulated": r.counts.accumulated,
+                "footprint_pixels_evaluated": r.counts.evaluated,
+                "footprint_pixels_contributing": r.counts.contributions,
                 "gpu_ms_per_kernel": {
                     "splat_project": r.stage_ms[0] / r.counts.projected.max(1) as f64,
-                    "splat_bin": r.stage_ms[1] / r.counts.kept().max(1) as f64,
-                    "splat_accumulate": r.stage_ms[2] / r.counts.kept().max(1) as f64,
-                    "splat_composite": r.stage_ms[3] / r.counts.kept().max(1) as f64,
+                    "splat_sort": r.stage_ms[1] / r.counts.kept().max(1) as f64,
+                    "splat_raster": r.stage_ms[2] / r.counts.kept().max(1) as f64,
                 },
             })),
             "skip": image.skip.as_ref().map(skip_json),
@@ -239,7 +242,7 @@ pub fn run_render_cpu(
     let (pixels, splat, skip): (Vec<[f64; 4]>, _, _) = match scene.render.method.splat_shading() {
         Some(shading) => {
             let setup = scene.splat_setup(shading, &field)?;
-            let image = vmls::splat::accumulate::splat_image(&setup, &field, &scene.transfer);
+            let image = vmls::splat::raster::splat_image(&setup, &field, &scene.transfer);
             (image.pixels, Some(image.counts), None)
         }
         None => {
