@@ -28,7 +28,8 @@ void main() {
         for (uint ty = r.y; ty <= r.w; ++ty) {
             for (uint tx = r.x; tx <= r.z; ++tx) {
                 uint first = (ty * params.tiles_x + tx) * params.slabs;
-                for (uint k = slabs.x; k <= slabs.y; ++k) {
+                // Ring registers: one entry per SPLAT_RING sheets, at the first of them.
+                for (uint k = slabs.x; k <= slabs.y; k += uint(max(SPLAT_RING, 1))) {
                     int at = int(2u * atomicAdd(cursors[first + k], 1u));
                     imageStore(list, at, uvec4(i));
                     imageStore(list, at + 1, uvec4(k));

@@ -42,6 +42,13 @@ const uint CULL_OVERSIZED = 8u;
 
 const float MIN_VARIANCE = 1e-6;
 
+// A kernel's entries start every SHEET_STEP sheets of its range (each covers that many).
+#if SPLAT_RING > 0
+const uint SHEET_STEP = uint(SPLAT_RING);
+#else
+const uint SHEET_STEP = 1u;
+#endif
+
 Splat culled(uint reason) {
     atomicAdd(stats[reason], 1u);
     Splat s;
@@ -265,8 +272,14 @@ Splat project(Sample k) {
     s0 = uint(clamp(floor((t - slab0) / slab), 0.0, float(params.slabs - 1u)));
     s1 = s0;
 #endif
+#if SPLAT_RING > 0
+    // Ring registers: one entry per tile and per SPLAT_RING sheets.
+    uint per_tile = (s1 - s0) / uint(SPLAT_RING) + 1u;
+#else
+    uint per_tile = s1 - s0 + 1u;
+#endif
     // splat_bin writes a kernel's entries in one invocation: bounded (src/splat/mod.rs).
-    if (float(s1 - s0 + 1u) * float(tiles) > float(SPLAT_MAX_KERNEL_ENTRIES)) {
+    if (float(per_tile) * float(tiles) > float(SPLAT_MAX_KERNEL_ENTRIES)) {
         return culled(CULL_OVERSIZED);
     }
     Splat s;
@@ -305,7 +318,7 @@ void main() {
         for (uint ty = r.y; ty <= r.w; ++ty) {
             for (uint tx = r.x; tx <= r.z; ++tx) {
                 uint first = (ty * params.tiles_x + tx) * params.slabs;
-                for (uint k = s.slabs.x; k <= s.slabs.y; ++k) {
+                for (uint k = s.slabs.x; k <= s.slabs.y; k += SHEET_STEP) {
                     atomicAdd(bucket_counts[first + k], 1u);
                 }
             }

@@ -1,12 +1,13 @@
 #version 450
 // Stage splat_raster (twin: splat_raster in src/splat/raster.rs): one workgroup per image
-// tile for the whole frame, one invocation per pixel of the tile and of its apron
-// (SPLAT_APRON pixels wide: post-shaded isosurfaces read their neighbours' sheets). The tile
+// tile for the whole frame, one invocation per column of SPLAT_PIXELS pixels of the tile and
+// of its apron (SPLAT_APRON pixels wide: post-shaded isosurfaces read their neighbours'
+// sheets; then one pixel per invocation). The tile
 // walks its entries, (splat, sheet) pairs sorted by sheet (list[offsets[b] .. offsets[b']]
 // with b = tile * sheets, b' = b + sheets), at an index that is the same in every lane, so
-// each record is one branch-free gather of one address per 8 lanes on lavapipe. Each lane adds
-// its pixel's footprint to its sheet in registers; when the sheet ends it composites in
-// registers:
+// each record is branch-free gathers of one address per 8 lanes on lavapipe, shared by the
+// invocation's SPLAT_PIXELS pixels (the gathers cost more than a footprint). Each pixel adds
+// its footprint to its sheet in registers; when the sheet ends it composites in registers:
 // - pre-shaded: surface splats first (coverage min(W, 1)), then alpha = 1 - e^-D,
 //   C += T (E/D) alpha;
 // - post-shaded ([BLUR]): one sheet behind; the mean value is classified over the part of the
@@ -29,6 +30,8 @@
 #endif
 
 #define EDGE (SPLAT_TILE + 2 * SPLAT_APRON)
+// Rows of invocations: each covers SPLAT_PIXELS pixel rows.
+#define ROWS (EDGE / SPLAT_PIXELS)
 layout(local_size_x = SPLAT_GROUP) in;
 
 #include "types.glsl"
@@ -132,6 +135,279 @@ float slab_overlap(int j, float t_in, float t_out, uint p) {
 }
 #endif
 
+// Everything a pixel keeps in registers.
+struct Pixel {
+    int x;
+    int y;
+    // Inside the image, and a pixel of the tile (not of its apron).
+    bool inside;
+    bool own;
+    uint p;
+    // Premultiplied colour and opacity.
+    vec4 acc;
+#if SPLAT_POST == 0
+    // The sheet's optical depth and emission (D, E.rgb), and its surface splats' W, sum q*alpha,
+    // C.rgb.
+    vec4 ext;
+#if SPLAT_SURFACES == 1
+    float sw;
+    float sa;
+    vec3 sc;
+#endif
+#else
+    // The integral of sheet k so far.
+    float sheet;
+#if SPLAT_RING > 0
+    // The integrals of sheets k + 1, k + 2, ... (r<d>: sheet k + 1 + d). Named registers, not
+    // an array: llvmpipe keeps an array it cannot prove constant-indexed in memory and reads it
+    // lane by lane.
+    float r0, r1, r2, r3, r4, r5, r6, r7, r8, r9, r10, r11, r12, r13, r14, r15;
+#endif
+    // Mean values of sheets j - 2, j - 1, j = k - 1, and the lateral gradients of j - 1, j.
+    float v_2;
+    float v0;
+    float v;
+    vec2 lat0;
+    vec2 lat1;
+    vec3 d;
+    float t_in;
+    float t_out;
+    bool in_domain;
+#endif
+    // Footprints evaluated and contributing.
+    uint evaluated;
+    uint contributions;
+};
+
+Pixel pixel_at(int x, int y, bool valid, bool own_tile) {
+    Pixel px;
+    int w = int(params.width), h = int(params.height);
+    px.x = x;
+    px.y = y;
+    px.inside = valid && x >= 0 && y >= 0 && x < w && y < h;
+    px.own = px.inside && own_tile;
+    px.p = px.inside ? uint(y * w + x) : 0u;
+    px.acc = vec4(0.0);
+#if SPLAT_POST == 0
+    px.ext = vec4(0.0);
+#if SPLAT_SURFACES == 1
+    px.sw = 0.0;
+    px.sa = 0.0;
+    px.sc = vec3(0.0);
+#endif
+#else
+    px.sheet = 0.0;
+#if SPLAT_RING > 0
+    px.r0 = 0.0; px.r1 = 0.0; px.r2 = 0.0; px.r3 = 0.0; px.r4 = 0.0; px.r5 = 0.0; px.r6 = 0.0;
+    px.r7 = 0.0; px.r8 = 0.0; px.r9 = 0.0; px.r10 = 0.0; px.r11 = 0.0; px.r12 = 0.0;
+    px.r13 = 0.0; px.r14 = 0.0; px.r15 = 0.0;
+#endif
+    px.v_2 = 0.0;
+    px.v0 = 0.0;
+    px.v = 0.0;
+    px.lat0 = vec2(0.0);
+    px.lat1 = vec2(0.0);
+    px.d = vec3(0.0);
+    px.t_in = 0.0;
+    px.t_out = 0.0;
+    px.in_domain = false;
+    if (px.own) {
+        vec3 o;
+        camera_ray(uvec2(x, y), o, px.d);
+        px.in_domain = clip_box(o, px.d, params.box_min.xyz, params.box_max.xyz, px.t_in,
+                                px.t_out);
+    }
+#endif
+    px.evaluated = 0u;
+    px.contributions = 0u;
+    return px;
+}
+
+// A pixel that still composites.
+bool pixel_open(Pixel px) {
+    return px.own && !(px.acc.w > params.background.w);
+}
+
+// Adds entry (s, covering sheets k .. k + span - 1 of the splat's) to the pixel.
+void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) {
+    bool in_box = all(greaterThanEqual(ivec2(px.x, px.y), s.bbox.xy))
+                  && all(lessThanEqual(ivec2(px.x, px.y), s.bbox.zw));
+#if SPLAT_POST == 0 && SPLAT_OCCLUSION == 1
+    in_box = in_box && !(px.acc.w > params.background.w);
+#endif
+    if (!in_box) {
+        return;
+    }
+    float cutoff = params.kernel_filter.x;
+    vec2 pixel = vec2(px.x, px.y);
+    px.evaluated += 1u;
+#if SPLAT_RING > 0
+    // The lateral footprint once, then the share of each sheet from the erfc tails at the
+    // sheet boundaries (each boundary's once).
+    vec3 pr = splat_profile(s, cutoff, pixel);
+    if (pr.x == 0.0) {
+        return;
+    }
+    px.contributions += 1u;
+    float slab = params.box_max.w;
+    float za = (ta - pr.y) * pr.z;
+    float qa = normal_tail(za);
+    float zb = (tb - pr.y) * pr.z;
+    float qb = normal_tail(zb);
+    px.sheet += pr.x * phi_from_tails(za, qa, zb, qb);
+#define RING_STEP(d, r) \
+    if (d + 1u < span) { \
+        za = zb; \
+        qa = qb; \
+        zb = (params.box_min.w + float(k + d + 2u) * slab - pr.y) * pr.z; \
+        qb = normal_tail(zb); \
+        px.r += pr.x * phi_from_tails(za, qa, zb, qb); \
+    }
+    RING_STEP(0u, r0) RING_STEP(1u, r1) RING_STEP(2u, r2) RING_STEP(3u, r3)
+    RING_STEP(4u, r4) RING_STEP(5u, r5) RING_STEP(6u, r6) RING_STEP(7u, r7)
+    RING_STEP(8u, r8) RING_STEP(9u, r9) RING_STEP(10u, r10) RING_STEP(11u, r11)
+    RING_STEP(12u, r12) RING_STEP(13u, r13) RING_STEP(14u, r14)
+#undef RING_STEP
+#else
+    float g = splat_footprint(s, cutoff, pixel, ta, tb);
+    if (g == 0.0) {
+        return;
+    }
+    px.contributions += 1u;
+#if SPLAT_POST == 1
+    px.sheet += g;
+#elif SPLAT_SURFACES == 1
+    if (s.color.w > 0.0) {
+        px.sw += g;
+        px.sa += g * s.color.w;
+        px.sc += g * s.color.rgb;
+    } else {
+        px.ext += g * vec4(1.0, s.color.rgb);
+    }
+#else
+    px.ext += g * vec4(1.0, s.color.rgb);
+#endif
+#endif
+}
+
+#if SPLAT_POST == 0
+// Composites the pixel's sheet and clears it.
+void finish_pre(inout Pixel px) {
+    float done = params.background.w;
+    if (px.own && !(px.acc.w > done)) {
+#if SPLAT_SURFACES == 1
+        // Surface splats first: coverage min(W, 1), normalised opacity and colour.
+        if (px.sw > 0.0) {
+            float cover = min(px.sw, 1.0) / px.sw;
+            px.acc.rgb += (1.0 - px.acc.w) * px.sc * cover;
+            px.acc.w += (1.0 - px.acc.w) * px.sa * cover;
+        }
+#endif
+        if (!(px.acc.w > done) && px.ext.x > 0.0) {
+            float alpha = 1.0 - exp_e(-px.ext.x);
+            px.acc.rgb += (1.0 - px.acc.w) * px.ext.yzw / px.ext.x * alpha;
+            px.acc.w += (1.0 - px.acc.w) * alpha;
+        }
+    }
+    px.ext = vec4(0.0);
+#if SPLAT_SURFACES == 1
+    px.sw = 0.0;
+    px.sa = 0.0;
+    px.sc = vec3(0.0);
+#endif
+}
+#else
+// Sheet k is complete: its mean value, and the next sheet's integral from the ring (`live`
+// ring registers hold something).
+float take_sheet(inout Pixel px, uint live) {
+    float v1 = px.sheet / params.box_max.w;
+#if SPLAT_RING > 0
+    px.sheet = px.r0;
+    if (live > 0u) {
+        px.r0 = px.r1; px.r1 = px.r2; px.r2 = px.r3; px.r3 = px.r4; px.r4 = px.r5;
+        px.r5 = px.r6; px.r6 = px.r7; px.r7 = px.r8; px.r8 = px.r9; px.r9 = px.r10;
+        px.r10 = px.r11; px.r11 = px.r12; px.r12 = px.r13; px.r13 = px.r14; px.r14 = px.r15;
+        px.r15 = 0.0;
+    }
+#else
+    px.sheet = 0.0;
+#endif
+    return v1;
+}
+
+// Composites sheet j = k - 1 (value px.v) given sheet k's value v1 and lateral gradient,
+// then shifts the pixel's sheet values.
+void composite_post(inout Pixel px, uint k, float v1, vec2 lat) {
+    float slab = params.box_max.w;
+    int j = int(k) - 1;
+    if (pixel_open(px) && px.in_domain && j >= 0) {
+        float len = slab_overlap(j, px.t_in, px.t_out, px.p);
+#if SPLAT_ISOSURFACES == 1
+        if (j >= 1 && len > 0.0 && slab_overlap(j - 1, px.t_in, px.t_out, px.p) > 0.0) {
+            float v0 = px.v0, v = px.v;
+            // Crossings in order of their position between the two sheets.
+            float pos[4];
+            uint order[4];
+            uint hits = 0u;
+            for (uint i = 0u; i < params.iso_count; ++i) {
+                float iv = isos[i].value;
+                if ((v0 - iv) * (v - iv) < 0.0 || (v == iv && v0 != iv)) {
+                    float a = (iv - v0) / (v - v0);
+                    uint at = hits;
+                    while (at > 0u && pos[at - 1u] > a) {
+                        pos[at] = pos[at - 1u];
+                        order[at] = order[at - 1u];
+                        --at;
+                    }
+                    pos[at] = a;
+                    order[at] = i;
+                    ++hits;
+                }
+            }
+            if (hits > 0u) {
+                float across = 0.5 / slab;
+                vec3 g0 = px.lat0.x * params.right.xyz + px.lat0.y * params.up.xyz
+                          + (v - px.v_2) * across * px.d;
+                vec3 g1 = px.lat1.x * params.right.xyz + px.lat1.y * params.up.xyz
+                          + (v1 - v0) * across * px.d;
+                for (uint hi = 0u; hi < hits; ++hi) {
+                    IsoSurface iso = isos[order[hi]];
+                    vec3 rgb = shade_surface(iso, mix(g0, g1, pos[hi]), px.d);
+                    px.acc.rgb += (1.0 - px.acc.w) * rgb;
+                    px.acc.w += (1.0 - px.acc.w) * iso.color_opacity.a;
+                }
+            }
+        }
+#endif
+        if (len > 0.0) {
+            vec4 ct = transfer_lookup(px.v, params.tf_count);
+            float alpha = 1.0 - exp_e(-ct.a * len);
+            px.acc.rgb += (1.0 - px.acc.w) * ct.rgb * alpha;
+            px.acc.w += (1.0 - px.acc.w) * alpha;
+        }
+    }
+    px.v_2 = px.v0;
+    px.v0 = px.v;
+    px.v = v1;
+    px.lat0 = px.lat1;
+    px.lat1 = lat;
+}
+#endif
+
+// The invocation's pixels, one statement each.
+#if SPLAT_PIXELS == 1
+#define EACH(F) F(px0)
+#elif SPLAT_PIXELS == 2
+#define EACH(F) F(px0) F(px1)
+#elif SPLAT_PIXELS == 4
+#define EACH(F) F(px0) F(px1) F(px2) F(px3)
+#else
+#error "SPLAT_PIXELS is 1, 2 or 4"
+#endif
+#if SPLAT_APRON > 0 && SPLAT_PIXELS != 1
+#error "the apron's lateral exchange takes one pixel per invocation"
+#endif
+
 // Adds per-invocation counts to the frame's counters: summed over each subgroup first where
 // subgroup operations exist, else over the workgroup in shared memory (group_counts, zeroed
 // before the frame's loop).
@@ -158,42 +434,27 @@ void add_counts(uvec4 c) {
 void main() {
     load_params();
     uint lane = gl_LocalInvocationIndex;
+    bool valid = lane < uint(EDGE * ROWS);
     int lx = int(lane % uint(EDGE)) - SPLAT_APRON;
-    int ly = int(lane / uint(EDGE)) - SPLAT_APRON;
+    int ly = int(lane / uint(EDGE)) * SPLAT_PIXELS - SPLAT_APRON;
     int x = int(gl_WorkGroupID.x) * SPLAT_TILE + lx;
     uint tile_y = gl_WorkGroupID.y + push.tile_row;
     int y = int(tile_y) * SPLAT_TILE + ly;
-    int w = int(params.width), h = int(params.height);
-    bool inside = lane < uint(EDGE * EDGE) && x >= 0 && y >= 0 && x < w && y < h;
-    bool own = inside && lx >= 0 && ly >= 0 && lx < SPLAT_TILE && ly < SPLAT_TILE;
-    uint p = inside ? uint(y * w + x) : 0u;
-    vec2 pixel = vec2(x, y);
-    float done = params.background.w;
-    float cutoff = params.kernel_filter.x;
+    bool own_x = lx >= 0 && lx < SPLAT_TILE;
+#define OWN(r) (own_x && ly + r >= 0 && ly + r < SPLAT_TILE)
+    Pixel px0 = pixel_at(x, y, valid, OWN(0));
+#if SPLAT_PIXELS >= 2
+    Pixel px1 = pixel_at(x, y + 1, valid, OWN(1));
+#endif
+#if SPLAT_PIXELS == 4
+    Pixel px2 = pixel_at(x, y + 2, valid, OWN(2));
+    Pixel px3 = pixel_at(x, y + 3, valid, OWN(3));
+#endif
+#undef OWN
     float slab = params.box_max.w;
-    vec4 acc = vec4(0.0);
-    // Footprints evaluated and contributing (per invocation); entries walked and entries
-    // skipped (per invocation, so that the counters hold them times the invocations).
-    uvec4 counts = uvec4(0u);
-#if SPLAT_POST == 0
-    vec4 ext = vec4(0.0);
-#if SPLAT_SURFACES == 1
-    float sw = 0.0, sa = 0.0;
-    vec3 sc = vec3(0.0);
-#endif
-#else
-    float sheet = 0.0;
-    // Mean values of sheets j - 2, j - 1, j = k - 1 (k: the sheet just accumulated).
-    float v_2 = 0.0, v0 = 0.0, v = 0.0;
-    vec2 lat0 = vec2(0.0), lat1 = vec2(0.0);
-    vec3 o = vec3(0.0), d = vec3(0.0);
-    float t_in = 0.0, t_out = 0.0;
-    bool in_domain = false;
-    if (own) {
-        camera_ray(uvec2(x, y), o, d);
-        in_domain = clip_box(o, d, params.box_min.xyz, params.box_max.xyz, t_in, t_out);
-    }
-#endif
+    // Entries walked and entries skipped by this invocation (the counters hold them times
+    // the invocations of a workgroup).
+    uvec2 walked = uvec2(0u);
 #if VOTE >= 2 || SPLAT_SUBGROUP_OPS == 0
     if (lane == 0u) {
 #if VOTE >= 2
@@ -217,6 +478,12 @@ void main() {
     uint at = offset_at(first_bucket);
     uint at_end = offset_at(first_bucket + params.slabs);
     uint steps = params.slabs + uint(SPLAT_POST);
+#if SPLAT_RING > 0
+    // Ring registers holding something (the same in every lane: it follows the entries).
+    uint live = 0u;
+#else
+    uint live = 0u;
+#endif
     // The sheet being accumulated, and the next entry: (splat, sheet), past the last the
     // closing sheet.
     uint k = 0u;
@@ -224,15 +491,19 @@ void main() {
     // One iteration per sheet finished; the barrier of post-shaded isosurfaces sits at this
     // loop's level (inside a nested loop it hung lanes on lavapipe).
     while (k < steps) {
+        bool open = false;
+#define OPEN(px) open = open || pixel_open(px);
+        EACH(OPEN)
+#undef OPEN
 #if VOTE == 1
         // This subgroup stops once all its pixels are opaque.
-        if (subgroupAll(!own || acc.w > done)) {
+        if (subgroupAll(!open)) {
             break;
         }
 #elif VOTE == 3
         // The workgroup stops once all its pixels are opaque: three slots, so that one
         // barrier per sheet separates each slot's reset, its writes and its reads.
-        if (own && !(acc.w > done)) {
+        if (open) {
             open_slots[k % 3u] = 1u;
         }
         barrier();
@@ -243,77 +514,45 @@ void main() {
             open_slots[(k + 2u) % 3u] = 0u;
         }
 #endif
-        while (entry.y == k) {
-            // The entry: a splat's share of sheet k.
 #if SPLAT_SPLIT == 1
-            float ta = params.box_min.w + float(k) * slab;
-            float tb = ta + slab;
+        float ta = params.box_min.w + float(k) * slab;
+        float tb = ta + slab;
 #else
-            float ta = 0.0, tb = 0.0;
+        float ta = 0.0, tb = 0.0;
 #endif
+        while (entry.y == k) {
             Splat s = load_splat(entry.x);
-            bool in_box = all(greaterThanEqual(ivec2(x, y), s.bbox.xy))
-                          && all(lessThanEqual(ivec2(x, y), s.bbox.zw));
-#if SPLAT_POST == 0 && SPLAT_OCCLUSION == 1
-            in_box = in_box && !(acc.w > done);
-#endif
-            if (in_box) {
-                float g = splat_footprint(s, cutoff, pixel, ta, tb);
-                counts.x += 1u;
-                if (g != 0.0) {
-                    counts.y += 1u;
-#if SPLAT_POST == 1
-                    sheet += g;
-#elif SPLAT_SURFACES == 1
-                    if (s.color.w > 0.0) {
-                        sw += g;
-                        sa += g * s.color.w;
-                        sc += g * s.color.rgb;
-                    } else {
-                        ext += g * vec4(1.0, s.color.rgb);
-                    }
+#if SPLAT_RING > 0
+            // The entry covers sheets k .. k + span - 1 of the splat's.
+            uint span = min(s.slabs.y - k + 1u, uint(SPLAT_RING));
+            live = max(live, span - 1u);
 #else
-                    ext += g * vec4(1.0, s.color.rgb);
+            uint span = 1u;
 #endif
-                }
-            }
+#define ACCUMULATE(px) accumulate(px, s, k, span, ta, tb);
+            EACH(ACCUMULATE)
+#undef ACCUMULATE
             at += 1u;
             entry = next_entry(at, at_end, steps);
         }
 #if SPLAT_POST == 0
-        if (own && !(acc.w > done)) {
-#if SPLAT_SURFACES == 1
-            // Surface splats first: coverage min(W, 1), normalised opacity and colour.
-            if (sw > 0.0) {
-                float cover = min(sw, 1.0) / sw;
-                acc.rgb += (1.0 - acc.w) * sc * cover;
-                acc.w += (1.0 - acc.w) * sa * cover;
-            }
-#endif
-            if (!(acc.w > done) && ext.x > 0.0) {
-                float alpha = 1.0 - exp_e(-ext.x);
-                acc.rgb += (1.0 - acc.w) * ext.yzw / ext.x * alpha;
-                acc.w += (1.0 - acc.w) * alpha;
-            }
-        }
-        ext = vec4(0.0);
-#if SPLAT_SURFACES == 1
-        sw = 0.0;
-        sa = 0.0;
-        sc = vec3(0.0);
-#endif
+#define FINISH(px) finish_pre(px);
+        EACH(FINISH)
+#undef FINISH
         k = entry.y;
 #else
-        float v1 = sheet / slab;
-        sheet = 0.0;
+#define TAKE(px) float v1_##px = take_sheet(px, live);
+        EACH(TAKE)
+#undef TAKE
+        live = live > 0u ? live - 1u : 0u;
         vec2 lat = vec2(0.0);
 #if LATERAL == 1
         // Lateral central differences of sheet k from the neighbours' lanes, one-sided at the
         // image border; two buffers, so that one barrier per sheet orders writes and reads.
-        sheet_values[k & 1u][lane] = v1;
+        sheet_values[k & 1u][lane] = v1_px0;
 #if VOTE == 2
         // The workgroup's vote rides on the same barrier (three slots: see VOTE 3).
-        if (own && !(acc.w > done)) {
+        if (open) {
             open_slots[k % 3u] = 1u;
         }
 #endif
@@ -327,13 +566,14 @@ void main() {
             open_slots[(k + 2u) % 3u] = 0u;
         }
 #endif
-        if (own) {
+        if (px0.own) {
             float a = params.box_min.w + float(k) * slab;
 #if SPLAT_ORTHO == 1
             float size = 1.0 / params.forward.w;
 #else
             float size = (a + 0.5 * slab) / params.forward.w;
 #endif
+            int w = int(params.width), h = int(params.height);
             int mx = max(x - 1, 0) - x, px = min(x + 1, w - 1) - x;
             int my = max(y - 1, 0) - y, py = min(y + 1, h - 1) - y;
             if (px != mx) {
@@ -348,73 +588,37 @@ void main() {
             }
         }
 #endif
-        int j = int(k) - 1;
-        if (own && in_domain && j >= 0 && !(acc.w > done)) {
-            float len = slab_overlap(j, t_in, t_out, p);
-#if SPLAT_ISOSURFACES == 1
-            if (j >= 1 && len > 0.0 && slab_overlap(j - 1, t_in, t_out, p) > 0.0) {
-                // Crossings in order of their position between the two sheets.
-                float pos[4];
-                uint order[4];
-                uint hits = 0u;
-                for (uint i = 0u; i < params.iso_count; ++i) {
-                    float iv = isos[i].value;
-                    if ((v0 - iv) * (v - iv) < 0.0 || (v == iv && v0 != iv)) {
-                        float a = (iv - v0) / (v - v0);
-                        uint at = hits;
-                        while (at > 0u && pos[at - 1u] > a) {
-                            pos[at] = pos[at - 1u];
-                            order[at] = order[at - 1u];
-                            --at;
-                        }
-                        pos[at] = a;
-                        order[at] = i;
-                        ++hits;
-                    }
-                }
-                if (hits > 0u) {
-                    float across = 0.5 / slab;
-                    vec3 g0 = lat0.x * params.right.xyz + lat0.y * params.up.xyz + (v - v_2) * across * d;
-                    vec3 g1 = lat1.x * params.right.xyz + lat1.y * params.up.xyz + (v1 - v0) * across * d;
-                    for (uint hi = 0u; hi < hits; ++hi) {
-                        IsoSurface iso = isos[order[hi]];
-                        vec3 rgb = shade_surface(iso, mix(g0, g1, pos[hi]), d);
-                        acc.rgb += (1.0 - acc.w) * rgb;
-                        acc.w += (1.0 - acc.w) * iso.color_opacity.a;
-                    }
-                }
-            }
-#endif
-            if (len > 0.0) {
-                vec4 ct = transfer_lookup(v, params.tf_count);
-                float alpha = 1.0 - exp_e(-ct.a * len);
-                acc.rgb += (1.0 - acc.w) * ct.rgb * alpha;
-                acc.w += (1.0 - acc.w) * alpha;
-            }
-        }
-        v_2 = v0;
-        v0 = v;
-        v = v1;
-        lat0 = lat1;
-        lat1 = lat;
+#define COMPOSITE(px) composite_post(px, k, v1_##px, lat);
+        EACH(COMPOSITE)
+#undef COMPOSITE
         k += 1u;
-#if LATERAL == 0
-        // Past the last sheet with a value, with no extinction at value 0, every sheet
-        // before the next entry's composites nothing: skip to it.
-#if SPLAT_SUBGROUP_OPS == 1
-        if (params.zero_extinction == 0.0 && k < entry.y && subgroupAll(v == 0.0)) {
-            v_2 = 0.0;
-            v0 = 0.0;
-            k = entry.y;
+#if LATERAL == 0 && SPLAT_SUBGROUP_OPS == 1
+        // Past the last sheet with a value, with no extinction at value 0 and nothing ahead
+        // in the ring, every sheet before the next entry's composites nothing: skip to it.
+        if (params.zero_extinction == 0.0 && k < entry.y && live == 0u) {
+            bool empty = true;
+#define EMPTY(px) empty = empty && px.v == 0.0 && px.sheet == 0.0;
+            EACH(EMPTY)
+#undef EMPTY
+            if (subgroupAll(empty)) {
+#define CLEAR(px) px.v_2 = 0.0; px.v0 = 0.0;
+                EACH(CLEAR)
+#undef CLEAR
+                k = entry.y;
+            }
         }
 #endif
 #endif
-#endif
     }
-    counts.z = at - offset_at(first_bucket);
-    counts.w = at_end - at;
-    if (own) {
-        image[p] = acc;
-    }
-    add_counts(counts);
+    walked.x = at - offset_at(first_bucket);
+    walked.y = at_end - at;
+    uvec2 footprints = uvec2(0u);
+#define WRITE(px) \
+    if (px.own) { \
+        image[px.p] = px.acc; \
+    } \
+    footprints += uvec2(px.evaluated, px.contributions);
+    EACH(WRITE)
+#undef WRITE
+    add_counts(uvec4(footprints, walked));
 }

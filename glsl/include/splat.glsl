@@ -32,26 +32,23 @@ float phi_between(float za, float zb) {
     return 1.0 - 0.5 * (erfc_pos(-za * k) + erfc_pos(zb * k));
 }
 
-// The share of a splat's line integral through pixel (x, y) that lies in t in [ta, tb]; zero
-// outside the cutoff. SPLAT_EXACT == 0: the affine footprint (exact for orthographic cameras);
-// else the exact integral along the pixel's own ray (src/splat/project.rs explains both and the
-// word layout).
+// The lateral part of a splat's footprint at a pixel: (A, m, inv) with A the whole line
+// integral through the pixel (0 outside the cutoff), m the kernel's mean distance along the
+// pixel's ray and inv the inverse of its standard deviation there, so that the share in
+// t in [ta, tb] is A * phi_between((ta - m) * inv, (tb - m) * inv). SPLAT_EXACT == 0: the
+// affine footprint (exact for orthographic cameras); else the exact integral along the
+// pixel's own ray (src/splat/project.rs explains both and the word layout).
 // Needs SplatParams params.
-float splat_footprint(Splat s, float cutoff, vec2 pixel, float ta, float tb) {
+vec3 splat_profile(Splat s, float cutoff, vec2 pixel) {
 #if SPLAT_EXACT == 0
     vec2 d = pixel - s.footprint0.xy;
     vec4 c = s.footprint1;
     float q = c.x * d.x * d.x + 2.0 * c.y * d.x * d.y + c.z * d.y * d.y;
     if (q > cutoff * cutoff) {
-        return 0.0;
+        return vec3(0.0, 0.0, 1.0);
     }
     float m = s.footprint0.z + dot(s.footprint2.xy, d);
-#if SPLAT_SPLIT == 1
-    float inv = 1.0 / s.footprint0.w;
-    return c.w * exp_e(-0.5 * q) * phi_between((ta - m) * inv, (tb - m) * inv);
-#else
-    return c.w * exp_e(-0.5 * q);
-#endif
+    return vec3(c.w * exp_e(-0.5 * q), m, 1.0 / s.footprint0.w);
 #else
     float f = params.forward.w;
     float dx = (pixel.x - params.right.w) / f;
@@ -69,22 +66,47 @@ float splat_footprint(Splat s, float cutoff, vec2 pixel, float ta, float tb) {
     float g = j0.x * w.x * w.x + j0.z * w.y * w.y + j1.y * w.z * w.z
             + 2.0 * (j0.y * w.x * w.y + j0.w * w.x * w.z + j1.x * w.y * w.z);
     if (!(a > 0.0)) {
-        return 0.0;
+        return vec3(0.0, 0.0, 1.0);
     }
     float e = g / a;
     if (e > cutoff * cutoff) {
-        return 0.0;
+        return vec3(0.0, 0.0, 1.0);
     }
     float len = sqrt(1.0 + dx * dx + dy * dy);
     float inv_sqrt_a = inversesqrt(a);
+    return vec3(j1.w * len * inv_sqrt_a * exp_e(-0.5 * e), -b * len / a,
+                1.0 / (len * inv_sqrt_a));
+#endif
+}
+
+// The share of a splat's line integral through pixel (x, y) that lies in t in [ta, tb]
+// (SPLAT_SPLIT == 0: the whole integral); zero outside the cutoff.
+float splat_footprint(Splat s, float cutoff, vec2 pixel, float ta, float tb) {
+    vec3 pr = splat_profile(s, cutoff, pixel);
 #if SPLAT_SPLIT == 1
-    float m = -b * len / a;
-    float inv = 1.0 / (len * inv_sqrt_a);
-    return j1.w * len * inv_sqrt_a * exp_e(-0.5 * e) * phi_between((ta - m) * inv, (tb - m) * inv);
+    if (pr.x == 0.0) {
+        return 0.0;
+    }
+    return pr.x * phi_between((ta - pr.y) * pr.z, (tb - pr.y) * pr.z);
 #else
-    return j1.w * len * inv_sqrt_a * exp_e(-0.5 * e);
+    return pr.x;
 #endif
-#endif
+}
+
+// Half the erfc tail at |z| / sqrt(2): the normal distribution's mass beyond |z|.
+float normal_tail(float z) {
+    return 0.5 * erfc_pos(abs(z) * 0.70710678118654752);
+}
+
+// phi_between(za, zb) from the tails qa, qb at its ends: the same branches, each boundary's
+// erfc computed once when consecutive sheets share it.
+float phi_from_tails(float za, float qa, float zb, float qb) {
+    if (za >= 0.0) {
+        return qa - qb;
+    } else if (zb <= 0.0) {
+        return qb - qa;
+    }
+    return 1.0 - qa - qb;
 }
 
 // A Splat is seven texels of the SPLATS buffer: footprint0..3 and color as rgba32f, bbox and

@@ -23,10 +23,10 @@
 //! - Splatting rows are measured on `splat_raster`, the main kernel of a splatting frame: per
 //!   pixel whose footprint it evaluates, 110 flops for exact footprints and 65 for affine ones
 //!   (the operations of `splat_footprint`, a transcendental function counted as 10), plus per
-//!   entry walked 8 per invocation of the tile (the box test and the loop), against
-//!   `probe_fma`; and per entry walked and per 8-invocation subgroup of the tile one broadcast
-//!   load of the 116 bytes of its index and record, against the streaming bandwidth. Both
-//!   counts come from the kernel's own counters.
+//!   entry walked 8 per pixel of the tile (the box test and the loop), against `probe_fma`;
+//!   and per entry walked and per 8-invocation subgroup of the tile one broadcast load of the
+//!   120 bytes of its entry and record, against the streaming bandwidth. Both counts come from
+//!   the kernel's own counters.
 
 use crate::probe::Ceilings;
 use crate::recon::{Basis, GradientMode, ReconMethod};
@@ -122,19 +122,17 @@ pub fn footprint_flops(exact: bool) -> f64 {
     if exact { 110.0 } else { 65.0 }
 }
 
-/// (FMA share, broadcast-load share) of a splatting frame's `splat_raster`, whose workgroups
-/// have `group` invocations.
+/// (FMA share, broadcast-load share) of a splatting frame's `splat_raster`.
 pub fn splat_shares(
     c: &Ceilings,
     report: &crate::render::renderer::SplatReport,
     exact: bool,
-    group: u32,
 ) -> (f64, f64) {
     let seconds = report.stage_ms[2] * 1e-3;
     let walked = report.counts.accumulated as f64;
-    let flops =
-        report.counts.evaluated as f64 * footprint_flops(exact) + walked * 8.0 * f64::from(group);
-    let bytes = walked * 116.0 * f64::from(group.div_ceil(8));
+    let flops = report.counts.evaluated as f64 * footprint_flops(exact)
+        + walked * 8.0 * f64::from(report.group_size);
+    let bytes = walked * 120.0 * f64::from(report.invocations.div_ceil(8));
     (
         flops / seconds / (c.fma_gflops * 1e9),
         bytes / seconds / c.stream_bytes_per_s,

@@ -463,7 +463,7 @@ pub fn run(
                     .shaders
                     .iter()
                     .any(|(_, d)| d.contains(&("SPLAT_EXACT".into(), "1".into())));
-                let (f, a) = ceiling::splat_shares(c, report, exact, report.group_size);
+                let (f, a) = ceiling::splat_shares(c, report, exact);
                 Some((f, a, "stream"))
             }
             _ => None,

@@ -59,9 +59,11 @@ pub struct SplatReport {
     /// Sheets in the frame and their thickness in world units.
     pub slabs: u32,
     pub slab: f64,
-    /// Image tile edge in pixels, and invocations per `splat_raster` workgroup.
+    /// Image tile edge in pixels, pixels per `splat_raster` workgroup (with the apron) and
+    /// its invocations.
     pub tile: u32,
     pub group_size: u32,
+    pub invocations: u32,
 }
 
 fn check_tables(setup: &RaySetup, tables: Option<&PreintegrationTables>) -> Result<(), VkError> {
@@ -466,6 +468,7 @@ impl Renderer {
                     slab: setup.slab,
                     tile: setup.settings.tile,
                     group_size: setup.group_size(),
+                    invocations: variant.group,
                 }),
                 skip: None,
             },

@@ -22,6 +22,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 /// that Ctrl-C and the progress bar act within a fraction of a long frame, while the wait for
 /// each submission's fence stays small beside the band's work.
 const RASTER_BANDS: u32 = 8;
+/// Pixels per `splat_raster` invocation without an apron (every tile size is a multiple).
+const RASTER_PIXELS: u32 = 4;
 /// Invocations per workgroup of the one-dimensional kernels.
 const GROUP: u32 = 64;
 /// `SplatCounts` counters in the stats buffer.
@@ -96,6 +98,8 @@ pub struct SplatVariant {
     pub exact: bool,
     /// Kernels split among sheets (`splat.split`).
     pub split: bool,
+    /// Post-shaded: ring registers per pixel (`SplatSetup::ring`; 0: none).
+    pub ring: u32,
     pub occlusion: bool,
     pub isosurfaces: bool,
     /// Surface splats (pre-shaded isosurfaces).
@@ -105,8 +109,12 @@ pub struct SplatVariant {
     /// Image tile edge and apron in pixels.
     pub tile: u32,
     pub apron: u32,
-    /// Invocations of a `splat_raster` workgroup: the tile and its apron, rounded up to whole
-    /// subgroups (so that every subgroup is full and may broadcast).
+    /// Pixels per `splat_raster` invocation, a column of them: each splat record an
+    /// invocation loads (gathers, the kernel's largest cost on lavapipe) serves them all. One
+    /// where the apron's lateral exchange needs a pixel per invocation.
+    pub pixels: u32,
+    /// Invocations of a `splat_raster` workgroup: the tile and its apron over `pixels`,
+    /// rounded up to whole subgroups (so that every subgroup is full for its votes).
     pub group: u32,
     /// The device has the subgroup operations `DeviceInfo::subgroup_ops` names: a subgroup
     /// stops by itself once its pixels are opaque (a vote, no barrier) and sums its counters.
@@ -123,15 +131,23 @@ impl SplatVariant {
             orthographic: setup.orthographic(),
             exact: setup.exact_footprints(),
             split: setup.settings.split,
+            ring: setup.ring,
             occlusion: setup.settings.occlusion,
             isosurfaces: !setup.isosurfaces.is_empty(),
             surfaces: setup.settings.surface && !setup.isosurfaces.is_empty(),
             hull: setup.hull && setup.shading == Shading::Post,
             tile: setup.settings.tile,
             apron: setup.apron(),
-            group: setup.group_size().next_multiple_of(subgroup.max(8)),
+            pixels: Self::pixels_per_invocation(setup),
+            group: (setup.group_size() / Self::pixels_per_invocation(setup))
+                .next_multiple_of(subgroup.max(8)),
             subgroup_ops: device.subgroup_ops,
         }
+    }
+
+    /// Pixels per `splat_raster` invocation for a setup (see [`SplatVariant::pixels`]).
+    pub fn pixels_per_invocation(setup: &SplatSetup) -> u32 {
+        if setup.apron() > 0 { 1 } else { RASTER_PIXELS }
     }
 
     /// shaderc macro definitions.
@@ -152,6 +168,7 @@ impl SplatVariant {
             ("SPLAT_ORTHO".into(), flag(self.orthographic)),
             ("SPLAT_EXACT".into(), flag(self.exact)),
             ("SPLAT_SPLIT".into(), flag(self.split)),
+            ("SPLAT_RING".into(), self.ring.to_string()),
             ("SPLAT_OCCLUSION".into(), flag(self.occlusion)),
             ("SPLAT_ISOSURFACES".into(), flag(self.isosurfaces)),
             ("SPLAT_SURFACES".into(), flag(self.surfaces)),
@@ -159,6 +176,7 @@ impl SplatVariant {
             ("SPLAT_TILE".into(), self.tile.to_string()),
             ("SPLAT_APRON".into(), self.apron.to_string()),
             ("SPLAT_GROUP".into(), self.group.to_string()),
+            ("SPLAT_PIXELS".into(), self.pixels.to_string()),
             ("SPLAT_SUBGROUP_OPS".into(), flag(self.subgroup_ops)),
             ("SPLAT_SCAN_BLOCK".into(), SCAN_BLOCK.to_string()),
             (
@@ -188,7 +206,7 @@ impl SplatVariant {
     /// Human-readable name for `--stats`.
     pub fn name(&self) -> String {
         format!(
-            "splat {} {} {}{}{}{} tile {}{}",
+            "splat {} {} {}{}{}{}{} tile {}{}",
             match self.shading {
                 Shading::Pre => "pre-shaded",
                 Shading::Post => "post-shaded",
@@ -206,6 +224,11 @@ impl SplatVariant {
             if self.exact { " exact-footprints" } else { "" },
             if self.occlusion { " occlusion" } else { "" },
             if self.split { "" } else { " whole-kernels" },
+            if self.ring > 0 {
+                format!(" ring {}", self.ring)
+            } else {
+                String::new()
+            },
             self.tile,
             if self.surfaces {
                 " surface-splats"

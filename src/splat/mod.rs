@@ -47,6 +47,11 @@ pub const MAX_KERNEL_ENTRIES: u64 = 60_000;
 pub const MAX_BUCKETS: u64 = 1 << 24;
 /// Buckets per workgroup of `splat_scan`'s first and third levels.
 pub const SCAN_BLOCK: u32 = 1024;
+/// Post-shaded splatting keeps each pixel's next sheets in this many registers
+/// (`SplatSetup::ring`): a kernel is then one entry per tile and per `RING` sheets it crosses,
+/// its lateral footprint evaluated once per pixel and entry and shared out to those sheets by
+/// the erfc at each sheet boundary, where one entry per sheet evaluates it per sheet.
+pub const RING: u32 = 16;
 /// At most this many sheets per frame.
 pub const MAX_SLABS: u32 = 16_384;
 /// 3DGS's guard: the Jacobian's lateral terms are evaluated at most this far outside the view
@@ -156,6 +161,10 @@ pub struct SplatSetup {
     pub early_termination: f64,
     pub background: [f64; 3],
     pub isosurfaces: Vec<Isosurface>,
+    /// Post-shaded with split kernels: `RING`, the registers for the sheets ahead of each
+    /// pixel, so that a kernel is one entry per tile and per `RING` sheets it crosses; 0
+    /// otherwise (one entry per tile and sheet).
+    pub ring: u32,
     pub lighting: Lighting,
 }
 
@@ -298,7 +307,7 @@ impl SplatSetup {
                 ),
             });
         }
-        Ok(Self {
+        let setup = Self {
             shading,
             settings: *settings,
             camera: *camera,
@@ -319,8 +328,14 @@ impl SplatSetup {
             early_termination,
             background,
             isosurfaces: isosurfaces.to_vec(),
+            ring: if shading == Shading::Post && settings.split {
+                RING
+            } else {
+                0
+            },
             lighting: *lighting,
-        })
+        };
+        Ok(setup)
     }
 
     /// Whether the camera is orthographic.

@@ -414,7 +414,14 @@ pub fn splat_project(
     };
     let r = setup.tile_rect(bbox);
     let tiles = u64::from(r[2] - r[0] + 1) * u64::from(r[3] - r[1] + 1);
-    if u64::from(slabs[1] - slabs[0] + 1) * tiles > super::MAX_KERNEL_ENTRIES {
+    let span = slabs[1] - slabs[0] + 1;
+    // With ring registers a kernel is one entry per tile and per `ring` sheets.
+    let entries = if setup.ring > 0 {
+        u64::from(span.div_ceil(setup.ring)) * tiles
+    } else {
+        u64::from(span) * tiles
+    };
+    if entries > super::MAX_KERNEL_ENTRIES {
         return Err(Cull::Oversized);
     }
     let x = exact.unwrap_or(Exact {

@@ -70,11 +70,15 @@ pub fn splat_bin(setup: &SplatSetup, splats: &[Splat]) -> Bins {
     let buckets = setup.buckets() as usize;
     let entries = |s: &Splat| {
         let r = setup.tile_rect(s.bbox);
+        // With ring registers, one entry per tile and per `ring` sheets, at the first.
         let [s0, s1] = s.slabs;
+        let step = setup.ring.max(1) as usize;
         (r[1]..=r[3]).flat_map(move |ty| {
             (r[0]..=r[2]).flat_map(move |tx| {
                 let tile = (ty * tiles_x + tx) as usize;
-                (s0..=s1).map(move |k| tile * slabs + k as usize)
+                (s0..=s1)
+                    .step_by(step)
+                    .map(move |k| tile * slabs + k as usize)
             })
         })
     };
@@ -108,6 +112,8 @@ struct Lane {
     transmittance: f64,
     /// Pre-shaded: the sheet's channels. Post-shaded: `sheet[0]` is the sheet's field integral.
     sheet: [f64; SHEET],
+    /// Post-shaded with ring registers: the integrals of the sheets after the current one.
+    ahead: std::collections::VecDeque<f64>,
     /// Post-shaded: mean values of sheets j − 2, j − 1, j (= k − 1) and k; k < 0 reads 0.
     values: [f64; 4],
     /// Post-shaded isosurfaces: the lateral gradients (right, up) of sheets j − 1, j and k.
@@ -163,6 +169,7 @@ pub fn splat_raster(
                 color: [0.0; 3],
                 transmittance: 1.0,
                 sheet: [0.0; SHEET],
+                ahead: std::collections::VecDeque::new(),
                 values: [0.0; 4],
                 lateral: [[0.0; 2]; 3],
                 ray,
@@ -200,7 +207,28 @@ pub fn splat_raster(
                     if !in_box || (!post && setup.settings.occlusion && done(l)) {
                         continue;
                     }
-                    let g = splat_footprint(s, setup, f64::from(l.x), f64::from(l.y), ta, tb);
+                    let (px, py) = (f64::from(l.x), f64::from(l.y));
+                    if setup.ring > 0 {
+                        // One evaluation of the lateral footprint, shared out to every sheet
+                        // the kernel crosses.
+                        counts.evaluated += 1;
+                        let whole = f64::NEG_INFINITY..f64::INFINITY;
+                        if splat_footprint(s, setup, px, py, whole.start, whole.end) == 0.0 {
+                            continue;
+                        }
+                        counts.contributions += 1;
+                        l.sheet[0] += splat_footprint(s, setup, px, py, ta, tb);
+                        let last = s.slabs[1].min(k + setup.ring - 1);
+                        for (d, j) in (k + 1..=last).enumerate() {
+                            let (a, b) = setup.slab_bounds(j);
+                            if l.ahead.len() <= d {
+                                l.ahead.push_back(0.0);
+                            }
+                            l.ahead[d] += splat_footprint(s, setup, px, py, a, b);
+                        }
+                        continue;
+                    }
+                    let g = splat_footprint(s, setup, px, py, ta, tb);
                     counts.evaluated += 1;
                     // Post-shaded weights carry the data's sign: only zero is nothing.
                     if g == 0.0 {
@@ -278,7 +306,7 @@ fn composite_post(
     let (w, h) = (setup.camera.width as i32, setup.camera.height as i32);
     for l in lanes.iter_mut() {
         l.values[3] = l.sheet[0] / setup.slab;
-        l.sheet[0] = 0.0;
+        l.sheet[0] = l.ahead.pop_front().unwrap_or(0.0);
     }
     let isosurfaces = !setup.isosurfaces.is_empty();
     if isosurfaces {
