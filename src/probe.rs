@@ -164,7 +164,8 @@ pub enum MemoryMode {
     CoherentTexelGather,
     /// Consecutive vec4 loads.
     Stream,
-    /// Float adds by compare-and-swap loops at random words (splat_accumulate's sheet_add).
+    /// Float adds by compare-and-swap loops at random words (what the splatter's sheet buffers
+    /// paid per footprint pixel before the tile rasterizer).
     Atomic,
     /// A ray march's reads as the fast path makes them: 8×8 tiles of parallel rays, each
     /// reading its cell's 8 corner texels (rgba32) per step.

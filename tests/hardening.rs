@@ -542,6 +542,7 @@ fn splatting_checks_its_budget_before_accumulating() {
         "render.method=\"splat\"",
         "volume.resolution=100",
         "splat.slab=0.05",
+        "splat.split=true",
         "camera.width=64",
         "camera.height=64",
     ];

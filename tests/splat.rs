@@ -169,7 +169,7 @@ fn one_kernel_footprint_is_the_line_integral_of_its_gaussian() {
 #[test]
 fn gpu_splatting_matches_its_cpu_twin_on_a_grid() {
     let (ctx, _) = gpu();
-    let cases: [(&str, &[&str]); 6] = [
+    let cases: [(&str, &[&str]); 8] = [
         (
             "pre-shaded surface splats",
             &[
@@ -192,6 +192,22 @@ fn gpu_splatting_matches_its_cpu_twin_on_a_grid() {
         (
             "post-shaded, affine footprints",
             &["render.method=\"splat-post\"", "splat.footprint=\"affine\""],
+        ),
+        (
+            "pre-shaded, kernels split among sheets, 8-pixel tiles",
+            &[
+                "render.method=\"splat\"",
+                "splat.split=true",
+                "splat.tile=8",
+            ],
+        ),
+        (
+            "post-shaded, 32-pixel tiles, no occlusion",
+            &[
+                "render.method=\"splat-post\"",
+                "splat.tile=32",
+                "splat.occlusion=false",
+            ],
         ),
         (
             "pre-shaded swan, no occlusion",

@@ -382,6 +382,7 @@ fn negative_data_and_oversized_kernels() {
         "camera.width=2048",
         "camera.height=2048",
         "splat.slab=0.05",
+        "splat.split=true",
         "camera.eye=[0.0,-1.2,0.0]",
     ]);
     let field = big.field(|_| {}).expect("field");

@@ -36,7 +36,10 @@ pub(super) fn parse(sec: &Section<'_>) -> Result<SplatSettings, SceneError> {
         occlusion: flag(sec, "occlusion", d.occlusion)?,
         surface: flag(sec, "surface", d.surface)?,
         exact: sec.choice("footprint", d.exact, &[("exact", true), ("affine", false)])?,
-        split: flag(sec, "split", d.split)?,
+        split: match sec.get("split") {
+            None => d.split,
+            Some(_) => Some(flag(sec, "split", true)?),
+        },
         tile: match sec.get("tile") {
             None => d.tile,
             Some(Value::Integer(t)) if [8, 16, 32].contains(t) => *t as u32,

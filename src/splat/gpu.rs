@@ -130,7 +130,7 @@ impl SplatVariant {
             antialias: setup.settings.antialias,
             orthographic: setup.orthographic(),
             exact: setup.exact_footprints(),
-            split: setup.settings.split,
+            split: setup.split,
             ring: setup.ring,
             occlusion: setup.settings.occlusion,
             isosurfaces: !setup.isosurfaces.is_empty(),

@@ -43,7 +43,7 @@ pub const TILE_SIZES: [u32; 3] = [8, 16, 32];
 /// an error naming `splat.slab` and the image size, never a silently truncated list.
 pub const MAX_KERNEL_ENTRIES: u64 = 60_000;
 /// At most this many (tile × sheet) buckets: the scan's second level is one workgroup of
-/// `SCAN_GROUP` invocations, each summing at most 64 blocks of `SCAN_BLOCK` buckets.
+/// 256 invocations, each summing at most 64 blocks of `SCAN_BLOCK` buckets.
 pub const MAX_BUCKETS: u64 = 1 << 24;
 /// Buckets per workgroup of `splat_scan`'s first and third levels.
 pub const SCAN_BLOCK: u32 = 1024;
@@ -108,8 +108,10 @@ pub struct SplatSettings {
     /// integral in each ([BLUR]'s sheets; exact emission–absorption as the sheets thin), or
     /// (pre-shaded only) composited whole in the sheet of its centre: [EWA]'s image model
     /// and 3D Gaussian splatting's, one footprint per kernel and tile instead of one per
-    /// sheet it crosses.
-    pub split: bool,
+    /// sheet it crosses. Unset: split post-shaded, whole pre-shaded (whose error is its
+    /// classification before the sum: BENCHMARKS.md measured the same RMSE both ways, at 13×
+    /// the time split).
+    pub split: Option<bool>,
 }
 
 impl Default for SplatSettings {
@@ -123,7 +125,7 @@ impl Default for SplatSettings {
             surface: false,
             exact: true,
             tile: 16,
-            split: true,
+            split: None,
         }
     }
 }
@@ -161,6 +163,8 @@ pub struct SplatSetup {
     pub early_termination: f64,
     pub background: [f64; 3],
     pub isosurfaces: Vec<Isosurface>,
+    /// `splat.split` resolved for the method.
+    pub split: bool,
     /// Post-shaded with split kernels: `RING`, the registers for the sheets ahead of each
     /// pixel, so that a kernel is one entry per tile and per `RING` sheets it crosses; 0
     /// otherwise (one entry per tile and sheet).
@@ -274,7 +278,7 @@ impl SplatSetup {
                 ),
             });
         }
-        if shading == Shading::Post && !settings.split {
+        if shading == Shading::Post && settings.split == Some(false) {
             return Err(RenderError::Setting {
                 key: "splat.split",
                 message: "post-shaded splatting classifies sheets of the field, so every kernel \
@@ -328,11 +332,8 @@ impl SplatSetup {
             early_termination,
             background,
             isosurfaces: isosurfaces.to_vec(),
-            ring: if shading == Shading::Post && settings.split {
-                RING
-            } else {
-                0
-            },
+            split: settings.split.unwrap_or(shading == Shading::Post),
+            ring: if shading == Shading::Post { RING } else { 0 },
             lighting: *lighting,
         };
         Ok(setup)

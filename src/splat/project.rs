@@ -400,7 +400,7 @@ pub fn splat_project(
     if bbox[0] > bbox[2] || bbox[1] > bbox[3] || last < 0.0 || first >= f64::from(setup.slabs) {
         return Err(Cull::Outside);
     }
-    let slabs = if setup.settings.split {
+    let slabs = if setup.split {
         [
             first.max(0.0) as u32,
             last.min(f64::from(setup.slabs - 1)) as u32,

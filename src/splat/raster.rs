@@ -190,7 +190,7 @@ pub fn splat_raster(
         }
         if k < setup.slabs {
             // Whole kernels: the footprint is the whole line integral.
-            let (ta, tb) = if setup.settings.split {
+            let (ta, tb) = if setup.split {
                 setup.slab_bounds(k)
             } else {
                 (f64::NEG_INFINITY, f64::INFINITY)

@@ -12,7 +12,7 @@
 //!   ray crosses a layer of unit areal density over a length 1/|n·d|; `splat_project` multiplies
 //!   the weight by |n·d|).
 //!
-//! `splat_composite` then composites each sheet's surface before its volume: coverage
+//! `splat_raster` then composites each sheet's surface before its volume: coverage
 //! c = min(W, 1), opacity (Σ q·α_iso / W)·c and premultiplied colour (Σ q·rgb / W)·c, where rgb is
 //! the ray caster's Blinn–Phong shading with |n·d| from the flattened metric
 //! ((n·d)² = (dᵀM_s d / a − 1)/(R² − 1)), so no normal needs storing.
