@@ -230,7 +230,8 @@ bool pixel_open(Pixel px) {
 
 // Adds entry (s, covering sheets k .. k + span - 1 of the splat's) to the pixel.
 void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) {
-    bool in_box = all(greaterThanEqual(ivec2(px.x, px.y), s.bbox.xy))
+    // (Padding invocations past the tile's rows have no pixel.)
+    bool in_box = px.inside && all(greaterThanEqual(ivec2(px.x, px.y), s.bbox.xy))
                   && all(lessThanEqual(ivec2(px.x, px.y), s.bbox.zw));
 #if SPLAT_POST == 0 && SPLAT_OCCLUSION == 1
     in_box = in_box && !(px.acc.w > params.background.w);
@@ -478,12 +479,8 @@ void main() {
     uint at = offset_at(first_bucket);
     uint at_end = offset_at(first_bucket + params.slabs);
     uint steps = params.slabs + uint(SPLAT_POST);
-#if SPLAT_RING > 0
     // Ring registers holding something (the same in every lane: it follows the entries).
     uint live = 0u;
-#else
-    uint live = 0u;
-#endif
     // The sheet being accumulated, and the next entry: (splat, sheet), past the last the
     // closing sheet.
     uint k = 0u;

@@ -504,26 +504,27 @@ fn the_work_budget_refuses_and_force_lifts_it() {
 fn splatting_checks_its_budget_before_accumulating() {
     let d = dir("splat-budget");
     let png = d.join("x.png");
-    // 764 sheets over 4096² pixels in 16² tiles: 5·10⁷ (tile, sheet) buckets, past the
+    // 764 sheets over 4096² pixels in 8² tiles: 2·10⁸ (tile, sheet) buckets, past the
     // counting sort's limit; refused by the key at fault before any work.
     let buckets = [
         "render.method=\"splat\"",
         "camera.width=4096",
         "camera.height=4096",
         "splat.slab=0.1",
+        "splat.tile=8",
     ];
     refused_quickly(
         &render_with(&png, &buckets),
         &["splat.slab", "(tile, sheet) buckets", "splat.tile"],
         &png,
     );
-    // In 32² tiles the buckets fit, and the sheets alone are past the work budget.
+    // Left to choose, the tile grows to 32² where the buckets fit, and the sheets alone are
+    // past the work budget.
     let sheets = [
         "render.method=\"splat\"",
         "camera.width=4096",
         "camera.height=4096",
         "splat.slab=0.1",
-        "splat.tile=32",
     ];
     refused_quickly(
         &render_with(&png, &sheets),

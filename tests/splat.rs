@@ -194,11 +194,11 @@ fn gpu_splatting_matches_its_cpu_twin_on_a_grid() {
             &["render.method=\"splat-post\"", "splat.footprint=\"affine\""],
         ),
         (
-            "pre-shaded, kernels split among sheets, 8-pixel tiles",
+            "pre-shaded, kernels split among sheets, 16-pixel tiles",
             &[
                 "render.method=\"splat\"",
                 "splat.split=true",
-                "splat.tile=8",
+                "splat.tile=16",
             ],
         ),
         (

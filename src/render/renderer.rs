@@ -466,7 +466,7 @@ impl Renderer {
                     stage_ms: image.stage_ms,
                     slabs: setup.slabs,
                     slab: setup.slab,
-                    tile: setup.settings.tile,
+                    tile: setup.tile,
                     group_size: setup.group_size(),
                     invocations: variant.group,
                 }),

@@ -42,7 +42,7 @@ pub(super) fn parse(sec: &Section<'_>) -> Result<SplatSettings, SceneError> {
         },
         tile: match sec.get("tile") {
             None => d.tile,
-            Some(Value::Integer(t)) if [8, 16, 32].contains(t) => *t as u32,
+            Some(Value::Integer(t)) if [8, 16, 32].contains(t) => Some(*t as u32),
             Some(v) => return Err(sec.err("tile", "8, 16 or 32 (pixels)", v)),
         },
     })

@@ -136,7 +136,7 @@ impl SplatVariant {
             isosurfaces: !setup.isosurfaces.is_empty(),
             surfaces: setup.settings.surface && !setup.isosurfaces.is_empty(),
             hull: setup.hull && setup.shading == Shading::Post,
-            tile: setup.settings.tile,
+            tile: setup.tile,
             apron: setup.apron(),
             pixels: Self::pixels_per_invocation(setup),
             group: (setup.group_size() / Self::pixels_per_invocation(setup))
@@ -376,7 +376,7 @@ impl SplatTargets {
             setup.camera.width,
             setup.camera.height,
             kernels.count,
-            setup.settings.tile,
+            setup.tile,
             setup.hull && setup.shading == Shading::Post,
         )
     }

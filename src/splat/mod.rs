@@ -102,8 +102,9 @@ pub struct SplatSettings {
     /// (about half the accumulation time; errs where kernels are large or thin for their
     /// distance).
     pub exact: bool,
-    /// Image tile edge in pixels (one of `TILE_SIZES`).
-    pub tile: u32,
+    /// Image tile edge in pixels (one of `TILE_SIZES`); unset: the smallest whose (tile,
+    /// sheet) buckets fit `MAX_BUCKETS`.
+    pub tile: Option<u32>,
     /// Each kernel split among the sheets its depth range crosses, by the share of its line
     /// integral in each ([BLUR]'s sheets; exact emission–absorption as the sheets thin), or
     /// (pre-shaded only) composited whole in the sheet of its centre: [EWA]'s image model
@@ -124,7 +125,7 @@ impl Default for SplatSettings {
             occlusion: true,
             surface: false,
             exact: true,
-            tile: 16,
+            tile: None,
             split: None,
         }
     }
@@ -165,6 +166,8 @@ pub struct SplatSetup {
     pub isosurfaces: Vec<Isosurface>,
     /// `splat.split` resolved for the method.
     pub split: bool,
+    /// `splat.tile` resolved for the image and sheets.
+    pub tile: u32,
     /// Post-shaded with split kernels: `RING`, the registers for the sheets ahead of each
     /// pixel, so that a kernel is one entry per tile and per `RING` sheets it crosses; 0
     /// otherwise (one entry per tile and sheet).
@@ -287,27 +290,43 @@ impl SplatSetup {
                     .into(),
             });
         }
-        if !TILE_SIZES.contains(&settings.tile)
-            || (settings.tile == 32 && shading == Shading::Post && !isosurfaces.is_empty())
-        {
-            return Err(RenderError::Setting {
-                key: "splat.tile",
-                message: format!(
-                    "{}: one of 8, 16 or 32 pixels (post-shaded isosurfaces: 8 or 16, since a \
-                     tile and its one-pixel apron are one workgroup of at most 1024 invocations)",
-                    settings.tile
-                ),
-            });
-        }
-        let tiles = u64::from(camera.width.div_ceil(settings.tile))
-            * u64::from(camera.height.div_ceil(settings.tile));
-        if tiles * count as u64 > MAX_BUCKETS {
+        // Post-shaded isosurfaces add a one-pixel apron: 32² + apron would pass the 1024
+        // invocations a workgroup may have.
+        let apron = shading == Shading::Post && !isosurfaces.is_empty();
+        let buckets = |t: u32| {
+            u64::from(camera.width.div_ceil(t))
+                * u64::from(camera.height.div_ceil(t))
+                * count as u64
+        };
+        let allowed = |t: u32| TILE_SIZES.contains(&t) && !(t == 32 && apron);
+        let tile = match settings.tile {
+            Some(t) if allowed(t) => t,
+            Some(t) => {
+                return Err(RenderError::Setting {
+                    key: "splat.tile",
+                    message: format!(
+                        "{t}: one of 8, 16 or 32 pixels (post-shaded isosurfaces: 8 or 16, since \
+                         a tile and its one-pixel apron are one workgroup of at most 1024 \
+                         invocations)"
+                    ),
+                });
+            }
+            // The smallest tile whose buckets fit (small tiles measured fastest on lavapipe).
+            None => TILE_SIZES
+                .into_iter()
+                .filter(|&t| allowed(t))
+                .find(|&t| buckets(t) <= MAX_BUCKETS)
+                .unwrap_or(if apron { 16 } else { 32 }),
+        };
+        if buckets(tile) > MAX_BUCKETS {
             return Err(RenderError::Setting {
                 key: "splat.slab",
                 message: format!(
-                    "{tiles} image tiles × {count} sheets are {} (tile, sheet) buckets; at most \
-                     {MAX_BUCKETS}: raise splat.slab or splat.tile, or take a smaller image",
-                    tiles * count as u64
+                    "{} image tiles of {tile}² pixels × {count} sheets are {} (tile, sheet) \
+                     buckets; at most {MAX_BUCKETS}: raise splat.slab or splat.tile, or take a \
+                     smaller image",
+                    buckets(tile) / count as u64,
+                    buckets(tile)
                 ),
             });
         }
@@ -333,6 +352,7 @@ impl SplatSetup {
             background,
             isosurfaces: isosurfaces.to_vec(),
             split: settings.split.unwrap_or(shading == Shading::Post),
+            tile,
             ring: if shading == Shading::Post { RING } else { 0 },
             lighting: *lighting,
         };
@@ -395,13 +415,13 @@ impl SplatSetup {
 
     /// Invocations of one `splat_raster` workgroup: the tile and its apron.
     pub fn group_size(&self) -> u32 {
-        let e = self.settings.tile + 2 * self.apron();
+        let e = self.tile + 2 * self.apron();
         e * e
     }
 
     /// Tiles across and down the image.
     pub fn tiles(&self) -> (u32, u32) {
-        let t = self.settings.tile;
+        let t = self.tile;
         (
             self.camera.width.div_ceil(t),
             self.camera.height.div_ceil(t),
@@ -416,7 +436,7 @@ impl SplatSetup {
 
     /// The inclusive tile range [tx0, ty0, tx1, ty1] whose pixels or aprons meet a pixel box.
     pub fn tile_rect(&self, bbox: [i32; 4]) -> [u32; 4] {
-        let t = self.settings.tile as i32;
+        let t = self.tile as i32;
         let a = self.apron() as i32;
         let (tx, ty) = self.tiles();
         let lo = |v: i32| ((v - a).max(0) / t) as u32;

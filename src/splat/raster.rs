@@ -136,7 +136,7 @@ pub fn splat_raster(
     counts: &mut SplatCounts,
     out: &mut [([f64; 3], f64)],
 ) {
-    let t = setup.settings.tile as i32;
+    let t = setup.tile as i32;
     let a = setup.apron() as i32;
     let (w, h) = (setup.camera.width as i32, setup.camera.height as i32);
     let edge = t + 2 * a;
@@ -181,9 +181,13 @@ pub fn splat_raster(
     let (tiles_x, _) = setup.tiles();
     let first_bucket = (tile.1 * tiles_x + tile.0) as usize * setup.slabs as usize;
     let steps = setup.slabs + u32::from(post);
+    // Post-shaded isosurfaces vote at their lateral exchange's barrier, after the sheet's
+    // entries (as the kernel does); every other variant before them.
+    let vote_late = setup.apron() > 0;
+    let end = first_bucket + setup.slabs as usize;
     for k in 0..steps {
-        if setup.settings.occlusion && lanes.iter().filter(|l| l.own).all(done) {
-            let end = first_bucket + setup.slabs as usize;
+        let opaque = setup.settings.occlusion && lanes.iter().filter(|l| l.own).all(done);
+        if opaque && !vote_late {
             let from = first_bucket + (k as usize).min(setup.slabs as usize);
             counts.skipped_occluded += u64::from(bins.offsets[end] - bins.offsets[from]);
             break;
@@ -254,6 +258,11 @@ pub fn splat_raster(
                     }
                 }
             }
+        }
+        if opaque {
+            let from = first_bucket + (k as usize + 1).min(setup.slabs as usize);
+            counts.skipped_occluded += u64::from(bins.offsets[end] - bins.offsets[from]);
+            break;
         }
         if post {
             composite_post(setup, tf, &mut lanes, edge, k);
