@@ -2,8 +2,10 @@
 //! and overrides, reads the rows it writes (the columns of `results.csv`), and measures each
 //! peer image against the run's reference exactly as vmls's own rows are measured.
 //!
-//! The peer's sample distances follow the run's `render.step` sweep when there is one (the
-//! same steps in spacings), else 1, 0.5 and 0.25 spacings.
+//! For a grid the VTK peer ray casts (`vtkGPUVolumeRayCastMapper`), its sample distances
+//! following the run's `render.step` sweep when there is one (the same steps in spacings), else
+//! 1, 0.5 and 0.25 spacings. A scattered point cloud it draws as point Gaussians
+//! (`vtkPointGaussianMapper`, the same kernels sorted back to front), where steps do not apply.
 
 use super::{BenchError, BenchOptions, metrics, reference::Reference, results::read_csv};
 use crate::bench::results::Row;
