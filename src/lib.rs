@@ -10,8 +10,8 @@
 //! - [`recon`]: MLS reconstruction (f64 CPU reference) and the redundant octree [OCT].
 //! - [`render`]: cameras, transfer functions, the ray-casting integrator (CPU reference) and the
 //!   GPU renderer that drives the kernels in `glsl/`.
-//! - [`splat`]: EWA volume splatting, pre- and post-shaded with sheet buffers (CPU twins and
-//!   the GPU driver).
+//! - [`splat`]: EWA volume splatting, pre- and post-shaded ([BLUR]'s sheets), drawn as a tile
+//!   rasterizer (CPU twins and the GPU driver).
 //! - [`scene`]: the TOML scene contract.
 
 pub mod bench;

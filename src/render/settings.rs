@@ -14,7 +14,7 @@ pub enum Method {
     Adaptive,
     /// Pre-shaded EWA splatting ([EWA], `crate::splat`).
     Splat,
-    /// Post-shaded splatting into sheet buffers ([BLUR], `crate::splat`).
+    /// Post-shaded splatting: the field's sheets classified per pixel ([BLUR], `crate::splat`).
     SplatPost,
 }
 

@@ -20,10 +20,13 @@
 //!   bucket, all on the GPU (an exclusive scan of the bucket counts, then a scatter), so that
 //!   each tile's entries lie together, sheet after sheet;
 //! - `splat_raster` ([`raster`]): one workgroup per tile for the whole frame, one invocation
-//!   per pixel. The tile walks its sheets front to back; each sheet's entries are read at an
-//!   index that is the same in every lane (one load, broadcast), accumulated in registers and
-//!   composited when the sheet ends; the tile stops once every pixel in it is opaque, and
-//!   writes each pixel once. No atomics on pixels, no sheet buffers in memory.
+//!   per column of four pixels (one pixel with an apron). The tile walks its entries front to
+//!   back at an index that is the same in every lane (on lavapipe a texel gather of one
+//!   address: storage-buffer loads are lane loops even then), accumulates them in registers
+//!   and composites each sheet as the walk passes it; a subgroup stops once its pixels are
+//!   opaque; each pixel is written once. No atomics on pixels, no sheet buffers in memory.
+//!   Post-shaded kernels are one entry per tile and `RING` sheets, shared out to the sheets
+//!   from the erfc at each sheet boundary.
 pub mod gpu;
 pub mod project;
 pub mod raster;
