@@ -9,6 +9,7 @@ use common::*;
 use vmls::render::camera::Projection;
 use vmls::render::raycast::raycast_image;
 use vmls::render::renderer::Renderer;
+use vmls::render::shading::Isosurface;
 use vmls::render::{Field, RenderError};
 use vmls::scene::Scene;
 use vmls::splat::project::{Cull, Kernel, splat_project};
@@ -170,6 +171,8 @@ fn pre_shaded_isosurfaces_and_bad_splat_keys_are_refused_by_name() {
         ("splat.occlusion=3", "splat.occlusion"),
         ("splat.footprint=\"ray\"", "splat.footprint"),
         ("splat.surface=1", "splat.surface"),
+        ("splat.tile=12", "splat.tile"),
+        ("splat.split=\"no\"", "splat.split"),
         ("splat.sheets=3", "sheets"),
         ("reconstruction.sigma=0.5", "reconstruction.sigma"),
     ] {
@@ -219,6 +222,34 @@ fn pre_shaded_isosurfaces_and_bad_splat_keys_are_refused_by_name() {
             ..
         }
     ));
+    // Post-shaded sheets need split kernels; post-shaded isosurfaces' apron does not fit a
+    // workgroup around a 32² tile.
+    let iso = [Isosurface {
+        value: 0.5,
+        color: [1.0, 0.8, 0.3],
+        opacity: 0.9,
+    }];
+    for (extra, isosurfaces, key) in [
+        ("splat.split=false", &[][..], "splat.split"),
+        ("splat.tile=32", &iso[..], "splat.tile"),
+    ] {
+        let post = scene(&["render.method=\"splat-post\"", extra]);
+        let err = SplatSetup::new(
+            Shading::Post,
+            &post.render.splat,
+            &post.camera,
+            0.99,
+            [0.0; 3],
+            isosurfaces,
+            &post.lighting,
+            &field,
+        )
+        .expect_err(extra);
+        assert!(
+            matches!(err, RenderError::Setting { key: k, .. } if k == key),
+            "{extra}: {err}"
+        );
+    }
     let tiny = scene(&["render.method=\"splat-post\"", "splat.slab=1e-4"]);
     let err = SplatSetup::new(
         Shading::Post,
