@@ -415,31 +415,48 @@ def run_points(scene, a, base):
         ren.SetPass(float_target if fb == "float32" else None)
         first = frame(False)  # shaders for this pipeline
         if not device:  # the GL context exists after the first frame
-            info = win.ReportCapabilities().splitlines()
-            device = next((l for l in info if "OpenGL renderer string" in l), ":OpenGL").split(":", 1)[1].strip()
-            version = next((l for l in info if "OpenGL version string" in l), ":").split(":", 1)[1].strip()
+            device, version = gl_strings(win)
         times = [frame(sort) for _ in range(a.repeat)]
-        writer = vtk.vtkPNGWriter()
         image_path = os.path.join(a.out, f"{i:03}.png")
-        writer.SetFileName(image_path)
-        writer.SetInputConnection(grab.GetOutputPort())
-        writer.Write()
-        rows.append({
-            "source": "vtk", "method": "vtk-point-gaussian",
-            "settings": f"framebuffer={fb};sort={'per-frame' if sort else 'once'};splats={drawn}",
-            "device": device, "driver": f"VTK {vtk.vtkVersion.GetVTKVersion()}, OpenGL {version}",
-            "vmls_version": "", "commit": "", "width": width, "height": height,
-            "frames": a.repeat, "gpu_ms": "", "gpu_ms_min": "", "gpu_ms_max": "", "kernel_ms": "",
-            "wall_ms": statistics.median(times), "first_frame_wall_ms": first,
-            "first_frame_gpu_ms": "", "prepare_ms": prepare_ms, "evaluations": "",
-            "evaluations_per_s": "", "bytes_uploaded_first": "", "bytes_uploaded_next": "",
-            "rmse": "", "max_abs": "", "max_x": "", "max_y": "", "psnr": "", "non_finite": "",
-            "fma_share": "", "memory_share": "", "bound_by": "", "reference": "", "variant": f"image={image_path}",
-        })
+        write_png(grab, image_path)
+        rows.append(peer_row(
+            "vtk-point-gaussian", f"framebuffer={fb};sort={'per-frame' if sort else 'once'};splats={drawn}",
+            device, version, width, height, times, first, prepare_ms, image_path))
     # The pass owns GL objects, which it must free while the context exists.
     ren.SetPass(None)
     float_target.ReleaseGraphicsResources(win)
     return rows
+
+
+def gl_strings(win):
+    """(renderer, version) of the window's OpenGL context, which exists after a first frame."""
+    info = win.ReportCapabilities().splitlines()
+    device = next((l for l in info if "OpenGL renderer string" in l), ":OpenGL").split(":", 1)[1].strip()
+    version = next((l for l in info if "OpenGL version string" in l), ":").split(":", 1)[1].strip()
+    return device, version
+
+
+def write_png(grab, path):
+    # vtkPNGWriter writes VTK's bottom-up rows top row first, as vmls's images are.
+    writer = vtk.vtkPNGWriter()
+    writer.SetFileName(path)
+    writer.SetInputConnection(grab.GetOutputPort())
+    writer.Write()
+
+
+def peer_row(method, settings, device, version, width, height, times, first, prepare_ms, image_path):
+    """A row in results.csv's columns: wall times only, the error columns left to vmls bench."""
+    return {
+        "source": "vtk", "method": method, "settings": settings,
+        "device": device, "driver": f"VTK {vtk.vtkVersion.GetVTKVersion()}, OpenGL {version}",
+        "vmls_version": "", "commit": "", "width": width, "height": height,
+        "frames": len(times), "gpu_ms": "", "gpu_ms_min": "", "gpu_ms_max": "", "kernel_ms": "",
+        "wall_ms": statistics.median(times), "first_frame_wall_ms": first,
+        "first_frame_gpu_ms": "", "prepare_ms": prepare_ms, "evaluations": "",
+        "evaluations_per_s": "", "bytes_uploaded_first": "", "bytes_uploaded_next": "",
+        "rmse": "", "max_abs": "", "max_x": "", "max_y": "", "psnr": "", "non_finite": "",
+        "fma_share": "", "memory_share": "", "bound_by": "", "reference": "", "variant": f"image={image_path}",
+    }
 
 
 def write_rows(out, rows):
@@ -533,28 +550,12 @@ def main():
         ren.ResetCameraClippingRange()
         first = frame()
         if not device:  # the GL context exists after the first frame
-            info = win.ReportCapabilities().splitlines()
-            device = next((l for l in info if "OpenGL renderer string" in l), ":OpenGL").split(":", 1)[1].strip()
-            version = next((l for l in info if "OpenGL version string" in l), ":").split(":", 1)[1].strip()
+            device, version = gl_strings(win)
         times = [frame() for _ in range(a.repeat)]
-        writer = vtk.vtkPNGWriter()
         image_path = os.path.join(a.out, f"{i:03}.png")
-        writer.SetFileName(image_path)
-        # vtkPNGWriter writes VTK's bottom-up rows top row first, as vmls's images are.
-        writer.SetInputConnection(grab.GetOutputPort())
-        writer.Write()
-        rows.append({
-            "source": "vtk", "method": "vtk-gpu",
-            "settings": f"sample_distance={step}",
-            "device": device, "driver": f"VTK {vtk.vtkVersion.GetVTKVersion()}, OpenGL {version}",
-            "vmls_version": "", "commit": "", "width": width, "height": height,
-            "frames": a.repeat, "gpu_ms": "", "gpu_ms_min": "", "gpu_ms_max": "", "kernel_ms": "",
-            "wall_ms": statistics.median(times), "first_frame_wall_ms": first,
-            "first_frame_gpu_ms": "", "prepare_ms": 0.0, "evaluations": "",
-            "evaluations_per_s": "", "bytes_uploaded_first": "", "bytes_uploaded_next": "",
-            "rmse": "", "max_abs": "", "max_x": "", "max_y": "", "psnr": "", "non_finite": "",
-            "fma_share": "", "memory_share": "", "bound_by": "", "reference": "", "variant": f"image={image_path}",
-        })
+        write_png(grab, image_path)
+        rows.append(peer_row("vtk-gpu", f"sample_distance={step}", device, version, width, height,
+                             times, first, 0.0, image_path))
     with open(os.path.join(a.out, "results.csv"), "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=COLUMNS)
         w.writeheader()
