@@ -203,33 +203,15 @@ fn pre_shaded_isosurfaces_and_bad_splat_keys_are_refused_by_name() {
         ),
         "{err}"
     );
-    let post = scene(&["render.method=\"splat-post\"", "splat.surface=true"]);
-    let err = SplatSetup::new(
-        Shading::Post,
-        &post.render.splat,
-        &post.camera,
-        0.99,
-        [0.0; 3],
-        &[],
-        &post.lighting,
-        &field,
-    )
-    .expect_err("surface splats with post-shading");
-    assert!(matches!(
-        err,
-        RenderError::Setting {
-            key: "splat.surface",
-            ..
-        }
-    ));
-    // Post-shaded sheets need split kernels; post-shaded isosurfaces' apron does not fit a
-    // workgroup around a 32² tile.
+    // Post-shaded splatting finds isosurfaces in its sheets (no surface splats), which need
+    // split kernels; post-shaded isosurfaces' apron does not fit a workgroup around a 32² tile.
     let iso = [Isosurface {
         value: 0.5,
         color: [1.0, 0.8, 0.3],
         opacity: 0.9,
     }];
     for (extra, isosurfaces, key) in [
+        ("splat.surface=true", &[][..], "splat.surface"),
         ("splat.split=false", &[][..], "splat.split"),
         ("splat.tile=32", &iso[..], "splat.tile"),
     ] {
