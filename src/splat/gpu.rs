@@ -22,6 +22,14 @@ use std::sync::atomic::{AtomicBool, Ordering};
 /// that Ctrl-C and the progress bar act within a fraction of a long frame, while the wait for
 /// each submission's fence stays small beside the band's work.
 const RASTER_BANDS: u32 = 8;
+/// What `splat_scan`'s passes bind: pass p the first p + 2 of these (counts and block sums;
+/// then the offsets it writes; then the cursors it starts).
+const SCAN_BINDINGS: [u32; 4] = [
+    binding::BUCKET_COUNTS,
+    binding::SCAN_SUMS,
+    binding::BUCKET_OFFSETS,
+    binding::BUCKET_CURSORS,
+];
 /// Pixels per `splat_raster` invocation without an apron (every tile size is a multiple).
 const RASTER_PIXELS: u32 = 4;
 /// Invocations per workgroup of the one-dimensional kernels.
@@ -125,6 +133,7 @@ impl SplatVariant {
     /// The variant a setup needs on a device.
     pub fn of(setup: &SplatSetup, device: &crate::vk::DeviceInfo) -> Self {
         let subgroup = device.subgroup_size.clamp(1, 128);
+        let pixels = Self::pixels_per_invocation(setup);
         Self {
             shading: setup.shading,
             antialias: setup.settings.antialias,
@@ -138,9 +147,8 @@ impl SplatVariant {
             hull: setup.hull && setup.shading == Shading::Post,
             tile: setup.tile,
             apron: setup.apron(),
-            pixels: Self::pixels_per_invocation(setup),
-            group: (setup.group_size() / Self::pixels_per_invocation(setup))
-                .next_multiple_of(subgroup.max(8)),
+            pixels,
+            group: (setup.group_size() / pixels).next_multiple_of(subgroup.max(8)),
             subgroup_ops: device.subgroup_ops,
         }
     }
@@ -315,12 +323,9 @@ impl SplatPipelines {
             variant: variant.clone(),
             project: make("splat_project.comp", &[], &project, 0)?,
             scan: [
-                scan(0, &[BUCKET_COUNTS, SCAN_SUMS])?,
-                scan(1, &[BUCKET_COUNTS, SCAN_SUMS, BUCKET_OFFSETS])?,
-                scan(
-                    2,
-                    &[BUCKET_COUNTS, SCAN_SUMS, BUCKET_OFFSETS, BUCKET_CURSORS],
-                )?,
+                scan(0, &SCAN_BINDINGS[..2])?,
+                scan(1, &SCAN_BINDINGS[..3])?,
+                scan(2, &SCAN_BINDINGS)?,
             ],
             bin: make(
                 "splat_bin.comp",
@@ -457,8 +462,13 @@ impl SplatGpuImage {
     }
 }
 
-fn params(setup: &SplatSetup, kernels: &GpuKernels, tf: &TransferFunction) -> SplatParams {
-    let tf_count = tf.to_gpu().len() as u32;
+/// The frame's parameters; `tf_count` is the length of `tf`'s GPU table.
+fn params(
+    setup: &SplatSetup,
+    kernels: &GpuKernels,
+    tf: &TransferFunction,
+    tf_count: u32,
+) -> SplatParams {
     let v = |d: glam::DVec3, w: f64| [d.x as f32, d.y as f32, d.z as f32, w as f32];
     let b = &setup.basis;
     let l = &setup.lighting;
@@ -562,7 +572,7 @@ pub fn splat_frame(
         return Err(VkError::Usage("splat frame buffers do not fit the setup".into()).into());
     }
     let gpu_tf = tf.to_gpu();
-    let p = params(setup, kernels, tf);
+    let p = params(setup, kernels, tf, gpu_tf.len() as u32);
     let params_buf = Buffer::from_slice(ctx, "splat params", &params_copies(p))?;
     let tf_buf = Buffer::from_slice(ctx, "transfer function", &gpu_tf)?;
     let isos = crate::render::renderer::iso_buffer_data(&setup.isosurfaces);
@@ -595,34 +605,13 @@ pub fn splat_frame(
         project_bind.push((binding::ISO, &iso_buf));
     }
     let group = BindGroup::new(ctx, &pipelines.project, &project_bind)?;
+    // Each pass binds a prefix of the same buffers (SCAN_BINDINGS).
+    let scan_buffers = [&t.counts, &t.sums, &t.offsets, &t.cursors];
+    let scan_bind: Vec<(u32, &Buffer)> = SCAN_BINDINGS.into_iter().zip(scan_buffers).collect();
     let scan = [
-        BindGroup::new(
-            ctx,
-            &pipelines.scan[0],
-            &[
-                (binding::BUCKET_COUNTS, &t.counts),
-                (binding::SCAN_SUMS, &t.sums),
-            ],
-        )?,
-        BindGroup::new(
-            ctx,
-            &pipelines.scan[1],
-            &[
-                (binding::BUCKET_COUNTS, &t.counts),
-                (binding::SCAN_SUMS, &t.sums),
-                (binding::BUCKET_OFFSETS, &t.offsets),
-            ],
-        )?,
-        BindGroup::new(
-            ctx,
-            &pipelines.scan[2],
-            &[
-                (binding::BUCKET_COUNTS, &t.counts),
-                (binding::SCAN_SUMS, &t.sums),
-                (binding::BUCKET_OFFSETS, &t.offsets),
-                (binding::BUCKET_CURSORS, &t.cursors),
-            ],
-        )?,
+        BindGroup::new(ctx, &pipelines.scan[0], &scan_bind[..2])?,
+        BindGroup::new(ctx, &pipelines.scan[1], &scan_bind[..3])?,
+        BindGroup::new(ctx, &pipelines.scan[2], &scan_bind)?,
     ];
     let segments = match &pipelines.segments {
         Some(p) => {
