@@ -10,10 +10,10 @@ use glam::DVec3;
 use vmls::render::camera::Projection;
 use vmls::render::renderer::Renderer;
 use vmls::samples::Metric;
-use vmls::splat::Shading;
-use vmls::splat::project::{Kernel, splat_footprint, splat_project};
+use vmls::splat::project::{Kernel, sheet_share, splat_footprint, splat_project};
 use vmls::splat::raster::splat_image;
 use vmls::splat::surface::KernelKind;
+use vmls::splat::{QUADRATURE_MAX_SHEET, Shading, SheetShare};
 
 /// ∫ w·G_V(o + t d − p) dt over the whole line, V = σ²M⁻¹ (P = V⁻¹ = M/σ²).
 fn line_integral(w: f64, sigma: f64, m: &Metric, p: DVec3, o: DVec3, d: DVec3) -> f64 {
@@ -169,7 +169,7 @@ fn one_kernel_footprint_is_the_line_integral_of_its_gaussian() {
 #[test]
 fn gpu_splatting_matches_its_cpu_twin_on_a_grid() {
     let (ctx, _) = gpu();
-    let cases: [(&str, &[&str]); 8] = [
+    let cases: [(&str, &[&str]); 9] = [
         (
             "pre-shaded surface splats",
             &[
@@ -180,6 +180,10 @@ fn gpu_splatting_matches_its_cpu_twin_on_a_grid() {
         ),
         ("pre-shaded", &["render.method=\"splat\""]),
         ("post-shaded", &["render.method=\"splat-post\""]),
+        (
+            "post-shaded, erfc sheet shares",
+            &["render.method=\"splat-post\"", "splat.sheet_share=\"erfc\""],
+        ),
         (
             "post-shaded, isosurface, orthographic",
             &[
@@ -257,6 +261,52 @@ fn gpu_splatting_matches_its_cpu_twin_on_a_grid() {
     }
     drop(renderer);
     finish(ctx);
+}
+
+#[test]
+fn the_quadrature_sheet_share_keeps_its_bound_and_serves_only_thin_sheets() {
+    // Against the erfc (1.5e-7) at every sheet position: within 1.5e-4 of the kernel's
+    // integral up to QUADRATURE_MAX_SHEET deviations, and far off beyond it.
+    let worst = |h: f64| {
+        (0..2000)
+            .map(|i| {
+                let za = -7.0 + 0.007 * f64::from(i);
+                (sheet_share(SheetShare::Quadrature, za, za + h)
+                    - sheet_share(SheetShare::Erfc, za, za + h))
+                .abs()
+            })
+            .fold(0.0, f64::max)
+    };
+    for h in [0.25, 0.5, 1.0, QUADRATURE_MAX_SHEET] {
+        assert!(
+            worst(h) < 1.5e-4,
+            "sheets {h} deviations thick: {:.3e}",
+            worst(h)
+        );
+    }
+    assert!(worst(3.0) > 1e-3, "{:.3e}", worst(3.0));
+    // Unset, post-shaded splatting takes the quadrature where every kernel's sheets are thin
+    // enough, and the erfc where they are not; pre-shaded splits always take the erfc.
+    let field = scene(&[]).field(|_| {}).expect("field");
+    let rule = |extra: &[&str], shading| setup(&scene(extra), &field, shading).sheet_share;
+    assert_eq!(rule(&[], Shading::Post), SheetShare::Quadrature);
+    assert_eq!(rule(&["splat.slab=4.0"], Shading::Post), SheetShare::Erfc);
+    assert_eq!(rule(&["splat.split=true"], Shading::Pre), SheetShare::Erfc);
+    for (extra, shading) in [
+        (
+            &["splat.sheet_share=\"quadrature\"", "splat.slab=4.0"][..],
+            Shading::Post,
+        ),
+        (
+            &["splat.sheet_share=\"quadrature\"", "splat.split=true"][..],
+            Shading::Pre,
+        ),
+    ] {
+        let err = scene(extra)
+            .splat_setup(shading, &field)
+            .expect_err("refused");
+        assert!(err.to_string().contains("splat.sheet_share"), "{err}");
+    }
 }
 
 #[test]

@@ -96,6 +96,9 @@ pub struct Field {
     volumes: std::sync::OnceLock<KernelVolumes>,
     /// Box of every sample's support (frame-relative): where kernels can reach.
     support_box: (DVec3, DVec3),
+    /// [`SampleSet::thinnest_support`], computed at first use (post-shaded splatting's
+    /// sheet-share rule).
+    thinnest: std::sync::OnceLock<f64>,
     /// The fast path's fine grid, built at first CPU use (`reconstruction.resample`; the GPU
     /// builds its own).
     resampled: std::sync::OnceLock<ResampledGrid>,
@@ -168,6 +171,7 @@ impl Field {
             full_metric,
             volumes: std::sync::OnceLock::new(),
             support_box: (DVec3::from(slo), DVec3::from(shi)),
+            thinnest: std::sync::OnceLock::new(),
             resampled: std::sync::OnceLock::new(),
             blocks: std::sync::OnceLock::new(),
             fast_path_declined: None,
@@ -391,6 +395,13 @@ impl Field {
     /// depth range).
     pub fn support_box(&self) -> (DVec3, DVec3) {
         self.support_box
+    }
+
+    /// A lower bound on the shortest half axis of any support ([`SampleSet::thinnest_support`]).
+    pub fn thinnest_support(&self) -> f64 {
+        *self
+            .thinnest
+            .get_or_init(|| self.samples.thinnest_support())
     }
 
     /// The unit of `render.step` ([`SampleSet::spacing`]).

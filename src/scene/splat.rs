@@ -1,7 +1,7 @@
 //! Scene section `[splat]`: the splatting renderer's settings (`crate::splat::SplatSettings`).
 
 use super::{SceneError, Section};
-use crate::splat::{Antialias, SplatSettings};
+use crate::splat::{Antialias, SheetShare, SplatSettings};
 use toml::Value;
 
 /// Keys of `[splat]`.
@@ -15,6 +15,7 @@ pub(super) const KEYS: &[&str] = &[
     "footprint",
     "tile",
     "split",
+    "sheet_share",
 ];
 
 /// Reads `[splat]`; every key is optional.
@@ -40,6 +41,15 @@ pub(super) fn parse(sec: &Section<'_>) -> Result<SplatSettings, SceneError> {
             None => d.split,
             Some(_) => Some(flag(sec, "split", true)?),
         },
+        sheet_share: sec.choice(
+            "sheet_share",
+            d.sheet_share,
+            &[
+                ("auto", None),
+                ("erfc", Some(SheetShare::Erfc)),
+                ("quadrature", Some(SheetShare::Quadrature)),
+            ],
+        )?,
         tile: match sec.get("tile") {
             None => d.tile,
             Some(Value::Integer(t)) if [8, 16, 32].contains(t) => Some(*t as u32),

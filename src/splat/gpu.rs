@@ -108,6 +108,9 @@ pub struct SplatVariant {
     pub split: bool,
     /// Post-shaded: ring registers per pixel (`SplatSetup::ring`; 0: none).
     pub ring: u32,
+    /// With ring registers: the quadrature sheet share (`SplatSetup::sheet_share`), else the
+    /// erfc.
+    pub quadrature: bool,
     pub occlusion: bool,
     pub isosurfaces: bool,
     /// Surface splats (pre-shaded isosurfaces).
@@ -141,6 +144,7 @@ impl SplatVariant {
             exact: setup.exact_footprints(),
             split: setup.split,
             ring: setup.ring,
+            quadrature: setup.ring > 0 && setup.sheet_share == super::SheetShare::Quadrature,
             occlusion: setup.settings.occlusion,
             isosurfaces: !setup.isosurfaces.is_empty(),
             surfaces: setup.settings.surface && !setup.isosurfaces.is_empty(),
@@ -177,6 +181,7 @@ impl SplatVariant {
             ("SPLAT_EXACT".into(), flag(self.exact)),
             ("SPLAT_SPLIT".into(), flag(self.split)),
             ("SPLAT_RING".into(), self.ring.to_string()),
+            ("SPLAT_QUADRATURE".into(), flag(self.quadrature)),
             ("SPLAT_OCCLUSION".into(), flag(self.occlusion)),
             ("SPLAT_ISOSURFACES".into(), flag(self.isosurfaces)),
             ("SPLAT_SURFACES".into(), flag(self.surfaces)),
@@ -233,7 +238,12 @@ impl SplatVariant {
             if self.occlusion { " occlusion" } else { "" },
             if self.split { "" } else { " whole-kernels" },
             if self.ring > 0 {
-                format!(" ring {}", self.ring)
+                let rule = if self.quadrature {
+                    "quadrature"
+                } else {
+                    "erfc"
+                };
+                format!(" ring {} {rule}", self.ring)
             } else {
                 String::new()
             },

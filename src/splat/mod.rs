@@ -55,6 +55,12 @@ pub const SCAN_BLOCK: u32 = 1024;
 /// its lateral footprint evaluated once per pixel and entry and shared out to those sheets by
 /// the erfc at each sheet boundary, where one entry per sheet evaluates it per sheet.
 pub const RING: u32 = 16;
+/// The quadrature sheet share ([`SheetShare::Quadrature`]) serves sheets at most this many of
+/// a kernel's standard deviations thick along the ray: its error is then at most 1.5·10⁻⁴ of
+/// the kernel's line integral per sheet (`project::sheet_share`), and the kernel's recurrence
+/// stays inside f32's range (its seeds lie at most 4 sheets, 6 deviations, from every sheet
+/// they serve).
+pub const QUADRATURE_MAX_SHEET: f64 = 1.5;
 /// At most this many sheets per frame.
 pub const MAX_SLABS: u32 = 16_384;
 /// 3DGS's guard: the Jacobian's lateral terms are evaluated at most this far outside the view
@@ -84,6 +90,20 @@ pub enum Antialias {
     Swan,
     /// No low-pass filter (aliases under minification).
     None,
+}
+
+/// `splat.sheet_share`: how post-shaded splatting shares a kernel's line integral out to the
+/// sheets it crosses (with ring registers, one lateral footprint per pixel and entry).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SheetShare {
+    /// Φ(z_b) − Φ(z_a) from the erfc at each sheet boundary (|error| ≤ 1.5·10⁻⁷): a division
+    /// and an exponential per sheet.
+    Erfc,
+    /// The Hermite–Simpson rule on each sheet (the Gaussian at both boundaries and the middle,
+    /// its slope at both boundaries; exact for quintics), the Gaussians by a product recurrence
+    /// from two seeds per entry: a few multiplies per sheet. For sheets at most
+    /// [`QUADRATURE_MAX_SHEET`] deviations thick.
+    Quadrature,
 }
 
 /// Scene section `[splat]`.
@@ -116,6 +136,9 @@ pub struct SplatSettings {
     /// classification before the sum: BENCHMARKS.md measured the same RMSE both ways, at 13×
     /// the time split).
     pub split: Option<bool>,
+    /// The sheet-share rule of post-shaded splatting; unset: the quadrature where every
+    /// kernel's sheets are thin enough for it (`QUADRATURE_MAX_SHEET`), else the erfc.
+    pub sheet_share: Option<SheetShare>,
 }
 
 impl Default for SplatSettings {
@@ -130,6 +153,7 @@ impl Default for SplatSettings {
             exact: true,
             tile: None,
             split: None,
+            sheet_share: None,
         }
     }
 }
@@ -175,6 +199,9 @@ pub struct SplatSetup {
     /// pixel, so that a kernel is one entry per tile and per `RING` sheets it crosses; 0
     /// otherwise (one entry per tile and sheet).
     pub ring: u32,
+    /// `splat.sheet_share` resolved (with ring registers; else `Erfc`, which one entry per
+    /// sheet uses).
+    pub sheet_share: SheetShare,
     pub lighting: Lighting,
 }
 
@@ -333,6 +360,35 @@ impl SplatSetup {
                 ),
             });
         }
+        let ring = if shading == Shading::Post { RING } else { 0 };
+        // The thickest sheet any kernel meets, in its own deviations along the ray: a ray's
+        // conditional deviation is at least the kernel's shortest one, σ × the support's
+        // shortest half axis.
+        let thickest = slab / (sigma * field.thinnest_support());
+        let sheet_share = match settings.sheet_share {
+            Some(SheetShare::Quadrature) if ring == 0 => {
+                return Err(RenderError::Setting {
+                    key: "splat.sheet_share",
+                    message: "\"quadrature\" shares kernels out to the sheets of post-shaded \
+                              splatting (render.method = \"splat-post\"); split pre-shaded \
+                              kernels use \"erfc\""
+                        .into(),
+                });
+            }
+            Some(SheetShare::Quadrature) if thickest > QUADRATURE_MAX_SHEET => {
+                return Err(RenderError::Setting {
+                    key: "splat.sheet_share",
+                    message: format!(
+                        "\"quadrature\" needs sheets at most {QUADRATURE_MAX_SHEET} kernel \
+                         deviations thick; the thinnest kernel meets sheets {thickest:.3} \
+                         deviations thick: lower splat.slab or use \"erfc\""
+                    ),
+                });
+            }
+            Some(rule) => rule,
+            None if ring > 0 && thickest <= QUADRATURE_MAX_SHEET => SheetShare::Quadrature,
+            None => SheetShare::Erfc,
+        };
         let setup = Self {
             shading,
             settings: *settings,
@@ -356,7 +412,8 @@ impl SplatSetup {
             isosurfaces: isosurfaces.to_vec(),
             split: settings.split.unwrap_or(shading == Shading::Post),
             tile,
-            ring: if shading == Shading::Post { RING } else { 0 },
+            ring,
+            sheet_share,
             lighting: *lighting,
         };
         Ok(setup)

@@ -24,7 +24,9 @@
 //!   early-termination opacity ([BLUR]'s early splat elimination, per tile): such pixels never
 //!   composite again, so stopping changes no pixel.
 
-use super::project::{Cull, Kernel, Splat, splat_footprint, splat_project};
+use super::project::{
+    Cull, Kernel, Splat, sheet_share, splat_footprint, splat_profile, splat_project,
+};
 use super::surface::{KernelKind, surface_kernels};
 use super::{Shading, SplatCounts, SplatSetup};
 use crate::render::Field;
@@ -216,19 +218,20 @@ pub fn splat_raster(
                         // One evaluation of the lateral footprint, shared out to every sheet
                         // the kernel crosses.
                         counts.evaluated += 1;
-                        let whole = f64::NEG_INFINITY..f64::INFINITY;
-                        if splat_footprint(s, setup, px, py, whole.start, whole.end) == 0.0 {
+                        let Some((amplitude, m, inv)) = splat_profile(s, setup, px, py) else {
                             continue;
-                        }
+                        };
                         counts.contributions += 1;
-                        l.sheet[0] += splat_footprint(s, setup, px, py, ta, tb);
+                        let share = |(a, b): (f64, f64)| {
+                            amplitude * sheet_share(setup.sheet_share, (a - m) * inv, (b - m) * inv)
+                        };
+                        l.sheet[0] += share((ta, tb));
                         let last = s.slabs[1].min(k + setup.ring - 1);
                         for (d, j) in (k + 1..=last).enumerate() {
-                            let (a, b) = setup.slab_bounds(j);
                             if l.ahead.len() <= d {
                                 l.ahead.push_back(0.0);
                             }
-                            l.ahead[d] += splat_footprint(s, setup, px, py, a, b);
+                            l.ahead[d] += share(setup.slab_bounds(j));
                         }
                         continue;
                     }
