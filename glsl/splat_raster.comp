@@ -18,7 +18,9 @@
 // once the sheets behind them hold no value and value 0 has no extinction. With
 // SPLAT_OCCLUSION the tile stops once every pixel of it is opaque. No atomics on pixels, no
 // sheet buffers; each pixel is written once. Variant macros: SPLAT_POST, SPLAT_ORTHO,
-// SPLAT_EXACT, SPLAT_OCCLUSION, SPLAT_ISOSURFACES, SPLAT_SURFACES, SPLAT_HULL, SPLAT_TILE,
+// SPLAT_EXACT, SPLAT_RING (0, or post-shaded: one entry per SPLAT_RING sheets, the sheets ahead
+// in ring registers), SPLAT_QUADRATURE (its sheet shares by the quadrature, else the erfc),
+// SPLAT_OCCLUSION, SPLAT_ISOSURFACES, SPLAT_SURFACES, SPLAT_HULL, SPLAT_TILE,
 // SPLAT_APRON, SPLAT_GROUP (invocations: EDGE² rounded up to whole subgroups),
 // SPLAT_SUBGROUP_OPS (subgroup votes and sums: each subgroup stops by itself, without
 // barriers, which cost lavapipe a coroutine switch per subgroup).
@@ -135,6 +137,29 @@ float slab_overlap(int j, float t_in, float t_out, uint p) {
 }
 #endif
 
+#if SPLAT_POST == 1 && SPLAT_RING > 0
+// The ring registers, and their shift by one sheet (r<d> <- r<d+1>, the last cleared).
+#if SPLAT_RING == 4
+#define RING_REGISTERS(F) F(r0) F(r1) F(r2)
+#define RING_SHIFT(px) px.r0 = px.r1; px.r1 = px.r2; px.r2 = 0.0;
+#elif SPLAT_RING == 8
+#define RING_REGISTERS(F) F(r0) F(r1) F(r2) F(r3) F(r4) F(r5) F(r6)
+#define RING_SHIFT(px) \
+    px.r0 = px.r1; px.r1 = px.r2; px.r2 = px.r3; px.r3 = px.r4; px.r4 = px.r5; px.r5 = px.r6; \
+    px.r6 = 0.0;
+#elif SPLAT_RING == 16
+#define RING_REGISTERS(F) \
+    F(r0) F(r1) F(r2) F(r3) F(r4) F(r5) F(r6) F(r7) F(r8) F(r9) F(r10) F(r11) F(r12) F(r13) \
+    F(r14)
+#define RING_SHIFT(px) \
+    px.r0 = px.r1; px.r1 = px.r2; px.r2 = px.r3; px.r3 = px.r4; px.r4 = px.r5; px.r5 = px.r6; \
+    px.r6 = px.r7; px.r7 = px.r8; px.r8 = px.r9; px.r9 = px.r10; px.r10 = px.r11; \
+    px.r11 = px.r12; px.r12 = px.r13; px.r13 = px.r14; px.r14 = 0.0;
+#else
+#error "SPLAT_RING is 0, 4, 8 or 16"
+#endif
+#endif
+
 // Everything a pixel keeps in registers.
 struct Pixel {
     int x;
@@ -158,10 +183,12 @@ struct Pixel {
     // The integral of sheet k so far.
     float sheet;
 #if SPLAT_RING > 0
-    // The integrals of sheets k + 1, k + 2, ... (r<d>: sheet k + 1 + d). Named registers, not
-    // an array: llvmpipe keeps an array it cannot prove constant-indexed in memory and reads it
-    // lane by lane.
-    float r0, r1, r2, r3, r4, r5, r6, r7, r8, r9, r10, r11, r12, r13, r14, r15;
+    // The integrals of sheets k + 1 ... k + SPLAT_RING - 1 (r<d>: sheet k + 1 + d). Named
+    // registers, not an array: llvmpipe keeps an array it cannot prove constant-indexed in
+    // memory and reads it lane by lane.
+#define DECLARE(r) float r;
+    RING_REGISTERS(DECLARE)
+#undef DECLARE
 #endif
     // Mean values of sheets j - 2, j - 1, j = k - 1, and the lateral gradients of j - 1, j.
     float v_2;
@@ -198,9 +225,9 @@ Pixel pixel_at(int x, int y, bool valid, bool own_tile) {
 #else
     px.sheet = 0.0;
 #if SPLAT_RING > 0
-    px.r0 = 0.0; px.r1 = 0.0; px.r2 = 0.0; px.r3 = 0.0; px.r4 = 0.0; px.r5 = 0.0; px.r6 = 0.0;
-    px.r7 = 0.0; px.r8 = 0.0; px.r9 = 0.0; px.r10 = 0.0; px.r11 = 0.0; px.r12 = 0.0;
-    px.r13 = 0.0; px.r14 = 0.0; px.r15 = 0.0;
+#define CLEAR(r) px.r = 0.0;
+    RING_REGISTERS(CLEAR)
+#undef CLEAR
 #endif
     px.v_2 = 0.0;
     px.v0 = 0.0;
@@ -255,10 +282,10 @@ void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) 
     // w = A/sqrt(2 pi), w h/30 (7 g_a + 16 g_m + 7 g_b) + w h^2/60 (z_b g_b - z_a g_a) for
     // g = e^(-z^2/2) at its boundaries a, b and middle m. The g at steps of dz = h/2 by the
     // recurrence g(z + dz) = g(z) rf, rf <- rf e^(-dz^2) (backwards: rb), from seeds at
-    // boundaries 4 and 12, each serving the 4 sheets either side: h <= QUADRATURE_MAX_SHEET
-    // keeps every sheet that matters within 13 deviations of its seed, where f32's e^(-z^2/2)
-    // has not underflowed. Seeds further out are clamped (their sheets are all ~0, and an
-    // unclamped rf could reach infinity against a zero g).
+    // boundaries 4 and 12 (ring 4: boundary 2), each serving up to 4 sheets either side:
+    // h <= QUADRATURE_MAX_SHEET keeps every sheet that matters within 13 deviations of its
+    // seed, where f32's e^(-z^2/2) has not underflowed. Seeds further out are clamped (their
+    // sheets are all ~0, and an unclamped rf could reach infinity against a zero g).
     float h = slab * pr.z;
     float dz = 0.5 * h;
     float c = exp_e(-dz * dz);
@@ -287,6 +314,13 @@ void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) 
          * (wa * (g0 + g1) + wm * gm + dir * wd * (z1 * g1 - z0 * g0)); \
     z0 = z1; \
     g0 = g1;
+#if SPLAT_RING == 4
+    SEED(2u)
+    FROM_SEED(rb)
+    SHEET_STEP(1u, -1.0, px.r0) SHEET_STEP(0u, -1.0, px.sheet)
+    FROM_SEED(rf)
+    SHEET_STEP(2u, 1.0, px.r1) SHEET_STEP(3u, 1.0, px.r2)
+#else
     SEED(4u)
     FROM_SEED(rb)
     SHEET_STEP(3u, -1.0, px.r2) SHEET_STEP(2u, -1.0, px.r1) SHEET_STEP(1u, -1.0, px.r0)
@@ -294,6 +328,8 @@ void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) 
     FROM_SEED(rf)
     SHEET_STEP(4u, 1.0, px.r3) SHEET_STEP(5u, 1.0, px.r4) SHEET_STEP(6u, 1.0, px.r5)
     SHEET_STEP(7u, 1.0, px.r6)
+#endif
+#if SPLAT_RING == 16
     SEED(12u)
     FROM_SEED(rb)
     SHEET_STEP(11u, -1.0, px.r10) SHEET_STEP(10u, -1.0, px.r9) SHEET_STEP(9u, -1.0, px.r8)
@@ -301,6 +337,7 @@ void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) 
     FROM_SEED(rf)
     SHEET_STEP(12u, 1.0, px.r11) SHEET_STEP(13u, 1.0, px.r12) SHEET_STEP(14u, 1.0, px.r13)
     SHEET_STEP(15u, 1.0, px.r14)
+#endif
 #undef SHEET_STEP
 #undef FROM_SEED
 #undef SEED
@@ -319,10 +356,14 @@ void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) 
         qb = normal_tail(zb); \
         px.r += pr.x * phi_from_tails(za, qa, zb, qb); \
     }
-    RING_STEP(0u, r0) RING_STEP(1u, r1) RING_STEP(2u, r2) RING_STEP(3u, r3)
-    RING_STEP(4u, r4) RING_STEP(5u, r5) RING_STEP(6u, r6) RING_STEP(7u, r7)
-    RING_STEP(8u, r8) RING_STEP(9u, r9) RING_STEP(10u, r10) RING_STEP(11u, r11)
-    RING_STEP(12u, r12) RING_STEP(13u, r13) RING_STEP(14u, r14)
+    RING_STEP(0u, r0) RING_STEP(1u, r1) RING_STEP(2u, r2)
+#if SPLAT_RING >= 8
+    RING_STEP(3u, r3) RING_STEP(4u, r4) RING_STEP(5u, r5) RING_STEP(6u, r6)
+#endif
+#if SPLAT_RING == 16
+    RING_STEP(7u, r7) RING_STEP(8u, r8) RING_STEP(9u, r9) RING_STEP(10u, r10)
+    RING_STEP(11u, r11) RING_STEP(12u, r12) RING_STEP(13u, r13) RING_STEP(14u, r14)
+#endif
 #undef RING_STEP
 #endif
 #else
@@ -381,10 +422,7 @@ float take_sheet(inout Pixel px, uint live) {
 #if SPLAT_RING > 0
     px.sheet = px.r0;
     if (live > 0u) {
-        px.r0 = px.r1; px.r1 = px.r2; px.r2 = px.r3; px.r3 = px.r4; px.r4 = px.r5;
-        px.r5 = px.r6; px.r6 = px.r7; px.r7 = px.r8; px.r8 = px.r9; px.r9 = px.r10;
-        px.r10 = px.r11; px.r11 = px.r12; px.r12 = px.r13; px.r13 = px.r14; px.r14 = px.r15;
-        px.r15 = 0.0;
+        RING_SHIFT(px)
     }
 #else
     px.sheet = 0.0;

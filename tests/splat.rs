@@ -13,7 +13,7 @@ use vmls::samples::Metric;
 use vmls::splat::project::{Kernel, sheet_share, splat_footprint, splat_project};
 use vmls::splat::raster::splat_image;
 use vmls::splat::surface::KernelKind;
-use vmls::splat::{QUADRATURE_MAX_SHEET, Shading, SheetShare};
+use vmls::splat::{QUADRATURE_MAX_SHEET, RINGS, Shading, SheetShare, choose_ring};
 
 /// ∫ w·G_V(o + t d − p) dt over the whole line, V = σ²M⁻¹ (P = V⁻¹ = M/σ²).
 fn line_integral(w: f64, sigma: f64, m: &Metric, p: DVec3, o: DVec3, d: DVec3) -> f64 {
@@ -169,7 +169,7 @@ fn one_kernel_footprint_is_the_line_integral_of_its_gaussian() {
 #[test]
 fn gpu_splatting_matches_its_cpu_twin_on_a_grid() {
     let (ctx, _) = gpu();
-    let cases: [(&str, &[&str]); 9] = [
+    let cases: [(&str, &[&str]); 11] = [
         (
             "pre-shaded surface splats",
             &[
@@ -183,6 +183,22 @@ fn gpu_splatting_matches_its_cpu_twin_on_a_grid() {
         (
             "post-shaded, erfc sheet shares",
             &["render.method=\"splat-post\"", "splat.sheet_share=\"erfc\""],
+        ),
+        (
+            "post-shaded, quadrature, 4-sheet ring",
+            &[
+                "render.method=\"splat-post\"",
+                "splat.sheet_share=\"quadrature\"",
+                "splat.ring=4",
+            ],
+        ),
+        (
+            "post-shaded, erfc, 8-sheet ring",
+            &[
+                "render.method=\"splat-post\"",
+                "splat.sheet_share=\"erfc\"",
+                "splat.ring=8",
+            ],
         ),
         (
             "post-shaded, isosurface, orthographic",
@@ -292,21 +308,41 @@ fn the_quadrature_sheet_share_keeps_its_bound_and_serves_only_thin_sheets() {
     assert_eq!(rule(&[], Shading::Post), SheetShare::Quadrature);
     assert_eq!(rule(&["splat.slab=4.0"], Shading::Post), SheetShare::Erfc);
     assert_eq!(rule(&["splat.split=true"], Shading::Pre), SheetShare::Erfc);
-    for (extra, shading) in [
+    for (extra, shading, key) in [
         (
             &["splat.sheet_share=\"quadrature\"", "splat.slab=4.0"][..],
             Shading::Post,
+            "splat.sheet_share",
         ),
         (
             &["splat.sheet_share=\"quadrature\"", "splat.split=true"][..],
             Shading::Pre,
+            "splat.sheet_share",
         ),
+        (&["splat.ring=8"][..], Shading::Pre, "splat.ring"),
     ] {
         let err = scene(extra)
             .splat_setup(shading, &field)
             .expect_err("refused");
-        assert!(err.to_string().contains("splat.sheet_share"), "{err}");
+        assert!(err.to_string().contains(key), "{err}");
     }
+}
+
+#[test]
+fn the_ring_fits_the_kernels_spans() {
+    // Spans of 2·r·sheets_per_radius + 1 sheets: 3 fit one 4-sheet entry; 7 one 8-sheet entry
+    // (two 4-sheet ones cost more); 13 one 16-sheet entry (two 8-sheet ones cost more).
+    assert_eq!(choose_ring(&[1.0], 1.0), 4);
+    assert_eq!(choose_ring(&[1.0], 3.0), 8);
+    assert_eq!(choose_ring(&[1.0], 6.0), 16);
+    // Mixed supports: a few long spans do not make every entry long.
+    let mut radii = vec![1.0; 60];
+    radii.extend([8.0; 4]);
+    assert_eq!(choose_ring(&radii, 1.0), 4);
+    // The scene's default post-shaded setup takes one of them.
+    let field = scene(&[]).field(|_| {}).expect("field");
+    let ring = setup(&scene(&[]), &field, Shading::Post).ring;
+    assert!(RINGS.contains(&ring), "{ring}");
 }
 
 #[test]

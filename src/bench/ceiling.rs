@@ -22,7 +22,8 @@
 //!
 //! - Splatting rows are measured on `splat_raster`, the main kernel of a splatting frame: per
 //!   pixel whose footprint it evaluates, 110 flops for exact footprints and 65 for affine ones
-//!   (the operations of `splat_footprint`, a transcendental function counted as 10), plus per
+//!   (the operations of `splat_footprint`, a transcendental function counted as 10; post-shaded
+//!   entries add their ring's sheet shares, `entry_flops`), plus per
 //!   entry walked 8 per pixel of the tile (the box test and the loop), against `probe_fma`;
 //!   and per entry walked and per 8-invocation subgroup of the tile one broadcast load of the
 //!   120 bytes of its entry and record, against the streaming bandwidth. Both counts come from
@@ -122,6 +123,24 @@ pub fn footprint_flops(exact: bool) -> f64 {
     if exact { 110.0 } else { 65.0 }
 }
 
+/// Flops of one entry at one pixel: a footprint, or with `ring` registers (post-shaded) the
+/// lateral profile (the footprint less its erfc share, 30) and `ring` sheet shares, each 30 by
+/// the erfc or 14 by the quadrature (4 multiplies of the recurrence, 10 for the rule), whose
+/// entries also seed the recurrence: 10 for e^(-dz²), then per seed (one per 8 sheets) 2
+/// exponentials and a division, 35.
+pub fn entry_flops(exact: bool, ring: u32, quadrature: bool) -> f64 {
+    let footprint = footprint_flops(exact);
+    if ring == 0 {
+        return footprint;
+    }
+    let ring = f64::from(ring);
+    if quadrature {
+        footprint - 30.0 + 14.0 * ring + 10.0 + 35.0 * (ring / 8.0).ceil()
+    } else {
+        footprint - 30.0 + 30.0 * ring
+    }
+}
+
 /// (FMA share, broadcast-load share) of a splatting frame's `splat_raster`.
 pub fn splat_shares(
     c: &Ceilings,
@@ -130,7 +149,7 @@ pub fn splat_shares(
 ) -> (f64, f64) {
     let seconds = report.stage_ms[2] * 1e-3;
     let walked = report.counts.accumulated as f64;
-    let flops = report.counts.evaluated as f64 * footprint_flops(exact)
+    let flops = report.counts.evaluated as f64 * entry_flops(exact, report.ring, report.quadrature)
         + walked * 8.0 * f64::from(report.group_size);
     let bytes = walked * 120.0 * f64::from(report.invocations.div_ceil(8));
     (

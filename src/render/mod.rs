@@ -99,6 +99,9 @@ pub struct Field {
     /// [`SampleSet::thinnest_support`], computed at first use (post-shaded splatting's
     /// sheet-share rule).
     thinnest: std::sync::OnceLock<f64>,
+    /// [`SampleSet::radius_quantiles`] at 64ths, computed at first use (post-shaded
+    /// splatting's ring size).
+    radii: std::sync::OnceLock<Vec<f64>>,
     /// The fast path's fine grid, built at first CPU use (`reconstruction.resample`; the GPU
     /// builds its own).
     resampled: std::sync::OnceLock<ResampledGrid>,
@@ -172,6 +175,7 @@ impl Field {
             volumes: std::sync::OnceLock::new(),
             support_box: (DVec3::from(slo), DVec3::from(shi)),
             thinnest: std::sync::OnceLock::new(),
+            radii: std::sync::OnceLock::new(),
             resampled: std::sync::OnceLock::new(),
             blocks: std::sync::OnceLock::new(),
             fast_path_declined: None,
@@ -402,6 +406,11 @@ impl Field {
         *self
             .thinnest
             .get_or_init(|| self.samples.thinnest_support())
+    }
+
+    /// Support radii at the quantiles 0, 1/64, …, 1 ([`SampleSet::radius_quantiles`]).
+    pub fn radius_quantiles(&self) -> &[f64] {
+        self.radii.get_or_init(|| self.samples.radius_quantiles(64))
     }
 
     /// The unit of `render.step` ([`SampleSet::spacing`]).

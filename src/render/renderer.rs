@@ -64,6 +64,10 @@ pub struct SplatReport {
     pub tile: u32,
     pub group_size: u32,
     pub invocations: u32,
+    /// Post-shaded: the ring size (sheet shares per entry and pixel; 0 without) and whether
+    /// the shares are the quadrature's.
+    pub ring: u32,
+    pub quadrature: bool,
 }
 
 fn check_tables(setup: &RaySetup, tables: Option<&PreintegrationTables>) -> Result<(), VkError> {
@@ -469,6 +473,8 @@ impl Renderer {
                     tile: setup.tile,
                     group_size: setup.group_size(),
                     invocations: variant.group,
+                    ring: variant.ring,
+                    quadrature: variant.quadrature,
                 }),
                 skip: None,
             },

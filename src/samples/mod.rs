@@ -219,6 +219,22 @@ impl SampleSet {
         1.0 / lambda.sqrt()
     }
 
+    /// The support radii (geometric means of the half axes) at the quantiles 0, 1/n, …, 1 of
+    /// the samples, n = `parts` (one value for a uniform support).
+    pub fn radius_quantiles(&self, parts: usize) -> Vec<f64> {
+        match &self.supports {
+            Supports::Uniform(h) => vec![(h[0] * h[1] * h[2]).cbrt()],
+            Supports::PerSample(m) => {
+                let mut r: Vec<f64> = m.iter().map(supports::mean_radius).collect();
+                r.sort_by(f64::total_cmp);
+                let last = r.len().saturating_sub(1);
+                (0..=parts)
+                    .filter_map(|q| r.get(q * last / parts.max(1)).copied())
+                    .collect()
+            }
+        }
+    }
+
     /// Half extents of sample i's support ellipsoid along the axes (its bounding box).
     pub fn support_extent(&self, i: usize) -> [f64; 3] {
         match &self.supports {

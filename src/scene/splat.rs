@@ -16,6 +16,7 @@ pub(super) const KEYS: &[&str] = &[
     "tile",
     "split",
     "sheet_share",
+    "ring",
 ];
 
 /// Reads `[splat]`; every key is optional.
@@ -50,6 +51,11 @@ pub(super) fn parse(sec: &Section<'_>) -> Result<SplatSettings, SceneError> {
                 ("quadrature", Some(SheetShare::Quadrature)),
             ],
         )?,
+        ring: match sec.get("ring") {
+            None => d.ring,
+            Some(Value::Integer(r)) if [4, 8, 16].contains(r) => Some(*r as u32),
+            Some(v) => return Err(sec.err("ring", "4, 8 or 16 (sheets)", v)),
+        },
         tile: match sec.get("tile") {
             None => d.tile,
             Some(Value::Integer(t)) if [8, 16, 32].contains(t) => Some(*t as u32),

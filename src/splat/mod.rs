@@ -25,8 +25,11 @@
 //!   address: storage-buffer loads are lane loops even then), accumulates them in registers
 //!   and composites each sheet as the walk passes it; a subgroup stops once its pixels are
 //!   opaque; each pixel is written once. No atomics on pixels, no sheet buffers in memory.
-//!   Post-shaded kernels are one entry per tile and `RING` sheets, shared out to the sheets
-//!   from the erfc at each sheet boundary.
+//!   Post-shaded kernels are one entry per tile and `ring` sheets (4, 8 or 16, fitted to the
+//!   kernels' spans: [`choose_ring`]), the lateral footprint evaluated once per pixel and
+//!   entry and shared out to the sheets ([`SheetShare`]: a Hermite–Simpson quadrature by a
+//!   product recurrence where the sheets are thin for every kernel, else the erfc at each
+//!   sheet boundary).
 pub mod gpu;
 pub mod project;
 pub mod raster;
@@ -50,11 +53,20 @@ pub const MAX_KERNEL_ENTRIES: u64 = 60_000;
 pub const MAX_BUCKETS: u64 = 1 << 24;
 /// Buckets per workgroup of `splat_scan`'s first and third levels.
 pub const SCAN_BLOCK: u32 = 1024;
-/// Post-shaded splatting keeps each pixel's next sheets in this many registers
-/// (`SplatSetup::ring`): a kernel is then one entry per tile and per `RING` sheets it crosses,
-/// its lateral footprint evaluated once per pixel and entry and shared out to those sheets by
-/// the erfc at each sheet boundary, where one entry per sheet evaluates it per sheet.
-pub const RING: u32 = 16;
+/// Post-shaded splatting keeps each pixel's next sheets in `ring − 1` registers, one of these
+/// sizes (`SplatSetup::ring`): a kernel is then one entry per tile and per `ring` sheets it
+/// crosses, its lateral footprint evaluated once per pixel and entry and shared out to those
+/// sheets, where one entry per sheet evaluates it per sheet. Every share of an entry is computed
+/// (llvmpipe runs both sides of a branch), so the ring fits the kernels' spans
+/// ([`choose_ring`]).
+pub const RINGS: [u32; 3] = [4, 8, 16];
+/// The work of one entry at one pixel besides its sheet shares (record, lateral footprint,
+/// seeds), in sheet shares, and how much dearer a share gets per sheet of ring (registers
+/// spill: a 16-sheet ring's shares cost 1.2 times a 4-sheet one's): fitted on lavapipe to
+/// `splat_raster`'s times with each ring on the ML points (sheets 0.5, 1 and 2 spacings) and
+/// the torus at 512² (issue 26), for both rules.
+pub const RING_ENTRY_COST: f64 = 3.0;
+pub const RING_SPILL: f64 = 0.2 / 16.0;
 /// The quadrature sheet share ([`SheetShare::Quadrature`]) serves sheets at most this many of
 /// a kernel's standard deviations thick along the ray: its error is then at most 1.5·10⁻⁴ of
 /// the kernel's line integral per sheet (`project::sheet_share`), and the kernel's recurrence
@@ -71,6 +83,33 @@ pub const LATERAL_CLAMP: f64 = 1.3;
 pub const PIXEL_SEGMENTS: usize = 4;
 /// Smallest footprint variance in px² (keeps the conic finite for needle-thin kernels).
 pub const MIN_VARIANCE: f64 = 1e-6;
+
+/// The ring size R of [`RINGS`] with the least work per kernel and tile: Σ E[⌈s/R⌉] ·
+/// (R·(1 + `RING_SPILL`·R) + `RING_ENTRY_COST`) over the kernels' spans s (sheets). A kernel
+/// of support radius r reaches about cutoff·σ·r along the ray either side of its centre, an
+/// interval of L = 2r·`sheets_per_radius` sheets (cutoff·σ/Δs per radius), which touches
+/// ⌊L⌋ + 1 sheets or, with probability frac(L), one more; `radii` are quantiles of the
+/// supports, each standing for as many kernels. An estimate: a kernel spanning more sheets
+/// than its ring is more entries, never a wrong image.
+pub fn choose_ring(radii: &[f64], sheets_per_radius: f64) -> u32 {
+    let work = |ring: u32| {
+        let r = f64::from(ring);
+        let entries = |span: f64| (span / r).ceil();
+        let per_entry = r * (1.0 + RING_SPILL * r) + RING_ENTRY_COST;
+        radii
+            .iter()
+            .map(|x| {
+                let l = 2.0 * x * sheets_per_radius;
+                let (f, lo) = (l.fract(), l.floor() + 1.0);
+                ((1.0 - f) * entries(lo) + f * entries(lo + 1.0)) * per_entry
+            })
+            .sum::<f64>()
+    };
+    RINGS
+        .into_iter()
+        .min_by(|a, b| work(*a).total_cmp(&work(*b)))
+        .unwrap_or(16)
+}
 
 /// Pre- or post-shaded splatting (`render.method = "splat"` or `"splat-post"`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -139,6 +178,8 @@ pub struct SplatSettings {
     /// The sheet-share rule of post-shaded splatting; unset: the quadrature where every
     /// kernel's sheets are thin enough for it (`QUADRATURE_MAX_SHEET`), else the erfc.
     pub sheet_share: Option<SheetShare>,
+    /// Post-shaded ring size (one of `RINGS`); unset: [`choose_ring`].
+    pub ring: Option<u32>,
 }
 
 impl Default for SplatSettings {
@@ -154,6 +195,7 @@ impl Default for SplatSettings {
             tile: None,
             split: None,
             sheet_share: None,
+            ring: None,
         }
     }
 }
@@ -195,9 +237,9 @@ pub struct SplatSetup {
     pub split: bool,
     /// `splat.tile` resolved for the image and sheets.
     pub tile: u32,
-    /// Post-shaded with split kernels: `RING`, the registers for the sheets ahead of each
-    /// pixel, so that a kernel is one entry per tile and per `RING` sheets it crosses; 0
-    /// otherwise (one entry per tile and sheet).
+    /// Post-shaded: the ring size ([`RINGS`]; `splat.ring`, else [`choose_ring`]), so that a
+    /// kernel is one entry per tile and per `ring` sheets it crosses; 0 otherwise (one entry
+    /// per tile and sheet).
     pub ring: u32,
     /// `splat.sheet_share` resolved (with ring registers; else `Erfc`, which one entry per
     /// sheet uses).
@@ -360,13 +402,22 @@ impl SplatSetup {
                 ),
             });
         }
-        let ring = if shading == Shading::Post { RING } else { 0 };
+        let post = shading == Shading::Post;
+        if let (Some(r), false) = (settings.ring, post) {
+            return Err(RenderError::Setting {
+                key: "splat.ring",
+                message: format!(
+                    "{r}: ring registers hold the sheets ahead of post-shaded splatting \
+                     (render.method = \"splat-post\")"
+                ),
+            });
+        }
         // The thickest sheet any kernel meets, in its own deviations along the ray: a ray's
         // conditional deviation is at least the kernel's shortest one, σ × the support's
         // shortest half axis.
         let thickest = slab / (sigma * field.thinnest_support());
         let sheet_share = match settings.sheet_share {
-            Some(SheetShare::Quadrature) if ring == 0 => {
+            Some(SheetShare::Quadrature) if !post => {
                 return Err(RenderError::Setting {
                     key: "splat.sheet_share",
                     message: "\"quadrature\" shares kernels out to the sheets of post-shaded \
@@ -386,8 +437,13 @@ impl SplatSetup {
                 });
             }
             Some(rule) => rule,
-            None if ring > 0 && thickest <= QUADRATURE_MAX_SHEET => SheetShare::Quadrature,
+            None if post && thickest <= QUADRATURE_MAX_SHEET => SheetShare::Quadrature,
             None => SheetShare::Erfc,
+        };
+        let ring = match (post, settings.ring) {
+            (false, _) => 0,
+            (true, Some(r)) => r,
+            (true, None) => choose_ring(field.radius_quantiles(), settings.cutoff * sigma / slab),
         };
         let setup = Self {
             shading,
