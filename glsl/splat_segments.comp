@@ -1,5 +1,5 @@
 #version 450
-// Stage splat_segments (twin: splat_segments in src/splat/accumulate.rs): post-shaded splatting
+// Stage splat_segments (twin: splat_segments in src/splat/raster.rs): post-shaded splatting
 // over a hull, once per frame and pixel, the inside segments of the pixel's ray (hull.glsl, as
 // the ray caster clips), at most SPLAT_SEGMENTS of them; more counts as an overflow, which the
 // host reports as an error.

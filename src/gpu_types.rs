@@ -40,9 +40,9 @@ pub mod binding {
     pub const ISO: u32 = 12;
     /// Per-pixel ray state between chunks of raycast.comp: the last knot, `vec4` per pixel.
     pub const RAY_STATE: u32 = 13;
-    /// Hull BVH nodes, two `vec4` each (read-only).
+    /// Hull BVH nodes, two rgba32ui texels each: corner bits and first/count (read-only).
     pub const HULL_NODES: u32 = 14;
-    /// Hull triangles, three `vec4` vertices each, in BVH leaf order (read-only).
+    /// Hull triangles, three rgba32f texels (vertices) each, in BVH leaf order (read-only).
     pub const HULL_TRIS: u32 = 15;
     /// Splatting: the kernels, one `Sample` each with its volume in `metric_off.z`, as three
     /// rgba32f texels (read-only). Splatting's large buffers are all read and written through
@@ -103,8 +103,8 @@ pub mod binding {
         use crate::vk::BindingKind;
         match b {
             SAMPLES | GRID | RESAMPLED | RESAMPLE_TARGET | PREINT | SKIP_BLOCKS
-            | TRANSFER_TEXELS | SPLAT_KERNELS | SPLATS => BindingKind::TexelRgba32Float,
-            NODES | SPLAT_WORDS => BindingKind::TexelRgba32Uint,
+            | TRANSFER_TEXELS | SPLAT_KERNELS | SPLATS | HULL_TRIS => BindingKind::TexelRgba32Float,
+            NODES | SPLAT_WORDS | HULL_NODES => BindingKind::TexelRgba32Uint,
             INDICES | PROBE_TEXELS | SKIP_TABLE | GRID_WORDS | SPLAT_LIST | OFFSET_TEXELS => {
                 BindingKind::TexelR32Uint
             }

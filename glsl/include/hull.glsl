@@ -6,11 +6,14 @@
 #ifndef VMLS_HULL_GLSL
 #define VMLS_HULL_GLSL
 
-// nodes[2i] = (lo, bits(first)), nodes[2i + 1] = (hi, bits(count)); count 0: inner node with
-// children first, first + 1.
-layout(std430, binding = BINDING_HULL_NODES) readonly buffer HullNodesBuf { vec4 hull_nodes[]; };
+// Both through texel views: every lane of a SIMD row reads its own node or triangle, a gather
+// on lavapipe where a storage-buffer load is a loop over the lanes.
+// nodes[2i] = (bits(lo), first), nodes[2i + 1] = (bits(hi), count) as integer texels (a float
+// view could flush the small integers' bits as denormals); count 0: inner node with children
+// first, first + 1.
+layout(rgba32ui, binding = BINDING_HULL_NODES) readonly uniform uimageBuffer hull_nodes;
 // Three vertices per triangle, in leaf order.
-layout(std430, binding = BINDING_HULL_TRIS) readonly buffer HullTrisBuf { vec4 hull_tris[]; };
+layout(rgba32f, binding = BINDING_HULL_TRIS) readonly uniform imageBuffer hull_tris;
 
 #define HULL_SEGMENTS (HULL_MAX_HITS / 2 + 1)
 
@@ -34,9 +37,10 @@ bool hull_slab(vec3 o, vec3 d, vec3 inv, vec3 lo, vec3 hi) {
 
 // Signed hit: +t entering, −t leaving; 0 for a miss (or a hit at t ≤ 0, behind the eye).
 float hull_intersect(vec3 o, vec3 d, int kx, int ky, int kz, vec3 shear, uint tri) {
-    vec3 a = hull_tris[3u * tri].xyz - o;
-    vec3 b = hull_tris[3u * tri + 1u].xyz - o;
-    vec3 c = hull_tris[3u * tri + 2u].xyz - o;
+    int at = int(3u * tri);
+    vec3 a = imageLoad(hull_tris, at).xyz - o;
+    vec3 b = imageLoad(hull_tris, at + 1).xyz - o;
+    vec3 c = imageLoad(hull_tris, at + 2).xyz - o;
     float ax = a[kx] - shear.x * a[kz], ay = a[ky] - shear.y * a[kz];
     float bx = b[kx] - shear.x * b[kz], by = b[ky] - shear.y * b[kz];
     float cx = c[kx] - shear.x * c[kz], cy = c[ky] - shear.y * c[kz];
@@ -79,13 +83,13 @@ int hull_segments(vec3 o, vec3 d, out vec2 seg[HULL_SEGMENTS]) {
     while (sp > 0 && !overflow) {
         sp -= 1;
         uint node = stack[sp];
-        vec4 lo = hull_nodes[2u * node];
-        vec4 hi = hull_nodes[2u * node + 1u];
-        if (!hull_slab(o, d, inv, lo.xyz, hi.xyz)) {
+        uvec4 lo = imageLoad(hull_nodes, int(2u * node));
+        uvec4 hi = imageLoad(hull_nodes, int(2u * node + 1u));
+        if (!hull_slab(o, d, inv, uintBitsToFloat(lo.xyz), uintBitsToFloat(hi.xyz))) {
             continue;
         }
-        uint first = floatBitsToUint(lo.w);
-        uint count = floatBitsToUint(hi.w);
+        uint first = lo.w;
+        uint count = hi.w;
         if (count == 0u) {
             stack[sp] = first;
             stack[sp + 1] = first + 1u;

@@ -359,17 +359,14 @@ impl GpuField {
         let hull = match &field.hull {
             None => None,
             Some(bvh) => {
-                let nodes: Vec<[f32; 4]> = bvh
+                // Integer texels: the corners as float bits (uintBitsToFloat in the kernel).
+                let nodes: Vec<[u32; 4]> = bvh
                     .nodes
                     .iter()
                     .flat_map(|n| {
-                        let [lx, ly, lz] = n.lo.map(|c| c as f32);
-                        let [hx, hy, hz] = n.hi.map(|c| c as f32);
-                        // Integers travel as float bits (floatBitsToUint in the kernel).
-                        [
-                            [lx, ly, lz, f32::from_bits(n.first)],
-                            [hx, hy, hz, f32::from_bits(n.count)],
-                        ]
+                        let [lx, ly, lz] = n.lo.map(|c| (c as f32).to_bits());
+                        let [hx, hy, hz] = n.hi.map(|c| (c as f32).to_bits());
+                        [[lx, ly, lz, n.first], [hx, hy, hz, n.count]]
                     })
                     .collect();
                 let tris: Vec<[f32; 4]> = bvh
