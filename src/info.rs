@@ -204,7 +204,7 @@ fn describe_samples(
     );
     let field = Field::from_samples(set, reconstruction, octree, |_| {})?;
     let set = &field.samples;
-    let neighbours = field.neighbours();
+    let neighbours = field.neighbours()?;
     let weighted = quantiles(
         picks
             .iter()
@@ -225,7 +225,7 @@ fn describe_samples(
         "  samples with weight at a sample: min {}, median {}, max {}",
         weighted[0], weighted[1], weighted[2]
     );
-    match &field.octree {
+    match field.octree()? {
         Some(tree) => {
             let s = tree.stats(std::mem::size_of::<Sample>() as u64);
             let _ = writeln!(

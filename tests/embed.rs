@@ -112,9 +112,12 @@ fn wraps_an_application_device() {
             let (out, _) =
                 evaluate(&ctx, &compiler, &field, &gf, &[[0.0, 0.0, 0.0]], 1).expect("eval");
             assert_eq!(out[0].terms, 4);
-            let cpu =
-                vmls::recon::mls_evaluate(&field.mls(), field.neighbours().as_ref(), [0.0; 3])
-                    .expect("defined");
+            let cpu = vmls::recon::mls_evaluate(
+                &field.mls(),
+                field.neighbours().expect("neighbours").as_ref(),
+                [0.0; 3],
+            )
+            .expect("defined");
             assert!(
                 (f64::from(out[0].value) - cpu.value).abs() < 1e-5,
                 "GPU {} vs CPU {}",

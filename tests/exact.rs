@@ -29,7 +29,7 @@ fn gpu_exact_field_matches_the_analytic_function() {
         let (out, _) = evaluate(&ctx, &compiler, &field, &gpu_field, &points, 1).expect("eval");
         drop(gpu_field);
         finish(ctx);
-        let neighbours_cpu = field.neighbours();
+        let neighbours_cpu = field.neighbours().expect("neighbours");
         let (mut worst_v, mut worst_g) = (0.0f64, 0.0f64);
         for (g, p) in out.iter().zip(&points) {
             // The ML generator's frame is centred on its grid: frame = the function's coordinates.
@@ -92,7 +92,7 @@ fn exact_field_follows_a_moved_grid_on_both_twins() {
     let (out, _) = evaluate(&ctx, &compiler, &field, &gpu_field, &points, 1).expect("eval");
     drop(gpu_field);
     finish(ctx);
-    let neighbours = field.neighbours();
+    let neighbours = field.neighbours().expect("neighbours");
     for (n, ((g, p), ijk)) in out
         .iter()
         .zip(&points)
@@ -128,7 +128,8 @@ fn gpu_exact_image_matches_the_cpu_reference() {
     let scene = common::general_scene(&set.map(String::from));
     let field = scene.field(|_| {}).expect("field");
     let setup = scene.ray_setup(&field).expect("setup");
-    let cpu = vmls::render::raycast::raycast_image(&setup, &field, &scene.transfer, None);
+    let cpu = vmls::render::raycast::raycast_image(&setup, &field, &scene.transfer, None)
+        .expect("CPU twin");
     let (ctx, _compiler) = gpu();
     let mut renderer = vmls::render::renderer::Renderer::new(&ctx, field).expect("renderer");
     let image = common::splat::scene_frame(&mut renderer, &scene);

@@ -47,7 +47,7 @@ fn gpu_vs_cpu(field: &Field, points: &[[f64; 3]]) -> (f64, usize) {
     let (out, _) = evaluate(&ctx, &compiler, field, &gpu_field, points, 1).expect("mls_eval");
     drop(gpu_field);
     finish(ctx);
-    let n = field.neighbours();
+    let n = field.neighbours().expect("neighbours");
     let (mut worst, mut scale, mut undefined) = (0.0f64, 0.0f64, 0);
     for (g, p) in out.iter().zip(points) {
         match field.evaluate(n.as_ref(), *p) {
@@ -109,7 +109,7 @@ fn a_constant_grid_field_comes_back_within_the_ripple() {
     let s = gaussian_scene(&[]);
     let field =
         Field::new(volume, s.reconstruction, &OctreeSettings::default(), |_| {}).expect("field");
-    let n = field.neighbours();
+    let n = field.neighbours().expect("neighbours");
     let mut rng = Lcg::new(5);
     let mut worst: f64 = 0.0;
     for _ in 0..500 {
@@ -131,7 +131,7 @@ fn gpu_ray_casting_of_the_gaussian_field_matches_the_cpu_reference() {
     ]);
     let field = s.field(|_| {}).expect("field");
     let setup = s.ray_setup(&field).expect("setup");
-    let cpu = raycast_image(&setup, &field, &s.transfer, None);
+    let cpu = raycast_image(&setup, &field, &s.transfer, None).expect("CPU twin");
     let mut renderer = Renderer::new(&ctx, field).expect("renderer");
     let gpu = splat::scene_frame(&mut renderer, &s);
     assert!(gpu.variant.contains("gaussian"), "{}", gpu.variant);

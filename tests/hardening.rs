@@ -761,7 +761,8 @@ fn constant_fields_far_from_zero_render_finite_on_both_renderers() {
                 &field,
                 &scene.transfer,
                 scene.render.table_resolution,
-            );
+            )
+            .expect("CPU twin");
             let mut renderer = Renderer::new(&ctx, field).expect("renderer");
             let (gpu, _) = renderer.render(&scene.view(), |_| {}).expect("frame");
             let mut worst: f64 = 0.0;

@@ -84,7 +84,7 @@ fn scene(extra: &[&str]) -> Scene {
 fn both(field: &Field, scene: &Scene) -> (GpuImage, Vec<PixelResult>) {
     let setup = scene.ray_setup(field).expect("setup");
     let tables = build_tables(&setup, field, &scene.transfer, 128, |_| {});
-    let cpu = raycast_image(&setup, field, &scene.transfer, tables.as_ref());
+    let cpu = raycast_image(&setup, field, &scene.transfer, tables.as_ref()).expect("CPU twin");
     let (ctx, compiler) = gpu();
     let gf = GpuField::upload(&ctx, field).expect("upload");
     let img = render(
@@ -150,7 +150,7 @@ fn rays_through_the_hole_see_only_the_background_and_gpu_matches_cpu() {
     let scene = scene(&[ORTHO, ORTHO_HEIGHT]);
     let setup = scene.ray_setup(&boxed).expect("setup");
     let tables = build_tables(&setup, &boxed, &scene.transfer, 128, |_| {});
-    let cpu = raycast_image(&setup, &boxed, &scene.transfer, tables.as_ref());
+    let cpu = raycast_image(&setup, &boxed, &scene.transfer, tables.as_ref()).expect("CPU twin");
     assert!(
         cpu[15 * 30 + 18].rgba[3] > 1e-3,
         "box clipping integrates in the hole"

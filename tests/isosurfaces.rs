@@ -64,7 +64,7 @@ fn both(s: &Scene, volume: Volume) -> (GpuImage, Vec<PixelResult>) {
     .expect("render");
     drop(gf);
     finish(ctx);
-    let c = raycast_image(&setup, &field, &s.transfer, tables.as_ref());
+    let c = raycast_image(&setup, &field, &s.transfer, tables.as_ref()).expect("CPU twin");
     for (p, q) in g.pixels.iter().zip(&c) {
         assert!(p.iter().all(|v| v.is_finite()) && q.rgba.iter().all(|v| v.is_finite()));
     }

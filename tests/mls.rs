@@ -39,7 +39,7 @@ fn compare(field: &Field, points: &[[f64; 3]]) -> Comparison {
             (l.min(f64::from(v)), h.max(f64::from(v)))
         });
     let range = (hi - lo).max(1e-30);
-    let neighbours = field.neighbours();
+    let neighbours = field.neighbours().expect("neighbours");
     let cpu: Vec<_> = points
         .iter()
         .map(|p| mls_evaluate(&field.mls(), neighbours.as_ref(), *p))
@@ -149,7 +149,7 @@ fn linear_basis_reproduces_linear_functions() {
                 recon(Basis::Linear, weight, gradient, NeighbourMode::Grid, 2.4),
             );
             let points = random_points(&field, 400, 0.0, 3);
-            let neighbours = field.neighbours();
+            let neighbours = field.neighbours().expect("neighbours");
             for p in &points {
                 let m = mls_evaluate(&field.mls(), neighbours.as_ref(), *p).expect("defined");
                 let world = [
@@ -201,7 +201,7 @@ fn quadratic_basis_reproduces_quadratics() {
             1.8,
         ),
     );
-    let neighbours = field.neighbours();
+    let neighbours = field.neighbours().expect("neighbours");
     for p in random_points(&field, 300, 0.2, 5) {
         let m = mls_evaluate(&field.mls(), neighbours.as_ref(), p).expect("defined");
         let w = [
@@ -242,7 +242,7 @@ fn analytic_gradient_matches_finite_differences() {
                 gradient: GradientMode::Local,
                 ..field.mls()
             };
-            let neighbours = field.neighbours();
+            let neighbours = field.neighbours().expect("neighbours");
             let eps = 1e-6;
             for p in random_points(&field, 100, 0.1, 9) {
                 let m = mls_evaluate(&field.mls(), neighbours.as_ref(), p).expect("defined");
@@ -283,7 +283,7 @@ fn coplanar_samples_fall_back_to_a_lower_order_basis() {
                 2.4,
             ),
         );
-        let neighbours = field.neighbours();
+        let neighbours = field.neighbours().expect("neighbours");
         let p = [0.1, -0.05, 0.0];
         let m = mls_evaluate(&field.mls(), neighbours.as_ref(), p).expect("defined");
         assert_eq!(m.terms, 1, "{basis:?}: expected the constant fallback");
@@ -311,7 +311,7 @@ fn no_weight_means_undefined_not_nan() {
         ),
     );
     let far = [[5.0, 0.0, 0.0], [0.0, -3.0, 0.0], [1.0e6, 1.0e6, 1.0e6]];
-    let neighbours = field.neighbours();
+    let neighbours = field.neighbours().expect("neighbours");
     for p in far {
         assert!(mls_evaluate(&field.mls(), neighbours.as_ref(), p).is_none());
     }
@@ -352,7 +352,10 @@ fn octree_and_grid_neighbours_agree() {
             ),
         );
         let points = random_points(&grid, 2000, -0.02, 21);
-        let (gn, on) = (grid.neighbours(), octree.neighbours());
+        let (gn, on) = (
+            grid.neighbours().expect("neighbours"),
+            octree.neighbours().expect("neighbours"),
+        );
         for p in &points {
             let a = mls_evaluate(&grid.mls(), gn.as_ref(), *p);
             let b = mls_evaluate(&octree.mls(), on.as_ref(), *p);
@@ -408,7 +411,7 @@ fn quadratic_solves_the_full_basis_in_the_interior() {
             1.8,
         ),
     );
-    let neighbours = field.neighbours();
+    let neighbours = field.neighbours().expect("neighbours");
     let points = random_points(&field, 2000, 0.1, 17);
     let full = points
         .iter()

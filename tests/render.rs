@@ -67,6 +67,7 @@ fn cpu_render(scene: &Scene, field: &Field) -> Vec<PixelResult> {
         &scene.transfer,
         t.as_ref(),
     )
+    .expect("CPU twin")
 }
 
 /// RMSE of the RGB channels of two CPU images.

@@ -14,7 +14,7 @@ use vmls::scene::{NeighbourMode, Scene};
 
 /// RMSE and maximum of |resampled − direct| over `points`, relative to the data range.
 fn difference(field: &vmls::render::Field, points: &[[f64; 3]]) -> (f64, f64) {
-    let n = field.neighbours();
+    let n = field.neighbours().expect("neighbours");
     let grid = field.grid().expect("grid");
     let (lo, hi) = field.value_range();
     let (mut sum, mut worst) = (0.0, 0.0f64);
@@ -80,7 +80,7 @@ fn gpu_fine_grid_matches_the_cpu_twin() {
         let (out, _) = evaluate(&ctx, &compiler, &f, &gpu_field, &points, 1).expect("eval");
         drop(gpu_field);
         finish(ctx);
-        let n = f.neighbours();
+        let n = f.neighbours().expect("neighbours");
         let (lo, hi) = f.value_range();
         let mut worst = 0.0f64;
         for (g, p) in out.iter().zip(&points) {
@@ -101,7 +101,7 @@ fn block_ranges_bound_the_fast_field() {
     // Dense sampling: the fast field never leaves its block's range (rigorous bound).
     let f = field(Basis::Quadratic, 1.8, 2);
     let blocks = f.blocks().expect("blocks");
-    let n = f.neighbours();
+    let n = f.neighbours().expect("neighbours");
     let tf = vmls::render::transfer::TransferFunction::new(vec![[0.0, 1.0, 1.0, 1.0, 1.0]]);
     let table = vmls::render::skip::SkipTable::build(&tf, &[], f.value_range());
     let (mut tight, mut count) = (0.0f64, 0);
@@ -160,7 +160,8 @@ fn both(s: &Scene) -> Both {
         &field,
         &s.transfer,
         s.render.table_resolution,
-    );
+    )
+    .expect("CPU twin");
     let (ctx, _compiler) = gpu();
     let mut renderer = vmls::render::renderer::Renderer::new(&ctx, field).expect("renderer");
     let image = common::splat::scene_frame(&mut renderer, s);

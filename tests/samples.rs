@@ -79,7 +79,7 @@ fn queries(field: &Field, lo: [f64; 3], hi: [f64; 3], margin: f64, n: usize) -> 
 /// Max |f − linear| over the queries where the linear basis was solved, on the CPU (f64), and
 /// the fraction of queries that were.
 fn cpu_linear_error(field: &Field, pts: &[[f64; 3]]) -> (f64, f64) {
-    let n = field.neighbours();
+    let n = field.neighbours().expect("neighbours");
     let o = field.frame_origin.to_array();
     let mut worst: f64 = 0.0;
     let mut solved = 0;
@@ -102,7 +102,7 @@ fn gpu_linear_error(field: &Field, pts: &[[f64; 3]]) -> f64 {
     let (out, _) = evaluate(&ctx, &compiler, field, &gpu_field, pts, 1).expect("mls_eval");
     drop(gpu_field);
     finish(ctx);
-    let n = field.neighbours();
+    let n = field.neighbours().expect("neighbours");
     let o = field.frame_origin.to_array();
     let mut worst: f64 = 0.0;
     let mut mismatched = 0;
@@ -329,7 +329,7 @@ fn isotropic_supports_leave_holes_on_a_10_to_1_grid_and_diagonal_ones_do_not() {
     // radius (support × 0.2) cannot reach the next layer 1.0 away: holes between layers.
     let f = field(samples(&d, 1.6, 8, Some(false)), Basis::Linear);
     let pts = pts_of(&f);
-    let n = f.neighbours();
+    let n = f.neighbours().expect("neighbours");
     let undefined = pts
         .iter()
         .filter(|p| mls_evaluate(&f.mls(), n.as_ref(), **p).is_none())
@@ -351,7 +351,7 @@ fn error_falls_with_density_on_scattered_samples() {
         let d = point_data(Geometry::Points { points: cloud }, g);
         let f = field(samples(&d, 1.6, 8, Some(false)), Basis::Linear);
         let pts = queries(&f, [0.0; 3], [1.0; 3], 0.15, 800);
-        let nb = f.neighbours();
+        let nb = f.neighbours().expect("neighbours");
         let o = f.frame_origin.to_array();
         let rms = (pts
             .iter()
@@ -386,7 +386,7 @@ fn octree_finds_every_neighbour_of_anisotropic_supports() {
     struct All<'a>(&'a Field);
     impl vmls::recon::mls::Neighbours for All<'_> {
         fn basis_scale(&self, x: [f64; 3]) -> [f64; 3] {
-            self.0.neighbours().basis_scale(x)
+            self.0.neighbours().expect("neighbours").basis_scale(x)
         }
         fn for_each(&self, _x: [f64; 3], visit: &mut vmls::recon::mls::Visit<'_>) {
             let s = &self.0.samples;
@@ -400,7 +400,7 @@ fn octree_finds_every_neighbour_of_anisotropic_supports() {
         weight: Weight::Wendland,
         gradient: GradientMode::Local,
     };
-    let tree = f.neighbours();
+    let tree = f.neighbours().expect("neighbours");
     for p in queries(&f, [0.0; 3], [1.0; 3], 0.0, 400) {
         let a = mls_evaluate(&settings, tree.as_ref(), p);
         let b = mls_evaluate(&settings, &All(&f), p);

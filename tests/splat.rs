@@ -248,7 +248,7 @@ fn gpu_splatting_matches_its_cpu_twin_on_a_grid() {
         extra.push("render.early_termination=0.9999");
         let s = scene(&extra);
         let shading = s.render.method.splat_shading().expect("a splat method");
-        let cpu = splat_image(&setup(&s, &field, shading), &field, &s.transfer);
+        let cpu = splat_image(&setup(&s, &field, shading), &field, &s.transfer).expect("CPU twin");
         let (gpu, report) = gpu_frame(&mut renderer, &s);
         let diff = max_diff(&gpu, &cpu.pixels);
         assert!(diff < GPU_TOLERANCE, "{name}: GPU vs CPU {diff:.3e}");
@@ -407,7 +407,8 @@ fn post_shaded_edges_are_crisper_than_pre_shaded() {
     let field = grid_field(volume, &s);
     let mut widths = Vec::new();
     for shading in [Shading::Pre, Shading::Post] {
-        let image = splat_image(&setup(&s, &field, shading), &field, &s.transfer);
+        let image =
+            splat_image(&setup(&s, &field, shading), &field, &s.transfer).expect("CPU twin");
         widths.push(edge_width(&image.pixels, 64, 32));
     }
     eprintln!(
@@ -460,7 +461,8 @@ fn zebra(antialias: &str, scale: u32) -> (Vec<[f64; 4]>, u32, u32) {
         "transfer.points=[[0.0,0.0,0.0,0.0,50.0],[1.0,1.0,1.0,1.0,50.0]]",
     ]);
     let field = grid_field(volume, &s);
-    let image = splat_image(&setup(&s, &field, Shading::Pre), &field, &s.transfer);
+    let image =
+        splat_image(&setup(&s, &field, Shading::Pre), &field, &s.transfer).expect("CPU twin");
     (image.pixels, w, h)
 }
 

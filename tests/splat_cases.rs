@@ -6,6 +6,10 @@ mod common;
 
 use common::splat::*;
 use common::*;
+use vmls::data::dataset::Geometry;
+use vmls::probe::Lcg;
+use vmls::recon::OctreeSettings;
+use vmls::recon::support_index::SupportIndex;
 use vmls::render::camera::Projection;
 use vmls::render::raycast::raycast_image;
 use vmls::render::renderer::Renderer;
@@ -111,7 +115,7 @@ fn the_eye_inside_the_volume_renders_finite_images_on_the_gpu() {
         );
         assert!(gpu.iter().all(|p| p[3] >= 0.0 && p[3] <= 1.0 + 1e-6));
         let shading = s.render.method.splat_shading().expect("splat");
-        let cpu = splat_image(&setup(&s, &field, shading), &field, &s.transfer);
+        let cpu = splat_image(&setup(&s, &field, shading), &field, &s.transfer).expect("CPU twin");
         let diff = max_diff(&gpu, &cpu.pixels);
         assert!(diff < GPU_TOLERANCE, "{method}: GPU vs CPU {diff:.3e}");
     }
@@ -129,12 +133,71 @@ fn irregular_data_splats_on_the_gpu_as_on_the_cpu() {
         let s = scene(&[m.as_str(), "camera.eye=[2.2,-1.8,1.9]"]);
         let (gpu, _) = gpu_frame(&mut renderer, &s);
         let shading = s.render.method.splat_shading().expect("splat");
-        let cpu = splat_image(&setup(&s, &field, shading), &field, &s.transfer);
+        let cpu = splat_image(&setup(&s, &field, shading), &field, &s.transfer).expect("CPU twin");
         let diff = max_diff(&gpu, &cpu.pixels);
         assert!(diff < GPU_TOLERANCE, "{method}: GPU vs CPU {diff:.3e}");
         let covered = cpu.pixels.iter().filter(|p| p[3] > 0.05).count();
         assert!(covered > 50, "{method}: {covered} pixels show the torus");
     }
+    drop(renderer);
+    finish(ctx);
+}
+
+#[test]
+fn splatting_defers_the_octree_and_ray_casting_builds_it() {
+    // A splatting field builds no octree: its kernel volumes come from kd-trees over classes
+    // of support radii, the same sums as the octree's (up to rounding), and splatting renders
+    // without one; the first ray-cast frame builds it. Points clustered towards a corner, so
+    // their (anisotropic) supports span several radius classes.
+    let mut rng = Lcg::new(5);
+    let points: Vec<[f64; 3]> = (0..3000)
+        .map(|_| std::array::from_fn(|_| 2.0 * rng.next_f64().powi(2) - 1.0))
+        .collect();
+    let d = point_data(Geometry::Points { points }, |p| {
+        0.5 + 0.4 * (3.0 * p[0]).sin() * p[2].cos()
+    });
+    let samples = || point_samples(&d, Some(true));
+    let s = scene(&["render.method=\"splat-post\"", "camera.eye=[2.2,-1.8,1.9]"]);
+    let eager = field_of(samples(), &s);
+    let deferred =
+        Field::from_samples_deferred(samples(), s.reconstruction, &OctreeSettings::default())
+            .expect("field");
+    assert!(eager.octree_if_built().is_some() && deferred.octree_if_built().is_none());
+    let (a, b) = (eager.kernel_volumes(), deferred.kernel_volumes());
+    let worst = (0..eager.samples.len())
+        .map(|i| (a.get(i) - b.get(i)).abs() / a.get(i))
+        .fold(0.0, f64::max);
+    assert!(
+        worst < 1e-12,
+        "kernel volumes differ by {worst:.3e} (relative)"
+    );
+    let index = SupportIndex::new(&deferred.samples);
+    assert!(index.classes() >= 2, "{} radius classes", index.classes());
+    let (ctx, _) = gpu();
+    let mut renderer = Renderer::new(&ctx, deferred).expect("renderer");
+    let (gpu, _) = gpu_frame(&mut renderer, &s);
+    assert!(
+        renderer.field().octree_if_built().is_none(),
+        "splatting built the octree"
+    );
+    let cpu =
+        splat_image(&setup(&s, &eager, Shading::Post), &eager, &s.transfer).expect("CPU twin");
+    let diff = max_diff(&gpu, &cpu.pixels);
+    assert!(
+        diff < GPU_TOLERANCE,
+        "deferred field, GPU vs the eager one's CPU twin {diff:.3e}"
+    );
+    let ray = scene(&[
+        "render.method=\"fixed\"",
+        "reconstruction.method=\"gaussian\"",
+        "camera.eye=[2.2,-1.8,1.9]",
+    ]);
+    let (image, _) = renderer
+        .render(&ray.view(), |_| {})
+        .expect("ray-cast frame");
+    assert!(renderer.field().octree_if_built().is_some());
+    let covered = image.pixels.iter().filter(|p| p[3] > 0.05).count();
+    assert!(covered > 50, "{covered} pixels show the points");
     drop(renderer);
     finish(ctx);
 }
@@ -278,11 +341,13 @@ fn surface_splats_draw_the_isosurface_the_ray_caster_draws() {
     let (rs, field) = sphere_scene("riemann");
     let setup_r = rs.ray_setup(&field).expect("ray setup");
     let ray: Vec<[f64; 4]> = raycast_image(&setup_r, &field, &rs.transfer, None)
+        .expect("CPU twin")
         .iter()
         .map(|p| p.rgba)
         .collect();
     let (ss, _) = sphere_scene("splat");
-    let splat = splat_image(&setup(&ss, &field, Shading::Pre), &field, &ss.transfer);
+    let splat =
+        splat_image(&setup(&ss, &field, Shading::Pre), &field, &ss.transfer).expect("CPU twin");
     let radius = |img: &[[f64; 4]]| {
         let covered = img.iter().map(|p| p[3].clamp(0.0, 1.0)).sum::<f64>();
         (covered / std::f64::consts::PI).sqrt()
@@ -363,7 +428,8 @@ fn a_new_camera_reuses_the_splatting_kernels_pipelines_and_buffers() {
         &setup(&moved, &field, Shading::Post),
         &field,
         &moved.transfer,
-    );
+    )
+    .expect("CPU twin");
     let diff = max_diff(&image.pixels, &cpu.pixels);
     assert!(diff < GPU_TOLERANCE, "turned camera: GPU vs CPU {diff:.3e}");
     drop(renderer);
@@ -382,7 +448,8 @@ fn negative_data_and_oversized_kernels() {
         "camera.height=16",
     ]);
     let field = grid_field(volume, &s);
-    let image = splat_image(&setup(&s, &field, Shading::Post), &field, &s.transfer);
+    let image =
+        splat_image(&setup(&s, &field, Shading::Post), &field, &s.transfer).expect("CPU twin");
     let centre = image.pixels[8 * 16 + 8];
     assert!(
         centre[3] > 0.5 && centre[0] > 0.3,

@@ -88,7 +88,7 @@ pub fn evaluation_cost(field: &Field, k: f64) -> EvaluationCost {
     } else {
         0.0
     };
-    let (loads, reads) = match (&field.octree, r.method) {
+    let (loads, reads) = match (field.octree_if_built(), r.method) {
         (_, ReconMethod::Exact) => (0.0, Reads::Storage),
         (None, ReconMethod::Mls) if r.basis != Basis::Quadratic => {
             let s = r.support;

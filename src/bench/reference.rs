@@ -124,7 +124,8 @@ fn render(
         ReferenceMode::Cpu => {
             let setup = scene.ray_setup(&field)?;
             let image =
-                crate::render::raycast::raycast_image(&setup, &field, &scene.transfer, None);
+                crate::render::raycast::raycast_image(&setup, &field, &scene.transfer, None)
+                    .map_err(crate::render::RenderError::from)?;
             Ok(image.iter().map(|p| p.rgba.map(|c| c as f32)).collect())
         }
     }

@@ -7,6 +7,7 @@ pub mod gaussian;
 pub mod mls;
 pub mod octree;
 pub mod resample;
+pub mod support_index;
 
 pub use mls::{Basis, GradientMode, MlsSettings, MlsValue, Neighbours, Weight, mls_evaluate};
 pub use octree::{Octree, OctreeSettings, OctreeStats, SamplePoint};
@@ -55,7 +56,7 @@ pub struct Reconstruction {
 }
 
 /// Errors of the reconstruction layer.
-#[derive(Debug, thiserror::Error)]
+#[derive(Debug, Clone, thiserror::Error)]
 pub enum ReconError {
     #[error("octree: no samples to index")]
     Empty,

@@ -287,7 +287,7 @@ pub fn render_params(field: &Field, setup: Option<&RaySetup>, tf_count: u32) -> 
         }
     }
     p.gauss_sigma = field.reconstruction.sigma as f32;
-    if let Some(o) = &field.octree {
+    if let Some(o) = field.octree_if_built() {
         p.octree_root = v4(o.root_center.into(), o.root_half);
     }
     if let Some(r) = setup {
@@ -351,11 +351,39 @@ pub struct GpuField {
     blocks: Option<Buffer>,
     octree: Option<[Buffer; 3]>,
     hull: Option<[Buffer; 2]>,
+    /// Whether the samples (grid, fast path or octree) are on the device: ray casting reads
+    /// them, splatting only the hull.
+    data: bool,
 }
 
 impl GpuField {
     /// Uploads what the field's variant reads and nothing else.
     pub fn upload(ctx: &Context, field: &Field) -> Result<Self, VkError> {
+        let mut gpu = Self::upload_hull(ctx, field)?;
+        gpu.upload_data(ctx, field)?;
+        Ok(gpu)
+    }
+
+    /// Whether [`GpuField::upload_data`] has run.
+    pub fn has_data(&self) -> bool {
+        self.data
+    }
+
+    /// Uploads the samples the ray caster reads (the grid and its fast path, or the samples
+    /// and octree), once; the octree must have been built ([`Field::octree`]).
+    pub fn upload_data(&mut self, ctx: &Context, field: &Field) -> Result<(), VkError> {
+        if self.data {
+            return Ok(());
+        }
+        let hull = self.hull.take();
+        *self = Self::upload_samples(ctx, field)?;
+        self.hull = hull;
+        self.data = true;
+        Ok(())
+    }
+
+    /// The hull's BVH alone (what splatting reads), without the samples.
+    pub fn upload_hull(ctx: &Context, field: &Field) -> Result<Self, VkError> {
         let hull = match &field.hull {
             None => None,
             Some(bvh) => {
@@ -380,9 +408,16 @@ impl GpuField {
                 ])
             }
         };
-        let mut gpu = Self::upload_samples(ctx, field)?;
-        gpu.hull = hull;
-        Ok(gpu)
+        Ok(Self {
+            grid: None,
+            grid_binding: binding::GRID,
+            resampled: None,
+            resample_ms: 0.0,
+            blocks: None,
+            octree: None,
+            hull,
+            data: false,
+        })
     }
 
     /// Refuses a regular grid of `samples` values stored as `storage` whose buffer the device
@@ -399,7 +434,13 @@ impl GpuField {
     }
 
     fn upload_samples(ctx: &Context, field: &Field) -> Result<Self, VkError> {
-        match &field.octree {
+        let octree = field.octree_if_built();
+        if field.uses_octree() && octree.is_none() {
+            return Err(VkError::Usage(
+                "the field's octree is not built (Field::octree builds a deferred one)".into(),
+            ));
+        }
+        match octree {
             None => {
                 // GRID_PAD zeros, the values as stored, zeros to the padded length: written
                 // into the buffer part by part, without a padded host copy of the grid.
@@ -424,6 +465,7 @@ impl GpuField {
                     blocks,
                     octree: None,
                     hull: None,
+                    data: true,
                 })
             }
             Some(o) => {
@@ -459,6 +501,7 @@ impl GpuField {
                         Buffer::from_slice(ctx, "octree indices", &o.indices)?,
                     ]),
                     hull: None,
+                    data: true,
                 })
             }
         }

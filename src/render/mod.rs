@@ -26,6 +26,7 @@ use crate::recon::mls::{MlsSettings, MlsValue, Neighbours, Visit, mls_evaluate};
 use crate::recon::resample::{
     AUTO_FACTOR, AUTO_MAX_POINTS, FINE_POINT_DEVICE_BYTES, MAX_POINTS, ResampledGrid, fine_points,
 };
+use crate::recon::support_index::SupportIndex;
 use crate::recon::{GridNeighbours, Octree, OctreeSettings, ReconError};
 use crate::recon::{NeighbourMode, Reconstruction};
 use crate::samples::bvh::HullBvh;
@@ -85,7 +86,12 @@ pub struct Field {
     pub frame_origin: DVec3,
     pub samples: SampleSet,
     pub reconstruction: Reconstruction,
-    pub octree: Option<Octree>,
+    /// The octree over the samples, where kernels read one (`octree_wanted`): built with the
+    /// field, or, for a field made by [`Field::from_samples_deferred`] (splatting, which reads
+    /// no octree), at the first [`Field::octree`].
+    octree: std::sync::OnceLock<Result<Option<Octree>, ReconError>>,
+    octree_settings: OctreeSettings,
+    octree_wanted: bool,
     /// Ray-clipping hierarchy over the boundary, for a hull domain.
     pub hull: Option<HullBvh>,
     /// Smallest and largest sample value.
@@ -145,10 +151,29 @@ impl Field {
     /// Moves the samples into a frame centred on their domain and builds the octree unless the
     /// implicit grid neighbours serve (a regular grid with `neighbours = "grid"`).
     pub fn from_samples(
-        mut samples: SampleSet,
+        samples: SampleSet,
         reconstruction: Reconstruction,
         octree: &OctreeSettings,
         progress: impl FnMut(f64),
+    ) -> Result<Self, ReconError> {
+        let field = Self::from_samples_deferred(samples, reconstruction, octree)?;
+        if field.octree_wanted {
+            let built = Octree::from_samples(&field.samples, octree, progress).map(Some);
+            let result = field.octree.get_or_init(|| built);
+            if let Err(e) = result {
+                return Err(e.clone());
+            }
+        }
+        Ok(field)
+    }
+
+    /// [`Field::from_samples`] without building the octree: the first [`Field::octree`] builds
+    /// it. For splatting, which reads the samples' kernels and no octree: a cloud of 10⁷
+    /// points splats although its octree would not fit.
+    pub fn from_samples_deferred(
+        mut samples: SampleSet,
+        reconstruction: Reconstruction,
+        octree: &OctreeSettings,
     ) -> Result<Self, ReconError> {
         let (lo, hi) = samples.domain_box();
         let centre = (DVec3::from(lo) + DVec3::from(hi)) * 0.5;
@@ -168,7 +193,9 @@ impl Field {
             frame_origin: centre,
             samples,
             reconstruction,
-            octree: None,
+            octree: std::sync::OnceLock::new(),
+            octree_settings: *octree,
+            octree_wanted: !grid || reconstruction.neighbours == NeighbourMode::Octree,
             hull: None,
             range,
             full_metric,
@@ -182,9 +209,6 @@ impl Field {
         };
         if let Domain::Hull(h) = &field.samples.domain {
             field.hull = Some(HullBvh::build(h));
-        }
-        if !grid || reconstruction.neighbours == NeighbourMode::Octree {
-            field.octree = Some(Octree::from_samples(&field.samples, octree, progress)?);
         }
         if field.reconstruction.resample_auto {
             field.reconstruction.resample_auto = false;
@@ -255,24 +279,52 @@ impl Field {
         }
     }
 
-    /// The neighbour structure in use: the octree when there is one, else the grid.
-    pub fn neighbours(&self) -> Box<dyn Neighbours + '_> {
-        match (&self.octree, self.grid()) {
+    /// The octree, where kernels read one (`None` for a grid's implicit neighbours); a deferred
+    /// one is built here, once, and its build error returned on every call.
+    pub fn octree(&self) -> Result<Option<&Octree>, ReconError> {
+        let built = self.octree.get_or_init(|| {
+            if self.octree_wanted {
+                Octree::from_samples(&self.samples, &self.octree_settings, |_| {}).map(Some)
+            } else {
+                Ok(None)
+            }
+        });
+        match built {
+            Ok(o) => Ok(o.as_ref()),
+            Err(e) => Err(e.clone()),
+        }
+    }
+
+    /// The octree if it has been built (statistics; never builds one).
+    pub fn octree_if_built(&self) -> Option<&Octree> {
+        self.octree
+            .get()
+            .and_then(|o| o.as_ref().ok())
+            .and_then(Option::as_ref)
+    }
+
+    /// The neighbour structure in use: the octree when kernels read one (built here if it was
+    /// deferred), else the grid.
+    pub fn neighbours(&self) -> Result<Box<dyn Neighbours + Sync + '_>, ReconError> {
+        Ok(match (self.octree()?, self.grid()) {
             (Some(o), _) => Box::new(o),
             (None, Some(g)) => Box::new(g),
-            // from_samples builds an octree for everything that is not a uniform grid.
+            // Every field that is not a uniform grid wants an octree.
             (None, None) => Box::new(NoNeighbours),
-        }
+        })
     }
 
     /// The volume each sample's Gaussian kernel stands for ([`KernelVolumes`]), computed once.
     pub fn kernel_volumes(&self) -> &KernelVolumes {
         self.volumes.get_or_init(|| {
-            let neighbours: Box<dyn Neighbours + Sync + '_> = match (&self.octree, self.grid()) {
-                (Some(o), _) => Box::new(o),
-                (None, Some(g)) => Box::new(g),
-                (None, None) => Box::new(NoNeighbours),
-            };
+            // The octree where it was built; a deferred one is not built for this (a kd-tree
+            // per class of support radii finds the same kernels in O(n) memory).
+            let neighbours: Box<dyn Neighbours + Sync + '_> =
+                match (self.octree_if_built(), self.grid()) {
+                    (Some(o), _) => Box::new(o),
+                    (None, Some(g)) => Box::new(g),
+                    (None, None) => Box::new(SupportIndex::new(&self.samples)),
+                };
             KernelVolumes::compute(
                 &self.samples,
                 neighbours.as_ref(),
@@ -285,7 +337,7 @@ impl Field {
     /// a fine grid of at most [`MAX_POINTS`] points.
     fn check_resample(&self) -> Result<(), ReconError> {
         let factor = self.reconstruction.resample;
-        let Some(g) = self.grid().filter(|_| self.octree.is_none()) else {
+        let Some(g) = self.grid().filter(|_| !self.octree_wanted) else {
             return Err(ReconError::Setting {
                 key: "reconstruction.resample",
                 value: factor.to_string(),
@@ -311,9 +363,7 @@ impl Field {
     /// path at every fine point, computed here in f64 at first use (stage `recon_resample`).
     pub fn resampled(&self) -> Option<&ResampledGrid> {
         let factor = self.reconstruction.resample;
-        let g = self
-            .grid()
-            .filter(|_| factor > 0 && self.octree.is_none())?;
+        let g = self.grid().filter(|_| factor > 0 && !self.octree_wanted)?;
         // The fine points store the field's own derivative (the analytic gradient): the fast
         // path's interpolation needs ∇f, not the local fit's slope.
         let mls = MlsSettings {
@@ -377,7 +427,7 @@ impl Field {
 
     /// Whether kernels read the octree (else the implicit grid).
     pub fn uses_octree(&self) -> bool {
-        self.octree.is_some()
+        self.octree_wanted
     }
 
     /// Compile-time MLS choices.

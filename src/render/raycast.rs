@@ -20,6 +20,7 @@ use super::preintegration::PreintegrationTables;
 use super::skip::{Blocks, SkipReport, SkipTable, resume_interval};
 use super::transfer::TransferFunction;
 use super::{Field, RaySetup};
+use crate::recon::ReconError;
 use crate::recon::mls::Neighbours;
 use crate::render::{IntervalModel, Method};
 use crate::samples::bvh::Segments;
@@ -310,18 +311,20 @@ pub fn raycast_frame(
     field: &Field,
     tf: &TransferFunction,
     resolution: usize,
-) -> Vec<PixelResult> {
+) -> Result<Vec<PixelResult>, ReconError> {
     let tables = super::build_tables(setup, field, tf, resolution, |_| {});
     raycast_image(setup, field, tf, tables.as_ref())
 }
 
-/// Renders the whole image on the CPU (rows split over the available cores).
+/// Renders the whole image on the CPU (rows split over the available cores); fails only where
+/// a deferred octree cannot be built ([`Field::octree`]).
 pub fn raycast_image(
     setup: &RaySetup,
     field: &Field,
     tf: &TransferFunction,
     tables: Option<&PreintegrationTables>,
-) -> Vec<PixelResult> {
+) -> Result<Vec<PixelResult>, ReconError> {
+    let neighbours = field.neighbours()?;
     let w = setup.camera.width as usize;
     let h = setup.camera.height as usize;
     let mut out = vec![
@@ -345,9 +348,9 @@ pub fn raycast_image(
     // Rows on rayon's persistent workers: a frame spawns no threads, so it returns with no
     // thread of its own still exiting (scoped threads could outlive `scope` by their exit,
     // which LeakSanitizer in the fuzz targets reported as leaks).
-    out.par_chunks_mut(w.max(1)).enumerate().for_each_init(
-        || field.neighbours(),
-        |neighbours, (y, row)| {
+    out.par_chunks_mut(w.max(1))
+        .enumerate()
+        .for_each(|(y, row)| {
             for (x, px) in row.iter_mut().enumerate() {
                 *px = raycast(
                     setup,
@@ -360,7 +363,6 @@ pub fn raycast_image(
                     y as u32,
                 );
             }
-        },
-    );
-    out
+        });
+    Ok(out)
 }

@@ -209,9 +209,11 @@ impl Renderer {
         self.budget = budget;
     }
 
-    /// Uploads the field's samples, octree and hull.
+    /// Uploads the field's hull; its samples (grid, fast path or samples and octree) follow at
+    /// the first ray-cast frame, which builds a deferred octree first: splatting reads
+    /// neither.
     pub fn new(ctx: &Context, field: Field) -> Result<Self, RenderError> {
-        let gpu_field = GpuField::upload(ctx, &field)?;
+        let gpu_field = GpuField::upload_hull(ctx, &field)?;
         Ok(Self {
             ctx: ctx.clone(),
             compiler: ShaderCompiler::new()?,
@@ -264,6 +266,10 @@ impl Renderer {
         )?;
         if let Some(budget) = self.budget {
             setup.check_budget(budget)?;
+        }
+        if !self.gpu_field.has_data() {
+            self.field.octree()?;
+            self.gpu_field.upload_data(&self.ctx, &self.field)?;
         }
         if setup.method.preintegrated() {
             check_table_size(
@@ -407,7 +413,13 @@ impl Renderer {
             .is_some_and(|k| k.has_surfaces_of(surfaces))
         {
             self.splat_kernels = None;
-            self.splat_kernels = Some(GpuKernels::upload(&self.ctx, &self.field, surfaces)?);
+            let kernels = crate::splat::surface::surface_kernels(&self.field, surfaces)?;
+            self.splat_kernels = Some(GpuKernels::upload(
+                &self.ctx,
+                &self.field,
+                surfaces,
+                kernels,
+            )?);
         }
         let Some(kernels) = self.splat_kernels.as_ref() else {
             return Err(VkError::Usage("splat kernels missing".into()).into());

@@ -99,6 +99,15 @@ impl Scene {
                 crate::samples::SampleError::Data(d) => RenderError::Data(d),
                 other => RenderError::Samples(other),
             })?;
+        // Splatting reads the kernels, not the octree: a splatting scene defers it to the first
+        // ray-cast frame or CPU evaluation that needs it.
+        if self.render.method.splat_shading().is_some() {
+            return Ok(Field::from_samples_deferred(
+                set,
+                self.reconstruction,
+                &self.octree,
+            )?);
+        }
         Ok(Field::from_samples(
             set,
             self.reconstruction,

@@ -48,15 +48,16 @@ pub struct GpuKernels {
 }
 
 impl GpuKernels {
-    /// Uploads every sample of the field as a Gaussian kernel, then the surface splats of
-    /// `isosurfaces` (none: no surface splats). A surface splat keeps its metric's scale in
-    /// `pos_value.w` and 1 + its isosurface index in `metric_off.w` (0 for volume kernels).
+    /// Uploads every sample of the field as a Gaussian kernel, then `surfaces`, the surface
+    /// splats of `isosurfaces` (`surface::surface_kernels`; none: no surface splats). A surface
+    /// splat keeps its metric's scale in `pos_value.w` and 1 + its isosurface index in
+    /// `metric_off.w` (0 for volume kernels).
     pub fn upload(
         ctx: &Context,
         field: &Field,
         isosurfaces: &[crate::render::shading::Isosurface],
+        surfaces: Vec<super::project::Kernel>,
     ) -> Result<Self, VkError> {
-        let surfaces = super::surface::surface_kernels(field, isosurfaces);
         let data: Vec<crate::gpu_types::Sample> = super::raster::kernels(field)
             .chain(surfaces)
             .map(|k| {

@@ -440,11 +440,15 @@ pub fn splat_segments(setup: &SplatSetup, field: &Field) -> Option<Vec<Vec<(f64,
 }
 
 /// The whole frame on the CPU, stage by stage as on the GPU.
-pub fn splat_image(setup: &SplatSetup, field: &Field, tf: &TransferFunction) -> SplatImage {
+pub fn splat_image(
+    setup: &SplatSetup,
+    field: &Field,
+    tf: &TransferFunction,
+) -> Result<SplatImage, crate::recon::ReconError> {
     let mut counts = SplatCounts::default();
     let mut splats = Vec::new();
     let surfaces = if setup.settings.surface {
-        surface_kernels(field, &setup.isosurfaces)
+        surface_kernels(field, &setup.isosurfaces)?
     } else {
         Vec::new()
     };
@@ -487,5 +491,5 @@ pub fn splat_image(setup: &SplatSetup, field: &Field, tf: &TransferFunction) -> 
             ]
         })
         .collect();
-    SplatImage { pixels, counts }
+    Ok(SplatImage { pixels, counts })
 }

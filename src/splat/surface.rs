@@ -41,20 +41,24 @@ pub fn normal_cos2(metric: &crate::samples::Metric, scale: f64, d: [f64; 3]) -> 
 }
 
 /// The surface kernels of a field's isosurfaces (frame-relative), in isosurface order.
-pub fn surface_kernels(field: &Field, isosurfaces: &[Isosurface]) -> Vec<Kernel> {
+pub fn surface_kernels(
+    field: &Field,
+    isosurfaces: &[Isosurface],
+) -> Result<Vec<Kernel>, crate::recon::ReconError> {
+    if isosurfaces.is_empty() {
+        return Ok(Vec::new());
+    }
     let volumes = field.kernel_volumes();
     let band = field.min_spacing();
     let s = &field.samples;
+    let neighbours = field.neighbours()?;
     let gradients: Vec<Option<[f64; 3]>> = (0..s.len())
         .into_par_iter()
-        .map_init(
-            || field.neighbours(),
-            |n, i| {
-                field
-                    .evaluate(n.as_ref(), s.position(i))
-                    .map(|v| v.gradient)
-            },
-        )
+        .map(|i| {
+            field
+                .evaluate(neighbours.as_ref(), s.position(i))
+                .map(|v| v.gradient)
+        })
         .collect();
     let mut out = Vec::new();
     for (iso_index, iso) in isosurfaces.iter().enumerate() {
@@ -93,5 +97,5 @@ pub fn surface_kernels(field: &Field, isosurfaces: &[Isosurface]) -> Vec<Kernel>
             });
         }
     }
-    out
+    Ok(out)
 }

@@ -117,6 +117,7 @@ pub fn sheet_convergence(field: &Field, common: &[&str], slabs: &[f64]) -> Vec<(
     let rs = scene(&extra);
     let setup_r = rs.ray_setup(field).expect("ray setup");
     let reference: Vec<[f64; 4]> = raycast_image(&setup_r, field, &rs.transfer, None)
+        .expect("CPU twin")
         .iter()
         .map(|p| p.rgba)
         .collect();
@@ -127,7 +128,8 @@ pub fn sheet_convergence(field: &Field, common: &[&str], slabs: &[f64]) -> Vec<(
             let key = format!("splat.slab={slab}");
             extra.extend(["render.method=\"splat-post\"", key.as_str()]);
             let s = scene(&extra);
-            let image = splat_image(&setup(&s, field, Shading::Post), field, &s.transfer);
+            let image = splat_image(&setup(&s, field, Shading::Post), field, &s.transfer)
+                .expect("CPU twin");
             (*slab, rmse(&image.pixels, &reference))
         })
         .collect()

@@ -5,7 +5,7 @@ use std::path::Path;
 use vmls::probe::{
     MemoryMode, coherent_order, fma_probe, median, memory_probe, mls_probe, random_points,
 };
-use vmls::render::Field;
+use vmls::render::{Field, RenderError};
 use vmls::scene::{NeighbourMode, Scene, load_volume};
 use vmls::vk::ShaderCompiler;
 
@@ -39,8 +39,8 @@ pub fn run_file_probe(
     let outputs = plan_outputs(None, Some(&scene), &[("--json", json)])?;
     let field = scene.field(|_| {})?;
     let stats = field
-        .octree
-        .as_ref()
+        .octree()
+        .map_err(RenderError::from)?
         .map(|o| o.stats(std::mem::size_of::<vmls::gpu_types::Sample>() as u64));
     let ctx = context(device)?;
     let compiler = ShaderCompiler::new()?;

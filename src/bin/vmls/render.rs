@@ -200,9 +200,9 @@ pub fn run_render(
             "table_build_ms_cpu": tables.map(|_| table_ms),
             "table_lengths_world": tables.map(|t| t.lengths.clone()),
             "table_resolution": tables.map(|t| t.resolution),
-            "octree_nodes": field.octree.as_ref().map(|o| o.nodes.len()),
-            "octree_references": field.octree.as_ref().map(|o| o.indices.len()),
-            "octree": field.octree.as_ref().map(|o| octree_json(&o.stats(std::mem::size_of::<vmls::gpu_types::Sample>() as u64))),
+            "octree_nodes": field.octree_if_built().map(|o| o.nodes.len()),
+            "octree_references": field.octree_if_built().map(|o| o.indices.len()),
+            "octree": field.octree_if_built().map(|o| octree_json(&o.stats(std::mem::size_of::<vmls::gpu_types::Sample>() as u64))),
             "data": {
                 "kind": field.samples.provenance.kind,
                 "array": field.samples.provenance.array,
@@ -242,7 +242,8 @@ pub fn run_render_cpu(
     let (pixels, splat, skip): (Vec<[f64; 4]>, _, _) = match scene.render.method.splat_shading() {
         Some(shading) => {
             let setup = scene.splat_setup(shading, &field)?;
-            let image = vmls::splat::raster::splat_image(&setup, &field, &scene.transfer);
+            let image = vmls::splat::raster::splat_image(&setup, &field, &scene.transfer)
+                .map_err(RenderError::from)?;
             (image.pixels, Some(image.counts), None)
         }
         None => {
@@ -256,7 +257,8 @@ pub fn run_render_cpu(
                 &field,
                 &scene.transfer,
                 scene.render.table_resolution,
-            );
+            )
+            .map_err(RenderError::from)?;
             let skip = setup
                 .skip
                 .then(|| vmls::render::raycast::skip_report(&image));
