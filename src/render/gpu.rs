@@ -375,10 +375,10 @@ impl GpuField {
         if self.data {
             return Ok(());
         }
-        let hull = self.hull.take();
-        *self = Self::upload_samples(ctx, field)?;
-        self.hull = hull;
-        self.data = true;
+        // Only a complete upload replaces anything: a failed one leaves the hull in place.
+        let mut data = Self::upload_samples(ctx, field)?;
+        data.hull = self.hull.take();
+        *self = data;
         Ok(())
     }
 
