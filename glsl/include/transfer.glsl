@@ -13,24 +13,26 @@ layout(std430, binding = BINDING_TRANSFER) readonly buffer TransferBuf { TfPoint
 layout(binding = BINDING_TRANSFER_TEXELS, rgba32f) uniform readonly imageBuffer tf_texels;
 
 // rgb = emitted colour, a = extinction τ per world unit: the same selection and arithmetic as
-// the storage-buffer version below, over all points without an early exit.
+// the storage-buffer version below. The segment is counted (one comparison per point, at the
+// same texel in every lane), then only its two points are read and interpolated: one division
+// per lookup, where interpolating every segment and selecting cost one per point.
 vec4 transfer_lookup(float s, uint count) {
-    vec4 ca = imageLoad(tf_texels, 0);
-    float sa = imageLoad(tf_texels, 1).x;
-    vec4 inside = ca;
-    float s_first = sa;
+    uint seg = 0u;
     for (uint i = 1u; i < count; ++i) {
-        vec4 cb = imageLoad(tf_texels, int(2u * i));
-        float sb = imageLoad(tf_texels, int(2u * i + 1u)).x;
-        if (s >= sa && s < sb) {
-            inside = mix(ca, cb, (s - sa) / (sb - sa));
-        }
-        ca = cb;
-        sa = sb;
+        seg += s >= imageLoad(tf_texels, int(2u * i + 1u)).x ? 1u : 0u;
     }
+    int last = int(count) - 1;
     // Beyond the last point (and NaN): the last colour; at or below the first: the first.
-    vec4 c = s >= sa || !(s == s) ? ca : inside;
-    return s <= s_first ? imageLoad(tf_texels, 0) : c;
+    if (!(s == s) || int(seg) >= last) {
+        return imageLoad(tf_texels, 2 * last);
+    }
+    if (s <= imageLoad(tf_texels, 1).x) {
+        return imageLoad(tf_texels, 0);
+    }
+    int a = 2 * int(seg);
+    float sa = imageLoad(tf_texels, a + 1).x;
+    float sb = imageLoad(tf_texels, a + 3).x;
+    return mix(imageLoad(tf_texels, a), imageLoad(tf_texels, a + 2), (s - sa) / (sb - sa));
 }
 #else
 // rgb = emitted colour, a = extinction τ per world unit.
