@@ -293,7 +293,7 @@ void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) 
     float wa = w * h * (7.0 / 30.0);
     float wm = w * h * (16.0 / 30.0);
     float wd = w * h * h * (1.0 / 60.0);
-    float z0, g0, z1, g1, gm, rho, zs, gs, rf, rb;
+    float z0, g0, p0, p1, g1, gm, rho, zs, gs, rf, rb;
 #define SEED(j) \
     zs = clamp((ta + float(j) * slab - pr.y) * pr.z, -20.0, 20.0); \
     gs = exp_e(-0.5 * zs * zs); \
@@ -302,17 +302,18 @@ void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) 
 #define FROM_SEED(ratio) \
     z0 = zs; \
     g0 = gs; \
+    p0 = zs * gs; \
     rho = ratio;
-    // Sheet d between z0 and z1 = z0 + dir h (dir = 1 forwards, -1 backwards).
+    // Sheet d between z0 and z0 + dir h (dir = 1 forwards, -1 backwards); p = z g carried.
 #define SHEET_STEP(d, dir, r) \
     gm = g0 * rho; \
     rho *= c; \
     g1 = gm * rho; \
     rho *= c; \
-    z1 = z0 + dir * h; \
-    r += (d < span ? 1.0 : 0.0) \
-         * (wa * (g0 + g1) + wm * gm + dir * wd * (z1 * g1 - z0 * g0)); \
-    z0 = z1; \
+    z0 += dir * h; \
+    p1 = z0 * g1; \
+    r += d < span ? wa * (g0 + g1) + wm * gm + dir * wd * (p1 - p0) : 0.0; \
+    p0 = p1; \
     g0 = g1;
 #if SPLAT_RING == 4
     SEED(2u)
