@@ -12,7 +12,7 @@ layout(local_size_x = 64) in;
 #include "splat_params.glsl"
 layout(rgba32ui, binding = BINDING_SPLAT_WORDS) readonly uniform uimageBuffer splat_words;
 layout(std430, binding = BINDING_BUCKET_CURSORS) buffer CursorBuf { uint cursors[]; };
-layout(r32ui, binding = BINDING_SPLAT_LIST) writeonly uniform uimageBuffer list;
+layout(rg32ui, binding = BINDING_SPLAT_LIST) writeonly uniform uimageBuffer list;
 
 #include "splat.glsl"
 
@@ -30,9 +30,8 @@ void main() {
                 uint first = (ty * params.tiles_x + tx) * params.slabs;
                 // Ring registers: one entry per SPLAT_RING sheets, at the first of them.
                 for (uint k = slabs.x; k <= slabs.y; k += uint(max(SPLAT_RING, 1))) {
-                    int at = int(2u * atomicAdd(cursors[first + k], 1u));
-                    imageStore(list, at, uvec4(i));
-                    imageStore(list, at + 1, uvec4(k));
+                    int at = int(atomicAdd(cursors[first + k], 1u));
+                    imageStore(list, at, uvec4(i, k, 0u, 0u));
                 }
             }
         }

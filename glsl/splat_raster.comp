@@ -45,7 +45,7 @@ layout(rgba32ui, binding = BINDING_SPLAT_WORDS) readonly uniform uimageBuffer sp
 #define SPLAT_READ
 #include "splat.glsl"
 layout(r32ui, binding = BINDING_OFFSET_TEXELS) readonly uniform uimageBuffer offset_texels;
-layout(r32ui, binding = BINDING_SPLAT_LIST) readonly uniform uimageBuffer list;
+layout(rg32ui, binding = BINDING_SPLAT_LIST) readonly uniform uimageBuffer list;
 layout(std430, binding = BINDING_IMAGE) writeonly buffer ImageBuf { vec4 image[]; };
 layout(std430, binding = BINDING_SPLAT_STATS) buffer StatsBuf { uint stats[]; };
 
@@ -115,7 +115,7 @@ uvec2 next_entry(uint at, uint at_end, uint steps) {
     if (at >= at_end) {
         return uvec2(0u, steps);
     }
-    return uvec2(imageLoad(list, int(2u * at)).x, imageLoad(list, int(2u * at + 1u)).x);
+    return imageLoad(list, int(at)).xy;
 }
 
 #if SPLAT_POST == 1

@@ -58,8 +58,8 @@ pub mod binding {
     pub const BUCKET_OFFSETS: u32 = 19;
     /// Splatting: entries written so far per bucket (atomic cursors of splat_bin).
     pub const BUCKET_CURSORS: u32 = 20;
-    /// Splatting: the sorted entries, one splat index each, bucket after bucket (`r32ui`
-    /// texels).
+    /// Splatting: the sorted entries, (splat, sheet) each as one `rg32ui` texel, bucket after
+    /// bucket.
     pub const SPLAT_LIST: u32 = 21;
     /// Splatting: splat_scan's block sums.
     pub const SCAN_SUMS: u32 = 22;
@@ -105,7 +105,8 @@ pub mod binding {
             SAMPLES | GRID | RESAMPLED | RESAMPLE_TARGET | PREINT | SKIP_BLOCKS
             | TRANSFER_TEXELS | SPLAT_KERNELS | SPLATS | HULL_TRIS => BindingKind::TexelRgba32Float,
             NODES | SPLAT_WORDS | HULL_NODES => BindingKind::TexelRgba32Uint,
-            INDICES | PROBE_TEXELS | SKIP_TABLE | GRID_WORDS | SPLAT_LIST | OFFSET_TEXELS => {
+            SPLAT_LIST => BindingKind::TexelRg32Uint,
+            INDICES | PROBE_TEXELS | SKIP_TABLE | GRID_WORDS | OFFSET_TEXELS => {
                 BindingKind::TexelR32Uint
             }
             PARAMS => BindingKind::Uniform,

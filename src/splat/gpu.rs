@@ -704,8 +704,8 @@ pub fn splat_frame(
     if let Some(budget) = control.budget {
         setup.check_budget(total, budget)?;
     }
-    // Two r32ui texels per entry: the splat and the sheet.
-    let limit = (ctx.info().max_texel_buffer_elements / 2).min(ctx.info().max_heap_bytes / 8);
+    // One rg32ui texel per entry: the splat and the sheet.
+    let limit = ctx.info().max_texel_buffer_elements.min(ctx.info().max_heap_bytes / 8);
     if total > limit {
         return Err(VkError::Usage(format!(
             "splatting: {total} binned footprints exceed the entry list's limit of {limit} \

@@ -24,6 +24,8 @@ pub enum BindingKind {
     Uniform,
     /// A storage texel buffer of `uint`s (`r32ui uimageBuffer`).
     TexelR32Uint,
+    /// A storage texel buffer of `uvec2`s (`rg32ui uimageBuffer`).
+    TexelRg32Uint,
     /// A storage texel buffer of `vec4`s (`rgba32f imageBuffer`).
     TexelRgba32Float,
     /// A storage texel buffer of `uvec4`s (`rgba32ui uimageBuffer`).
@@ -44,6 +46,7 @@ impl BindingKind {
         match self {
             BindingKind::Storage | BindingKind::Uniform => None,
             BindingKind::TexelR32Uint => Some((vk::Format::R32_UINT, 4)),
+            BindingKind::TexelRg32Uint => Some((vk::Format::R32G32_UINT, 8)),
             BindingKind::TexelRgba32Float => Some((vk::Format::R32G32B32A32_SFLOAT, 16)),
             BindingKind::TexelRgba32Uint => Some((vk::Format::R32G32B32A32_UINT, 16)),
         }
