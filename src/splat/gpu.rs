@@ -705,7 +705,10 @@ pub fn splat_frame(
         setup.check_budget(total, budget)?;
     }
     // One rg32ui texel per entry: the splat and the sheet.
-    let limit = ctx.info().max_texel_buffer_elements.min(ctx.info().max_heap_bytes / 8);
+    let limit = ctx
+        .info()
+        .max_texel_buffer_elements
+        .min(ctx.info().max_heap_bytes / 8);
     if total > limit {
         return Err(VkError::Usage(format!(
             "splatting: {total} binned footprints exceed the entry list's limit of {limit} \
