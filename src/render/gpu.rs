@@ -674,7 +674,24 @@ mod tests {
             timestamp_period_ns: Some(1.0),
             subgroup_size: 8,
             subgroup_ops: true,
+            storage_texel_formats: crate::vk::TEXEL_FORMATS.to_vec(),
         }
+    }
+
+    #[test]
+    fn a_texel_format_the_device_lacks_is_refused_naming_the_buffer() {
+        let mut info = lavapipe();
+        let list = binding::kind(binding::SPLAT_LIST);
+        crate::vk::check_texel_view(&info, "splat entries", 1 << 20, list).expect("rg32ui");
+        info.storage_texel_formats
+            .retain(|&f| f != ash::vk::Format::R32G32_UINT);
+        let err = crate::vk::check_texel_view(&info, "splat entries", 1 << 20, list)
+            .expect_err("no rg32ui");
+        let text = err.to_string();
+        assert!(
+            text.contains("splat entries") && text.contains("R32G32_UINT"),
+            "{text}"
+        );
     }
 
     #[test]

@@ -50,17 +50,25 @@ pub fn check_size(
 }
 
 /// Refuses a texel-buffer view of `bytes` bytes read as `kind` that `info`'s device cannot make
-/// (maxTexelBufferElements), naming the buffer: bind groups check every view, and callers check
-/// the large ones before the host builds their contents.
+/// (a format it does not support as a storage texel buffer, or past maxTexelBufferElements),
+/// naming the buffer: bind groups check every view, and callers check the large ones before
+/// the host builds their contents.
 pub fn check_texel_view(
     info: &super::DeviceInfo,
     name: &str,
     bytes: u64,
     kind: super::BindingKind,
 ) -> Result<(), VkError> {
-    let Some((_, texel_bytes)) = kind.texel() else {
+    let Some((format, texel_bytes)) = kind.texel() else {
         return Ok(());
     };
+    if !info.storage_texel_formats.contains(&format) {
+        return Err(VkError::Usage(format!(
+            "buffer '{name}' is read through a {format:?} storage texel buffer, which device \
+             '{}' does not support",
+            info.name
+        )));
+    }
     if bytes / texel_bytes > info.max_texel_buffer_elements {
         return Err(VkError::Limit {
             resource: format!("texel view of buffer '{name}'"),

@@ -53,6 +53,9 @@ pub struct DeviceInfo {
     /// counters with them).
     pub subgroup_size: u32,
     pub subgroup_ops: bool,
+    /// The texel-view formats vmls binds (`BindingKind::texel`) that this device supports as
+    /// storage texel buffers; a view of any other is refused naming its buffer.
+    pub storage_texel_formats: Vec<vk::Format>,
 }
 
 /// Handles of a Vulkan device created by the embedding application.
@@ -371,7 +374,17 @@ fn device_info(
         .map(|h| h.size)
         .max()
         .unwrap_or(u64::MAX);
+    let storage_texel_formats = super::TEXEL_FORMATS
+        .into_iter()
+        .filter(|&f| {
+            // SAFETY: a plain query on a device of this instance.
+            let p = unsafe { instance.get_physical_device_format_properties(physical, f) };
+            p.buffer_features
+                .contains(vk::FormatFeatureFlags::STORAGE_TEXEL_BUFFER)
+        })
+        .collect();
     DeviceInfo {
+        storage_texel_formats,
         name: props
             .device_name_as_c_str()
             .map(|n| n.to_string_lossy().into_owned())

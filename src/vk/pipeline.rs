@@ -32,6 +32,16 @@ pub enum BindingKind {
     TexelRgba32Uint,
 }
 
+/// Every texel-view format of [`BindingKind::texel`]: `r32ui`, `rgba32f` and `rgba32ui` are
+/// required of every Vulkan device as storage texel buffers, `rg32ui` is not; the device's
+/// support is queried once (`DeviceInfo::storage_texel_formats`).
+pub(crate) const TEXEL_FORMATS: [vk::Format; 4] = [
+    vk::Format::R32_UINT,
+    vk::Format::R32G32_UINT,
+    vk::Format::R32G32B32A32_SFLOAT,
+    vk::Format::R32G32B32A32_UINT,
+];
+
 impl BindingKind {
     fn descriptor_type(self) -> vk::DescriptorType {
         match self {
