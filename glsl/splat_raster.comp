@@ -119,22 +119,28 @@ uvec2 next_entry(uint at, uint at_end, uint steps) {
 }
 
 #if SPLAT_POST == 1
-// The length of sheet j's slab inside the domain along pixel p's ray: the box's [t_in,
-// t_out], or the sum over the pixel's hull segments.
-float slab_overlap(int j, float t_in, float t_out, uint p) {
+#if SPLAT_HULL == 1 && SPLAT_SEGMENTS != 4
+#error "the pixel's hull segments are two vec4 registers"
+#endif
+// The length of sheet j's slab inside the domain along a pixel's ray: the box's [t_in,
+// t_out], or the sum over the pixel's hull segments (s01, s23: two each, read once per pixel
+// into registers; a storage-buffer read per sheet is a loop over the lanes on lavapipe).
+float slab_overlap(int j, float t_in, float t_out, vec4 s01, vec4 s23) {
     float a = params.box_min.w + float(j) * params.box_max.w;
     float b = a + params.box_max.w;
 #if SPLAT_HULL == 1
-    float len = 0.0;
-    for (uint i = 0u; i < uint(SPLAT_SEGMENTS); ++i) {
-        vec2 s = pixel_segments[p * uint(SPLAT_SEGMENTS) + i];
-        len += max(min(b, s.y) - max(a, s.x), 0.0);
-    }
-    return len;
+    return max(min(b, s01.y) - max(a, s01.x), 0.0) + max(min(b, s01.w) - max(a, s01.z), 0.0)
+           + max(min(b, s23.y) - max(a, s23.x), 0.0) + max(min(b, s23.w) - max(a, s23.z), 0.0);
 #else
     return max(min(b, t_out) - max(a, t_in), 0.0);
 #endif
 }
+#endif
+
+#if SPLAT_HULL == 1
+#define SEGMENTS(px) px.s01, px.s23
+#else
+#define SEGMENTS(px) vec4(0.0), vec4(0.0)
 #endif
 
 #if SPLAT_POST == 1 && SPLAT_RING > 0
@@ -200,6 +206,11 @@ struct Pixel {
     float t_in;
     float t_out;
     bool in_domain;
+#if SPLAT_HULL == 1
+    // The pixel's hull segments (t_in, t_out) in pairs.
+    vec4 s01;
+    vec4 s23;
+#endif
 #endif
     // Footprints evaluated and contributing.
     uint evaluated;
@@ -244,6 +255,15 @@ Pixel pixel_at(int x, int y, bool valid, bool own_tile) {
         px.in_domain = clip_box(o, px.d, params.box_min.xyz, params.box_max.xyz, px.t_in,
                                 px.t_out);
     }
+#if SPLAT_HULL == 1
+    px.s01 = vec4(0.0);
+    px.s23 = vec4(0.0);
+    if (px.own) {
+        uint at = px.p * uint(SPLAT_SEGMENTS);
+        px.s01 = vec4(pixel_segments[at], pixel_segments[at + 1u]);
+        px.s23 = vec4(pixel_segments[at + 2u], pixel_segments[at + 3u]);
+    }
+#endif
 #endif
     px.evaluated = 0u;
     px.contributions = 0u;
@@ -437,9 +457,9 @@ void composite_post(inout Pixel px, uint k, float v1, vec2 lat) {
     float slab = params.box_max.w;
     int j = int(k) - 1;
     if (pixel_open(px) && px.in_domain && j >= 0) {
-        float len = slab_overlap(j, px.t_in, px.t_out, px.p);
+        float len = slab_overlap(j, px.t_in, px.t_out, SEGMENTS(px));
 #if SPLAT_ISOSURFACES == 1
-        if (j >= 1 && len > 0.0 && slab_overlap(j - 1, px.t_in, px.t_out, px.p) > 0.0) {
+        if (j >= 1 && len > 0.0 && slab_overlap(j - 1, px.t_in, px.t_out, SEGMENTS(px)) > 0.0) {
             float v0 = px.v0, v = px.v;
             // Crossings in order of their position between the two sheets.
             float pos[4];
