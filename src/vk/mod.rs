@@ -20,8 +20,8 @@ mod shader;
 pub use buffer::{Buffer, BufferUsage, check_size, check_texel_view};
 pub use commands::{DispatchTiming, Recorder};
 pub use context::{Context, ContextOptions, DeviceInfo, FAIL_ALLOCATIONS_VAR, RawContext};
-pub use pipeline::{BindGroup, BindingKind, ComputePipeline};
 pub(crate) use pipeline::TEXEL_FORMATS;
+pub use pipeline::{BindGroup, BindingKind, ComputePipeline};
 pub use shader::{ShaderCompiler, ShaderSource, shader_names, source_texts};
 
 use ash::vk;
