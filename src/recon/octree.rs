@@ -131,7 +131,7 @@ impl Prepared<'_> {
         let mut b = [0, 1, 2].map(|a| s.position[a].clamp(lo[a], hi[a]));
         let diag = [m[0], m[1], m[2]];
         // For a diagonal metric the quadratic is separable and the clamp is already exact.
-        let rotated = m[3] != 0.0 || m[4] != 0.0 || m[5] != 0.0;
+        let rotated = crate::samples::supports::is_rotated(m);
         for _ in 0..if rotated { 8 } else { 0 } {
             for a in 0..3 {
                 let d = [0, 1, 2].map(|k| b[k] - s.position[k]);

@@ -7,7 +7,7 @@
 
 use super::Neighbours;
 use super::mls::Visit;
-use crate::samples::{Metric, SampleSet, supports};
+use crate::samples::{SampleSet, supports};
 use kiddo::SquaredEuclidean;
 use kiddo::immutable::float::kdtree::ImmutableKdTree;
 
@@ -31,23 +31,12 @@ pub struct SupportIndex<'a> {
     scale: f64,
 }
 
-/// An upper bound on the distance from a sample to any point of its support: the largest half
-/// axis for axis-aligned ellipsoids, else √trace(M⁻¹) (the half diagonal of its bounding box).
-pub fn support_reach(m: &Metric) -> f64 {
-    if m[3] == 0.0 && m[4] == 0.0 && m[5] == 0.0 {
-        1.0 / m[0].min(m[1]).min(m[2]).sqrt()
-    } else {
-        let e = supports::extent(m);
-        (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt()
-    }
-}
-
 impl<'a> SupportIndex<'a> {
-    /// Sorts the samples by [`support_reach`] and builds one kd-tree per class of radii within
+    /// Sorts the samples by [`supports::reach`] and builds one kd-tree per class of radii within
     /// [`CLASS_SPAN`] of each other.
     pub fn new(samples: &'a SampleSet) -> Self {
         let mut order: Vec<(f64, u32)> = (0..samples.len())
-            .map(|i| (support_reach(&samples.metric(i)), i as u32))
+            .map(|i| (supports::reach(&samples.metric(i)), i as u32))
             .collect();
         order.sort_by(|a, b| a.0.total_cmp(&b.0));
         let mut classes = Vec::new();

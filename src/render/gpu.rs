@@ -351,9 +351,6 @@ pub struct GpuField {
     blocks: Option<Buffer>,
     octree: Option<[Buffer; 3]>,
     hull: Option<[Buffer; 2]>,
-    /// Whether the samples (grid, fast path or octree) are on the device: ray casting reads
-    /// them, splatting only the hull.
-    data: bool,
 }
 
 impl GpuField {
@@ -364,15 +361,16 @@ impl GpuField {
         Ok(gpu)
     }
 
-    /// Whether [`GpuField::upload_data`] has run.
+    /// Whether [`GpuField::upload_data`] has run: the samples (a grid, or the samples and
+    /// octree) are on the device. Ray casting reads them, splatting only the hull.
     pub fn has_data(&self) -> bool {
-        self.data
+        self.grid.is_some() || self.octree.is_some()
     }
 
     /// Uploads the samples the ray caster reads (the grid and its fast path, or the samples
     /// and octree), once; the octree must have been built ([`Field::octree`]).
     pub fn upload_data(&mut self, ctx: &Context, field: &Field) -> Result<(), VkError> {
-        if self.data {
+        if self.has_data() {
             return Ok(());
         }
         // Only a complete upload replaces anything: a failed one leaves the hull in place.
@@ -416,7 +414,6 @@ impl GpuField {
             blocks: None,
             octree: None,
             hull,
-            data: false,
         })
     }
 
@@ -465,7 +462,6 @@ impl GpuField {
                     blocks,
                     octree: None,
                     hull: None,
-                    data: true,
                 })
             }
             Some(o) => {
@@ -501,7 +497,6 @@ impl GpuField {
                         Buffer::from_slice(ctx, "octree indices", &o.indices)?,
                     ]),
                     hull: None,
-                    data: true,
                 })
             }
         }

@@ -158,11 +158,9 @@ impl Field {
     ) -> Result<Self, ReconError> {
         let field = Self::from_samples_deferred(samples, reconstruction, octree)?;
         if field.octree_wanted {
-            let built = Octree::from_samples(&field.samples, octree, progress).map(Some);
-            let result = field.octree.get_or_init(|| built);
-            if let Err(e) = result {
-                return Err(e.clone());
-            }
+            let built = Octree::from_samples(&field.samples, octree, progress)?;
+            // The lock is new and empty: this sets it.
+            let _ = field.octree.set(Ok(Some(built)));
         }
         Ok(field)
     }

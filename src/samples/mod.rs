@@ -196,7 +196,7 @@ impl SampleSet {
     pub fn has_full_metric(&self) -> bool {
         match &self.supports {
             Supports::Uniform(_) => false,
-            Supports::PerSample(m) => m.iter().any(|m| m[3] != 0.0 || m[4] != 0.0 || m[5] != 0.0),
+            Supports::PerSample(m) => m.iter().any(supports::is_rotated),
         }
     }
 
@@ -204,17 +204,12 @@ impl SampleSet {
     /// over all samples: exact for diagonal metrics; for rotated ones λ_max is bounded by the
     /// largest absolute row sum (Gershgorin), which can only shorten the bound.
     pub fn thinnest_support(&self) -> f64 {
-        let largest = |m: &Metric| {
-            if m[3] == 0.0 && m[4] == 0.0 && m[5] == 0.0 {
-                m[0].max(m[1]).max(m[2])
-            } else {
-                let (xy, xz, yz) = (m[3].abs(), m[4].abs(), m[5].abs());
-                (m[0] + xy + xz).max(m[1] + xy + yz).max(m[2] + xz + yz)
-            }
-        };
         let lambda = match &self.supports {
-            Supports::Uniform(h) => largest(&supports::diagonal(*h)),
-            Supports::PerSample(m) => m.iter().map(largest).fold(0.0, f64::max),
+            Supports::Uniform(h) => supports::largest_eigenvalue_bound(&supports::diagonal(*h)),
+            Supports::PerSample(m) => m
+                .iter()
+                .map(supports::largest_eigenvalue_bound)
+                .fold(0.0, f64::max),
         };
         1.0 / lambda.sqrt()
     }

@@ -120,6 +120,31 @@ pub fn inverse(m: &Metric) -> Metric {
     ]
 }
 
+/// Whether the ellipsoid's axes are not the coordinate axes (off-diagonal terms).
+pub fn is_rotated(m: &Metric) -> bool {
+    m[3] != 0.0 || m[4] != 0.0 || m[5] != 0.0
+}
+
+/// An upper bound on λ_max(M), so 1/√ of it bounds the shortest half axis from below: exact
+/// for diagonal metrics, else the largest absolute row sum (Gershgorin).
+pub fn largest_eigenvalue_bound(m: &Metric) -> f64 {
+    if !is_rotated(m) {
+        return m[0].max(m[1]).max(m[2]);
+    }
+    let (xy, xz, yz) = (m[3].abs(), m[4].abs(), m[5].abs());
+    (m[0] + xy + xz).max(m[1] + xy + yz).max(m[2] + xz + yz)
+}
+
+/// An upper bound on the distance from the centre to any point of the ellipsoid: the largest
+/// half axis for diagonal metrics, else √trace(M⁻¹) (the half diagonal of its bounding box).
+pub fn reach(m: &Metric) -> f64 {
+    if !is_rotated(m) {
+        return 1.0 / m[0].min(m[1]).min(m[2]).sqrt();
+    }
+    let e = extent(m);
+    (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt()
+}
+
 /// Half extents of the ellipsoid along the axes: √((M⁻¹)_aa).
 pub fn extent(m: &Metric) -> [f64; 3] {
     let inv = inverse(m);

@@ -1,7 +1,7 @@
 //! Scene section `[splat]`: the splatting renderer's settings (`crate::splat::SplatSettings`).
 
 use super::{SceneError, Section};
-use crate::splat::{Antialias, SheetShare, SplatSettings};
+use crate::splat::{Antialias, RINGS, SheetShare, SplatSettings, TILE_SIZES};
 use toml::Value;
 
 /// Keys of `[splat]`.
@@ -53,12 +53,14 @@ pub(super) fn parse(sec: &Section<'_>) -> Result<SplatSettings, SceneError> {
         )?,
         ring: match sec.get("ring") {
             None => d.ring,
-            Some(Value::Integer(r)) if [4, 8, 16].contains(r) => Some(*r as u32),
+            Some(Value::Integer(r)) if RINGS.iter().any(|&x| i64::from(x) == *r) => Some(*r as u32),
             Some(v) => return Err(sec.err("ring", "4, 8 or 16 (sheets)", v)),
         },
         tile: match sec.get("tile") {
             None => d.tile,
-            Some(Value::Integer(t)) if [8, 16, 32].contains(t) => Some(*t as u32),
+            Some(Value::Integer(t)) if TILE_SIZES.iter().any(|&x| i64::from(x) == *t) => {
+                Some(*t as u32)
+            }
             Some(v) => return Err(sec.err("tile", "8, 16 or 32 (pixels)", v)),
         },
     })

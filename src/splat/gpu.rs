@@ -145,7 +145,7 @@ impl SplatVariant {
             exact: setup.exact_footprints(),
             split: setup.split,
             ring: setup.ring,
-            quadrature: setup.ring > 0 && setup.sheet_share == super::SheetShare::Quadrature,
+            quadrature: setup.sheet_share == super::SheetShare::Quadrature,
             occlusion: setup.settings.occlusion,
             isosurfaces: !setup.isosurfaces.is_empty(),
             surfaces: setup.settings.surface && !setup.isosurfaces.is_empty(),
