@@ -203,6 +203,10 @@ pub fn binding_defines() -> Vec<(String, String)> {
         "HULL_STACK".into(),
         crate::samples::bvh::MAX_DEPTH.to_string(),
     ));
+    d.push((
+        "HULL_HIT_MERGE".into(),
+        format!("{:e}", crate::samples::bvh::HIT_MERGE),
+    ));
     for (k, v) in [
         ("RAY_DONE", ray_count::DONE),
         ("RAY_TRUNCATED", ray_count::TRUNCATED),

@@ -21,6 +21,21 @@ How the scene is matched (see BENCHMARKS.md, "Peers"):
 - Time is wall time of Render() followed by a framebuffer read (which waits for the GPU): median
   of `--repeat` frames after a first frame (which compiles shaders and uploads the volume).
 
+Unstructured meshes (`volume.file` a .vtu or a legacy .vtk unstructured grid) are split into
+tetrahedra (vtkDataSetTriangleFilter: VTK's unstructured volume mappers draw tetrahedra only)
+and drawn with VTK's two unstructured volume mappers: rows `vtk-unstructured-raycast`
+(vtkUnstructuredGridVolumeRayCastMapper: Bunyk's cell-by-cell ray caster on the CPU threads,
+one ray per pixel, piecewise-linear ray integration) and `vtk-projected-tetrahedra`
+(vtkProjectedTetrahedraMapper, OpenGL: cells sorted by visibility and drawn as projected
+triangles), whatever `--steps` says. Their field is the mesh's piecewise-linear interpolant, not
+vmls's MLS reconstruction, so the image differs by the reconstruction, which the error columns
+(against vmls's reference) include. Transfer function: VTK's unstructured integrators read the
+opacity function as an attenuation per `ScalarOpacityUnitDistance` (attenuation = value / unit),
+so the opacity points hold τ(s)·u with u = 1 / max τ, which is vmls's extinction τ per world
+unit; colours as for grids (1024 points, RGB, linear). Time: as for grids, wall time of Render()
+and the framebuffer read, median of `--repeat` frames after a first one (which sorts, builds
+the cell connectivity and its tables); prepare_ms is the read and the split into tetrahedra.
+
 Scattered points (`volume.file` a .csv: columns x, y, z or Points:0..2 and the scalar column
 `volume.scalars`, else the first other numeric one) are drawn with vtkPointGaussianMapper, one
 Gaussian per sample as vmls's pre-shaded splatting (`render.method = "splat"`, src/splat/) draws
@@ -466,6 +481,112 @@ def write_rows(out, rows):
         w.writerows(rows)
 
 
+def run_unstructured(scene, a, base):
+    t0 = time.perf_counter()
+    vol = scene["volume"]
+    path = os.path.join(base, vol["file"])
+    reader = vtk.vtkXMLUnstructuredGridReader() if path.endswith(".vtu") else vtk.vtkUnstructuredGridReader()
+    reader.SetFileName(path)
+    reader.Update()
+    grid = reader.GetOutput()
+    if "scalars" in vol:
+        if grid.GetPointData().GetArray(vol["scalars"]) is None:
+            sys.exit(f"peer-vtk: {path} has no point array '{vol['scalars']}'")
+        grid.GetPointData().SetActiveScalars(vol["scalars"])
+    tets = vtk.vtkDataSetTriangleFilter()
+    tets.SetInputData(grid)
+    tets.TetrahedraOnlyOn()
+    tets.Update()
+    mesh = tets.GetOutput()
+    prepare_ms = (time.perf_counter() - t0) * 1e3
+    points = scene["transfer"]["points"]
+    s_lo, s_hi = points[0][0], points[-1][0]
+    tau_max = max(max(q[4] for q in points), 1e-30)
+    unit = 1.0 / tau_max
+    color, opacity = vtk.vtkColorTransferFunction(), vtk.vtkPiecewiseFunction()
+    color.SetColorSpaceToRGB()
+    for i in range(1024):
+        sv = s_lo + (s_hi - s_lo) * i / 1023
+        r, g, b, tau = tf_lookup(points, sv)
+        color.AddRGBPoint(sv, r, g, b)
+        opacity.AddPoint(sv, tau * unit)
+    prop = vtk.vtkVolumeProperty()
+    prop.SetColor(color)
+    prop.SetScalarOpacity(opacity)
+    prop.SetScalarOpacityUnitDistance(unit)
+    prop.SetInterpolationTypeToLinear()
+    prop.ShadeOff()
+    cam = scene.get("camera", {})
+    width, height = int(cam.get("width", 256)), int(cam.get("height", 256))
+    rows = []
+    device, version = "", ""
+    for i, (name, mapper) in enumerate((
+            ("vtk-unstructured-raycast", vtk.vtkUnstructuredGridVolumeRayCastMapper()),
+            ("vtk-projected-tetrahedra", vtk.vtkProjectedTetrahedraMapper()))):
+        mapper.SetInputData(mesh)
+        settings = f"tetrahedra={mesh.GetNumberOfCells()}"
+        if name == "vtk-unstructured-raycast":
+            mapper.AutoAdjustSampleDistancesOff()
+            mapper.SetImageSampleDistance(1.0)
+            settings += f";threads={mapper.GetNumberOfThreads()}"
+        volume = vtk.vtkVolume()
+        volume.SetMapper(mapper)
+        volume.SetProperty(prop)
+        ren = vtk.vtkRenderer()
+        ren.AddVolume(volume)
+        ren.SetBackground(*scene.get("render", {}).get("background", [0.0, 0.0, 0.0]))
+        win = vtk.vtkRenderWindow()
+        win.SetOffScreenRendering(1)
+        win.SetSize(width, height)
+        win.AddRenderer(ren)
+        set_camera(ren.GetActiveCamera(), cam)
+        ren.ResetCameraClippingRange()
+        grab = vtk.vtkWindowToImageFilter()
+        grab.SetInput(win)
+        grab.SetInputBufferTypeToRGBA()
+        grab.ReadFrontBufferOff()
+
+        def frame():
+            t = time.perf_counter()
+            win.Render()
+            grab.Modified()
+            grab.Update()
+            return (time.perf_counter() - t) * 1e3
+
+        first = frame()
+        if not device:
+            device, version = gl_strings(win)
+        times = [frame() for _ in range(a.repeat)]
+        image_path = os.path.join(a.out, f"{i:03}.png")
+        write_png(grab, image_path)
+        rows.append(peer_row(name, settings, device, version, width, height, times, first,
+                             prepare_ms, image_path))
+        win.Finalize()
+    return rows
+
+
+def set_camera(camera, cam):
+    """vmls's camera keys, with vmls's defaults (src/scene/mod.rs) where the scene leaves one out."""
+    camera.SetPosition(*cam.get("eye", [3.0, 2.0, 2.5]))
+    camera.SetFocalPoint(*cam.get("target", [0.0, 0.0, 0.0]))
+    camera.SetViewUp(*cam.get("up", [0.0, 0.0, 1.0]))
+    if cam.get("projection", "perspective") == "orthographic":
+        camera.ParallelProjectionOn()
+        camera.SetParallelScale(cam.get("view_height", 2.0) / 2)
+    else:
+        camera.SetViewAngle(cam.get("fov_y", 30.0))
+
+
+def is_unstructured(scene, base):
+    name = str(scene.get("volume", {}).get("file", ""))
+    if name.lower().endswith(".vtu"):
+        return True
+    if name.lower().endswith(".vtk"):
+        with open(os.path.join(base, name), "rb") as f:
+            return b"UNSTRUCTURED_GRID" in f.read(4096)
+    return False
+
+
 def is_points(scene):
     return str(scene.get("volume", {}).get("file", "")).lower().endswith(".csv")
 
@@ -485,10 +606,14 @@ def main():
     if scene.get("transfer", {}).get("isosurfaces"):
         sys.exit("peer-vtk: scenes with isosurfaces are not matched (VTK's volume mapper has none)")
     os.makedirs(a.out, exist_ok=True)
+    base = os.path.dirname(os.path.abspath(a.scene))
     if is_points(scene):
-        write_rows(a.out, run_points(scene, a, os.path.dirname(os.path.abspath(a.scene))))
+        write_rows(a.out, run_points(scene, a, base))
         return
-    img, spacing = load_volume(scene, os.path.dirname(os.path.abspath(a.scene)))
+    if is_unstructured(scene, base):
+        write_rows(a.out, run_unstructured(scene, a, base))
+        return
+    img, spacing = load_volume(scene, base)
     cam = scene.get("camera", {})
     width, height = int(cam.get("width", 256)), int(cam.get("height", 256))
     points = scene["transfer"]["points"]
@@ -520,16 +645,7 @@ def main():
     win.SetOffScreenRendering(1)
     win.SetSize(width, height)
     win.AddRenderer(ren)
-    camera = ren.GetActiveCamera()
-    # vmls's defaults (src/scene/mod.rs) where the scene leaves a key out.
-    camera.SetPosition(*cam.get("eye", [3.0, 2.0, 2.5]))
-    camera.SetFocalPoint(*cam.get("target", [0.0, 0.0, 0.0]))
-    camera.SetViewUp(*cam.get("up", [0.0, 0.0, 1.0]))
-    if cam.get("projection", "perspective") == "orthographic":
-        camera.ParallelProjectionOn()
-        camera.SetParallelScale(cam.get("view_height", 2.0) / 2)
-    else:
-        camera.SetViewAngle(cam.get("fov_y", 30.0))
+    set_camera(ren.GetActiveCamera(), cam)
     grab = vtk.vtkWindowToImageFilter()
     grab.SetInput(win)
     grab.SetInputBufferTypeToRGBA()

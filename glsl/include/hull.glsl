@@ -2,7 +2,8 @@
 // segments of a ray through a mesh's outward-facing boundary triangles, found through a BVH.
 // Watertight ray–triangle test (Woop, Benthin, Wald, JCGT 2013) and a winding number, so a
 // ray through a shared edge or vertex neither misses the surface nor flips inside and outside.
-// Needs BINDING_HULL_NODES / BINDING_HULL_TRIS and HULL_MAX_HITS, HULL_STACK from the host.
+// Needs BINDING_HULL_NODES / BINDING_HULL_TRIS and HULL_MAX_HITS, HULL_STACK, HULL_HIT_MERGE from
+// the host.
 #ifndef VMLS_HULL_GLSL
 #define VMLS_HULL_GLSL
 
@@ -121,6 +122,19 @@ int hull_segments(vec3 o, vec3 d, out vec2 seg[HULL_SEGMENTS]) {
         }
         hits[j + 1] = h;
     }
+    // One crossing per run of same-direction hits at one distance (bvh.rs merge_coincident):
+    // the triangles around a shared edge or vertex may each report it.
+    int m = 0;
+    for (int i = 0; i < n; ++i) {
+        float h = hits[i];
+        if (m > 0 && (h > 0.0) == (hits[m - 1] > 0.0) &&
+            abs(h) - abs(hits[m - 1]) <= HULL_HIT_MERGE * abs(h)) {
+            continue;
+        }
+        hits[m] = h;
+        m += 1;
+    }
+    n = m;
     int w = 0;
     for (int i = 0; i < n; ++i) {
         w -= hits[i] > 0.0 ? 1 : -1;

@@ -6,10 +6,14 @@
 //!   against its normal enters, along it leaves;
 //! - hits use the watertight ray–triangle test of Woop, Benthin and Wald (JCGT 2013): a ray
 //!   through an edge or vertex shared by several triangles is never missed. It may be counted
-//!   by more than one of them, so inside-ness is a winding number, not a parity: w(∞) = 0,
+//!   by more than one of them: hits of the same direction at the same distance (within
+//!   [`HIT_MERGE`] relative) are one crossing ([`merge_coincident`]). Counting both broke the
+//!   winding below: a ray entering through a face and leaving through an edge summed to +1,
+//!   which put the eye inside and made a segment from the eye (a real mesh, fire_ug.vtu,
+//!   had such a ray at 512² in f32). Inside-ness is a winding number, not a parity: w(∞) = 0,
 //!   walking forward an entering hit raises w by one and a leaving hit lowers it, so the
-//!   winding at the eye is minus the sum of all steps ahead; the ray is inside where w > 0.
-//!   Double hits then only move w between 1 and 2, and an eye inside the mesh works;
+//!   winding at the eye is minus the sum of all steps ahead; the ray is inside where w > 0,
+//!   and an eye inside the mesh works;
 //! - at most [`MAX_HITS`] crossings per ray ahead of the eye; a ray with more gets
 //!   [`Segments::Overflow`] and the render fails clearly.
 //!
@@ -21,6 +25,11 @@ use super::mesh::Hull;
 
 /// Crossings a ray may have with a hull.
 pub const MAX_HITS: usize = 32;
+/// Relative distance within which two hits of the same direction are one crossing: the
+/// triangles around a shared edge or vertex compute its t from different vertices, which
+/// differ by rounding (f32 on the GPU), never by this much on a mesh whose cells are larger
+/// than 10⁻⁵ of their distance from the eye.
+pub const HIT_MERGE: f64 = 1e-5;
 /// Triangles per leaf, at most.
 pub const LEAF_TRIANGLES: usize = 4;
 /// Depth of the traversal stack on the GPU; the build never exceeds it.
@@ -113,8 +122,25 @@ impl HullBvh {
             return Segments::Overflow;
         }
         hits.sort_by(|a, b| a.0.total_cmp(&b.0));
+        merge_coincident(&mut hits);
         Segments::List(walk(&hits))
     }
+}
+
+/// Keeps one of each run of sorted hits with the same step whose distances differ by at most
+/// [`HIT_MERGE`] relative: one crossing of a shared edge or vertex that several triangles hit.
+pub fn merge_coincident(hits: &mut Vec<(f64, i32)>) {
+    let mut kept: Vec<(f64, i32)> = Vec::with_capacity(hits.len());
+    for &h in hits.iter() {
+        if let Some(&last) = kept.last()
+            && last.1 == h.1
+            && h.0 - last.0 <= HIT_MERGE * h.0
+        {
+            continue;
+        }
+        kept.push(h);
+    }
+    *hits = kept;
 }
 
 /// Turns sorted hits (t, +1 entering / −1 leaving) into inside segments.
@@ -298,6 +324,17 @@ mod tests {
             panic!("overflow")
         };
         assert_eq!(s, vec![(0.0, 0.5)]);
+        // In through a face, out through the top face's diagonal (an edge of two triangles):
+        // one crossing each way, the eye outside.
+        let Segments::List(s) = bvh.segments([0.0, 1.0, -1.0], [0.25, -0.25, 1.0]) else {
+            panic!("overflow")
+        };
+        assert_eq!(s, vec![(1.0, 2.0)]);
+        // The same ray backwards: in through the edge, out through a face.
+        let Segments::List(s) = bvh.segments([1.0, 0.0, 3.0], [-0.25, 0.25, -1.0]) else {
+            panic!("overflow")
+        };
+        assert_eq!(s, vec![(2.0, 3.0)]);
         // Missing it.
         assert_eq!(
             bvh.segments([2.0, 2.0, -1.0], [0.0, 0.0, 1.0]),
