@@ -200,10 +200,6 @@ pub fn binding_defines() -> Vec<(String, String)> {
         crate::samples::bvh::MAX_HITS.to_string(),
     ));
     d.push((
-        "HULL_STACK".into(),
-        crate::samples::bvh::MAX_DEPTH.to_string(),
-    ));
-    d.push((
         "HULL_HIT_MERGE".into(),
         format!("{:e}", crate::samples::bvh::HIT_MERGE),
     ));

@@ -66,6 +66,9 @@ fn sweep_writes_rows_plot_and_caches_the_reference() {
         "--variant",
         // Against the scene's own field, so that the integrators' error is what converges.
         "--own-reference",
+        // The fast path whatever the image size ("auto" declines it for a 24×20 first frame).
+        "--set",
+        "reconstruction.resample=2",
     ];
     args.extend(SMALL);
     let stdout = run_ok(&args);
@@ -138,6 +141,8 @@ fn sweep_writes_rows_plot_and_caches_the_reference() {
         &[
             "--no-ceilings",
             "--own-reference",
+            "--set",
+            "reconstruction.resample=2",
             "--import",
             s(&first_csv),
         ],

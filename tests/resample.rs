@@ -264,10 +264,6 @@ fn gpu_fast_path_images_match_the_cpu_twin_with_and_without_skipping() {
 fn resample_is_refused_where_it_cannot_serve() {
     for (set, key) in [
         (
-            vec!["reconstruction.neighbours=\"octree\""],
-            "reconstruction.resample",
-        ),
-        (
             vec!["reconstruction.support=0.8"],
             "reconstruction.resample",
         ),
@@ -280,19 +276,21 @@ fn resample_is_refused_where_it_cannot_serve() {
         let err = Scene::load(None, &all).expect_err("refused");
         assert!(err.to_string().contains(key), "{set:?}: {err}");
     }
-    // Irregular data: refused when the field is built, naming the key.
-    let s = Scene::load(
-        None,
-        &[
-            "volume.file=\"tests/data/legacy/unstructured-42-ascii.vtk\"".to_string(),
-            "reconstruction.resample=2".to_string(),
-        ],
-    )
-    .expect("scene");
-    let err = s
-        .field(|_| {})
-        .expect_err("no fast path for irregular data");
-    assert!(err.to_string().contains("reconstruction.resample"), "{err}");
+    // Irregular data and octree neighbours take it (on a lattice, tests/resample_irregular.rs).
+    for set in [
+        "volume.file=\"tests/data/legacy/unstructured-42-ascii.vtk\"",
+        "reconstruction.neighbours=\"octree\"",
+    ] {
+        let s = Scene::load(
+            None,
+            &["reconstruction.resample=2".to_string(), set.to_string()],
+        )
+        .expect("scene");
+        let f = s
+            .field(|_| {})
+            .expect("the fast path serves irregular data");
+        assert_eq!(f.fast_path()["factor"], 2, "{set}");
+    }
     // Too many fine points: refused before anything is built.
     let s = Scene::load(
         None,
@@ -324,15 +322,20 @@ fn auto_takes_the_fast_path_only_where_it_serves() {
     assert!(default.reconstruction.resample_auto);
     assert_eq!(factor(&[]), vmls::recon::resample::AUTO_FACTOR);
     assert_eq!(factor(&["reconstruction.basis=\"quadratic\""]), 2);
-    // Everywhere an explicit factor is refused, auto falls back to the direct solve.
+    // Irregular data and octree neighbours: on a lattice over the domain.
     for set in [
         "reconstruction.neighbours=\"octree\"",
+        "volume.file=\"tests/data/legacy/unstructured-42-ascii.vtk\"",
+    ] {
+        assert_eq!(factor(&[set]), 2, "{set}");
+    }
+    // Everywhere an explicit factor is refused, auto falls back to the direct solve.
+    for set in [
         "reconstruction.support=0.8",
         "render.method=\"splat\"",
         "reconstruction.method=\"exact\"",
         // The reference integrator's image is the ground truth of the scene's own field.
         "render.method=\"reference\"",
-        "volume.file=\"tests/data/legacy/unstructured-42-ascii.vtk\"",
     ] {
         assert_eq!(factor(&[set]), 0, "{set}");
     }
@@ -341,4 +344,61 @@ fn auto_takes_the_fast_path_only_where_it_serves() {
     let err = Scene::load(None, &["reconstruction.resample=\"4\"".to_string()])
         .expect_err("a string other than auto");
     assert!(err.to_string().contains("\"auto\""), "{err}");
+}
+
+#[test]
+fn auto_skipping_is_compiled_in_only_where_most_ray_length_is_empty() {
+    // ml-emission's two bands: about 40% of the ray length lies in empty blocks, below
+    // SKIP_AUTO_FRACTION: compiled out, on the GPU and in the CPU twin.
+    let b = both(&scene(&[]));
+    assert!(!b.variant.contains("-skip"), "{}", b.variant);
+    assert!(b.gpu_skip.is_none());
+    assert_eq!(
+        b.cpu_skip.skipped_length, 0.0,
+        "the twin did not skip either"
+    );
+    // Extinction only in the top tenth of the range: nearly every block is empty.
+    let thin = "transfer.points=[[0.0, 1.0, 1.0, 1.0, 0.0], [0.9, 1.0, 1.0, 1.0, 0.0], \
+                [0.95, 1.0, 0.5, 0.2, 8.0], [1.0, 1.0, 0.5, 0.2, 8.0]]";
+    let b = both(&scene(&[thin]));
+    assert!(b.variant.contains("-skip"), "{}", b.variant);
+    let (g, c) = (b.gpu_skip.expect("GPU skip report"), b.cpu_skip);
+    assert!(
+        c.fraction() >= vmls::render::skip::SKIP_AUTO_FRACTION && g.fraction() > 0.7,
+        "GPU {g:?} CPU {c:?}"
+    );
+    let w = worst(&b.gpu, &b.cpu);
+    assert!(w < 2e-3, "GPU vs CPU {w:.2e}");
+}
+
+#[test]
+fn scene_files_default_to_auto_resample_hermite_intervals_and_auto_skipping() {
+    let s = Scene::load(
+        Some(std::path::Path::new("tests/scenes/ml-emission.toml")),
+        &[],
+    )
+    .expect("scene");
+    assert!(s.reconstruction.resample_auto);
+    assert_eq!(s.render.interval, vmls::render::IntervalModel::Hermite);
+    assert_eq!(s.render.skip, vmls::render::SkipMode::Auto);
+    // A constant fit with the local gradient has no slope: linear intervals.
+    let s = Scene::load(
+        Some(std::path::Path::new("tests/scenes/ml-emission.toml")),
+        &["reconstruction.basis=\"constant\"".to_string()],
+    )
+    .expect("scene");
+    assert_eq!(s.render.interval, vmls::render::IntervalModel::Linear);
+    // Explicit values win.
+    let s = Scene::load(
+        Some(std::path::Path::new("tests/scenes/ml-emission.toml")),
+        &[
+            "reconstruction.resample=0".to_string(),
+            "render.interval=\"linear\"".to_string(),
+            "render.skip=false".to_string(),
+        ],
+    )
+    .expect("scene");
+    assert!(!s.reconstruction.resample_auto && s.reconstruction.resample == 0);
+    assert_eq!(s.render.interval, vmls::render::IntervalModel::Linear);
+    assert_eq!(s.render.skip, vmls::render::SkipMode::Off);
 }

@@ -38,8 +38,9 @@ fn auto_takes_the_fast_path_only_where_its_fine_grid_stays_moderate() {
         args.extend_from_slice(extra);
         vmls(&small_render(&png, &args))
     };
-    // The built-in 41³ scene: 81³ fine points.
-    let out = render(&[]);
+    // The built-in 41³ scene at 128²: 81³ fine points, fewer than the first frame's solves.
+    let big = ["--set", "camera.width=128", "--set", "camera.height=128"];
+    let out = render(&big);
     assert!(
         out.status.success(),
         "{}",
@@ -48,6 +49,16 @@ fn auto_takes_the_fast_path_only_where_its_fine_grid_stays_moderate() {
     let fast = &stats_of(&stats)["fast_path"];
     assert_eq!(fast["factor"], 2, "{fast}");
     assert_eq!(fast["fine_points"], 81 * 81 * 81, "{fast}");
+    // At 8×8 the first frame solves far fewer than 81³ times: the general path, and why.
+    let out = render(&[]);
+    assert!(out.status.success());
+    let fast = &stats_of(&stats)["fast_path"];
+    assert_eq!(fast["factor"], 0, "{fast}");
+    let why = fast["declined"].as_str().unwrap_or_default();
+    assert!(
+        why.contains("531441 points") && why.contains("first frame"),
+        "{why}"
+    );
     // 130³: 259³ = 17.4 M fine points, past auto's 2^24: the general path, and --stats says why.
     let out = render(&["--set", "volume.resolution=130"]);
     assert!(

@@ -2,16 +2,15 @@
 // segments of a ray through a mesh's outward-facing boundary triangles, found through a BVH.
 // Watertight ray–triangle test (Woop, Benthin, Wald, JCGT 2013) and a winding number, so a
 // ray through a shared edge or vertex neither misses the surface nor flips inside and outside.
-// Needs BINDING_HULL_NODES / BINDING_HULL_TRIS and HULL_MAX_HITS, HULL_STACK, HULL_HIT_MERGE from
-// the host.
+// Needs BINDING_HULL_NODES / BINDING_HULL_TRIS and HULL_MAX_HITS, HULL_HIT_MERGE from the host.
 #ifndef VMLS_HULL_GLSL
 #define VMLS_HULL_GLSL
 
 // Both through texel views: every lane of a SIMD row reads its own node or triangle, a gather
 // on lavapipe where a storage-buffer load is a loop over the lanes.
-// nodes[2i] = (bits(lo), first), nodes[2i + 1] = (bits(hi), count) as integer texels (a float
-// view could flush the small integers' bits as denormals); count 0: inner node with children
-// first, first + 1.
+// Nodes in depth-first preorder (bvh.rs): nodes[2i] = (bits(lo), first), nodes[2i + 1] =
+// (bits(hi), count) as integer texels (a float view could flush the small integers' bits as
+// denormals); count 0: inner node, first child i + 1, `first` its escape past the subtree.
 layout(rgba32ui, binding = BINDING_HULL_NODES) readonly uniform uimageBuffer hull_nodes;
 // Three vertices per triangle, in leaf order.
 layout(rgba32f, binding = BINDING_HULL_TRIS) readonly uniform imageBuffer hull_tris;
@@ -77,37 +76,36 @@ int hull_segments(vec3 o, vec3 d, out vec2 seg[HULL_SEGMENTS]) {
     }
     vec3 shear = vec3(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
     vec3 inv = 1.0 / d;
-    uint stack[HULL_STACK];
-    int sp = 1;
-    stack[0] = 0u;
+    // Stackless walk (escape links): one index instead of a stack, which a dynamically
+    // indexed local array would keep in memory. The root's escape is the node count.
+    uint node = 0u;
+    uint end = 1u;
     bool overflow = false;
-    while (sp > 0 && !overflow) {
-        sp -= 1;
-        uint node = stack[sp];
+    while (node < end) {
         uvec4 lo = imageLoad(hull_nodes, int(2u * node));
         uvec4 hi = imageLoad(hull_nodes, int(2u * node + 1u));
-        if (!hull_slab(o, d, inv, uintBitsToFloat(lo.xyz), uintBitsToFloat(hi.xyz))) {
+        bool hit = hull_slab(o, d, inv, uintBitsToFloat(lo.xyz), uintBitsToFloat(hi.xyz));
+        if (hi.w == 0u) {
+            if (node == 0u) {
+                end = lo.w;
+            }
+            node = hit ? node + 1u : lo.w;
             continue;
         }
-        uint first = lo.w;
-        uint count = hi.w;
-        if (count == 0u) {
-            stack[sp] = first;
-            stack[sp + 1] = first + 1u;
-            sp += 2;
-            continue;
-        }
-        for (uint k = first; k < first + count; ++k) {
-            float h = hull_intersect(o, d, kx, ky, kz, shear, k);
-            if (h != 0.0) {
-                if (n == HULL_MAX_HITS) {
-                    overflow = true;
-                    break;
+        if (hit) {
+            for (uint k = lo.w; k < lo.w + hi.w; ++k) {
+                float h = hull_intersect(o, d, kx, ky, kz, shear, k);
+                if (h != 0.0) {
+                    if (n == HULL_MAX_HITS) {
+                        overflow = true;
+                    } else {
+                        hits[n] = h;
+                        n += 1;
+                    }
                 }
-                hits[n] = h;
-                n += 1;
             }
         }
+        node += 1u;
     }
     if (overflow) {
         return -1;

@@ -24,12 +24,16 @@ use crate::vk::Context;
 /// isosurface (issue 11's `tests/scenes/ml-emission.toml`), at [`CHECK_SET`].
 pub const CHECK_SCENE: &str = include_str!("../../tests/scenes/ml-emission.toml");
 
-/// The check scene's size and integrator: 48², preintegrated, half a spacing per step.
-pub const CHECK_SET: [&str; 4] = [
+/// The check scene's size and integrator: 48², preintegrated with linear intervals, half a
+/// spacing per step, the direct solve (the cases were written against these, the defaults
+/// before issue 27; a case that checks the fast path or Hermite intervals asks for them).
+pub const CHECK_SET: [&str; 6] = [
     "camera.width=48",
     "camera.height=48",
     "render.method=\"fixed\"",
     "render.step=0.5",
+    "render.interval=\"linear\"",
+    "reconstruction.resample=0",
 ];
 
 /// What a measured number must satisfy.

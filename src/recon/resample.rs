@@ -10,6 +10,14 @@
 //! points is new, and its error falls as factor⁻² (tested against the direct solve in
 //! `tests/resample.rs`, RMSE and maximum over dense random points).
 //!
+//! Irregular data (meshes, scattered points; issue 27 §1) takes the same path on a [`Lattice`]
+//! laid over the domain's box at the median nearest-sample spacing, its fine points computed by
+//! the general path through the octree. There the shape functions vary from sample to sample,
+//! so the fine grid is an approximation whose error follows the local sample spacing against
+//! the lattice's: `tests/resample.rs` bounds it (RMSE and maximum over dense random points
+//! inside the hull, per data kind). The lattice is uniform, not adaptive: a mesh graded more
+//! than the fine spacing resolves is interpolated more coarsely where its cells are smallest.
+//!
 //! Contract of [`ResampledGrid::evaluate`] (stage `resample_evaluate`, GPU twin
 //! `resampled_evaluate` in `glsl/include/neighbours.glsl`):
 //! - fine point (i, j, k) sits at `origin + (i, j, k) ⊙ spacing / factor` and holds
@@ -44,6 +52,43 @@ pub const AUTO_MAX_POINTS: u64 = 1 << 24;
 
 /// Device bytes per fine point: f and ∇f as one rgba32f texel.
 pub const FINE_POINT_DEVICE_BYTES: u64 = 16;
+
+/// The coarse grid a fine grid refines: a regular grid's own points, or for irregular data a
+/// lattice over the domain's box ([`Lattice::covering`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Lattice {
+    pub dims: [usize; 3],
+    pub origin: [f64; 3],
+    pub spacing: [f64; 3],
+}
+
+impl Lattice {
+    /// The lattice with points at `lo` and `hi` and at most `spacing` between neighbours along
+    /// each axis (a flat axis gets one point); `spacing` must be positive.
+    pub fn covering(lo: [f64; 3], hi: [f64; 3], spacing: f64) -> Self {
+        let mut dims = [1usize; 3];
+        let mut step = [spacing; 3];
+        for a in 0..3 {
+            let extent = (hi[a] - lo[a]).max(0.0);
+            if extent > 0.0 {
+                // At most 2^20 points per axis: far past MAX_POINTS, which the caller checks.
+                let cells = (extent / spacing).ceil().clamp(1.0, f64::from(1u32 << 20));
+                dims[a] = cells as usize + 1;
+                step[a] = extent / cells;
+            }
+        }
+        Self {
+            dims,
+            origin: lo,
+            spacing: step,
+        }
+    }
+
+    /// Fine points of this lattice refined `factor` times.
+    pub fn fine_points(&self, factor: u32) -> u64 {
+        fine_points(self.dims, factor)
+    }
+}
 
 /// Fine points per axis for a grid of `dims` points refined `factor` times.
 pub fn fine_dims(dims: [usize; 3], factor: u32) -> [usize; 3] {

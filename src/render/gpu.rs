@@ -286,6 +286,19 @@ pub fn render_params(field: &Field, setup: Option<&RaySetup>, tf_count: u32) -> 
                 as f32;
         }
     }
+    if field.grid().is_none() && field.reconstruction.resample > 0 {
+        // Irregular data on the fast path: the fine grid's lattice where a grid's points would
+        // be (recon_resample and resampled_evaluate read only these three).
+        let l = field.lattice();
+        p.grid_origin = v4(l.origin.into(), 0.0);
+        p.grid_inv_spacing = [
+            (1.0 / l.spacing[0]) as f32,
+            (1.0 / l.spacing[1]) as f32,
+            (1.0 / l.spacing[2]) as f32,
+            0.0,
+        ];
+        p.grid_dims = [l.dims[0] as i32, l.dims[1] as i32, l.dims[2] as i32, 0];
+    }
     p.gauss_sigma = field.reconstruction.sigma as f32;
     if let Some(o) = field.octree_if_built() {
         p.octree_root = v4(o.root_center.into(), o.root_half);
@@ -347,8 +360,8 @@ pub struct GpuField {
     resampled: Option<Buffer>,
     /// GPU milliseconds recon_resample took.
     pub resample_ms: f64,
-    /// The fast field's range per skipping block, `vec4(min, max, 0, 0)`.
-    blocks: Option<Buffer>,
+    /// The fast field's range per skipping block, `vec4(min, max, 0, 0)`, and the host's copy.
+    blocks: Option<(Buffer, super::skip::Blocks)>,
     octree: Option<[Buffer; 3]>,
     hull: Option<[Buffer; 2]>,
 }
@@ -448,7 +461,8 @@ impl GpuField {
                 let back = vec![0u8; total - front.len() - values.bytes().len()];
                 let grid = Buffer::new(ctx, "grid", total as u64, BufferUsage::Texel)?;
                 grid.write_parts(ctx, &[&front, values.bytes(), &back])?;
-                let fine = super::resample::resample_grid(ctx, field, &grid)?;
+                let binding = grid_binding(values.storage());
+                let fine = super::resample::resample_grid(ctx, field, &[(binding, &grid)])?;
                 let resample_ms = fine.as_ref().map_or(0.0, |f| f.1);
                 let blocks = match &fine {
                     Some((buffer, _)) => Some(super::resample::block_buffer(ctx, field, buffer)?),
@@ -485,17 +499,34 @@ impl GpuField {
                         }
                     })
                     .collect();
+                let octree = [
+                    Buffer::from_slice(ctx, "octree samples", &samples)?,
+                    Buffer::from_slice(ctx, "octree nodes", &o.nodes)?,
+                    Buffer::from_slice(ctx, "octree indices", &o.indices)?,
+                ];
+                // The fast path's fine grid over the lattice, through the octree.
+                let [s, n, i] = &octree;
+                let fine = super::resample::resample_grid(
+                    ctx,
+                    field,
+                    &[
+                        (binding::SAMPLES, s),
+                        (binding::NODES, n),
+                        (binding::INDICES, i),
+                    ],
+                )?;
+                let resample_ms = fine.as_ref().map_or(0.0, |f| f.1);
+                let blocks = match &fine {
+                    Some((buffer, _)) => Some(super::resample::block_buffer(ctx, field, buffer)?),
+                    None => None,
+                };
                 Ok(Self {
                     grid_binding: binding::GRID,
                     grid: None,
-                    resampled: None,
-                    resample_ms: 0.0,
-                    blocks: None,
-                    octree: Some([
-                        Buffer::from_slice(ctx, "octree samples", &samples)?,
-                        Buffer::from_slice(ctx, "octree nodes", &o.nodes)?,
-                        Buffer::from_slice(ctx, "octree indices", &o.indices)?,
-                    ]),
+                    resampled: fine.map(|f| f.0),
+                    resample_ms,
+                    blocks,
+                    octree: Some(octree),
                     hull: None,
                 })
             }
@@ -523,8 +554,13 @@ impl GpuField {
     pub(super) fn skip_bindings(&self) -> Vec<(u32, &Buffer)> {
         self.blocks
             .iter()
-            .map(|b| (binding::SKIP_BLOCKS, b))
+            .map(|(b, _)| (binding::SKIP_BLOCKS, b))
             .collect()
+    }
+
+    /// The host's copy of the skipping blocks (none without the fast path).
+    pub fn blocks(&self) -> Option<&super::skip::Blocks> {
+        self.blocks.as_ref().map(|(_, b)| b)
     }
 
     /// The hull's BVH buffers with their bindings (none for a box domain).

@@ -24,7 +24,7 @@ use crate::recon::ReconMethod;
 use crate::recon::gaussian::{KernelVolumes, gaussian_evaluate};
 use crate::recon::mls::{MlsSettings, MlsValue, Neighbours, Visit, mls_evaluate};
 use crate::recon::resample::{
-    AUTO_FACTOR, AUTO_MAX_POINTS, FINE_POINT_DEVICE_BYTES, MAX_POINTS, ResampledGrid, fine_points,
+    AUTO_FACTOR, AUTO_MAX_POINTS, FINE_POINT_DEVICE_BYTES, Lattice, MAX_POINTS, ResampledGrid,
 };
 use crate::recon::support_index::SupportIndex;
 use crate::recon::{GridNeighbours, Octree, OctreeSettings, ReconError};
@@ -35,7 +35,7 @@ use crate::vk::VkError;
 use camera::{Camera, Projection, ViewBasis};
 use glam::DVec3;
 use preintegration::PreintegrationTables;
-pub use settings::{AdaptiveCriterion, IntervalModel, Method, RenderSettings};
+pub use settings::{AdaptiveCriterion, IntervalModel, Method, RenderSettings, SkipMode};
 use transfer::TransferFunction;
 
 /// Errors of the render layer (and everything below it).
@@ -214,10 +214,10 @@ impl Field {
             if let Err(e) = field.check_resample() {
                 field.reconstruction.resample = 0;
                 field.fast_path_declined = Some(e.to_string());
-            } else if let Some(g) = field.grid() {
+            } else {
                 // The fine grid's device memory and first-frame build grow with its points:
                 // "auto" takes the fast path only where both stay moderate.
-                let points = fine_points(g.dims, AUTO_FACTOR);
+                let points = field.lattice().fine_points(AUTO_FACTOR);
                 if points > AUTO_MAX_POINTS {
                     field.reconstruction.resample = 0;
                     field.fast_path_declined = Some(format!(
@@ -236,13 +236,22 @@ impl Field {
         Ok(field)
     }
 
+    /// Turns the fast path off before anything used it, recording why for `--stats` (the
+    /// scene's "auto" rule for the first frame, [`crate::scene::Scene::frame_evaluations`]).
+    pub fn decline_fast_path(&mut self, why: String) {
+        self.reconstruction.resample = 0;
+        self.fast_path_declined = Some(why);
+        self.resampled = std::sync::OnceLock::new();
+        self.blocks = std::sync::OnceLock::new();
+    }
+
     /// The fast path as `--stats` states it: its factor, fine points and device bytes, or why
     /// `"auto"` declined it.
     pub fn fast_path(&self) -> serde_json::Value {
         let factor = self.reconstruction.resample;
-        match self.grid().filter(|_| factor > 0) {
-            Some(g) => {
-                let points = fine_points(g.dims, factor);
+        match Some(self.lattice()).filter(|_| factor > 0) {
+            Some(l) => {
+                let points = l.fine_points(factor);
                 serde_json::json!({
                     "factor": factor,
                     "fine_points": points,
@@ -253,6 +262,27 @@ impl Field {
                 "factor": 0,
                 "declined": self.fast_path_declined,
             }),
+        }
+    }
+
+    /// The coarse grid the fast path refines: a regular grid's points, or for irregular data a
+    /// lattice over the domain's box at the median nearest-sample spacing (the unit of
+    /// `render.step`, [`SampleSet::spacing`]).
+    pub fn lattice(&self) -> Lattice {
+        match &self.samples.positions {
+            Positions::Grid {
+                dims,
+                origin,
+                spacing,
+            } => Lattice {
+                dims: *dims,
+                origin: *origin,
+                spacing: *spacing,
+            },
+            Positions::Scattered(_) => {
+                let (lo, hi) = self.samples.domain_box();
+                Lattice::covering(lo, hi, self.samples.spacing.max(f64::MIN_POSITIVE))
+            }
         }
     }
 
@@ -331,26 +361,17 @@ impl Field {
         })
     }
 
-    /// The fast path needs implicit grid neighbours (a regular grid, `neighbours = "grid"`) and
-    /// a fine grid of at most [`MAX_POINTS`] points.
+    /// The fast path needs a fine grid of at most [`MAX_POINTS`] points over its lattice
+    /// ([`Field::lattice`]).
     fn check_resample(&self) -> Result<(), ReconError> {
         let factor = self.reconstruction.resample;
-        let Some(g) = self.grid().filter(|_| !self.octree_wanted) else {
-            return Err(ReconError::Setting {
-                key: "reconstruction.resample",
-                value: factor.to_string(),
-                expected: "0 for this data (the fast path needs a regular grid with \
-                           reconstruction.neighbours = \"grid\")",
-            });
-        };
-        let points = fine_points(g.dims, factor);
+        let lattice = self.lattice();
+        let points = lattice.fine_points(factor);
         if points > MAX_POINTS {
+            let [x, y, z] = lattice.dims;
             return Err(ReconError::Setting {
                 key: "reconstruction.resample",
-                value: format!(
-                    "{factor} ({points} fine points for a {}x{}x{} grid)",
-                    g.dims[0], g.dims[1], g.dims[2]
-                ),
+                value: format!("{factor} ({points} fine points for a {x}x{y}x{z} lattice)"),
                 expected: "a factor giving at most 2^27 fine points (2 GiB)",
             });
         }
@@ -358,21 +379,28 @@ impl Field {
     }
 
     /// The fast path's fine grid (`None` unless `reconstruction.resample` > 0): the general
-    /// path at every fine point, computed here in f64 at first use (stage `recon_resample`).
+    /// path at every fine point of the lattice, computed here in f64 at first use (stage
+    /// `recon_resample`). For irregular data it reads the octree, built here if it was
+    /// deferred; `None` where that build fails (every CPU twin asks [`Field::neighbours`]
+    /// first, which returns its error).
     pub fn resampled(&self) -> Option<&ResampledGrid> {
         let factor = self.reconstruction.resample;
-        let g = self.grid().filter(|_| factor > 0 && !self.octree_wanted)?;
+        if factor == 0 {
+            return None;
+        }
         // The fine points store the field's own derivative (the analytic gradient): the fast
         // path's interpolation needs ∇f, not the local fit's slope.
         let mls = MlsSettings {
             gradient: crate::recon::GradientMode::Analytic,
             ..self.mls()
         };
+        let neighbours = self.neighbours().ok()?;
+        let l = self.lattice();
         Some(self.resampled.get_or_init(|| {
-            ResampledGrid::build(g.dims, g.origin, g.spacing, factor, |x| {
+            ResampledGrid::build(l.dims, l.origin, l.spacing, factor, |x| {
                 match self.reconstruction.method {
-                    ReconMethod::Mls => mls_evaluate(&mls, &g, x),
-                    _ => self.evaluate_direct(&g, x),
+                    ReconMethod::Mls => mls_evaluate(&mls, neighbours.as_ref(), x),
+                    _ => self.evaluate_direct(neighbours.as_ref(), x),
                 }
             })
         }))
@@ -522,6 +550,10 @@ pub struct RaySetup {
     pub early_termination: f64,
     /// Empty-space skipping: `render.skip` with the fast path ([`skip`]).
     pub skip: bool,
+    /// `render.skip = "auto"` not yet decided for a frame ([`RaySetup::resolve_skip`]).
+    pub skip_auto: bool,
+    /// The fraction of ray length "auto" found in empty blocks when it decided.
+    pub skip_estimate: Option<f64>,
     pub background: [f64; 3],
     /// Riemann and reference methods stop below this transmittance.
     pub min_transmittance: f64,
@@ -559,7 +591,8 @@ impl RaySetup {
         let unit = field.min_spacing();
         let mls2008 =
             render.method == Method::Adaptive && render.adaptive == AdaptiveCriterion::Mls2008;
-        if render.skip && field.reconstruction.resample == 0 {
+        let skip_on = render.skip == SkipMode::On;
+        if skip_on && field.reconstruction.resample == 0 {
             return Err(RenderError::Setting {
                 key: "render.skip",
                 message: format!(
@@ -573,7 +606,7 @@ impl RaySetup {
                 ),
             });
         }
-        if render.skip && mls2008 {
+        if skip_on && mls2008 {
             return Err(RenderError::Setting {
                 key: "render.skip",
                 message: "true does not apply to render.adaptive = \"mls2008\" (the paper's \
@@ -596,7 +629,11 @@ impl RaySetup {
             epsilon: render.epsilon,
             spacing: unit,
             early_termination: render.early_termination,
-            skip: render.skip,
+            skip: skip_on,
+            skip_auto: render.skip == SkipMode::Auto
+                && field.reconstruction.resample > 0
+                && !mls2008,
+            skip_estimate: None,
             background: render.background,
             min_transmittance: render.min_transmittance,
             isosurfaces: isosurfaces.to_vec(),
@@ -605,6 +642,28 @@ impl RaySetup {
         };
         setup.check_resolution(field)?;
         Ok(setup)
+    }
+
+    /// Decides `render.skip = "auto"` for a frame of `tf` over the fast field's `blocks`:
+    /// skipping where [`skip::skippable_fraction`] reaches [`skip::SKIP_AUTO_FRACTION`]. The
+    /// GPU decides on its own fine grid's blocks and the CPU twin on its f64 ones.
+    pub fn resolve_skip(
+        &mut self,
+        blocks: Option<&skip::Blocks>,
+        tf: &TransferFunction,
+        field: &Field,
+    ) {
+        if !self.skip_auto {
+            return;
+        }
+        self.skip_auto = false;
+        let Some(blocks) = blocks else {
+            return;
+        };
+        let table = skip::SkipTable::build(tf, &self.isosurfaces, scalar_range(field));
+        let fraction = skip::skippable_fraction(blocks, &table, self);
+        self.skip_estimate = Some(fraction);
+        self.skip = fraction >= skip::SKIP_AUTO_FRACTION;
     }
 
     /// The shortest length, in world units, this setup's method steps by: the step (the

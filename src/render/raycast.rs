@@ -325,6 +325,16 @@ pub fn raycast_image(
     tables: Option<&PreintegrationTables>,
 ) -> Result<Vec<PixelResult>, ReconError> {
     let neighbours = field.neighbours()?;
+    // `render.skip = "auto"` decided on this twin's own f64 blocks.
+    let resolved;
+    let setup = if setup.skip_auto {
+        let mut s = setup.clone();
+        s.resolve_skip(field.blocks(), tf, field);
+        resolved = s;
+        &resolved
+    } else {
+        setup
+    };
     let w = setup.camera.width as usize;
     let h = setup.camera.height as usize;
     let mut out = vec![

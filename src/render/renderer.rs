@@ -95,6 +95,9 @@ pub fn render(
     mut progress: impl FnMut(f64),
 ) -> Result<GpuImage, VkError> {
     check_tables(setup, tables)?;
+    let mut resolved = setup.clone();
+    resolved.resolve_skip(gpu_field.blocks(), tf, field);
+    let setup = &resolved;
     let tables = tables.filter(|_| setup.method.preintegrated());
     let variant = Variant::for_render(field, setup);
     let pipeline = frame_pipeline(
@@ -161,6 +164,10 @@ pub struct FrameStats {
     /// Frame buffers were (re)allocated (a new image size).
     pub targets_allocated: bool,
     pub bands: u32,
+    /// `render.skip = "auto"`: the fraction of ray length it found in empty blocks (skipping
+    /// is compiled in at [`crate::render::skip::SKIP_AUTO_FRACTION`] or more); `None` where
+    /// "auto" did not decide (skipping set, or no fast path).
+    pub skip_estimate: Option<f64>,
 }
 
 /// A compiled variant: its macro definitions, its bindings and the pipeline.
@@ -257,7 +264,7 @@ impl Renderer {
         if let Some(shading) = view.settings.method.splat_shading() {
             return self.render_splat(view, shading, start, &mut progress);
         }
-        let setup = RaySetup::new(
+        let mut setup = RaySetup::new(
             view.camera,
             view.settings,
             view.isosurfaces,
@@ -271,6 +278,7 @@ impl Renderer {
             self.field.octree()?;
             self.gpu_field.upload_data(&self.ctx, &self.field)?;
         }
+        setup.resolve_skip(self.gpu_field.blocks(), view.transfer, &self.field);
         if setup.method.preintegrated() {
             check_table_size(
                 &setup.table_lengths(view.transfer),
@@ -377,6 +385,7 @@ impl Renderer {
                 pipeline_built,
                 targets_allocated,
                 bands,
+                skip_estimate: setup.skip_estimate,
             },
         ))
     }
@@ -498,6 +507,7 @@ impl Renderer {
                 pipeline_built,
                 targets_allocated,
                 bands: image.submissions,
+                skip_estimate: None,
             },
         ))
     }

@@ -1,6 +1,7 @@
 //! GPU driver of stage `recon_resample` (`glsl/recon_resample.comp`; CPU twin
-//! [`crate::recon::resample::ResampledGrid::build`]): computes the fast path's fine grid from the
-//! uploaded coarse grid once per dataset, when the persistent renderer uploads the field.
+//! [`crate::recon::resample::ResampledGrid::build`]): computes the fast path's fine grid over the
+//! field's lattice ([`Field::lattice`]) from the uploaded samples (a grid, or the samples and
+//! octree) once per dataset, when the persistent renderer uploads the field.
 
 use super::Field;
 use super::gpu::{Variant, groups_2d, pipeline_for, render_params};
@@ -12,18 +13,19 @@ use crate::vk::{BindGroup, Buffer, BufferUsage, Context, ShaderCompiler, VkError
 const GROUP: u32 = 64;
 
 /// The fine grid of a field with `reconstruction.resample` > 0, computed on the GPU from the
-/// uploaded `grid` (binding GRID), as `vec4(f, ∇f)` per fine point; `None` without the fast
-/// path. Returns the buffer and the GPU milliseconds it took.
+/// uploaded neighbour data (`data`: the grid's binding, or the octree's three), as
+/// `vec4(f, ∇f)` per fine point; `None` without the fast path. Returns the buffer and the GPU
+/// milliseconds it took.
 pub fn resample_grid(
     ctx: &Context,
     field: &Field,
-    grid: &Buffer,
+    data: &[(u32, &Buffer)],
 ) -> Result<Option<(Buffer, f64)>, VkError> {
     let factor = field.reconstruction.resample;
-    let Some(g) = field.grid().filter(|_| factor > 0) else {
+    if factor == 0 {
         return Ok(None);
-    };
-    let points = resample::fine_points(g.dims, factor);
+    }
+    let points = field.lattice().fine_points(factor);
     let count = u32::try_from(points)
         .map_err(|_| VkError::Usage(format!("{points} fine points exceed 2^32")))?;
     let compiler = ShaderCompiler::new()?;
@@ -34,7 +36,11 @@ pub fn resample_grid(
         gradient: crate::recon::GradientMode::Analytic,
         ..Variant::of(field)
     };
-    let ids = [variant.grid_binding(), binding::RESAMPLE_TARGET];
+    let ids: Vec<u32> = data
+        .iter()
+        .map(|(b, _)| *b)
+        .chain([binding::RESAMPLE_TARGET])
+        .collect();
     let pipeline = pipeline_for(
         ctx,
         &compiler,
@@ -49,15 +55,12 @@ pub fn resample_grid(
         &crate::gpu_types::params_copies(render_params(field, None, 0)),
     )?;
     let fine = Buffer::new(ctx, "resampled grid", points * 16, BufferUsage::Texel)?;
-    let group = BindGroup::new(
-        ctx,
-        &pipeline,
-        &[
-            (variant.grid_binding(), grid),
-            (binding::RESAMPLE_TARGET, &fine),
-            (binding::PARAMS, &params),
-        ],
-    )?;
+    let mut all = data.to_vec();
+    all.extend([
+        (binding::RESAMPLE_TARGET, &fine),
+        (binding::PARAMS, &params),
+    ]);
+    let group = BindGroup::new(ctx, &pipeline, &all)?;
     // One dispatch covers every point (2D when the groups exceed a dimension's limit): one
     // evaluation per invocation, at most 2^27 of them (resample::MAX_POINTS).
     let [gx, gy, _] = groups_2d(count, GROUP);
@@ -81,17 +84,20 @@ pub fn resample_grid(
 }
 
 /// The skipping blocks of the GPU's fine grid ([`crate::render::skip::Blocks`]), as
-/// `vec4(min, max, 0, 0)` per block: the fine grid is read back once and reduced on the host by
-/// the same function as the CPU twin's.
-pub fn block_buffer(ctx: &Context, field: &Field, fine: &Buffer) -> Result<Buffer, VkError> {
-    let Some(g) = field.grid() else {
-        return Err(VkError::Usage("skipping blocks need a grid".into()));
-    };
+/// `vec4(min, max, 0, 0)` per block, and the host's copy (what `render.skip = "auto"` decides
+/// by): the fine grid is read back once and reduced on the host by the same function as the
+/// CPU twin's.
+pub fn block_buffer(
+    ctx: &Context,
+    field: &Field,
+    fine: &Buffer,
+) -> Result<(Buffer, crate::render::skip::Blocks), VkError> {
+    let g = field.lattice();
     let factor = field.reconstruction.resample;
     let dims = resample::fine_dims(g.dims, factor);
     let data: Vec<[f32; 4]> = fine.read(ctx)?;
     let h = g.spacing.map(|s| s / f64::from(factor));
-    let (_, ranges) = resample::block_ranges(
+    let (blocks, ranges) = resample::block_ranges(
         dims,
         factor as usize * crate::render::skip::SKIP_BLOCK,
         |i| resample::point_bounds(data[i].map(f64::from), h),
@@ -108,7 +114,16 @@ pub fn block_buffer(ctx: &Context, field: &Field, fine: &Buffer) -> Result<Buffe
             ]
         })
         .collect();
-    Buffer::from_slice(ctx, "skipping blocks", &texels)
+    let buffer = Buffer::from_slice(ctx, "skipping blocks", &texels)?;
+    Ok((
+        buffer,
+        crate::render::skip::Blocks {
+            dims: blocks,
+            origin: g.origin.into(),
+            size: glam::DVec3::from(g.spacing) * crate::render::skip::SKIP_BLOCK as f64,
+            ranges,
+        },
+    ))
 }
 
 /// The largest f32 not above v (given v rounded to nearest as `x`).

@@ -122,12 +122,24 @@ pub struct RenderSettings {
     pub epsilon: f64,
     /// Preintegrated methods stop a ray once its opacity exceeds this ([MLS]: 0.99).
     pub early_termination: f64,
-    /// Empty-space skipping (`render.skip`, off by default: on Marschner–Lobb it saved about 1%
-    /// of the evaluations and cost 25–40% more time, BENCHMARKS.md); it needs the fast path
+    /// Empty-space skipping (`render.skip`); it needs the fast path
     /// (`reconstruction.resample`), whose field has exact block bounds ([`super::skip`]).
-    pub skip: bool,
+    pub skip: SkipMode,
     /// Preintegration table resolution per scalar axis.
     pub table_resolution: usize,
     /// Splatting settings (scene section `[splat]`).
     pub splat: crate::splat::SplatSettings,
+}
+
+/// `render.skip`: empty-space skipping off, on, or chosen per frame ([`super::skip`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SkipMode {
+    Off,
+    /// Skipping in every frame (the fast path required).
+    On,
+    /// The default: skipping compiled in only where the frame's rays would spend at least
+    /// [`super::skip::SKIP_AUTO_FRACTION`] of their length in empty blocks
+    /// ([`super::skip::skippable_fraction`]), decided from the transfer function and the
+    /// block ranges before the frame; off without the fast path.
+    Auto,
 }

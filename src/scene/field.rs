@@ -40,12 +40,9 @@ impl Scene {
                 )?;
                 check(n as usize, crate::data::Storage::F32)?;
                 let volume = crate::data::marschner_lobb::generate(*resolution);
-                Ok(Field::new(
-                    volume,
-                    self.reconstruction,
-                    &self.octree,
-                    progress,
-                )?)
+                let mut field = Field::new(volume, self.reconstruction, &self.octree, progress)?;
+                self.fit_fast_path(&mut field);
+                Ok(field)
             }
             VolumeSource::File { path, array } => {
                 // A grid the device cannot hold is refused naming the file and what it needs:
@@ -108,12 +105,69 @@ impl Scene {
                 &self.octree,
             )?);
         }
-        Ok(Field::from_samples(
-            set,
-            self.reconstruction,
-            &self.octree,
-            progress,
-        )?)
+        let mut field = Field::from_samples(set, self.reconstruction, &self.octree, progress)?;
+        self.fit_fast_path(&mut field);
+        Ok(field)
+    }
+
+    /// `reconstruction.resample = "auto"` counts the first frame (issue 27 §2): the fine grid is
+    /// built in the first ray-cast frame, one general-path evaluation per fine point, so "auto"
+    /// keeps the fast path only where the grid has no more points than that frame would
+    /// evaluate without it ([`Scene::frame_evaluations`]). The first frame then costs at most
+    /// about what the general path's would, and every later one far less; where the grid is
+    /// larger (a 128³ grid at 64²: 16.6 M fine points against about 2 M evaluations) the first
+    /// frame would be several times slower, and "auto" solves directly. An explicit factor
+    /// takes the fast path whatever the frame.
+    fn fit_fast_path(&self, field: &mut Field) {
+        let factor = field.reconstruction.resample;
+        if !self.reconstruction.resample_auto || factor == 0 {
+            return;
+        }
+        let Some(evaluations) = self.frame_evaluations(field) else {
+            return;
+        };
+        let points = field.lattice().fine_points(factor);
+        if points > evaluations {
+            field.decline_fast_path(format!(
+                "\"auto\" declined the fast path: its fine grid's {points} points (one solve \
+                 each, in the first frame) exceed the {evaluations} solves the first frame \
+                 makes without it at this image size and step; set reconstruction.resample = \
+                 {factor} to take it anyway (later frames are cheaper with it)"
+            ));
+        }
+    }
+
+    /// Solves a first ray-cast frame of this scene would make on the general path, estimated
+    /// from 32 × 32 camera rays clipped to the field's box, stepping `render.step` (adaptive:
+    /// the geometric mean of `l_min` and `l_max`; early termination and a mesh's hull ignored,
+    /// so an upper estimate), scaled to the image's pixels. `None` for a degenerate camera.
+    pub fn frame_evaluations(&self, field: &Field) -> Option<u64> {
+        const RAYS: u32 = 32;
+        let basis = self.camera.basis().ok()?;
+        let (lo, hi) = field.bounds();
+        let spacings = match self.render.method {
+            crate::render::Method::Adaptive => (self.render.l_min * self.render.l_max).sqrt(),
+            crate::render::Method::Reference => self.render.reference_step,
+            _ => self.render.step,
+        };
+        let step = spacings * field.min_spacing();
+        let (w, h) = (self.camera.width.max(1), self.camera.height.max(1));
+        let at = |i: u32, n: u32| {
+            (((f64::from(i) + 0.5) * f64::from(n) / f64::from(RAYS)) as u32).min(n - 1)
+        };
+        let mut length = 0.0;
+        for j in 0..RAYS {
+            for i in 0..RAYS {
+                let (o, d) = self
+                    .camera
+                    .ray(&basis, field.frame_origin, at(i, w), at(j, h));
+                if let Some((t0, t1)) = crate::render::camera::clip_box(o, d, lo, hi) {
+                    length += t1 - t0;
+                }
+            }
+        }
+        let pixels = f64::from(w) * f64::from(h);
+        Some((length / step * pixels / f64::from(RAYS * RAYS)).min(u64::MAX as f64) as u64)
     }
 
     /// What the persistent renderer draws for this scene: its camera and everything else.

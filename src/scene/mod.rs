@@ -25,7 +25,7 @@ use crate::render::transfer::TransferFunction;
 // The configuration types live with the layers that use them; the scene re-exports them so
 // that a scene file's vocabulary is in one place.
 pub use crate::recon::{NeighbourMode, Reconstruction};
-pub use crate::render::{AdaptiveCriterion, IntervalModel, Method, RenderSettings};
+pub use crate::render::{AdaptiveCriterion, IntervalModel, Method, RenderSettings, SkipMode};
 use crate::samples::SampleSettings;
 use std::path::{Path, PathBuf};
 use toml::{Table, Value};
@@ -178,6 +178,22 @@ step = 0.25
 interval = "hermite"
 background = [0.0, 0.0, 0.0]
 "#;
+
+/// `render.interval` left out: Hermite intervals, which measured less error than linear ones
+/// at the same evaluations on every scene (BENCHMARKS.md: Marschner–Lobb, issue 11; the
+/// room-fire mesh, issue 27), wherever the field has slopes; linear for a constant fit with
+/// the local gradient, whose slope is zero (the fast path's fine grid would have one, but
+/// "auto" may decline it after this is parsed).
+fn default_interval(r: &Reconstruction) -> IntervalModel {
+    if r.method == ReconMethod::Mls
+        && r.basis == Basis::Constant
+        && r.gradient == GradientMode::Local
+    {
+        IntervalModel::Linear
+    } else {
+        IntervalModel::Hermite
+    }
+}
 
 /// A value as an error message quotes it: short and escaped (see [`crate::files::excerpt`]).
 fn describe(v: &Value) -> String {
@@ -566,7 +582,12 @@ impl Scene {
         };
 
         let rec = section("reconstruction");
-        let auto = matches!(rec.get("resample"), Some(Value::String(a)) if a == "auto");
+        // Left out, "auto" (issue 27 §2): the fast path wherever it serves and pays.
+        let auto = match rec.get("resample") {
+            None => true,
+            Some(Value::String(a)) => a == "auto",
+            Some(_) => false,
+        };
         let mut reconstruction = Reconstruction {
             method: rec.choice(
                 "method",
@@ -791,7 +812,7 @@ impl Scene {
             adaptive,
             interval: ren.choice(
                 "interval",
-                IntervalModel::Linear,
+                default_interval(&reconstruction),
                 &[
                     ("linear", IntervalModel::Linear),
                     ("hermite", IntervalModel::Hermite),
@@ -800,14 +821,16 @@ impl Scene {
             epsilon: ren.float("epsilon", adaptive.default_epsilon(), 0.0, 1e3)?,
             early_termination: ren.float("early_termination", 0.99, 0.0, 1.0)?,
             skip: match ren.get("skip") {
-                None => false,
-                Some(Value::Boolean(b)) => *b,
-                Some(v) => return Err(ren.err("skip", "true or false", v)),
+                None => SkipMode::Auto,
+                Some(Value::Boolean(true)) => SkipMode::On,
+                Some(Value::Boolean(false)) => SkipMode::Off,
+                Some(Value::String(a)) if a == "auto" => SkipMode::Auto,
+                Some(v) => return Err(ren.err("skip", "true, false or \"auto\"", v)),
             },
             table_resolution: ren.int("table_resolution", 512, 2, 4096)? as usize,
             splat: splat::parse(&section("splat"))?,
         };
-        if render.skip && render.method.splat_shading().is_some() {
+        if render.skip == SkipMode::On && render.method.splat_shading().is_some() {
             return Err(section("render").err(
                 "skip",
                 "false with a splatting method (empty-space skipping serves ray casting)",
@@ -817,8 +840,7 @@ impl Scene {
         // "auto" chooses the direct solve wherever the fast path cannot serve, and for the
         // reference integrator, whose image is the ground truth of the scene's own field.
         if reconstruction.resample_auto
-            && (reconstruction.neighbours == NeighbourMode::Octree
-                || reconstruction.support < 1.0
+            && (reconstruction.support < 1.0
                 || reconstruction.method != ReconMethod::Mls
                 || render.method.splat_shading().is_some()
                 || render.method == Method::Reference)
@@ -826,11 +848,7 @@ impl Scene {
             reconstruction.resample_auto = false;
         }
         if reconstruction.resample > 0 {
-            let why = if reconstruction.neighbours == NeighbourMode::Octree {
-                Some(
-                    "0 with reconstruction.neighbours = \"octree\" (the fast path reads implicit grid neighbours)",
-                )
-            } else if reconstruction.support < 1.0 {
+            let why = if reconstruction.support < 1.0 {
                 Some(
                     "0 with reconstruction.support below 1 (the fast path needs the field defined everywhere in the box)",
                 )
@@ -850,7 +868,7 @@ impl Scene {
         // Skipping reads the fast path's block ranges: refused here, before any work (a bench
         // checks every configuration at its start), where the scene already rules it out; the
         // ray setup refuses it too where "auto" declines the fast path for the data.
-        if render.skip {
+        if render.skip == SkipMode::On {
             let why = if reconstruction.resample == 0 && !reconstruction.resample_auto {
                 Some(
                     "false here: skipping needs the fast path, and reconstruction.resample is 0 \

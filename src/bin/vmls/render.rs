@@ -191,6 +191,7 @@ pub fn run_render(
                 "table_ms": f.table_ms,
                 "pipeline_built": f.pipeline_built,
                 "buffers_allocated": f.targets_allocated,
+                "skip_auto_fraction": f.skip_estimate,
             })).collect::<Vec<_>>(),
             "bands": image.bands,
             "wall_ms": start.elapsed().as_secs_f64() * 1e3,
@@ -247,11 +248,12 @@ pub fn run_render_cpu(
             (image.pixels, Some(image.counts), None)
         }
         None => {
-            let setup = scene.ray_setup(&field)?;
+            let mut setup = scene.ray_setup(&field)?;
             if !force {
                 setup.check_budget(vmls::render::WORK_BUDGET)?;
             }
             check_stop(stop)?;
+            setup.resolve_skip(field.blocks(), &scene.transfer, &field);
             let image = vmls::render::raycast::raycast_frame(
                 &setup,
                 &field,
