@@ -2,7 +2,8 @@
 // Stage `recon_resample` (twin: ResampledGrid::build in src/recon/resample.rs): the general path
 // (MLS, Gaussian or exact, the variant's MLS_RESAMPLED = 0) at every point of the grid
 // RESAMPLE_FACTOR times finer, written as vec4(f, ∇f), x fastest: the fast path's fine grid.
-// Undefined points (no neighbour) get zeros, as on the CPU.
+// Undefined points (no neighbour) get the quiet NaN RESAMPLE_UNDEFINED in f and zeros in ∇f,
+// as on the CPU (resample::UNDEFINED).
 #extension GL_EXT_control_flow_attributes : require
 
 layout(local_size_x = 64) in;
@@ -28,5 +29,6 @@ void main() {
     vec3 spacing = 1.0 / params.grid_inv_spacing.xyz;
     vec3 x = params.grid_origin.xyz + vec3(idx) * (spacing / float(RESAMPLE_FACTOR));
     MlsResult m = mls_evaluate(x);
-    imageStore(fine, int(n), m.terms > 0u ? vec4(m.value, m.gradient) : vec4(0.0));
+    imageStore(fine, int(n), m.terms > 0u ? vec4(m.value, m.gradient)
+                                          : vec4(uintBitsToFloat(RESAMPLE_UNDEFINED), vec3(0.0)));
 }

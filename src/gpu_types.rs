@@ -200,6 +200,10 @@ pub fn binding_defines() -> Vec<(String, String)> {
         crate::samples::bvh::MAX_HITS.to_string(),
     ));
     d.push((
+        "RESAMPLE_UNDEFINED".into(),
+        format!("{}u", crate::recon::resample::UNDEFINED_BITS),
+    ));
+    d.push((
         "HULL_HIT_MERGE".into(),
         format!("{:e}", crate::samples::bvh::HIT_MERGE),
     ));

@@ -245,3 +245,44 @@ fn mesh_fast_path_images_match_the_cpu_twin_and_keep_the_hull() {
         );
     }
 }
+
+#[test]
+fn auto_takes_the_fast_path_on_irregular_data_only_where_its_pilot_finds_it_accurate() {
+    // The scenes' "auto" (left out) at 64²: smooth data on the torus passes the pilot; a field
+    // that changes sign within a sample spacing on scattered points does not, and `--stats`
+    // says why.
+    let scene = general_scene(
+        &[
+            "reconstruction.resample=\"auto\"",
+            "camera.eye=[0.0, -3.0, 2.0]",
+            "camera.width=64",
+            "camera.height=64",
+        ]
+        .map(String::from),
+    );
+    let path = std::path::Path::new("test");
+    let smooth_mesh = point_data(tet_torus(32, 4), smooth);
+    let f = scene
+        .field_from_dataset(&smooth_mesh, path, |_| {})
+        .expect("field");
+    assert_eq!(f.fast_path()["factor"], 2, "{}", f.fast_path());
+    let mut rng = Lcg::new(8);
+    let scattered: Vec<[f64; 3]> = (0..3000)
+        .map(|_| std::array::from_fn(|_| 2.0 * rng.next_f64() - 1.0))
+        .collect();
+    let rough = point_data(Geometry::Points { points: scattered }, |p| {
+        (0.5 + 0.5 * (25.0 * p[0]).sin() * (25.0 * p[1]).cos()).clamp(0.0, 1.0)
+    });
+    let f = scene
+        .field_from_dataset(&rough, path, |_| {})
+        .expect("field");
+    assert_eq!(f.fast_path()["factor"], 0, "{}", f.fast_path());
+    let why = f.fast_path()["declined"]
+        .as_str()
+        .unwrap_or_default()
+        .to_string();
+    assert!(
+        why.contains("RMSE") && why.contains("resample = 2"),
+        "{why}"
+    );
+}

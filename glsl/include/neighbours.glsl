@@ -372,7 +372,9 @@ layout(binding = BINDING_RESAMPLED, rgba32f) uniform readonly imageBuffer resamp
 
 // Stage `resample_evaluate` (twin: ResampledGrid::evaluate in src/recon/resample.rs): x clamped
 // into the box; from the fine cell around it (8 texel reads), f = Σ w_c (f_c + ½ ∇f_c·(x − x_c))
-// with trilinear weights w_c (exact for quadratics) and ∇f interpolated trilinearly.
+// with trilinear weights w_c (exact for quadratics) and ∇f interpolated trilinearly; undefined
+// (terms 0) where a corner is (f = the quiet NaN RESAMPLE_UNDEFINED, compared as bits: a NaN
+// compare could be folded away).
 MlsResult resampled_evaluate(vec3 x) {
     ivec3 dims = (params.grid_dims.xyz - 1) * MLS_RESAMPLED + 1;
     vec3 h = 1.0 / (params.grid_inv_spacing.xyz * float(MLS_RESAMPLED));
@@ -384,15 +386,17 @@ MlsResult resampled_evaluate(vec3 x) {
     int base = cell.x + dims.x * (cell.y + dims.y * cell.z);
     float value = 0.0;
     vec3 gradient = vec3(0.0);
+    bool defined = true;
     [[unroll]] for (int c = 0; c < 8; ++c) {
         vec3 b = vec3(c & 1, (c >> 1) & 1, c >> 2);
         vec3 wa = mix(1.0 - u, u, b);
         float w = wa.x * wa.y * wa.z;
         vec4 v = imageLoad(resampled, base + (c & 1) * next.x + ((c >> 1) & 1) * next.y + (c >> 2) * next.z);
+        defined = defined && floatBitsToUint(v.x) != RESAMPLE_UNDEFINED && !isnan(v.x);
         value += w * (v.x + 0.5 * dot(v.yzw, (u - b) * h));
         gradient += w * v.yzw;
     }
-    return MlsResult(value, gradient, 8u, 1u);
+    return defined ? MlsResult(value, gradient, 8u, 1u) : MlsResult(0.0, vec3(0.0), 8u, 0u);
 }
 #endif
 

@@ -39,7 +39,8 @@ bool skip_block(vec3 o, vec3 d, float t, out float t_exit) {
                        uintBitsToFloat(imageLoad(skip_table, 1).x), float(imageLoad(skip_table, 2).x));
     int b0 = skip_bin(r.x, -1, header);
     int b1 = skip_bin(r.y, 1, header);
-    return imageLoad(skip_table, 3 + b1 + 1).x == imageLoad(skip_table, 3 + b0).x;
+    // min > max: no defined fine point, the fast field is undefined in the whole block.
+    return r.x > r.y || imageLoad(skip_table, 3 + b1 + 1).x == imageLoad(skip_table, 3 + b0).x;
 }
 
 // Stage `skip_run` (twin of Blocks::run): from t across consecutive empty blocks, at most

@@ -406,6 +406,33 @@ impl Field {
         }))
     }
 
+    /// [`crate::recon::resample::pilot_error`] at `points` (frame-relative); `None` without
+    /// the fast path, where its octree cannot be built, or where no point is defined.
+    pub fn fast_path_pilot(&self, points: &[[f64; 3]]) -> Option<(f64, f64)> {
+        let factor = self.reconstruction.resample;
+        if factor == 0 {
+            return None;
+        }
+        let neighbours = self.neighbours().ok()?;
+        let lattice = self.lattice();
+        let analytic = MlsSettings {
+            gradient: crate::recon::GradientMode::Analytic,
+            ..self.mls()
+        };
+        let (lo, hi) = self.value_range();
+        crate::recon::resample::pilot_error(
+            &lattice,
+            factor,
+            points,
+            |x| match self.reconstruction.method {
+                ReconMethod::Mls => mls_evaluate(&analytic, neighbours.as_ref(), x),
+                _ => self.evaluate_direct(neighbours.as_ref(), x),
+            },
+            |x| self.evaluate_direct(neighbours.as_ref(), x),
+            hi - lo,
+        )
+    }
+
     /// Value ranges of the fast field per skipping block (`None` without the fast path).
     pub fn blocks(&self) -> Option<&skip::Blocks> {
         let grid = self.resampled()?;
@@ -420,7 +447,7 @@ impl Field {
     /// interpolation of the fine grid (stage `resample_evaluate`), defined everywhere.
     pub fn evaluate(&self, neighbours: &dyn Neighbours, x: [f64; 3]) -> Option<MlsValue> {
         if let Some(r) = self.resampled() {
-            return Some(r.evaluate(x));
+            return Some(r.evaluate(x)).filter(|v| v.terms > 0);
         }
         self.evaluate_direct(neighbours, x)
     }

@@ -137,8 +137,12 @@ impl SkipTable {
         (b + widen).clamp(0, SKIP_BINS as i64 - 1) as usize
     }
 
-    /// Whether no value in [a, b] has extinction or an isosurface.
+    /// Whether no value in [a, b] has extinction or an isosurface (a > b: no value at all, a
+    /// block where the fast field is undefined).
     pub fn empty(&self, a: f64, b: f64) -> bool {
+        if a > b {
+            return true;
+        }
         let (b0, b1) = (self.bin(a, -1), self.bin(b, 1));
         self.prefix[b1 + 1] == self.prefix[b0]
     }

@@ -3,6 +3,7 @@
 //! renderers take.
 
 use super::{Scene, VolumeSource};
+use crate::recon::resample::AUTO_PILOT_RMSE;
 use crate::render::camera::Camera;
 use crate::render::{Field, RaySetup, RenderError};
 use crate::samples::SampleSet;
@@ -110,7 +111,8 @@ impl Scene {
         Ok(field)
     }
 
-    /// `reconstruction.resample = "auto"` counts the first frame (issue 27 §2): the fine grid is
+    /// `reconstruction.resample = "auto"` takes the fast path on irregular data only where a
+    /// pilot finds it accurate ([`AUTO_PILOT_RMSE`]), and counts the first frame (issue 27 §2): the fine grid is
     /// built in the first ray-cast frame, one general-path evaluation per fine point, so "auto"
     /// keeps the fast path only where the grid has no more points than that frame would
     /// evaluate without it ([`Scene::frame_evaluations`]). The first frame then costs at most
@@ -122,6 +124,25 @@ impl Scene {
         let factor = field.reconstruction.resample;
         if !self.reconstruction.resample_auto || factor == 0 {
             return;
+        }
+        // Irregular data: the lattice is uniform where the samples are not, and the MLS field
+        // of scattered points can vary within a sample spacing (supports entering and
+        // leaving); a pilot measures the fast path's own error where the rays go. A regular
+        // grid's fast path refines a fixed convolution and is bounded by tests/resample.rs.
+        if field.grid().is_none() {
+            let points = self.pilot_points(field);
+            if let Some((rmse, max)) = field.fast_path_pilot(&points)
+                && rmse > AUTO_PILOT_RMSE
+            {
+                field.decline_fast_path(format!(
+                    "\"auto\" declined the fast path: at {} points along the first frame's \
+                     rays its interpolation differs from the direct solve by {rmse:.1e} of the \
+                     data range in RMSE (max {max:.1e}), above auto's {AUTO_PILOT_RMSE:e}; set \
+                     reconstruction.resample = {factor} to take it anyway",
+                    points.len()
+                ));
+                return;
+            }
         }
         let Some(evaluations) = self.frame_evaluations(field) else {
             return;
@@ -135,6 +156,49 @@ impl Scene {
                  {factor} to take it anyway (later frames are cheaper with it)"
             ));
         }
+    }
+
+    /// Points where this scene's first frame samples the field: one at a pseudo-random depth
+    /// (seeded) inside the domain on each of 16 × 16 camera rays that reach it (clipped to a
+    /// mesh's hull where it has one, else to the box).
+    pub fn pilot_points(&self, field: &Field) -> Vec<[f64; 3]> {
+        const RAYS: u32 = 16;
+        let Ok(basis) = self.camera.basis() else {
+            return Vec::new();
+        };
+        let (lo, hi) = field.bounds();
+        let (w, h) = (self.camera.width.max(1), self.camera.height.max(1));
+        let at = |i: u32, n: u32| {
+            (((f64::from(i) + 0.5) * f64::from(n) / f64::from(RAYS)) as u32).min(n - 1)
+        };
+        let mut rng = crate::probe::Lcg::new(27);
+        let mut points = Vec::new();
+        for j in 0..RAYS {
+            for i in 0..RAYS {
+                let (o, d) = self
+                    .camera
+                    .ray(&basis, field.frame_origin, at(i, w), at(j, h));
+                let segments = match &field.hull {
+                    Some(bvh) => match bvh.segments(o.to_array(), d.to_array()) {
+                        crate::samples::bvh::Segments::List(s) => s,
+                        crate::samples::bvh::Segments::Overflow => Vec::new(),
+                    },
+                    None => crate::render::camera::clip_box(o, d, lo, hi)
+                        .into_iter()
+                        .collect(),
+                };
+                let inside: f64 = segments.iter().map(|(a, b)| b - a).sum();
+                let mut u = rng.next_f64() * inside;
+                for (a, b) in segments {
+                    if u <= b - a {
+                        points.push((o + d * (a + u)).to_array());
+                        break;
+                    }
+                    u -= b - a;
+                }
+            }
+        }
+        points
     }
 
     /// Solves a first ray-cast frame of this scene would make on the general path, estimated
