@@ -55,8 +55,11 @@ impl Default for OctreeSettings {
             leaf_budget: 16,
             max_depth: 12,
             leaf_size: 0.6,
-            // 128 MiB of u32: lavapipe's maxStorageBufferRange.
-            max_references: 32 << 20,
+            // 2^27 references (512 MiB of u32): lavapipe's maxTexelBufferElements. Kernels read
+            // the indices through an r32ui texel view (binding::kind), so one storage
+            // binding's 128 MiB no longer bounds them (it refused 10⁶ scattered points, 33.5 M
+            // references); `Scene::field_on` lowers this to the device's own view limit.
+            max_references: 1 << 27,
         }
     }
 }

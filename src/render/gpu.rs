@@ -499,10 +499,13 @@ impl GpuField {
                         }
                     })
                     .collect();
+                // Kernels read all three through texel views (neighbours.glsl): bounded by
+                // maxTexelBufferElements, not by one storage binding's range.
+                let texel = BufferUsage::Texel;
                 let octree = [
-                    Buffer::from_slice(ctx, "octree samples", &samples)?,
-                    Buffer::from_slice(ctx, "octree nodes", &o.nodes)?,
-                    Buffer::from_slice(ctx, "octree indices", &o.indices)?,
+                    Buffer::from_slice_as(ctx, "octree samples", &samples, texel)?,
+                    Buffer::from_slice_as(ctx, "octree nodes", &o.nodes, texel)?,
+                    Buffer::from_slice_as(ctx, "octree indices", &o.indices, texel)?,
                 ];
                 // The fast path's fine grid over the lattice, through the octree.
                 let [s, n, i] = &octree;

@@ -72,7 +72,14 @@ impl Scene {
                 {
                     refused(v.len(), v.storage())?;
                 }
-                self.field_from_dataset(&dataset, path, progress)
+                // The octree's indices are one texel view: built no larger than the device can
+                // view, so an oversized one is refused before it is built, naming the key.
+                let mut octree = self.octree;
+                if let Some(info) = device {
+                    octree.max_references =
+                        octree.max_references.min(info.max_texel_buffer_elements);
+                }
+                self.field_from_dataset_with(&dataset, path, &octree, progress)
             }
         }
     }
@@ -83,6 +90,17 @@ impl Scene {
         &self,
         dataset: &crate::data::dataset::Dataset,
         path: &Path,
+        progress: impl FnMut(f64),
+    ) -> Result<Field, RenderError> {
+        self.field_from_dataset_with(dataset, path, &self.octree, progress)
+    }
+
+    /// [`Scene::field_from_dataset`] with other octree settings (a device's limits).
+    fn field_from_dataset_with(
+        &self,
+        dataset: &crate::data::dataset::Dataset,
+        path: &Path,
+        octree: &crate::recon::OctreeSettings,
         progress: impl FnMut(f64),
     ) -> Result<Field, RenderError> {
         // Loaders describe flat or vast data (`vmls info`); rendering needs a volume the f32
@@ -103,10 +121,10 @@ impl Scene {
             return Ok(Field::from_samples_deferred(
                 set,
                 self.reconstruction,
-                &self.octree,
+                octree,
             )?);
         }
-        let mut field = Field::from_samples(set, self.reconstruction, &self.octree, progress)?;
+        let mut field = Field::from_samples(set, self.reconstruction, octree, progress)?;
         self.fit_fast_path(&mut field);
         Ok(field)
     }

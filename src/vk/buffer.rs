@@ -194,8 +194,19 @@ impl Buffer {
         name: &str,
         data: &[T],
     ) -> Result<Self, VkError> {
+        Self::from_slice_as(ctx, name, data, BufferUsage::Storage)
+    }
+
+    /// Allocates a buffer of `usage` holding `data` (`Texel`: read through texel views only,
+    /// bounded by maxTexelBufferElements rather than maxStorageBufferRange).
+    pub fn from_slice_as<T: bytemuck::Pod>(
+        ctx: &Context,
+        name: &str,
+        data: &[T],
+        usage: BufferUsage,
+    ) -> Result<Self, VkError> {
         let bytes: &[u8] = bytemuck::cast_slice(data);
-        let buffer = Self::new(ctx, name, bytes.len() as u64, BufferUsage::Storage)?;
+        let buffer = Self::new(ctx, name, bytes.len() as u64, usage)?;
         buffer.write(ctx, bytes)?;
         Ok(buffer)
     }
