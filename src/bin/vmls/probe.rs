@@ -29,10 +29,15 @@ pub fn run_file_probe(
     json: Option<&Path>,
     device: &DeviceArgs,
 ) -> Result<(), CliError> {
-    let mut overrides = vec![format!(
-        "volume.file={}",
-        toml::Value::String(file.display().to_string())
-    )];
+    // The general path, as the probe's name says (a scene file's default is "auto", which
+    // would measure the fast path's interpolation); --set reconstruction.resample=N still wins.
+    let mut overrides = vec![
+        format!(
+            "volume.file={}",
+            toml::Value::String(file.display().to_string())
+        ),
+        "reconstruction.resample=0".to_string(),
+    ];
     overrides.extend(set.iter().cloned());
     // An empty scene, not the built-in one: its generator would conflict with volume.file.
     let scene = Scene::parse("", "vmls probe --file", Path::new("."), &overrides)?;
