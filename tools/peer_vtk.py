@@ -529,30 +529,8 @@ def run_unstructured(scene, a, base):
             mapper.AutoAdjustSampleDistancesOff()
             mapper.SetImageSampleDistance(1.0)
             settings += f";threads={mapper.GetNumberOfThreads()}"
-        volume = vtk.vtkVolume()
-        volume.SetMapper(mapper)
-        volume.SetProperty(prop)
-        ren = vtk.vtkRenderer()
-        ren.AddVolume(volume)
-        ren.SetBackground(*scene.get("render", {}).get("background", [0.0, 0.0, 0.0]))
-        win = vtk.vtkRenderWindow()
-        win.SetOffScreenRendering(1)
-        win.SetSize(width, height)
-        win.AddRenderer(ren)
-        set_camera(ren.GetActiveCamera(), cam)
+        ren, win, grab, frame = volume_window(scene, mapper, prop, width, height)
         ren.ResetCameraClippingRange()
-        grab = vtk.vtkWindowToImageFilter()
-        grab.SetInput(win)
-        grab.SetInputBufferTypeToRGBA()
-        grab.ReadFrontBufferOff()
-
-        def frame():
-            t = time.perf_counter()
-            win.Render()
-            grab.Modified()
-            grab.Update()
-            return (time.perf_counter() - t) * 1e3
-
         first = frame()
         if not device:
             device, version = gl_strings(win)
@@ -563,6 +541,35 @@ def run_unstructured(scene, a, base):
                              prepare_ms, image_path))
         win.Finalize()
     return rows
+
+
+def volume_window(scene, mapper, prop, width, height):
+    """An offscreen window drawing `mapper` with `prop` through the scene's camera: (renderer,
+    window, framebuffer grab, frame), frame() rendering once and returning its wall ms."""
+    volume = vtk.vtkVolume()
+    volume.SetMapper(mapper)
+    volume.SetProperty(prop)
+    ren = vtk.vtkRenderer()
+    ren.AddVolume(volume)
+    ren.SetBackground(*scene.get("render", {}).get("background", [0.0, 0.0, 0.0]))
+    win = vtk.vtkRenderWindow()
+    win.SetOffScreenRendering(1)
+    win.SetSize(width, height)
+    win.AddRenderer(ren)
+    set_camera(ren.GetActiveCamera(), scene.get("camera", {}))
+    grab = vtk.vtkWindowToImageFilter()
+    grab.SetInput(win)
+    grab.SetInputBufferTypeToRGBA()
+    grab.ReadFrontBufferOff()
+
+    def frame():
+        t = time.perf_counter()
+        win.Render()
+        grab.Modified()
+        grab.Update()
+        return (time.perf_counter() - t) * 1e3
+
+    return ren, win, grab, frame
 
 
 def set_camera(camera, cam):
@@ -635,29 +642,7 @@ def main():
     mapper.SetInputData(img)
     mapper.AutoAdjustSampleDistancesOff()
     mapper.SetBlendModeToComposite()
-    volume = vtk.vtkVolume()
-    volume.SetMapper(mapper)
-    volume.SetProperty(prop)
-    ren = vtk.vtkRenderer()
-    ren.AddVolume(volume)
-    ren.SetBackground(*scene.get("render", {}).get("background", [0.0, 0.0, 0.0]))
-    win = vtk.vtkRenderWindow()
-    win.SetOffScreenRendering(1)
-    win.SetSize(width, height)
-    win.AddRenderer(ren)
-    set_camera(ren.GetActiveCamera(), cam)
-    grab = vtk.vtkWindowToImageFilter()
-    grab.SetInput(win)
-    grab.SetInputBufferTypeToRGBA()
-    grab.ReadFrontBufferOff()
-
-    def frame():
-        t = time.perf_counter()
-        win.Render()
-        grab.Modified()
-        grab.Update()
-        return (time.perf_counter() - t) * 1e3
-
+    ren, win, grab, frame = volume_window(scene, mapper, prop, width, height)
     rows = []
     device, version = "", ""
     for i, step in enumerate(float(x) for x in a.steps.split(",")):

@@ -266,29 +266,9 @@ pub fn render_params(field: &Field, setup: Option<&RaySetup>, tf_count: u32) -> 
         tf_count,
         ..Default::default()
     };
-    if let Some(g) = field.grid() {
-        let inv_h = g.inv_support();
-        p.grid_origin = v4(g.origin.into(), 0.0);
-        p.grid_inv_spacing = [
-            (1.0 / g.spacing[0]) as f32,
-            (1.0 / g.spacing[1]) as f32,
-            (1.0 / g.spacing[2]) as f32,
-            0.0,
-        ];
-        p.inv_support = [inv_h[0] as f32, inv_h[1] as f32, inv_h[2] as f32, 0.0];
-        p.grid_dims = [g.dims[0] as i32, g.dims[1] as i32, g.dims[2] as i32, 0];
-        p.support_cells = g.support as f32;
-        if field.reconstruction.method == crate::recon::ReconMethod::Gaussian {
-            let h = g.spacing.map(|s| s * g.support);
-            let metric = crate::samples::supports::diagonal(h);
-            p.gauss_weight = (field.kernel_volumes().get(0)
-                * crate::recon::gaussian::gaussian_norm(field.reconstruction.sigma, &metric))
-                as f32;
-        }
-    }
-    if field.grid().is_none() && field.reconstruction.resample > 0 {
-        // Irregular data on the fast path: the fine grid's lattice where a grid's points would
-        // be (recon_resample and resampled_evaluate read only these three).
+    if field.grid().is_some() || field.reconstruction.resample > 0 {
+        // A grid's points, or for irregular data on the fast path the fine grid's lattice
+        // where a grid's would be (recon_resample and resampled_evaluate read only these).
         let l = field.lattice();
         p.grid_origin = v4(l.origin.into(), 0.0);
         p.grid_inv_spacing = [
@@ -298,6 +278,18 @@ pub fn render_params(field: &Field, setup: Option<&RaySetup>, tf_count: u32) -> 
             0.0,
         ];
         p.grid_dims = [l.dims[0] as i32, l.dims[1] as i32, l.dims[2] as i32, 0];
+    }
+    if let Some(g) = field.grid() {
+        let inv_h = g.inv_support();
+        p.inv_support = [inv_h[0] as f32, inv_h[1] as f32, inv_h[2] as f32, 0.0];
+        p.support_cells = g.support as f32;
+        if field.reconstruction.method == crate::recon::ReconMethod::Gaussian {
+            let h = g.spacing.map(|s| s * g.support);
+            let metric = crate::samples::supports::diagonal(h);
+            p.gauss_weight = (field.kernel_volumes().get(0)
+                * crate::recon::gaussian::gaussian_norm(field.reconstruction.sigma, &metric))
+                as f32;
+        }
     }
     p.gauss_sigma = field.reconstruction.sigma as f32;
     if let Some(o) = field.octree_if_built() {
