@@ -7,7 +7,7 @@ use common::*;
 use std::path::Path;
 use vmls::data::dataset::{DataArray, Dataset, Location};
 use vmls::recon::{Basis, GradientMode, OctreeSettings, Weight};
-use vmls::render::gpu::{GpuField, GpuImage, render};
+use vmls::render::gpu::GpuImage;
 use vmls::render::raycast::{PixelResult, raycast_image};
 use vmls::render::{Field, build_tables};
 use vmls::samples::{SampleSet, SampleSettings};
@@ -82,25 +82,7 @@ fn scene(extra: &[&str]) -> Scene {
 
 /// The GPU image and the f64 reference of a scene's view of the field.
 fn both(field: &Field, scene: &Scene) -> (GpuImage, Vec<PixelResult>) {
-    let setup = scene.ray_setup(field).expect("setup");
-    let tables = build_tables(&setup, field, &scene.transfer, 128, |_| {});
-    let cpu = raycast_image(&setup, field, &scene.transfer, tables.as_ref()).expect("CPU twin");
-    let (ctx, compiler) = gpu();
-    let gf = GpuField::upload(&ctx, field).expect("upload");
-    let img = render(
-        &ctx,
-        &compiler,
-        field,
-        &gf,
-        &scene.transfer,
-        tables.as_ref(),
-        &setup,
-        |_| {},
-    )
-    .expect("render");
-    drop(gf);
-    finish(ctx);
-    (img, cpu)
+    gpu_and_cpu_frames(field, scene)
 }
 
 #[test]

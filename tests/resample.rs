@@ -8,7 +8,6 @@ mod common;
 use common::*;
 use vmls::probe::random_points;
 use vmls::recon::{Basis, GradientMode, Weight};
-use vmls::render::gpu::{GpuField, evaluate};
 use vmls::render::skip::SkipReport;
 use vmls::scene::{NeighbourMode, Scene};
 
@@ -75,19 +74,7 @@ fn gpu_fine_grid_matches_the_cpu_twin() {
     for (basis, support) in [(Basis::Linear, 2.4), (Basis::Quadratic, 1.8)] {
         let f = field(basis, support, 3);
         let points = random_points(&f, 2000, 0.0, 3);
-        let (ctx, compiler) = gpu();
-        let gpu_field = GpuField::upload(&ctx, &f).expect("upload");
-        let (out, _) = evaluate(&ctx, &compiler, &f, &gpu_field, &points, 1).expect("eval");
-        drop(gpu_field);
-        finish(ctx);
-        let n = f.neighbours().expect("neighbours");
-        let (lo, hi) = f.value_range();
-        let mut worst = 0.0f64;
-        for (g, p) in out.iter().zip(&points) {
-            let cpu = f.evaluate(n.as_ref(), *p).expect("defined");
-            assert_eq!(g.neighbours, 8, "the fast path reads 8 fine points");
-            worst = worst.max((f64::from(g.value) - cpu.value).abs() / (hi - lo));
-        }
+        let worst = fast_path_gpu_vs_cpu(&f, &points);
         // f32 MLS at the fine points (1e-6 to 1e-5 of the range) and f32 interpolation.
         assert!(
             worst < 1e-4,

@@ -11,7 +11,6 @@ use vmls::data::dataset::{Dataset, Geometry};
 use vmls::probe::Lcg;
 use vmls::recon::{Basis, GradientMode, OctreeSettings, Weight};
 use vmls::render::Field;
-use vmls::render::gpu::{GpuField, evaluate};
 use vmls::scene::NeighbourMode;
 
 /// A smooth field with variation at about the meshes' scale.
@@ -147,19 +146,7 @@ fn irregular_gpu_fine_grid_matches_the_cpu_twin() {
         let f = field_of(&d, Basis::Linear, 2);
         f.octree().expect("octree");
         let points = inside(&f, &d, 1000, 4);
-        let (ctx, compiler) = gpu();
-        let gpu_field = GpuField::upload(&ctx, &f).expect("upload");
-        let (out, _) = evaluate(&ctx, &compiler, &f, &gpu_field, &points, 1).expect("eval");
-        drop(gpu_field);
-        finish(ctx);
-        let n = f.neighbours().expect("neighbours");
-        let (lo, hi) = f.value_range();
-        let mut worst = 0.0f64;
-        for (g, p) in out.iter().zip(&points) {
-            let cpu = f.evaluate(n.as_ref(), *p).expect("defined");
-            assert_eq!(g.neighbours, 8, "{kind}: the fast path reads 8 fine points");
-            worst = worst.max((f64::from(g.value) - cpu.value).abs() / (hi - lo));
-        }
+        let worst = fast_path_gpu_vs_cpu(&f, &points);
         // f32 MLS at the fine points through the octree, and f32 interpolation.
         assert!(worst < 1e-4, "{kind}: GPU vs CPU {worst:.2e} of the range");
     }
@@ -188,26 +175,7 @@ fn mesh_fast_path_images_match_the_cpu_twin_and_keep_the_hull() {
             ]
             .map(String::from),
         );
-        let setup = scene.ray_setup(&field).expect("setup");
-        let tables = vmls::render::build_tables(&setup, &field, &scene.transfer, 128, |_| {});
-        let cpu =
-            vmls::render::raycast::raycast_image(&setup, &field, &scene.transfer, tables.as_ref())
-                .expect("CPU twin");
-        let (ctx, compiler) = gpu();
-        let gf = GpuField::upload(&ctx, &field).expect("upload");
-        let img = vmls::render::gpu::render(
-            &ctx,
-            &compiler,
-            &field,
-            &gf,
-            &scene.transfer,
-            tables.as_ref(),
-            &setup,
-            |_| {},
-        )
-        .expect("render");
-        drop(gf);
-        finish(ctx);
+        let (img, cpu) = gpu_and_cpu_frames(&field, &scene);
         assert!(
             img.variant.contains("-hull") && img.variant.contains("resample2"),
             "{}",

@@ -148,16 +148,24 @@ def ml_volume(n):
     return img, h
 
 
+def read_with(reader, path, scalars):
+    """The dataset `reader` reads from `path`, with point array `scalars` (if given) active."""
+    reader.SetFileName(path)
+    reader.Update()
+    data = reader.GetOutput()
+    if scalars is not None:
+        if data.GetPointData().GetArray(scalars) is None:
+            sys.exit(f"peer-vtk: {path} has no point array '{scalars}'")
+        data.GetPointData().SetActiveScalars(scalars)
+    return data
+
+
 def load_volume(scene, base):
     vol = scene.get("volume", {})
     if "file" in vol:
         path = os.path.join(base, vol["file"])
-        reader = vtk.vtkXMLImageDataReader() if path.endswith(".vti") else vtk.vtkStructuredPointsReader()
-        reader.SetFileName(path)
-        reader.Update()
-        img = reader.GetOutput()
-        if "scalars" in vol:
-            img.GetPointData().SetActiveScalars(vol["scalars"])
+        img = read_with(vtk.vtkXMLImageDataReader() if path.endswith(".vti") else vtk.vtkStructuredPointsReader(),
+                        path, vol.get("scalars"))
         return img, min(img.GetSpacing())
     return ml_volume(int(vol.get("resolution", 41)))
 
@@ -485,14 +493,8 @@ def run_unstructured(scene, a, base):
     t0 = time.perf_counter()
     vol = scene["volume"]
     path = os.path.join(base, vol["file"])
-    reader = vtk.vtkXMLUnstructuredGridReader() if path.endswith(".vtu") else vtk.vtkUnstructuredGridReader()
-    reader.SetFileName(path)
-    reader.Update()
-    grid = reader.GetOutput()
-    if "scalars" in vol:
-        if grid.GetPointData().GetArray(vol["scalars"]) is None:
-            sys.exit(f"peer-vtk: {path} has no point array '{vol['scalars']}'")
-        grid.GetPointData().SetActiveScalars(vol["scalars"])
+    grid = read_with(vtk.vtkXMLUnstructuredGridReader() if path.endswith(".vtu") else vtk.vtkUnstructuredGridReader(),
+                     path, vol.get("scalars"))
     tets = vtk.vtkDataSetTriangleFilter()
     tets.SetInputData(grid)
     tets.TetrahedraOnlyOn()

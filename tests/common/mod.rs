@@ -165,3 +165,54 @@ pub fn point_data(geometry: Geometry, f: impl Fn([f64; 3]) -> f64) -> vmls::data
         }],
     }
 }
+
+/// The fast path's values at `points` on the GPU (`mls_eval`) against its CPU twin: the largest
+/// difference relative to the value range. Asserts that every GPU evaluation read 8 fine points.
+pub fn fast_path_gpu_vs_cpu(field: &Field, points: &[[f64; 3]]) -> f64 {
+    let (ctx, compiler) = gpu();
+    let gpu_field = vmls::render::gpu::GpuField::upload(&ctx, field).expect("upload");
+    let (out, _) =
+        vmls::render::gpu::evaluate(&ctx, &compiler, field, &gpu_field, points, 1).expect("eval");
+    drop(gpu_field);
+    finish(ctx);
+    let n = field.neighbours().expect("neighbours");
+    let (lo, hi) = field.value_range();
+    let mut worst = 0.0f64;
+    for (g, p) in out.iter().zip(points) {
+        let cpu = field.evaluate(n.as_ref(), *p).expect("defined");
+        assert_eq!(g.neighbours, 8, "the fast path reads 8 fine points");
+        worst = worst.max((f64::from(g.value) - cpu.value).abs() / (hi - lo));
+    }
+    worst
+}
+
+/// A scene's ray-cast frame of `field` on the GPU (validated) and by the CPU twin, with
+/// preintegration tables of 128 entries.
+pub fn gpu_and_cpu_frames(
+    field: &Field,
+    scene: &Scene,
+) -> (
+    vmls::render::gpu::GpuImage,
+    Vec<vmls::render::raycast::PixelResult>,
+) {
+    let setup = scene.ray_setup(field).expect("setup");
+    let tables = vmls::render::build_tables(&setup, field, &scene.transfer, 128, |_| {});
+    let cpu = vmls::render::raycast::raycast_image(&setup, field, &scene.transfer, tables.as_ref())
+        .expect("CPU twin");
+    let (ctx, compiler) = gpu();
+    let gf = vmls::render::gpu::GpuField::upload(&ctx, field).expect("upload");
+    let img = vmls::render::gpu::render(
+        &ctx,
+        &compiler,
+        field,
+        &gf,
+        &scene.transfer,
+        tables.as_ref(),
+        &setup,
+        |_| {},
+    )
+    .expect("render");
+    drop(gf);
+    finish(ctx);
+    (img, cpu)
+}
