@@ -46,12 +46,16 @@ pub struct Reconstruction {
     /// h = support × sample spacing, per axis.
     pub support: f64,
     pub neighbours: NeighbourMode,
-    /// The regular-grid fast path: the field resampled `resample` times finer and interpolated
-    /// ([`resample`]); 0 evaluates the general path everywhere.
+    /// The fast path: the field resampled `resample` times finer than its lattice (a grid's
+    /// points, or a lattice over irregular data) and interpolated ([`resample`]); 0 evaluates
+    /// the general path everywhere.
     pub resample: u32,
-    /// `reconstruction.resample = "auto"`: the field picks the factor when it sees the data
-    /// ([`resample::AUTO_FACTOR`] on a regular grid with grid neighbours and MLS, else 0), sets
-    /// `resample` to it and clears this flag; so a built field never holds it set.
+    /// `reconstruction.resample = "auto"` (the default): the field picks the factor when it
+    /// sees the data ([`resample::AUTO_FACTOR`] where the fast path serves and its fine grid
+    /// stays under [`resample::AUTO_MAX_POINTS`], else 0), sets `resample` to it and clears
+    /// this flag, so a built field never holds it set; a scene then also weighs the first
+    /// frame and, on irregular data, a pilot of the fast path's error
+    /// (`Scene::fit_fast_path`).
     pub resample_auto: bool,
 }
 

@@ -158,8 +158,8 @@ weight = "wendland"
 # support: 2.4 (× spacing on grids; 1.5 × the 8th-neighbour distance for irregular data)
 gradient = "local"
 neighbours = "grid"
-# The fast path wherever it serves (a regular grid, grid neighbours, ray casting; not the
-# reference integrator): 2x finer, interpolated.
+# The fast path wherever it serves and pays (ray casting, not the reference integrator; every
+# scene's default): 2x finer, interpolated.
 resample = "auto"
 [transfer]
 # A translucent blue shell below 0.5, a dense bright band at the 0.5 level set, orange above.
@@ -841,7 +841,7 @@ impl Scene {
         // reference integrator, whose image is the ground truth of the scene's own field.
         if reconstruction.resample_auto
             && (reconstruction.support < 1.0
-                || reconstruction.method != ReconMethod::Mls
+                || reconstruction.method == ReconMethod::Exact
                 || render.method.splat_shading().is_some()
                 || render.method == Method::Reference)
         {
