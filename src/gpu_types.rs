@@ -196,10 +196,6 @@ pub fn binding_defines() -> Vec<(String, String)> {
     d.push(("GRID_PAD".into(), GRID_PAD.to_string()));
     d.push(("PARAMS_COPIES".into(), PARAMS_COPIES.to_string()));
     d.push((
-        "HULL_MAX_HITS".into(),
-        crate::samples::bvh::MAX_HITS.to_string(),
-    ));
-    d.push((
         "RESAMPLE_UNDEFINED".into(),
         format!("{}u", crate::recon::resample::UNDEFINED_BITS),
     ));

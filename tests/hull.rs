@@ -262,3 +262,99 @@ fn scattered_points_leave_gaps_empty_and_never_produce_nan() {
         "GPU vs CPU: RMSE {rmse}, max {worst}"
     );
 }
+
+/// Six cubes in a row, each split into hexahedra of 2×2×2 cells: a ray along the row crosses
+/// the hull 12 times.
+fn comb_field() -> Field {
+    use vmls::data::dataset::{CellType, Cells, Geometry};
+    let mut points = Vec::new();
+    let mut cells = Cells::default();
+    for cube in 0..6 {
+        let x0 = -2.75 + cube as f64 * 1.0;
+        let base = points.len() as u32;
+        for k in 0..3 {
+            for j in 0..3 {
+                for i in 0..3 {
+                    points.push([
+                        x0 + 0.25 * i as f64,
+                        -0.5 + 0.5 * j as f64,
+                        -0.5 + 0.5 * k as f64,
+                    ]);
+                }
+            }
+        }
+        let id = |i: u32, j: u32, k: u32| base + i + 3 * j + 9 * k;
+        for k in 0..2 {
+            for j in 0..2 {
+                for i in 0..2 {
+                    cells.push(
+                        CellType::Hexahedron,
+                        &[
+                            id(i, j, k),
+                            id(i + 1, j, k),
+                            id(i + 1, j + 1, k),
+                            id(i, j + 1, k),
+                            id(i, j, k + 1),
+                            id(i + 1, j, k + 1),
+                            id(i + 1, j + 1, k + 1),
+                            id(i, j + 1, k + 1),
+                        ],
+                    );
+                }
+            }
+        }
+    }
+    let d = point_data(Geometry::Unstructured { points, cells }, |p| {
+        0.5 + 0.2 * p[0] / 3.0 + 0.2 * p[2]
+    });
+    let set = common::splat::point_samples(&d, None);
+    Field::from_samples(
+        set,
+        recon(
+            Basis::Linear,
+            Weight::Wendland,
+            GradientMode::Local,
+            NeighbourMode::Octree,
+            2.4,
+        ),
+        &OctreeSettings::default(),
+        |_| {},
+    )
+    .expect("field")
+}
+
+#[test]
+fn rays_with_more_crossings_than_the_first_variant_keeps_render_again_with_all() {
+    let field = comb_field();
+    // Along the row: the central rays cross 12 faces, past the first variant's 8.
+    let along = scene(&[
+        ORTHO,
+        "camera.view_height=1.5",
+        "camera.eye=[-6.0, 0.0, 0.0]",
+        "camera.up=[0.0, 0.0, 1.0]",
+        "camera.width=12",
+        "camera.height=12",
+    ]);
+    let (img, cpu) = both(&field, &along);
+    assert!(img.variant.ends_with("-hull"), "{}", img.variant);
+    let centre = 6 * 12 + 6;
+    assert!(cpu[centre].rgba[3] > 0.1, "alpha {}", cpu[centre].rgba[3]);
+    let worst = img
+        .pixels
+        .iter()
+        .zip(&cpu)
+        .flat_map(|(g, c)| (0..4).map(move |k| (f64::from(g[k]) - c.rgba[k]).abs()))
+        .fold(0.0, f64::max);
+    assert!(worst < 2e-3, "GPU vs CPU {worst:.2e}");
+    // Across the row: 2 crossings per ray, the first variant serves.
+    let across = scene(&[
+        ORTHO,
+        "camera.view_height=7.0",
+        "camera.eye=[0.0, -6.0, 0.0]",
+        "camera.up=[0.0, 0.0, 1.0]",
+        "camera.width=24",
+        "camera.height=8",
+    ]);
+    let (img, _) = both(&field, &across);
+    assert!(img.variant.ends_with("-hull8"), "{}", img.variant);
+}

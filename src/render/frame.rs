@@ -193,7 +193,18 @@ pub(super) fn frame_targets(ctx: &Context, pixels: u64) -> Result<FrameTargets, 
     })
 }
 
-/// Binds everything and runs the bands; returns (GPU ms, submissions).
+/// How [`run_bands`] ended.
+pub(super) enum Bands {
+    /// Every band finished: GPU ms and submissions.
+    Done(f64, u32),
+    /// The stop flag was raised.
+    Stopped,
+    /// A ray crossed the hull more often than the variant's `HULL_MAX_HITS`, which is below
+    /// `bvh::MAX_HITS`: render the frame again with that.
+    HullHits,
+}
+
+/// Binds everything and runs the bands.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn run_bands(
     ctx: &Context,
@@ -205,7 +216,7 @@ pub(super) fn run_bands(
     setup: &RaySetup,
     progress: &mut dyn FnMut(f64),
     stop: Option<&AtomicBool>,
-) -> Result<Option<(f64, u32)>, VkError> {
+) -> Result<Bands, VkError> {
     let mut all = gpu_field.bindings();
     all.extend(gpu_field.hull_bindings());
     all.extend([
@@ -260,7 +271,7 @@ pub(super) fn run_bands(
             gpu_ms += timings.iter().filter_map(|t| t.gpu_ms).sum::<f64>();
             bands += 1;
             if stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
-                return Ok(None);
+                return Ok(Bands::Stopped);
             }
             band_counts =
                 targets
@@ -290,6 +301,9 @@ pub(super) fn run_bands(
             .iter()
             .position(|c| c & ray_count::HULL_OVERFLOW != 0)
         {
+            if (setup.hull_hits as usize) < crate::samples::bvh::MAX_HITS {
+                return Ok(Bands::HullHits);
+            }
             let (x, y) = pixel_of(i);
             return Err(VkError::Usage(format!(
                 "raycast: the ray through pixel ({x}, {y}) crosses the domain's boundary more \
@@ -306,7 +320,7 @@ pub(super) fn run_bands(
         row += rows;
         progress(f64::from(row) / f64::from(h));
     }
-    Ok(Some((gpu_ms, bands)))
+    Ok(Bands::Done(gpu_ms, bands))
 }
 
 /// A ray-cast frame as read back.

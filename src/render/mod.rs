@@ -579,6 +579,8 @@ pub struct RaySetup {
     pub skip: bool,
     /// `render.skip = "auto"` not yet decided for a frame ([`RaySetup::resolve_skip`]).
     pub skip_auto: bool,
+    /// Hull crossings the GPU kernel keeps per ray ([`gpu::Variant::hull_hits`]).
+    pub hull_hits: u32,
     /// The fraction of ray length "auto" found in empty blocks when it decided.
     pub skip_estimate: Option<f64>,
     pub background: [f64; 3],
@@ -661,6 +663,7 @@ impl RaySetup {
                 && field.reconstruction.resample > 0
                 && !mls2008,
             skip_estimate: None,
+            hull_hits: gpu::FIRST_HULL_HITS,
             background: render.background,
             min_transmittance: render.min_transmittance,
             isosurfaces: isosurfaces.to_vec(),

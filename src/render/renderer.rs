@@ -8,7 +8,7 @@
 
 use super::frame::FrameTargets;
 use super::frame::{
-    Readback, frame_bindings, frame_constants, frame_pipeline, frame_targets, read_image,
+    Bands, Readback, frame_bindings, frame_constants, frame_pipeline, frame_targets, read_image,
     run_bands, table_buffer,
 };
 pub use super::frame::{default_chunk, iso_buffer_data, outer_steps};
@@ -97,31 +97,41 @@ pub fn render(
     check_tables(setup, tables)?;
     let mut resolved = setup.clone();
     resolved.resolve_skip(gpu_field.blocks(), tf, field);
-    let setup = &resolved;
-    let tables = tables.filter(|_| setup.method.preintegrated());
-    let variant = Variant::for_render(field, setup);
-    let pipeline = frame_pipeline(
-        ctx,
-        compiler,
-        &variant,
-        &frame_bindings(gpu_field, setup, tables.is_some(), variant.skip),
-    )?;
+    let tables = tables.filter(|_| resolved.method.preintegrated());
     let table = tables.map(|t| table_buffer(ctx, t)).transpose()?;
-    let constants = frame_constants(ctx, field, setup, tf, tables, variant.skip)?;
-    let (w, h) = (setup.camera.width, setup.camera.height);
+    let (w, h) = (resolved.camera.width, resolved.camera.height);
     let targets = frame_targets(ctx, u64::from(w) * u64::from(h))?;
-    let (gpu_ms, bands) = run_bands(
-        ctx,
-        &pipeline,
-        gpu_field,
-        &constants,
-        &targets,
-        table.as_ref(),
-        setup,
-        &mut progress,
-        None,
-    )?
-    .ok_or_else(|| VkError::Usage("raycast: stopped without a stop request".into()))?;
+    // Once more with every crossing the CPU twin allows if a ray had more than the first
+    // variant keeps (Bands::HullHits).
+    let (variant, gpu_ms, bands) = loop {
+        let variant = Variant::for_render(field, &resolved);
+        let pipeline = frame_pipeline(
+            ctx,
+            compiler,
+            &variant,
+            &frame_bindings(gpu_field, &resolved, tables.is_some(), variant.skip),
+        )?;
+        let constants = frame_constants(ctx, field, &resolved, tf, tables, variant.skip)?;
+        match run_bands(
+            ctx,
+            &pipeline,
+            gpu_field,
+            &constants,
+            &targets,
+            table.as_ref(),
+            &resolved,
+            &mut progress,
+            None,
+        )? {
+            Bands::Done(ms, bands) => break (variant, ms, bands),
+            Bands::HullHits => resolved.hull_hits = crate::samples::bvh::MAX_HITS as u32,
+            Bands::Stopped => {
+                return Err(VkError::Usage(
+                    "raycast: stopped without a stop request".into(),
+                ));
+            }
+        }
+    };
     let Readback {
         pixels,
         counts,
@@ -311,56 +321,67 @@ impl Renderer {
         {
             self.table_buffer = Some((self.tables.builds(), table_buffer(&self.ctx, t)?));
         }
-        let variant = Variant::for_render(&self.field, &setup);
-        let defines = variant.defines();
-        let bindings = frame_bindings(&self.gpu_field, &setup, tables.is_some(), variant.skip);
-        let cached = self
-            .pipelines
-            .iter()
-            .position(|(d, b, _)| *d == defines && *b == bindings);
-        let pipeline_built = cached.is_none();
-        let index = match cached {
-            Some(i) => i,
-            None => {
-                let p = frame_pipeline(&self.ctx, &self.compiler, &variant, &bindings)?;
-                self.pipelines.push((defines, bindings, p));
-                self.pipelines.len() - 1
-            }
-        };
         let pixels = u64::from(setup.camera.width) * u64::from(setup.camera.height);
         let targets_allocated = self.targets.as_ref().map(|t| t.pixels) != Some(pixels);
         if targets_allocated {
             self.targets = None;
             self.targets = Some(frame_targets(&self.ctx, pixels)?);
         }
-        let constants = frame_constants(
-            &self.ctx,
-            &self.field,
-            &setup,
-            view.transfer,
-            tables,
-            variant.skip,
-        )?;
+        let mut pipeline_built = false;
+        // Once more with every crossing the CPU twin allows if a ray had more than the first
+        // variant keeps (Bands::HullHits).
+        let (variant, gpu_ms, bands) = loop {
+            let variant = Variant::for_render(&self.field, &setup);
+            let defines = variant.defines();
+            let bindings = frame_bindings(&self.gpu_field, &setup, tables.is_some(), variant.skip);
+            let cached = self
+                .pipelines
+                .iter()
+                .position(|(d, b, _)| *d == defines && *b == bindings);
+            pipeline_built |= cached.is_none();
+            let index = match cached {
+                Some(i) => i,
+                None => {
+                    let p = frame_pipeline(&self.ctx, &self.compiler, &variant, &bindings)?;
+                    self.pipelines.push((defines, bindings, p));
+                    self.pipelines.len() - 1
+                }
+            };
+            let constants = frame_constants(
+                &self.ctx,
+                &self.field,
+                &setup,
+                view.transfer,
+                tables,
+                variant.skip,
+            )?;
+            let Some(targets) = self.targets.as_ref() else {
+                return Err(VkError::Usage("frame buffers missing".into()).into());
+            };
+            let table = if tables.is_some() {
+                self.table_buffer.as_ref().map(|(_, b)| b)
+            } else {
+                None
+            };
+            match run_bands(
+                &self.ctx,
+                &self.pipelines[index].2,
+                &self.gpu_field,
+                &constants,
+                targets,
+                table,
+                &setup,
+                &mut progress,
+                self.stop.as_deref(),
+            )? {
+                Bands::Done(ms, bands) => break (variant, ms, bands),
+                Bands::HullHits => setup.hull_hits = crate::samples::bvh::MAX_HITS as u32,
+                Bands::Stopped => return Err(RenderError::Interrupted),
+            }
+        };
         let Some(targets) = self.targets.as_ref() else {
             return Err(VkError::Usage("frame buffers missing".into()).into());
         };
-        let table = if tables.is_some() {
-            self.table_buffer.as_ref().map(|(_, b)| b)
-        } else {
-            None
-        };
-        let (gpu_ms, bands) = run_bands(
-            &self.ctx,
-            &self.pipelines[index].2,
-            &self.gpu_field,
-            &constants,
-            targets,
-            table,
-            &setup,
-            &mut progress,
-            self.stop.as_deref(),
-        )?
-        .ok_or(RenderError::Interrupted)?;
         let Readback {
             pixels,
             counts,

@@ -198,6 +198,10 @@ impl SplatVariant {
                 super::MAX_KERNEL_ENTRIES.to_string(),
             ),
             ("SPLAT_SEGMENTS".into(), super::PIXEL_SEGMENTS.to_string()),
+            (
+                "HULL_MAX_HITS".into(),
+                crate::samples::bvh::MAX_HITS.to_string(),
+            ),
         ]);
         d
     }
