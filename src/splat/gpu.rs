@@ -32,6 +32,9 @@ const SCAN_BINDINGS: [u32; 4] = [
 ];
 /// Pixels per `splat_raster` invocation without an apron (every tile size is a multiple).
 const RASTER_PIXELS: u32 = 4;
+/// Hull hits `splat_segments` keeps per pixel (`HULL_MAX_HITS` of its variant).
+pub const SEGMENT_HITS: usize = 2 * super::PIXEL_SEGMENTS + 4;
+
 /// Invocations per workgroup of the one-dimensional kernels.
 const GROUP: u32 = 64;
 /// `SplatCounts` counters in the stats buffer.
@@ -198,10 +201,11 @@ impl SplatVariant {
                 super::MAX_KERNEL_ENTRIES.to_string(),
             ),
             ("SPLAT_SEGMENTS".into(), super::PIXEL_SEGMENTS.to_string()),
-            (
-                "HULL_MAX_HITS".into(),
-                crate::samples::bvh::MAX_HITS.to_string(),
-            ),
+            // Raw hits `splat_segments` keeps per pixel: the crossings of PIXEL_SEGMENTS
+            // segments, plus room for coincident hits that are merged after sorting. Not
+            // bvh::MAX_HITS: each access to the kernel's hit array costs in proportion to its
+            // length on lavapipe (render::gpu::FIRST_HULL_HITS).
+            ("HULL_MAX_HITS".into(), SEGMENT_HITS.to_string()),
         ]);
         d
     }
