@@ -1,0 +1,174 @@
+//! The fast path as a field holds it (DESIGN §7, issue 11 §4, issue 27 §1): its lattice (a
+//! regular grid's points, or a lattice over irregular data), the fine grid built on it
+//! ([`ResampledGrid`], computed here in f64 for the CPU twins; the GPU builds its own in
+//! `super::resample`), what "auto" chose and why, and the skipping blocks read from it.
+
+use super::{Field, skip};
+use crate::recon::ReconError;
+use crate::recon::ReconMethod;
+use crate::recon::mls::{MlsSettings, mls_evaluate};
+use crate::recon::resample::{
+    AUTO_FACTOR, AUTO_MAX_POINTS, FINE_POINT_DEVICE_BYTES, Lattice, MAX_POINTS, ResampledGrid,
+};
+use crate::samples::Positions;
+
+impl Field {
+    /// `reconstruction.resample = "auto"` as the field sees it: [`AUTO_FACTOR`] where the
+    /// fast path serves and its fine grid holds at most [`AUTO_MAX_POINTS`] points (device
+    /// memory and a first-frame build both grow with them), else 0 with the reason kept for
+    /// `--stats`. The scene weighs the first frame and a pilot after this
+    /// (`Scene::fit_fast_path`).
+    pub(super) fn resolve_auto_resample(&mut self) {
+        if !self.reconstruction.resample_auto {
+            return;
+        }
+        self.reconstruction.resample_auto = false;
+        self.reconstruction.resample = AUTO_FACTOR;
+        if let Err(e) = self.check_resample() {
+            self.reconstruction.resample = 0;
+            self.fast_path_declined = Some(e.to_string());
+            return;
+        }
+        let points = self.lattice().fine_points(AUTO_FACTOR);
+        if points > AUTO_MAX_POINTS {
+            self.reconstruction.resample = 0;
+            self.fast_path_declined = Some(format!(
+                "\"auto\" declined the fast path: its fine grid would hold {points} points ({} \
+                 bytes on the device, built in the first frame), more than auto's \
+                 {AUTO_MAX_POINTS}; set reconstruction.resample = {AUTO_FACTOR} to take it anyway",
+                points * FINE_POINT_DEVICE_BYTES
+            ));
+        }
+    }
+
+    /// Turns the fast path off before anything used it, recording why for `--stats` (the
+    /// scene's "auto" rule for the first frame, [`crate::scene::Scene::frame_evaluations`]).
+    pub fn decline_fast_path(&mut self, why: String) {
+        self.reconstruction.resample = 0;
+        self.fast_path_declined = Some(why);
+        self.resampled = std::sync::OnceLock::new();
+        self.blocks = std::sync::OnceLock::new();
+    }
+
+    /// The fast path as `--stats` states it: its factor, fine points and device bytes, or why
+    /// `"auto"` declined it.
+    pub fn fast_path(&self) -> serde_json::Value {
+        let factor = self.reconstruction.resample;
+        match Some(self.lattice()).filter(|_| factor > 0) {
+            Some(l) => {
+                let points = l.fine_points(factor);
+                serde_json::json!({
+                    "factor": factor,
+                    "fine_points": points,
+                    "device_bytes": points * FINE_POINT_DEVICE_BYTES,
+                })
+            }
+            None => serde_json::json!({
+                "factor": 0,
+                "declined": self.fast_path_declined,
+            }),
+        }
+    }
+
+    /// The coarse grid the fast path refines: a regular grid's points, or for irregular data a
+    /// lattice over the domain's box at the median nearest-sample spacing (the unit of
+    /// `render.step`, [`SampleSet::spacing`]).
+    pub fn lattice(&self) -> Lattice {
+        match &self.samples.positions {
+            Positions::Grid {
+                dims,
+                origin,
+                spacing,
+            } => Lattice {
+                dims: *dims,
+                origin: *origin,
+                spacing: *spacing,
+            },
+            Positions::Scattered(_) => {
+                let (lo, hi) = self.samples.domain_box();
+                Lattice::covering(lo, hi, self.samples.spacing.max(f64::MIN_POSITIVE))
+            }
+        }
+    }
+
+    /// The fast path needs a fine grid of at most [`MAX_POINTS`] points over its lattice
+    /// ([`Field::lattice`]).
+    pub(super) fn check_resample(&self) -> Result<(), ReconError> {
+        let factor = self.reconstruction.resample;
+        let lattice = self.lattice();
+        let points = lattice.fine_points(factor);
+        if points > MAX_POINTS {
+            let [x, y, z] = lattice.dims;
+            return Err(ReconError::Setting {
+                key: "reconstruction.resample",
+                value: format!("{factor} ({points} fine points for a {x}x{y}x{z} lattice)"),
+                expected: "a factor giving at most 2^27 fine points (2 GiB)",
+            });
+        }
+        Ok(())
+    }
+
+    /// The fast path's fine grid (`None` unless `reconstruction.resample` > 0): the general
+    /// path at every fine point of the lattice, computed here in f64 at first use (stage
+    /// `recon_resample`). For irregular data it reads the octree, built here if it was
+    /// deferred; `None` where that build fails (every CPU twin asks [`Field::neighbours`]
+    /// first, which returns its error).
+    pub fn resampled(&self) -> Option<&ResampledGrid> {
+        let factor = self.reconstruction.resample;
+        if factor == 0 {
+            return None;
+        }
+        // The fine points store the field's own derivative (the analytic gradient): the fast
+        // path's interpolation needs ∇f, not the local fit's slope.
+        let mls = MlsSettings {
+            gradient: crate::recon::GradientMode::Analytic,
+            ..self.mls()
+        };
+        let neighbours = self.neighbours().ok()?;
+        let l = self.lattice();
+        Some(self.resampled.get_or_init(|| {
+            ResampledGrid::build(l.dims, l.origin, l.spacing, factor, |x| {
+                match self.reconstruction.method {
+                    ReconMethod::Mls => mls_evaluate(&mls, neighbours.as_ref(), x),
+                    _ => self.evaluate_direct(neighbours.as_ref(), x),
+                }
+            })
+        }))
+    }
+
+    /// [`crate::recon::resample::pilot_error`] at `points` (frame-relative); `None` without
+    /// the fast path, where its octree cannot be built, or where no point is defined.
+    pub fn fast_path_pilot(&self, points: &[[f64; 3]]) -> Option<(f64, f64)> {
+        let factor = self.reconstruction.resample;
+        if factor == 0 {
+            return None;
+        }
+        let neighbours = self.neighbours().ok()?;
+        let lattice = self.lattice();
+        let analytic = MlsSettings {
+            gradient: crate::recon::GradientMode::Analytic,
+            ..self.mls()
+        };
+        let (lo, hi) = self.value_range();
+        crate::recon::resample::pilot_error(
+            &lattice,
+            factor,
+            points,
+            |x| match self.reconstruction.method {
+                ReconMethod::Mls => mls_evaluate(&analytic, neighbours.as_ref(), x),
+                _ => self.evaluate_direct(neighbours.as_ref(), x),
+            },
+            |x| self.evaluate_direct(neighbours.as_ref(), x),
+            hi - lo,
+        )
+    }
+
+    /// Value ranges of the fast field per skipping block (`None` without the fast path).
+    pub fn blocks(&self) -> Option<&skip::Blocks> {
+        let grid = self.resampled()?;
+        Some(
+            self.blocks
+                .get_or_init(|| skip::Blocks::from_resampled(grid)),
+        )
+    }
+}
