@@ -13,6 +13,23 @@ use vmls::render::{Field, build_tables};
 use vmls::samples::{SampleSet, SampleSettings};
 use vmls::scene::{NeighbourMode, Scene};
 
+/// The field of a sample set by linear MLS over the octree with `support`.
+fn linear_octree_field(set: SampleSet, support: f64) -> Field {
+    Field::from_samples(
+        set,
+        recon(
+            Basis::Linear,
+            Weight::Wendland,
+            GradientMode::Local,
+            NeighbourMode::Octree,
+            support,
+        ),
+        &OctreeSettings::default(),
+        |_| {},
+    )
+    .expect("field")
+}
+
 fn torus_field() -> Field {
     let geometry = tet_torus(24, 3);
     let values = (0..geometry.point_count())
@@ -42,19 +59,7 @@ fn torus_field() -> Field {
         },
     )
     .expect("samples");
-    Field::from_samples(
-        set,
-        recon(
-            Basis::Linear,
-            Weight::Wendland,
-            GradientMode::Local,
-            NeighbourMode::Octree,
-            2.0,
-        ),
-        &OctreeSettings::default(),
-        |_| {},
-    )
-    .expect("field")
+    linear_octree_field(set, 2.0)
 }
 
 const ORTHO: &str = "camera.projection=\"orthographic\"";
@@ -222,19 +227,7 @@ fn scattered_points_leave_gaps_empty_and_never_produce_nan() {
     };
     let set = SampleSet::from_dataset(&d, Path::new("slabs"), None, &SampleSettings::default())
         .expect("samples");
-    let field = Field::from_samples(
-        set,
-        recon(
-            Basis::Linear,
-            Weight::Wendland,
-            GradientMode::Local,
-            NeighbourMode::Octree,
-            2.4,
-        ),
-        &OctreeSettings::default(),
-        |_| {},
-    )
-    .expect("field");
+    let field = linear_octree_field(set, 2.4);
     assert!(field.hull.is_none());
     // Looking down z: column c is at x = ((c + 0.5)/30 − 0.5) · 3.
     let scene = scene(&[ORTHO, ORTHO_HEIGHT, "render.method=\"fixed\""]);
@@ -308,19 +301,7 @@ fn comb_field() -> Field {
         0.5 + 0.2 * p[0] / 3.0 + 0.2 * p[2]
     });
     let set = common::splat::point_samples(&d, None);
-    Field::from_samples(
-        set,
-        recon(
-            Basis::Linear,
-            Weight::Wendland,
-            GradientMode::Local,
-            NeighbourMode::Octree,
-            2.4,
-        ),
-        &OctreeSettings::default(),
-        |_| {},
-    )
-    .expect("field")
+    linear_octree_field(set, 2.4)
 }
 
 #[test]
@@ -339,12 +320,8 @@ fn rays_with_more_crossings_than_the_first_variant_keeps_render_again_with_all()
     assert!(img.variant.ends_with("-hull"), "{}", img.variant);
     let centre = 6 * 12 + 6;
     assert!(cpu[centre].rgba[3] > 0.1, "alpha {}", cpu[centre].rgba[3]);
-    let worst = img
-        .pixels
-        .iter()
-        .zip(&cpu)
-        .flat_map(|(g, c)| (0..4).map(move |k| (f64::from(g[k]) - c.rgba[k]).abs()))
-        .fold(0.0, f64::max);
+    let rgba: Vec<[f64; 4]> = cpu.iter().map(|p| p.rgba).collect();
+    let worst = common::splat::max_diff(&img.pixels, &rgba);
     assert!(worst < 2e-3, "GPU vs CPU {worst:.2e}");
     // Across the row: 2 crossings per ray, the first variant serves.
     let across = scene(&[

@@ -201,12 +201,8 @@ fn mesh_fast_path_images_match_the_cpu_twin_and_keep_the_hull() {
             cpu[15 * 30 + 25].rgba[3] > 0.2,
             "skip {skip}: the tube is not empty"
         );
-        let worst = img
-            .pixels
-            .iter()
-            .zip(&cpu)
-            .flat_map(|(g, c)| (0..4).map(move |k| (f64::from(g[k]) - c.rgba[k]).abs()))
-            .fold(0.0, f64::max);
+        let rgba: Vec<[f64; 4]> = cpu.iter().map(|p| p.rgba).collect();
+        let worst = common::splat::max_diff(&img.pixels, &rgba);
         assert!(
             worst < 2e-3,
             "skip {skip}: GPU vs CPU max difference {worst:.2e}"

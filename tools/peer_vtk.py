@@ -502,22 +502,8 @@ def run_unstructured(scene, a, base):
     mesh = tets.GetOutput()
     prepare_ms = (time.perf_counter() - t0) * 1e3
     points = scene["transfer"]["points"]
-    s_lo, s_hi = points[0][0], points[-1][0]
-    tau_max = max(max(q[4] for q in points), 1e-30)
-    unit = 1.0 / tau_max
-    color, opacity = vtk.vtkColorTransferFunction(), vtk.vtkPiecewiseFunction()
-    color.SetColorSpaceToRGB()
-    for i in range(1024):
-        sv = s_lo + (s_hi - s_lo) * i / 1023
-        r, g, b, tau = tf_lookup(points, sv)
-        color.AddRGBPoint(sv, r, g, b)
-        opacity.AddPoint(sv, tau * unit)
-    prop = vtk.vtkVolumeProperty()
-    prop.SetColor(color)
-    prop.SetScalarOpacity(opacity)
-    prop.SetScalarOpacityUnitDistance(unit)
-    prop.SetInterpolationTypeToLinear()
-    prop.ShadeOff()
+    unit = 1.0 / max(max(q[4] for q in points), 1e-30)
+    prop = volume_property(points, unit, lambda tau: tau * unit)
     cam = scene.get("camera", {})
     width, height = int(cam.get("width", 256)), int(cam.get("height", 256))
     rows = []
@@ -543,6 +529,26 @@ def run_unstructured(scene, a, base):
                              prepare_ms, image_path))
         win.Finalize()
     return rows
+
+
+def volume_property(points, unit, opacity_of):
+    """vmls's transfer points tabulated at 1024 values (colour in RGB, linear) with opacity
+    opacity_of(τ) per `unit` of ScalarOpacityUnitDistance; linear interpolation, no shading."""
+    s_lo, s_hi = points[0][0], points[-1][0]
+    color, opacity = vtk.vtkColorTransferFunction(), vtk.vtkPiecewiseFunction()
+    color.SetColorSpaceToRGB()
+    for i in range(1024):
+        s = s_lo + (s_hi - s_lo) * i / 1023
+        r, g, b, tau = tf_lookup(points, s)
+        color.AddRGBPoint(s, r, g, b)
+        opacity.AddPoint(s, opacity_of(tau))
+    prop = vtk.vtkVolumeProperty()
+    prop.SetColor(color)
+    prop.SetScalarOpacity(opacity)
+    prop.SetScalarOpacityUnitDistance(unit)
+    prop.SetInterpolationTypeToLinear()
+    prop.ShadeOff()
+    return prop
 
 
 def volume_window(scene, mapper, prop, width, height):
@@ -626,20 +632,8 @@ def main():
     cam = scene.get("camera", {})
     width, height = int(cam.get("width", 256)), int(cam.get("height", 256))
     points = scene["transfer"]["points"]
-    s_lo, s_hi = points[0][0], points[-1][0]
     unit = spacing
-    color, opacity = vtk.vtkColorTransferFunction(), vtk.vtkPiecewiseFunction()
-    for i in range(1024):
-        s = s_lo + (s_hi - s_lo) * i / 1023
-        r, g, b, tau = tf_lookup(points, s)
-        color.AddRGBPoint(s, r, g, b)
-        opacity.AddPoint(s, 1.0 - math.exp(-tau * unit))
-    prop = vtk.vtkVolumeProperty()
-    prop.SetColor(color)
-    prop.SetScalarOpacity(opacity)
-    prop.SetScalarOpacityUnitDistance(unit)
-    prop.SetInterpolationTypeToLinear()
-    prop.ShadeOff()
+    prop = volume_property(points, unit, lambda tau: 1.0 - math.exp(-tau * unit))
     mapper = vtk.vtkGPUVolumeRayCastMapper()
     mapper.SetInputData(img)
     mapper.AutoAdjustSampleDistancesOff()

@@ -91,6 +91,23 @@ impl Camera {
             }
         }
     }
+
+    /// `n` × `n` of the image's rays, spread evenly (one at the centre of each of n × n equal
+    /// parts of the image, rounded to a pixel), relative to `frame_origin`: what the host's
+    /// estimates before a frame look through (fast-path pilot and first-frame cost, skipping).
+    pub fn sample_rays(
+        &self,
+        basis: &ViewBasis,
+        frame_origin: DVec3,
+        n: u32,
+    ) -> impl Iterator<Item = (DVec3, DVec3)> + '_ {
+        let (w, h) = (self.width.max(1), self.height.max(1));
+        let at = move |i: u32, size: u32| {
+            (((f64::from(i) + 0.5) * f64::from(size) / f64::from(n)) as u32).min(size - 1)
+        };
+        let basis = *basis;
+        (0..n * n).map(move |k| self.ray(&basis, frame_origin, at(k % n, w), at(k / n, h)))
+    }
 }
 
 /// Slab test against [lo, hi] with t0 ≥ 0; `None` when the ray misses. Axis-parallel rays are

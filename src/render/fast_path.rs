@@ -6,7 +6,7 @@
 use super::{Field, skip};
 use crate::recon::ReconError;
 use crate::recon::ReconMethod;
-use crate::recon::mls::{MlsSettings, mls_evaluate};
+use crate::recon::mls::{MlsSettings, MlsValue, Neighbours, mls_evaluate};
 use crate::recon::resample::{
     AUTO_FACTOR, AUTO_MAX_POINTS, FINE_POINT_DEVICE_BYTES, Lattice, MAX_POINTS, ResampledGrid,
 };
@@ -118,22 +118,29 @@ impl Field {
         if factor == 0 {
             return None;
         }
-        // The fine points store the field's own derivative (the analytic gradient): the fast
-        // path's interpolation needs ∇f, not the local fit's slope.
-        let mls = MlsSettings {
-            gradient: crate::recon::GradientMode::Analytic,
-            ..self.mls()
-        };
         let neighbours = self.neighbours().ok()?;
         let l = self.lattice();
         Some(self.resampled.get_or_init(|| {
             ResampledGrid::build(l.dims, l.origin, l.spacing, factor, |x| {
-                match self.reconstruction.method {
-                    ReconMethod::Mls => mls_evaluate(&mls, neighbours.as_ref(), x),
-                    _ => self.evaluate_direct(neighbours.as_ref(), x),
-                }
+                self.fine_point(neighbours.as_ref(), x)
             })
         }))
+    }
+
+    /// What the fine grid stores at x: the general path with the field's own derivative (the
+    /// analytic gradient for MLS), since the fast path's interpolation needs ∇f, not the local
+    /// fit's slope (twin of `recon_resample`'s variant).
+    fn fine_point(&self, neighbours: &dyn Neighbours, x: [f64; 3]) -> Option<MlsValue> {
+        match self.reconstruction.method {
+            ReconMethod::Mls => {
+                let analytic = MlsSettings {
+                    gradient: crate::recon::GradientMode::Analytic,
+                    ..self.mls()
+                };
+                mls_evaluate(&analytic, neighbours, x)
+            }
+            _ => self.evaluate_direct(neighbours, x),
+        }
     }
 
     /// [`crate::recon::resample::pilot_error`] at `points` (frame-relative); `None` without
@@ -144,20 +151,12 @@ impl Field {
             return None;
         }
         let neighbours = self.neighbours().ok()?;
-        let lattice = self.lattice();
-        let analytic = MlsSettings {
-            gradient: crate::recon::GradientMode::Analytic,
-            ..self.mls()
-        };
         let (lo, hi) = self.value_range();
         crate::recon::resample::pilot_error(
-            &lattice,
+            &self.lattice(),
             factor,
             points,
-            |x| match self.reconstruction.method {
-                ReconMethod::Mls => mls_evaluate(&analytic, neighbours.as_ref(), x),
-                _ => self.evaluate_direct(neighbours.as_ref(), x),
-            },
+            |x| self.fine_point(neighbours.as_ref(), x),
             |x| self.evaluate_direct(neighbours.as_ref(), x),
             hi - lo,
         )

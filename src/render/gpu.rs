@@ -244,12 +244,12 @@ impl Variant {
                     _ => format!("-{}", m.name()),
                 })
                 .unwrap_or_default()
-        ) + if !self.hull {
-            ""
+        ) + &if !self.hull {
+            String::new()
         } else if self.hull_hits as usize >= crate::samples::bvh::MAX_HITS {
-            "-hull"
+            "-hull".to_string()
         } else {
-            "-hull8"
+            format!("-hull{}", self.hull_hits)
         } + &if self.resampled {
             format!("-resample{}", self.resample)
         } else {
@@ -353,6 +353,32 @@ pub(super) fn table_params(p: &mut RenderParams, tables: &PreintegrationTables) 
     p.preint_range[1] = tables.s_max as f32;
     p.preint_range[2] = tables.lengths[0] as f32;
     p.preint_dims = [tables.resolution as u32, tables.lengths.len() as u32, 0, 0];
+}
+
+/// The fast path's device data, built from the uploaded neighbour data (all `None` without it).
+struct FastPath {
+    fine: Option<Buffer>,
+    ms: f64,
+    blocks: Option<(Buffer, super::skip::Blocks)>,
+}
+
+impl FastPath {
+    /// The fine grid (`recon_resample` from `data`) and its skipping blocks.
+    fn build(ctx: &Context, field: &Field, data: &[(u32, &Buffer)]) -> Result<Self, VkError> {
+        let Some((fine, ms)) = super::resample::resample_grid(ctx, field, data)? else {
+            return Ok(Self {
+                fine: None,
+                ms: 0.0,
+                blocks: None,
+            });
+        };
+        let blocks = super::resample::block_buffer(ctx, field, &fine)?;
+        Ok(Self {
+            fine: Some(fine),
+            ms,
+            blocks: Some(blocks),
+        })
+    }
 }
 
 /// Hull crossings a ray-cast frame first allows per ray ([`Variant::hull_hits`]): the
@@ -470,18 +496,13 @@ impl GpuField {
                 let grid = Buffer::new(ctx, "grid", total as u64, BufferUsage::Texel)?;
                 grid.write_parts(ctx, &[&front, values.bytes(), &back])?;
                 let binding = grid_binding(values.storage());
-                let fine = super::resample::resample_grid(ctx, field, &[(binding, &grid)])?;
-                let resample_ms = fine.as_ref().map_or(0.0, |f| f.1);
-                let blocks = match &fine {
-                    Some((buffer, _)) => Some(super::resample::block_buffer(ctx, field, buffer)?),
-                    None => None,
-                };
+                let fast = FastPath::build(ctx, field, &[(binding, &grid)])?;
                 Ok(Self {
-                    grid_binding: grid_binding(values.storage()),
+                    grid_binding: binding,
                     grid: Some(grid),
-                    resampled: fine.map(|f| f.0),
-                    resample_ms,
-                    blocks,
+                    resampled: fast.fine,
+                    resample_ms: fast.ms,
+                    blocks: fast.blocks,
                     octree: None,
                     hull: None,
                 })
@@ -517,7 +538,7 @@ impl GpuField {
                 ];
                 // The fast path's fine grid over the lattice, through the octree.
                 let [s, n, i] = &octree;
-                let fine = super::resample::resample_grid(
+                let fast = FastPath::build(
                     ctx,
                     field,
                     &[
@@ -526,17 +547,12 @@ impl GpuField {
                         (binding::INDICES, i),
                     ],
                 )?;
-                let resample_ms = fine.as_ref().map_or(0.0, |f| f.1);
-                let blocks = match &fine {
-                    Some((buffer, _)) => Some(super::resample::block_buffer(ctx, field, buffer)?),
-                    None => None,
-                };
                 Ok(Self {
                     grid_binding: binding::GRID,
                     grid: None,
-                    resampled: fine.map(|f| f.0),
-                    resample_ms,
-                    blocks,
+                    resampled: fast.fine,
+                    resample_ms: fast.ms,
+                    blocks: fast.blocks,
                     octree: Some(octree),
                     hull: None,
                 })

@@ -117,12 +117,7 @@ pub fn block_buffer(
     let buffer = Buffer::from_slice(ctx, "skipping blocks", &texels)?;
     Ok((
         buffer,
-        crate::render::skip::Blocks {
-            dims: blocks,
-            origin: g.origin.into(),
-            size: glam::DVec3::from(g.spacing) * crate::render::skip::SKIP_BLOCK as f64,
-            ranges,
-        },
+        crate::render::skip::Blocks::over(g.origin, g.spacing, blocks, ranges),
     ))
 }
 

@@ -174,10 +174,21 @@ impl Blocks {
     /// The blocks of a fine grid (its `factor` × `SKIP_BLOCK` fine cells per block edge).
     pub fn from_resampled(grid: &ResampledGrid) -> Self {
         let (dims, ranges) = grid.block_ranges(grid.factor as usize * SKIP_BLOCK);
+        Self::over(grid.origin, grid.spacing, dims, ranges)
+    }
+
+    /// Blocks of `SKIP_BLOCK` coarse cells (`spacing`) from `origin`, `dims` of them with their
+    /// `ranges` ([`crate::recon::resample::block_ranges`]).
+    pub fn over(
+        origin: [f64; 3],
+        spacing: [f64; 3],
+        dims: [usize; 3],
+        ranges: Vec<[f64; 2]>,
+    ) -> Self {
         Self {
             dims,
-            origin: DVec3::from(grid.origin),
-            size: DVec3::from(grid.spacing) * SKIP_BLOCK as f64,
+            origin: DVec3::from(origin),
+            size: DVec3::from(spacing) * SKIP_BLOCK as f64,
             ranges,
         }
     }
@@ -237,32 +248,27 @@ impl Blocks {
 /// `table`, over 32 × 32 of the camera's rays: the estimate `render.skip = "auto"` decides by,
 /// before the frame (a mesh's hull and early termination are not looked at).
 pub fn skippable_fraction(blocks: &Blocks, table: &SkipTable, setup: &super::RaySetup) -> f64 {
-    let cam = &setup.camera;
-    let (w, h) = (cam.width.max(1), cam.height.max(1));
-    let at = |i: u32, n: u32| {
-        (((f64::from(i) + 0.5) * f64::from(n) / f64::from(ESTIMATE_RAYS)) as u32).min(n - 1)
-    };
     let nudge = RUN_NUDGE * blocks.size.min_element();
     let (mut inside, mut empty) = (0.0, 0.0);
-    for j in 0..ESTIMATE_RAYS {
-        for i in 0..ESTIMATE_RAYS {
-            let (o, d) = cam.ray(&setup.basis, setup.frame_origin, at(i, w), at(j, h));
-            let Some((t0, t1)) = super::camera::clip_box(o, d, setup.box_lo, setup.box_hi) else {
-                continue;
-            };
-            inside += t1 - t0;
-            let mut t = t0;
-            while t < t1 {
-                let (is_empty, exit) = blocks.lookup(table, o, d, t + nudge);
-                let exit = exit.min(t1);
-                if exit <= t {
-                    break;
-                }
-                if is_empty {
-                    empty += exit - t;
-                }
-                t = exit;
+    let rays = setup
+        .camera
+        .sample_rays(&setup.basis, setup.frame_origin, ESTIMATE_RAYS);
+    for (o, d) in rays {
+        let Some((t0, t1)) = super::camera::clip_box(o, d, setup.box_lo, setup.box_hi) else {
+            continue;
+        };
+        inside += t1 - t0;
+        let mut t = t0;
+        while t < t1 {
+            let (is_empty, exit) = blocks.lookup(table, o, d, t + nudge);
+            let exit = exit.min(t1);
+            if exit <= t {
+                break;
             }
+            if is_empty {
+                empty += exit - t;
+            }
+            t = exit;
         }
     }
     if inside > 0.0 { empty / inside } else { 0.0 }

@@ -133,17 +133,8 @@ impl HullBvh {
 /// Keeps one of each run of sorted hits with the same step whose distances differ by at most
 /// [`HIT_MERGE`] relative: one crossing of a shared edge or vertex that several triangles hit.
 pub fn merge_coincident(hits: &mut Vec<(f64, i32)>) {
-    let mut kept: Vec<(f64, i32)> = Vec::with_capacity(hits.len());
-    for &h in hits.iter() {
-        if let Some(&last) = kept.last()
-            && last.1 == h.1
-            && h.0 - last.0 <= HIT_MERGE * h.0
-        {
-            continue;
-        }
-        kept.push(h);
-    }
-    *hits = kept;
+    // `dedup_by` compares each hit with the last one kept.
+    hits.dedup_by(|h, kept| h.1 == kept.1 && h.0 - kept.0 <= HIT_MERGE * h.0);
 }
 
 /// Turns sorted hits (t, +1 entering / −1 leaving) into inside segments.

@@ -185,35 +185,26 @@ impl Scene {
             return Vec::new();
         };
         let (lo, hi) = field.bounds();
-        let (w, h) = (self.camera.width.max(1), self.camera.height.max(1));
-        let at = |i: u32, n: u32| {
-            (((f64::from(i) + 0.5) * f64::from(n) / f64::from(RAYS)) as u32).min(n - 1)
-        };
         let mut rng = crate::probe::Lcg::new(27);
         let mut points = Vec::new();
-        for j in 0..RAYS {
-            for i in 0..RAYS {
-                let (o, d) = self
-                    .camera
-                    .ray(&basis, field.frame_origin, at(i, w), at(j, h));
-                let segments = match &field.hull {
-                    Some(bvh) => match bvh.segments(o.to_array(), d.to_array()) {
-                        crate::samples::bvh::Segments::List(s) => s,
-                        crate::samples::bvh::Segments::Overflow => Vec::new(),
-                    },
-                    None => crate::render::camera::clip_box(o, d, lo, hi)
-                        .into_iter()
-                        .collect(),
-                };
-                let inside: f64 = segments.iter().map(|(a, b)| b - a).sum();
-                let mut u = rng.next_f64() * inside;
-                for (a, b) in segments {
-                    if u <= b - a {
-                        points.push((o + d * (a + u)).to_array());
-                        break;
-                    }
-                    u -= b - a;
+        for (o, d) in self.camera.sample_rays(&basis, field.frame_origin, RAYS) {
+            let segments = match &field.hull {
+                Some(bvh) => match bvh.segments(o.to_array(), d.to_array()) {
+                    crate::samples::bvh::Segments::List(s) => s,
+                    crate::samples::bvh::Segments::Overflow => Vec::new(),
+                },
+                None => crate::render::camera::clip_box(o, d, lo, hi)
+                    .into_iter()
+                    .collect(),
+            };
+            let inside: f64 = segments.iter().map(|(a, b)| b - a).sum();
+            let mut u = rng.next_f64() * inside;
+            for (a, b) in segments {
+                if u <= b - a {
+                    points.push((o + d * (a + u)).to_array());
+                    break;
                 }
+                u -= b - a;
             }
         }
         points
@@ -233,22 +224,13 @@ impl Scene {
             _ => self.render.step,
         };
         let step = spacings * field.min_spacing();
-        let (w, h) = (self.camera.width.max(1), self.camera.height.max(1));
-        let at = |i: u32, n: u32| {
-            (((f64::from(i) + 0.5) * f64::from(n) / f64::from(RAYS)) as u32).min(n - 1)
-        };
-        let mut length = 0.0;
-        for j in 0..RAYS {
-            for i in 0..RAYS {
-                let (o, d) = self
-                    .camera
-                    .ray(&basis, field.frame_origin, at(i, w), at(j, h));
-                if let Some((t0, t1)) = crate::render::camera::clip_box(o, d, lo, hi) {
-                    length += t1 - t0;
-                }
-            }
-        }
-        let pixels = f64::from(w) * f64::from(h);
+        let length: f64 = self
+            .camera
+            .sample_rays(&basis, field.frame_origin, RAYS)
+            .filter_map(|(o, d)| crate::render::camera::clip_box(o, d, lo, hi))
+            .map(|(t0, t1)| t1 - t0)
+            .sum();
+        let pixels = f64::from(self.camera.width.max(1)) * f64::from(self.camera.height.max(1));
         Some((length / step * pixels / f64::from(RAYS * RAYS)).min(u64::MAX as f64) as u64)
     }
 
