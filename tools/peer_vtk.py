@@ -91,7 +91,7 @@ a per-fragment Gaussian (standard deviation = scale·ScaleFactor). How the kerne
   footprint reaches the image).
 - Framebuffer: with VTK's default 8-bit target every one of the hundreds of blends a pixel
   receives is rounded to 1/255, and with opacities of a few per cent per kernel the rounding
-  does not average out: on bench/scenes/ml-points-68921.toml it raises the green channel's
+  does not average out: on tools/scenes/ml-points-68921.toml it raises the green channel's
   mean by 11% (RMSE 0.020 against vmls's splatting, against 0.0012 in float). The matched
   configuration therefore renders VTK's standard render steps (vtkRenderStepsPass) into the
   RGBA32F target of a vtkToneMappingPass whose mapping is Clamp (identity on [0, 1]); the
