@@ -250,3 +250,46 @@ fn auto_takes_the_fast_path_on_irregular_data_only_where_its_pilot_finds_it_accu
         "{why}"
     );
 }
+
+#[test]
+fn the_pilot_of_a_gaussian_field_finishes_on_many_workers() {
+    // Found on a 16-core machine: the pilot (a parallel loop over points) asked for the Gaussian
+    // sum's kernel volumes in its first evaluation, whose builder is itself a parallel loop; the
+    // building worker, waiting for its own jobs, stole an outer job that waited for the volumes,
+    // and the render hung. `Field::neighbours` now builds them before any loop fans out. Each
+    // trial is a fresh field on a pool of 16 workers (more than this machine's cores, as there).
+    const TRIALS: usize = 6;
+    let mut rng = Lcg::new(21);
+    let scattered: Vec<[f64; 3]> = (0..3000)
+        .map(|_| std::array::from_fn(|_| 2.0 * rng.next_f64() - 1.0))
+        .collect();
+    let d = point_data(Geometry::Points { points: scattered }, smooth);
+    for trial in 0..TRIALS {
+        let mut r = recon(
+            Basis::Linear,
+            Weight::Wendland,
+            GradientMode::Local,
+            NeighbourMode::Octree,
+            2.4,
+        );
+        r.method = vmls::recon::ReconMethod::Gaussian;
+        r.resample = 2;
+        let set = common::splat::point_samples(&d, None);
+        let field = Field::from_samples(set, r, &OctreeSettings::default(), |_| {}).expect("field");
+        let points = inside(&field, &d, 256, 40 + trial as u64);
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(16)
+                .build()
+                .expect("a pool of 16 workers");
+            // Sending fails only when the test already gave up waiting.
+            let _ = tx.send(pool.install(|| field.fast_path_pilot(&points)));
+        });
+        let pilot = rx
+            .recv_timeout(std::time::Duration::from_secs(300))
+            .unwrap_or_else(|_| panic!("trial {trial}: the pilot did not finish in 300 s"));
+        let (rmse, _) = pilot.expect("a pilot on defined points");
+        assert!(rmse.is_finite(), "trial {trial}: pilot RMSE {rmse}");
+    }
+}

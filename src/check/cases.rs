@@ -147,7 +147,7 @@ fn gpu_cpu_difference(
     let (out, _) = crate::render::gpu::evaluate(env.ctx, &compiler, field, &gpu_field, points, 1)?;
     let (lo, hi) = field.value_range();
     let range = (hi - lo).max(1e-30);
-    let neighbours = field.neighbours()?;
+    let neighbours = field.evaluator()?;
     let (mut worst, mut bad) = (0.0f64, 0usize);
     let mut other_basis = 0;
     for (g, p) in out.iter().zip(points) {

@@ -166,7 +166,7 @@ fn spacing(env: &Env<'_>) -> Result<Vec<Outcome>, BenchError> {
             let h = 2.0 / (n - 1) as f64;
             let volume = grid_volume(n, smooth);
             let field = Field::new(volume, scene.reconstruction, &scene.octree, |_| {})?;
-            let neighbours = field.neighbours()?;
+            let neighbours = field.evaluator()?;
             let mut rng = Lcg::new(17);
             let mut sum = 0.0;
             let count = 2000;
@@ -204,7 +204,7 @@ fn shepard_centroid(env: &Env<'_>, sizes: &[usize]) -> Result<Outcome, BenchErro
     let h = 2.0 / (n - 1) as f64;
     let volume = grid_volume(n, |p| p[0]);
     let field = Field::new(volume, scene.reconstruction, &scene.octree, |_| {})?;
-    let neighbours = field.neighbours()?;
+    let neighbours = field.evaluator()?;
     let mut rng = Lcg::new(23);
     let mut worst = 0.0f64;
     for _ in 0..2000 {

@@ -111,7 +111,7 @@ impl Field {
     /// The fast path's fine grid (`None` unless `reconstruction.resample` > 0): the general
     /// path at every fine point of the lattice, computed here in f64 at first use (stage
     /// `recon_resample`). For irregular data it reads the octree, built here if it was
-    /// deferred; `None` where that build fails (every CPU twin asks [`Field::neighbours`]
+    /// deferred; `None` where that build fails (every CPU twin asks [`Field::evaluator`]
     /// first, which returns its error).
     pub fn resampled(&self) -> Option<&ResampledGrid> {
         let factor = self.reconstruction.resample;

@@ -260,14 +260,31 @@ impl Field {
     }
 
     /// The neighbour structure in use: the octree when kernels read one (built here if it was
-    /// deferred), else the grid.
+    /// deferred), else the grid. Everything else [`Field::evaluate_direct`] reads is built here
+    /// too (the Gaussian sum's kernel volumes), so that callers can fan out over rayon after
+    /// it: a lazily built value whose builder itself runs on rayon, first asked for inside a
+    /// parallel loop, deadlocks when the building worker, waiting for its own jobs, steals an
+    /// outer job that waits for the same value (the pilot of a Gaussian field hung that way on
+    /// 16 cores).
     pub fn neighbours(&self) -> Result<Box<dyn Neighbours + Sync + '_>, ReconError> {
-        Ok(match (self.octree()?, self.grid()) {
+        let neighbours: Box<dyn Neighbours + Sync + '_> = match (self.octree()?, self.grid()) {
             (Some(o), _) => Box::new(o),
             (None, Some(g)) => Box::new(g),
             // Every field that is not a uniform grid wants an octree.
             (None, None) => Box::new(NoNeighbours),
-        })
+        };
+        if self.reconstruction.method == ReconMethod::Gaussian {
+            self.kernel_volumes();
+        }
+        Ok(neighbours)
+    }
+
+    /// [`Field::neighbours`] with everything [`Field::evaluate`] reads built as well (the fast
+    /// path's CPU fine grid): what a CPU twin asks for before its parallel loop.
+    pub fn evaluator(&self) -> Result<Box<dyn Neighbours + Sync + '_>, ReconError> {
+        let neighbours = self.neighbours()?;
+        self.resampled();
+        Ok(neighbours)
     }
 
     /// The volume each sample's Gaussian kernel stands for ([`KernelVolumes`]), computed once.

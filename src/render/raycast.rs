@@ -324,7 +324,7 @@ pub fn raycast_image(
     tf: &TransferFunction,
     tables: Option<&PreintegrationTables>,
 ) -> Result<Vec<PixelResult>, ReconError> {
-    let neighbours = field.neighbours()?;
+    let neighbours = field.evaluator()?;
     // `render.skip = "auto"` decided on this twin's own f64 blocks.
     let resolved;
     let setup = if setup.skip_auto {

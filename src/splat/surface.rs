@@ -51,7 +51,7 @@ pub fn surface_kernels(
     let volumes = field.kernel_volumes();
     let band = field.min_spacing();
     let s = &field.samples;
-    let neighbours = field.neighbours()?;
+    let neighbours = field.evaluator()?;
     let gradients: Vec<Option<[f64; 3]>> = (0..s.len())
         .into_par_iter()
         .map(|i| {
