@@ -3,7 +3,9 @@
 //!
 //! For a command that can stop between submissions (`render`), the first signal sets the stop
 //! flag (the frame ends after the dispatch in flight and nothing is written) and a second one
-//! removes every temporary output and exits at once. Every other command removes its
+//! removes every temporary output and exits at once, as does [`GRACE`] passing without a stop:
+//! host work that reads no flag (an octree build, a `--cpu` frame) or a hung process must not
+//! outlive a `timeout` or a batch system's SIGTERM. Every other command removes its
 //! temporaries and exits at the first signal. The exit status is 128 + the first signal's
 //! number (130, 143, 129), as a shell reports a process killed by it.
 
@@ -11,6 +13,9 @@ use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
 use std::io::Write;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicI32, Ordering};
+
+/// How long a graceful stop may take before the process quits anyway.
+pub const GRACE: std::time::Duration = std::time::Duration::from_secs(10);
 
 /// The first stop signal received; 0 while none was.
 static FIRST: AtomicI32 = AtomicI32::new(0);
@@ -43,7 +48,7 @@ pub fn install(graceful: bool) -> Arc<AtomicBool> {
                 let _ = FIRST.compare_exchange(0, signal, Ordering::SeqCst, Ordering::SeqCst);
                 // Writes to stderr may fail (a closed terminal after SIGHUP): never panic here,
                 // or the thread dies and no later signal is handled.
-                let say = |text: String| {
+                let say = move |text: String| {
                     let _ = writeln!(std::io::stderr(), "vmls: {}: {text}", name(signal));
                 };
                 if !graceful || seen.swap(true, Ordering::SeqCst) {
@@ -52,6 +57,15 @@ pub fn install(graceful: bool) -> Arc<AtomicBool> {
                     std::process::exit(exit_status());
                 }
                 say("stopping without writing (Ctrl-C again to quit at once)".into());
+                std::thread::spawn(move || {
+                    std::thread::sleep(GRACE);
+                    vmls::files::remove_temporaries();
+                    say(format!(
+                        "did not stop within {} s: quit without writing",
+                        GRACE.as_secs()
+                    ));
+                    std::process::exit(exit_status());
+                });
             }
         });
     }
