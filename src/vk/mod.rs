@@ -16,13 +16,15 @@ mod commands;
 mod context;
 mod pipeline;
 mod shader;
+mod shader_cache;
 
 pub use buffer::{Buffer, BufferUsage, check_size, check_texel_view};
 pub use commands::{DispatchTiming, Recorder};
 pub use context::{Context, ContextOptions, DeviceInfo, FAIL_ALLOCATIONS_VAR, RawContext};
 pub(crate) use pipeline::TEXEL_FORMATS;
 pub use pipeline::{BindGroup, BindingKind, ComputePipeline};
-pub use shader::{ShaderCompiler, ShaderSource, shader_names, source_texts};
+pub use shader::{ShaderCompiler, ShaderSource, shader_counts, shader_names, source_texts};
+pub use shader_cache::use_disk_cache;
 
 use ash::vk;
 

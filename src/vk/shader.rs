@@ -8,11 +8,15 @@
 //! there (for `spirv-dis`) through the output layer like every other writer (a planted symlink
 //! redirects nothing); a variable that names no directory, or a dump that cannot be written,
 //! fails the compilation with an error naming the variable, since the user asked for the files.
+//! Where the process turned it on, compiled variants are also kept on disk between processes
+//! ([`super::shader_cache`]).
 
 use super::VkError;
+use super::shader_cache;
 use std::collections::HashMap;
 use std::hash::{Hash, Hasher};
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Mutex};
 
 macro_rules! embed {
@@ -78,11 +82,27 @@ pub enum ShaderSource<'a> {
     Text { name: &'a str, text: &'a str },
 }
 
-/// shaderc compiler with a per-process cache of compiled variants.
+/// shaderc compiler with a per-process cache of compiled variants, and the disk cache of
+/// [`super::shader_cache`] where the process turned it on.
 pub struct ShaderCompiler {
     compiler: Mutex<shaderc::Compiler>,
     cache: Mutex<HashMap<u64, Arc<Vec<u32>>>>,
     dir: Option<PathBuf>,
+    /// The disk cache's directory and the hash of every GLSL file as this compiler reads them.
+    disk: Option<(PathBuf, u64)>,
+}
+
+/// Variants compiled by shaderc in this process, and variants read from the disk cache.
+static COMPILED: AtomicU32 = AtomicU32::new(0);
+static FROM_DISK: AtomicU32 = AtomicU32::new(0);
+
+/// Kernel variants this process compiled with shaderc, and those it read from the disk cache
+/// (`--stats` reports both).
+pub fn shader_counts() -> (u32, u32) {
+    (
+        COMPILED.load(Ordering::Relaxed),
+        FROM_DISK.load(Ordering::Relaxed),
+    )
 }
 
 fn lookup(dir: &Option<PathBuf>, name: &str) -> Result<String, String> {
@@ -109,10 +129,15 @@ impl ShaderCompiler {
             name: "(compiler)".into(),
             message: format!("cannot start shaderc: {e}"),
         })?;
+        let disk = shader_cache::disk_cache_dir().map(|d| {
+            let sources = shader_cache::Fnv::new().field(source_texts().as_bytes());
+            (d, sources.finish())
+        });
         Ok(Self {
             compiler: Mutex::new(compiler),
             cache: Mutex::new(HashMap::new()),
             dir: std::env::var_os("VMLS_GLSL_DIR").map(PathBuf::from),
+            disk,
         })
     }
 
@@ -144,6 +169,53 @@ impl ShaderCompiler {
         {
             return Ok(hit.clone());
         }
+        let disk = self.disk.as_ref().map(|(dir, sources)| {
+            let mut key = shader_cache::Fnv::new()
+                .bytes(&sources.to_le_bytes())
+                .field(name.as_bytes())
+                .field(text.as_bytes());
+            for (k, v) in defines {
+                key = key.field(k.as_bytes()).field(v.as_bytes());
+            }
+            (dir, key.finish())
+        });
+        let cached = disk.and_then(|(dir, key)| shader_cache::load(dir, name, key));
+        let words = match cached {
+            Some(words) => {
+                FROM_DISK.fetch_add(1, Ordering::Relaxed);
+                Arc::new(words)
+            }
+            None => {
+                let words = Arc::new(self.shaderc(name, &text, defines)?);
+                COMPILED.fetch_add(1, Ordering::Relaxed);
+                if let Some((dir, key)) = disk {
+                    shader_cache::store(dir, name, key, &words);
+                }
+                words
+            }
+        };
+        if let Some(dir) = std::env::var_os("VMLS_SPIRV_DUMP") {
+            dump_spirv(
+                &PathBuf::from(dir),
+                &format!("{}-{key:016x}.spv", name.replace('/', "_")),
+                bytemuck::cast_slice(&words),
+            )?;
+        }
+        self.cache
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .insert(key, words.clone());
+        Ok(words)
+    }
+
+    /// Runs shaderc on one variant (the options are part of the disk cache's format: bump
+    /// `shader_cache::FORMAT` when they change).
+    fn shaderc(
+        &self,
+        name: &str,
+        text: &str,
+        defines: &[(String, String)],
+    ) -> Result<Vec<u32>, VkError> {
         let shader_err = |message: String| VkError::Shader {
             name: name.to_string(),
             message,
@@ -177,26 +249,14 @@ impl ShaderCompiler {
             .lock()
             .unwrap_or_else(|p| p.into_inner())
             .compile_into_spirv(
-                &text,
+                text,
                 shaderc::ShaderKind::Compute,
                 name,
                 "main",
                 Some(&options),
             )
             .map_err(|e| shader_err(e.to_string()))?;
-        let words = Arc::new(artifact.as_binary().to_vec());
-        if let Some(dir) = std::env::var_os("VMLS_SPIRV_DUMP") {
-            dump_spirv(
-                &PathBuf::from(dir),
-                &format!("{}-{key:016x}.spv", name.replace('/', "_")),
-                artifact.as_binary_u8(),
-            )?;
-        }
-        self.cache
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .insert(key, words.clone());
-        Ok(words)
+        Ok(artifact.as_binary().to_vec())
     }
 }
 

@@ -263,8 +263,22 @@ fn chain(error: &dyn std::error::Error) -> String {
     line
 }
 
+/// Where compiled kernels are kept between runs (vmls::vk::use_disk_cache): `VMLS_SHADER_CACHE`
+/// (a directory, or `off`), else `$XDG_CACHE_HOME/vmls/shaders` or `~/.cache/vmls/shaders`.
+fn shader_cache_dir() -> Option<PathBuf> {
+    match std::env::var_os("VMLS_SHADER_CACHE") {
+        Some(v) if v == "off" || v == "0" || v.is_empty() => None,
+        Some(v) => Some(PathBuf::from(v)),
+        None => std::env::var_os("XDG_CACHE_HOME")
+            .map(PathBuf::from)
+            .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
+            .map(|base| base.join("vmls").join("shaders")),
+    }
+}
+
 fn main() {
     let cli = Cli::parse();
+    vmls::vk::use_disk_cache(shader_cache_dir());
     let stop = signals::install(matches!(cli.command, Command::Render { .. }));
     let result = match &cli.command {
         Command::Render {

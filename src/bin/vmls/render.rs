@@ -143,6 +143,11 @@ pub fn run_render(
             "device_type": ctx.info().device_type,
             "driver": ctx.info().driver,
             "variant": image.variant,
+            // Kernel variants compiled by shaderc and read from the disk cache (shader_cache).
+            "shaders": {
+                "compiled": vmls::vk::shader_counts().0,
+                "from_disk_cache": vmls::vk::shader_counts().1,
+            },
             "width": scene.camera.width,
             "height": scene.camera.height,
             "method": scene.render.method.name(),
