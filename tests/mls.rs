@@ -592,3 +592,71 @@ fn row_windows_hold_at_the_grid_corners_for_every_support() {
         }
     }
 }
+
+#[test]
+fn octree_leaves_with_index_gaps_past_16_bits_match_the_cpu() {
+    // Compact references (recon::octree_codes) write a gap of 65 535 or more as jumps. Put
+    // 66 000 filler samples far away between the lower and upper halves of a 13³ lattice, so
+    // that every leaf near the lattice's middle jumps over them; GPU and CPU must still agree.
+    use vmls::data::dataset::Geometry;
+    use vmls::probe::Lcg;
+    let lattice = |k: usize, j: usize, i: usize| [i, j, k].map(|c| c as f64 / 6.0 - 1.0);
+    let mut points: Vec<[f64; 3]> = Vec::new();
+    for k in 0..7 {
+        for j in 0..13 {
+            for i in 0..13 {
+                points.push(lattice(k, j, i));
+            }
+        }
+    }
+    let mut rng = Lcg::new(3);
+    points.extend((0..66_000).map(|_| std::array::from_fn(|_| 4.0 + rng.next_f64())));
+    for k in 7..13 {
+        for j in 0..13 {
+            for i in 0..13 {
+                points.push(lattice(k, j, i));
+            }
+        }
+    }
+    let d = point_data(Geometry::Points { points }, |p| {
+        0.5 + 0.3 * (2.0 * p[0]).sin() * (1.5 * p[1]).cos() + 0.2 * p[2]
+    });
+    let set = common::splat::point_samples(&d, None);
+    let r = recon(
+        Basis::Linear,
+        Weight::Wendland,
+        GradientMode::Local,
+        NeighbourMode::Octree,
+        2.4,
+    );
+    let field = Field::from_samples(set, r, &OctreeSettings::default(), |_| {}).expect("field");
+    let shift = field.frame_origin;
+    let at = |p: [f64; 3]| std::array::from_fn(|a| p[a] - shift[a]);
+    // The leaf at the middle lists samples on both sides of the fillers.
+    let octree = field.octree().expect("octree").expect("an octree");
+    let (leaf, _) = octree.leaf(at([0.05, 0.02, 0.0]));
+    let leaf: Vec<u32> = leaf.collect();
+    let widest = leaf.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(0);
+    assert!(
+        widest >= 66_000,
+        "widest gap {widest} in {} references",
+        leaf.len()
+    );
+    let mut rng = Lcg::new(4);
+    let queries: Vec<[f64; 3]> = (0..1500)
+        .map(|_| at(std::array::from_fn(|_| 1.6 * rng.next_f64() - 0.8)))
+        .collect();
+    let c = compare(&field, &queries);
+    assert!(c.defined > 1400, "only {} defined", c.defined);
+    assert_eq!(c.terms_mismatch, 0);
+    assert!(
+        c.max_value_error <= 5e-6,
+        "value error {:.2e}",
+        c.max_value_error
+    );
+    assert!(
+        c.max_gradient_error <= 1e-4,
+        "gradient error {:.2e}",
+        c.max_gradient_error
+    );
+}

@@ -227,8 +227,8 @@ void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float
     }
 }
 #else
-// Descends to the leaf containing x; returns (begin, count, basis-scale bits) of its reference
-// list (the scale: 1 / the leaf's mean support radius).
+// Descends to the leaf containing x; returns (first word, count, basis-scale bits) of its coded
+// reference list (the scale: 1 / the leaf's mean support radius).
 uvec3 octree_leaf(vec3 x) {
     vec3 center = params.octree_root.xyz;
     float half_side = params.octree_root.w;
@@ -249,6 +249,14 @@ uvec3 octree_leaf(vec3 x) {
     return uvec3(0u);
 }
 
+// Stage `octree_codes` (twin: LeafCodes in src/recon/octree_codes.rs): a leaf is its first
+// sample index (word `begin`), then 16-bit codes from half 2 (begin + 1), two to a word: each
+// adds itself to the running index, and names a sample unless it is the jump 0xFFFF. Code c's
+// address does not depend on the codes before it, so the loads of a loop overlap.
+uint code_half(uint h) {
+    return bitfieldExtract(imageLoad(indices, int(h >> 1u)).x, int((h & 1u) << 4u), 16);
+}
+
 // M d for sample i's support metric (MLS_FULL_METRIC 0: diagonal metrics only, and the third
 // texel is never read).
 vec3 metric_apply(int i, vec3 d) {
@@ -265,9 +273,16 @@ void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float
     uvec3 leaf = octree_leaf(x);
     vec3 scale = vec3(uintBitsToFloat(leaf.z));
     s.inv_h = scale;
-    uint r = leaf.x;
-    for (; r < leaf.x + leaf.y; ++r) {
-        int i = int(imageLoad(indices, int(r)).x);
+    uint h = 2u * (leaf.x + 1u);
+    uint prev = leaf.y > 0u ? imageLoad(indices, int(leaf.x)).x : 0u;
+    uint r = 0u;
+    for (; r < leaf.y; ++r) {
+        uint code = code_half(h + r);
+        prev += code;
+        if (code == 0xFFFFu) {
+            continue;
+        }
+        int i = int(prev);
         vec4 pos_value = imageLoad(samples, 3 * i);
         vec3 d = pos_value.xyz - x;
         vec3 md = metric_apply(i, d);
@@ -280,7 +295,7 @@ void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float
             }
         }
     }
-    if (r < leaf.x + leaf.y) {
+    if (r < leaf.y) {
         g_loop_cut = true;
     }
 }
@@ -320,9 +335,16 @@ MlsResult gaussian_evaluate(vec3 x) {
     }
 #else
     uvec3 leaf = octree_leaf(x);
-    uint r = leaf.x;
-    for (; r < leaf.x + leaf.y; ++r) {
-        int i = int(imageLoad(indices, int(r)).x);
+    uint h = 2u * (leaf.x + 1u);
+    uint prev = leaf.y > 0u ? imageLoad(indices, int(leaf.x)).x : 0u;
+    uint r = 0u;
+    for (; r < leaf.y; ++r) {
+        uint code = code_half(h + r);
+        prev += code;
+        if (code == 0xFFFFu) {
+            continue;
+        }
+        int i = int(prev);
         vec4 pos_value = imageLoad(samples, 3 * i);
         vec3 d = pos_value.xyz - x;
         vec3 md = metric_apply(i, d);
@@ -335,7 +357,7 @@ MlsResult gaussian_evaluate(vec3 x) {
             ++count;
         }
     }
-    if (r < leaf.x + leaf.y) {
+    if (r < leaf.y) {
         g_loop_cut = true;
     }
 #endif

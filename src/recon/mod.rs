@@ -6,6 +6,7 @@
 pub mod gaussian;
 pub mod mls;
 pub mod octree;
+pub mod octree_codes;
 pub mod resample;
 pub mod support_index;
 
@@ -65,11 +66,13 @@ pub enum ReconError {
     #[error("octree: no samples to index")]
     Empty,
     #[error(
-        "octree: {refs} sample references exceed the limit of {limit}; raise octree.leaf_size or octree.leaf_budget, or lower reconstruction.support"
+        "octree: {refs} sample references ({words} words of codes) exceed the limit of {limit} \
+         words (octree.max_references, at most the device's maxTexelBufferElements); raise \
+         octree.leaf_size or octree.leaf_budget, or lower reconstruction.support"
     )]
-    TooManyReferences { refs: u64, limit: u64 },
+    TooManyReferences { refs: u64, words: u64, limit: u64 },
     #[error(
-        "octree: a leaf holds {refs} sample references, more than {limit} (every MLS evaluation \
+        "octree: a leaf holds {refs} sample references (or codes), more than {limit} (every MLS evaluation \
          loops over its leaf; devices such as lavapipe cut loops past 65 535 iterations): raise \
          octree.max_depth, or lower octree.leaf_budget or octree.leaf_size"
     )]

@@ -5,9 +5,10 @@
 //! GPU layout (twin: `octree_leaf` in `glsl/include/neighbours.glsl`): `nodes[i] =
 //! (child, begin, count, scale)`; `child = 0` marks a leaf (the root is node 0 and never a
 //! child), otherwise the node's 8 children are `child..child+8` in octant order
-//! `x | y<<1 | z<<2` (bit set = upper half). A leaf's samples are
-//! `indices[begin..begin+count]`; `scale` holds the f32 bits of 1 / the leaf's mean support
-//! radius, the basis scale of every evaluation inside the leaf ([`Neighbours::basis_scale`]).
+//! `x | y<<1 | z<<2` (bit set = upper half). A leaf's samples are `count` codes from word
+//! `begin` of `codes` ([`super::octree_codes`]: 16-bit gaps, two to a word); `scale` holds the
+//! f32 bits of 1 / the leaf's mean support radius, the basis scale of every evaluation inside
+//! the leaf ([`Neighbours::basis_scale`]).
 //!
 //! Subdivision ([OCT]): a node is split while it holds more than `leaf_budget` references, its
 //! side exceeds `leaf_size` × the mean support radius of its samples, and it is shallower than
@@ -24,6 +25,7 @@
 
 use super::ReconError;
 use super::mls::{Neighbours, Visit};
+use super::octree_codes::{self, LeafCodes};
 use crate::samples::{Metric, SampleSet, metric_apply, metric_rho2, supports};
 use rayon::prelude::*;
 
@@ -45,7 +47,8 @@ pub struct OctreeSettings {
     pub max_depth: u32,
     /// Never split a node whose side is below this fraction of its mean support radius.
     pub leaf_size: f64,
-    /// Largest number of references (the index buffer's length).
+    /// Largest length of the reference buffer, in 32-bit words (two references to a word,
+    /// [`super::octree_codes`]; the name is the scene key's).
     pub max_references: u64,
 }
 
@@ -55,10 +58,10 @@ impl Default for OctreeSettings {
             leaf_budget: 16,
             max_depth: 12,
             leaf_size: 0.6,
-            // 2^27 references (512 MiB of u32): lavapipe's maxTexelBufferElements. Kernels read
-            // the indices through an r32ui texel view (binding::kind), so one storage
-            // binding's 128 MiB no longer bounds them (it refused 10⁶ scattered points, 33.5 M
-            // references); `Scene::field_on` lowers this to the device's own view limit.
+            // 2^27 words (512 MiB, about 2^28 references): lavapipe's maxTexelBufferElements.
+            // Kernels read the codes through an r32ui texel view (binding::kind), so one
+            // storage binding's 128 MiB does not bound them (it refused 10⁶ scattered points,
+            // 33.5 M references); `Scene::field_on` lowers this to the device's own view limit.
             max_references: 1 << 27,
         }
     }
@@ -73,7 +76,7 @@ pub struct OctreeStats {
     /// References per sample.
     pub redundancy: f64,
     pub depth: u32,
-    /// Bytes of nodes + indices + samples as uploaded.
+    /// Bytes of nodes + reference codes + samples as uploaded.
     pub bytes: u64,
     pub build_ms: f64,
 }
@@ -86,13 +89,20 @@ pub struct OctreeStats {
 /// than the supports or at `max_depth`.
 pub const MAX_LEAF_REFERENCES: usize = 4096;
 
+/// Most codes one leaf may hold ([`super::octree_codes`]: its references and the jumps over
+/// index gaps of 65 535 or more), for the same loop limit.
+pub const MAX_LEAF_CODES: usize = 16_384;
+
 /// The flattened octree plus its samples.
 #[derive(Debug, Clone)]
 pub struct Octree {
     pub root_center: [f64; 3],
     pub root_half: f64,
     pub nodes: Vec<[u32; 4]>,
-    pub indices: Vec<u32>,
+    /// Every leaf's sample indices, coded ([`super::octree_codes`]).
+    pub codes: Vec<u32>,
+    /// References over all leaves.
+    pub references: usize,
     pub samples: Vec<SamplePoint>,
     pub build_ms: f64,
 }
@@ -243,6 +253,7 @@ impl Octree {
         }
         let n = u32::try_from(samples.len()).map_err(|_| ReconError::TooManyReferences {
             refs: samples.len() as u64,
+            words: samples.len() as u64,
             limit: u64::from(u32::MAX),
         })?;
         let extent: Vec<[f64; 3]> = samples
@@ -281,31 +292,39 @@ impl Octree {
         let built = prepared.build((0..n).collect(), root_center, root_half, 0);
         progress(0.9);
         let mut nodes = vec![[0u32; 4]];
-        let mut indices = Vec::new();
-        flatten(&built, 0, &mut nodes, &mut indices, settings.max_references)?;
+        let mut codes = Vec::new();
+        let mut references = 0;
+        flatten(
+            &built,
+            0,
+            &mut nodes,
+            (&mut codes, &mut references),
+            settings.max_references,
+        )?;
         progress(1.0);
         Ok(Self {
             root_center,
             root_half,
             nodes,
-            indices,
+            codes,
+            references,
             samples,
             build_ms: start.elapsed().as_secs_f64() * 1e3,
         })
     }
 
-    /// The leaf containing x: (reference list, basis scale); empty outside the root cube.
-    pub fn leaf(&self, x: [f64; 3]) -> (&[u32], f64) {
+    /// The leaf containing x: (its sample indices, basis scale); empty outside the root cube.
+    pub fn leaf(&self, x: [f64; 3]) -> (LeafCodes<'_>, f64) {
         let mut center = self.root_center;
         let mut half = self.root_half;
         if (0..3).any(|a| (x[a] - center[a]).abs() > half) {
-            return (&[], 0.0);
+            return (LeafCodes::empty(), 0.0);
         }
         let mut node = 0usize;
         loop {
             let [child, begin, count, scale] = self.nodes[node];
             if child == 0 {
-                let list = &self.indices[begin as usize..(begin + count) as usize];
+                let list = LeafCodes::new(&self.codes, begin, count);
                 return (list, f64::from(f32::from_bits(scale)));
             }
             half *= 0.5;
@@ -341,11 +360,11 @@ impl Octree {
         OctreeStats {
             nodes: self.nodes.len(),
             leaves: self.nodes.iter().filter(|n| n[0] == 0).count(),
-            references: self.indices.len(),
-            redundancy: self.indices.len() as f64 / self.samples.len().max(1) as f64,
+            references: self.references,
+            redundancy: self.references as f64 / self.samples.len().max(1) as f64,
             depth: self.depth(),
             bytes: self.nodes.len() as u64 * 16
-                + self.indices.len() as u64 * 4
+                + self.codes.len() as u64 * 4
                 + self.samples.len() as u64 * sample_bytes,
             build_ms: self.build_ms,
         }
@@ -357,34 +376,41 @@ fn flatten(
     built: &Built,
     at: usize,
     nodes: &mut Vec<[u32; 4]>,
-    indices: &mut Vec<u32>,
-    max_references: u64,
+    (codes, references): (&mut Vec<u32>, &mut usize),
+    max_words: u64,
 ) -> Result<(), ReconError> {
     match built {
         Built::Leaf { members, scale } => {
-            let begin = indices.len();
             if members.len() > MAX_LEAF_REFERENCES {
                 return Err(ReconError::LeafTooLarge {
                     refs: members.len(),
                     limit: MAX_LEAF_REFERENCES,
                 });
             }
-            let refs = (begin + members.len()) as u64;
-            if refs > max_references {
-                return Err(ReconError::TooManyReferences {
-                    refs,
-                    limit: max_references,
+            let (begin, count) = octree_codes::encode(members, codes);
+            if count > MAX_LEAF_CODES {
+                return Err(ReconError::LeafTooLarge {
+                    refs: count,
+                    limit: MAX_LEAF_CODES,
                 });
             }
-            nodes[at] = [0, begin as u32, members.len() as u32, scale.to_bits()];
-            indices.extend_from_slice(members);
+            let words = codes.len() as u64;
+            if words > max_words {
+                return Err(ReconError::TooManyReferences {
+                    refs: (*references + members.len()) as u64,
+                    words,
+                    limit: max_words,
+                });
+            }
+            *references += members.len();
+            nodes[at] = [0, begin as u32, count as u32, scale.to_bits()];
         }
         Built::Inner(children) => {
             let child = nodes.len();
             nodes[at] = [child as u32, 0, 0, 0];
             nodes.extend(std::iter::repeat_n([0u32; 4], 8));
             for (o, c) in children.iter().enumerate() {
-                flatten(c, child + o, nodes, indices, max_references)?;
+                flatten(c, child + o, nodes, (codes, references), max_words)?;
             }
         }
     }
@@ -397,7 +423,7 @@ impl Neighbours for Octree {
     }
 
     fn for_each(&self, x: [f64; 3], visit: &mut Visit<'_>) {
-        for &i in self.leaf(x).0 {
+        for i in self.leaf(x).0 {
             let s = &self.samples[i as usize];
             visit(i as usize, s.position, s.value, &s.metric);
         }

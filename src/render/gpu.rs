@@ -534,7 +534,7 @@ impl GpuField {
                 let octree = [
                     Buffer::from_slice_as(ctx, "octree samples", &samples, texel)?,
                     Buffer::from_slice_as(ctx, "octree nodes", &o.nodes, texel)?,
-                    Buffer::from_slice_as(ctx, "octree indices", &o.indices, texel)?,
+                    Buffer::from_slice_as(ctx, "octree reference codes", &o.codes, texel)?,
                 ];
                 // The fast path's fine grid over the lattice, through the octree.
                 let [s, n, i] = &octree;

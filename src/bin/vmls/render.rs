@@ -207,7 +207,7 @@ pub fn run_render(
             "table_lengths_world": tables.map(|t| t.lengths.clone()),
             "table_resolution": tables.map(|t| t.resolution),
             "octree_nodes": field.octree_if_built().map(|o| o.nodes.len()),
-            "octree_references": field.octree_if_built().map(|o| o.indices.len()),
+            "octree_references": field.octree_if_built().map(|o| o.references),
             "octree": field.octree_if_built().map(|o| octree_json(&o.stats(std::mem::size_of::<vmls::gpu_types::Sample>() as u64))),
             "data": {
                 "kind": field.samples.provenance.kind,
