@@ -119,13 +119,16 @@ pub(super) fn store(dir: &Path, name: &str, key: u64, spirv: &[u32]) {
     words.extend_from_slice(spirv);
     let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
     let target = path(dir, name, key);
+    // One temporary per process and store: threads of one process may store the same key.
+    static STORES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
     let temp = dir.join(format!(
-        ".{}.{}.tmp",
+        ".{}.{}.{}.tmp",
         target
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default(),
-        std::process::id()
+        std::process::id(),
+        STORES.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
     ));
     let written = std::fs::create_dir_all(dir)
         .and_then(|()| std::fs::write(&temp, &bytes))
@@ -175,6 +178,20 @@ mod tests {
             .map(|e| e.expect("entry").file_name())
             .collect();
         assert_eq!(names.len(), 1, "{names:?}");
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn threads_storing_one_key_at_once_leave_one_valid_file() {
+        let d = dir("threads");
+        let spirv: Vec<u32> = std::iter::once(SPIRV_MAGIC).chain(0..50_000).collect();
+        std::thread::scope(|s| {
+            for _ in 0..8 {
+                s.spawn(|| store(&d, "raycast.comp", 9, &spirv));
+            }
+        });
+        assert_eq!(load(&d, "raycast.comp", 9).as_ref(), Some(&spirv));
+        assert_eq!(std::fs::read_dir(&d).expect("dir").count(), 1);
         let _ = std::fs::remove_dir_all(&d);
     }
 
