@@ -498,3 +498,26 @@ fn splatting_from_the_command_line() {
         (24, 16)
     );
 }
+
+#[cfg(unix)]
+#[test]
+fn the_cli_helper_fails_on_validation_messages_and_leak_reports() {
+    // What the library prints (vk::context): each must fail a CLI test whatever the status.
+    use std::os::unix::process::ExitStatusExt;
+    let run = |stderr: &str| {
+        let out = std::process::Output {
+            status: std::process::ExitStatus::from_raw(0),
+            stdout: Vec::new(),
+            stderr: stderr.as_bytes().to_vec(),
+        };
+        std::panic::catch_unwind(|| common::cli::assert_clean(&out)).is_err()
+    };
+    assert!(!run("vmls: wrote x.png\n"));
+    for line in [
+        "vmls: Vulkan validation error: VUID-vkCmdDispatch-None-02699\n",
+        "vmls: Vulkan validation warning: UNASSIGNED-BestPractices\n",
+        "vmls: leak report: 2 GPU allocation(s) still alive at shutdown\n",
+    ] {
+        assert!(run(line), "passed: {line}");
+    }
+}

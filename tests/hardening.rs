@@ -45,7 +45,9 @@ fn vmls_within(args: &[&str], limit: Duration) -> Output {
         }
         std::thread::sleep(Duration::from_millis(50));
     }
-    child.wait_with_output().expect("output")
+    let out = child.wait_with_output().expect("output");
+    common::cli::assert_clean(&out);
+    out
 }
 
 /// The names in `d`, sorted (hidden temporaries included).
@@ -621,7 +623,7 @@ fn out_of_memory_at_any_allocation_fails_cleanly_and_writes_nothing() {
     let d = dir("oom");
     let (png, stats) = (d.join("x.png"), d.join("stats.json"));
     let run = |env: &str, method: &str| {
-        Command::new(env!("CARGO_BIN_EXE_vmls"))
+        let out = Command::new(env!("CARGO_BIN_EXE_vmls"))
             .args(["render", "-o", s(&png), "--stats", s(&stats), "--set"])
             .arg(format!("render.method=\"{method}\""))
             .args(SMALL)
@@ -635,7 +637,9 @@ fn out_of_memory_at_any_allocation_fails_cleanly_and_writes_nothing() {
             .env_remove("VMLS_DEVICE")
             .env(vmls::vk::FAIL_ALLOCATIONS_VAR, env)
             .output()
-            .expect("run vmls")
+            .expect("run vmls");
+        common::cli::assert_clean(&out);
+        out
     };
     // The first allocation (the upload), early and late ones of the first frame.
     for method in ["fixed", "splat"] {

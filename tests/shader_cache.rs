@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::cli::{dir, s, small_render};
+use common::cli::{assert_clean, dir, s, small_render};
 use std::path::Path;
 use std::process::Command;
 
@@ -26,6 +26,7 @@ fn render(d: &Path, env: &[(&str, &Path)], off: bool) -> (u64, u64, Vec<u8>) {
         cmd.env("VMLS_SHADER_CACHE", "off");
     }
     let out = cmd.output().expect("run vmls");
+    assert_clean(&out);
     assert!(
         out.status.success(),
         "{}",

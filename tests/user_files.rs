@@ -86,13 +86,15 @@ fn bench_refuses_outputs_that_are_its_inputs() {
 }
 
 fn render_with_dump(dump: &Path, png: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vmls"))
+    let out = Command::new(env!("CARGO_BIN_EXE_vmls"))
         .args(small_render(png, &[]))
         .env("VMLS_VALIDATION", "1")
         .env("VMLS_SPIRV_DUMP", dump)
         .env_remove("VMLS_DEVICE")
         .output()
-        .expect("run vmls")
+        .expect("run vmls");
+    common::cli::assert_clean(&out);
+    out
 }
 
 #[cfg(unix)]
@@ -183,7 +185,9 @@ fn signal_a_long_render(d: &Path, signal: i32, extra: &[&str]) -> Output {
         }
         std::thread::sleep(Duration::from_millis(50));
     }
-    child.wait_with_output().expect("output")
+    let out = child.wait_with_output().expect("output");
+    common::cli::assert_clean(&out);
+    out
 }
 
 #[cfg(unix)]

@@ -3,13 +3,34 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+/// Runs `vmls` with validation on; fails the test on a validation message or a leak report
+/// in its stderr ([`assert_clean`]).
 pub fn vmls(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vmls"))
+    let out = Command::new(env!("CARGO_BIN_EXE_vmls"))
         .args(args)
         .env("VMLS_VALIDATION", "1")
         .env_remove("VMLS_DEVICE")
         .output()
-        .expect("run vmls")
+        .expect("run vmls");
+    assert_clean(&out);
+    out
+}
+
+/// What the library prints for a validation error or warning (`vk::context`'s messenger) and
+/// for GPU allocations alive at shutdown: a test that reads only the exit status would let
+/// them pass.
+const UNCLEAN: [&str; 3] = [
+    "Vulkan validation error",
+    "Vulkan validation warning",
+    "leak report",
+];
+
+/// Fails on a validation message or a leak report in a run's stderr, whatever its status.
+pub fn assert_clean(out: &Output) {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    if let Some(found) = UNCLEAN.iter().find(|u| stderr.contains(*u)) {
+        panic!("vmls printed a {found}:\n{stderr}");
+    }
 }
 
 pub fn dir(name: &str) -> PathBuf {
@@ -25,6 +46,7 @@ pub fn s(p: &Path) -> &str {
 
 /// Asserts failure with exactly one stderr line containing every `needle`, and no image.
 pub fn assert_fails(out: &Output, needles: &[&str], image: &Path) {
+    assert_clean(out);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(
         out.status.code(),
