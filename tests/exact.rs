@@ -141,7 +141,9 @@ fn gpu_exact_image_matches_the_cpu_reference() {
         .zip(&cpu)
         .flat_map(|(g, c)| (0..3).map(move |k| (f64::from(g[k]) - c.rgba[k]).abs()))
         .fold(0.0, f64::max);
-    assert!(worst < 2e-3, "largest pixel difference {worst:.2e}");
+    // Measured 1.5e-5 on lavapipe (f32 sin/cos of phases up to 12π along each ray).
+    eprintln!("exact field image, GPU vs CPU: {worst:.2e}");
+    assert!(worst < 5e-5, "largest pixel difference {worst:.2e}");
     assert!(image.variant.contains("exact"), "{}", image.variant);
 }
 

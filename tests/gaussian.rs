@@ -142,7 +142,9 @@ fn gpu_ray_casting_of_the_gaussian_field_matches_the_cpu_reference() {
         .flat_map(|(g, c)| (0..4).map(move |k| (f64::from(g[k]) - c.rgba[k]).abs()))
         .fold(0.0, f64::max);
     // As the MLS reference's GPU/CPU bound (tests/render.rs): f32 along ≈100 steps.
-    assert!(diff < 2e-3, "GPU vs CPU {diff:.2e}");
+    // Measured 1.6e-5 on lavapipe (f32 along ≈100 steps, each a sum of exp terms).
+    eprintln!("Gaussian field image, GPU vs CPU: {diff:.2e}");
+    assert!(diff < 5e-5, "GPU vs CPU {diff:.2e}");
     drop(renderer);
     finish(ctx);
 }

@@ -234,27 +234,41 @@ fn gpu_image_matches_cpu_reference() {
         let c = cpu_render(&s, &f);
         let diffs = pixel_differences(&g, &c);
         let max = diffs.iter().copied().fold(0.0, f64::max);
-        let loose = diffs.iter().filter(|d| **d > 2e-4).count();
-        let decisions = g
+        let same_steps: Vec<bool> = g
             .counts
             .iter()
             .zip(&c)
-            .filter(|(a, b)| **a != b.evaluations)
-            .count();
+            .map(|(a, b)| *a == b.evaluations)
+            .collect();
+        let decisions = same_steps.iter().filter(|s| !**s).count();
+        // Rays that took the same steps on both sides: only f32 rounding separates them.
+        let max_same = diffs
+            .iter()
+            .zip(&same_steps)
+            .filter(|(_, s)| **s)
+            .map(|(d, _)| *d)
+            .fold(0.0, f64::max);
         eprintln!(
-            "{extra:?}: max {max:.2e}, {loose} pixels > 2e-4, {decisions} rays with other step counts"
+            "{extra:?}: max {max:.2e}, {max_same:.2e} where the steps agree, {decisions} rays \
+             with other step counts"
+        );
+        // f32 vs f64 through ~100 compositing steps of a dense transfer function. Measured on
+        // lavapipe: 9.4e-7 to 7.6e-6 for every case here, adaptive included.
+        assert!(
+            max_same < 3e-5,
+            "{extra:?}: max pixel difference {max_same:.2e} on rays with equal steps"
         );
         if extra.iter().any(|e| e.contains("adaptive")) {
             // Accept/subdivide is a threshold decision: f32 and f64 may take a different
-            // branch on a few rays, which then differ by up to the integration tolerance.
+            // branch on a few rays (none measured here), which then differ by up to the
+            // integration tolerance.
             assert!(
-                loose <= diffs.len() / 10,
-                "{extra:?}: {loose} pixels differ by more than 2e-4"
+                decisions <= diffs.len() / 100,
+                "{extra:?}: {decisions} rays took other steps"
             );
-            assert!(max < 2e-2, "{extra:?}: max pixel difference {max:.2e}");
+            assert!(max < 2e-3, "{extra:?}: max pixel difference {max:.2e}");
         } else {
-            // f32 vs f64 through ~100 compositing steps of a dense transfer function.
-            assert!(max < 2e-4, "{extra:?}: max pixel difference {max:.2e}");
+            assert!(max < 3e-5, "{extra:?}: max pixel difference {max:.2e}");
             assert!(
                 decisions <= g.counts.len() / 50,
                 "{extra:?}: {decisions} rays took a different number of steps"

@@ -189,7 +189,9 @@ fn gpu_fast_path_images_match_the_cpu_twin_with_and_without_skipping() {
             let s = scene(&[&m, skip, "render.adaptive=\"hermite\"", "render.l_max=1"]);
             let b = both(&s);
             let w = worst(&b.gpu, &b.cpu);
-            assert!(w < 2e-3, "{method} {skip}: GPU vs CPU {w:.2e}");
+            // Measured 7.2e-6 (riemann) to 8.7e-6 (fixed) on lavapipe, skipping or not.
+            eprintln!("fast path {method} {skip}, GPU vs CPU: {w:.2e}");
+            assert!(w < 3e-5, "{method} {skip}: GPU vs CPU {w:.2e}");
             assert!(b.variant.contains("resample3"), "{}", b.variant);
             let skipping = skip.ends_with("true");
             assert_eq!(b.variant.contains("-skip"), skipping, "{}", b.variant);
@@ -356,7 +358,9 @@ fn auto_skipping_is_compiled_in_only_where_most_ray_length_is_empty() {
         "GPU {g:?} CPU {c:?}"
     );
     let w = worst(&b.gpu, &b.cpu);
-    assert!(w < 2e-3, "GPU vs CPU {w:.2e}");
+    // Measured 9.2e-6 on lavapipe.
+    eprintln!("fast path, thin transfer function, GPU vs CPU: {w:.2e}");
+    assert!(w < 3e-5, "GPU vs CPU {w:.2e}");
 }
 
 #[test]

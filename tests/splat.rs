@@ -251,6 +251,7 @@ fn gpu_splatting_matches_its_cpu_twin_on_a_grid() {
         let cpu = splat_image(&setup(&s, &field, shading), &field, &s.transfer).expect("CPU twin");
         let (gpu, report) = gpu_frame(&mut renderer, &s);
         let diff = max_diff(&gpu, &cpu.pixels);
+        eprintln!("GPU vs CPU, {name}: {diff:.2e}");
         assert!(diff < GPU_TOLERANCE, "{name}: GPU vs CPU {diff:.3e}");
         let c = report.counts;
         let k = cpu.counts;

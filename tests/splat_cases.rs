@@ -117,6 +117,7 @@ fn the_eye_inside_the_volume_renders_finite_images_on_the_gpu() {
         let shading = s.render.method.splat_shading().expect("splat");
         let cpu = splat_image(&setup(&s, &field, shading), &field, &s.transfer).expect("CPU twin");
         let diff = max_diff(&gpu, &cpu.pixels);
+        eprintln!("GPU vs CPU, near {method}: {diff:.2e}");
         assert!(diff < GPU_TOLERANCE, "{method}: GPU vs CPU {diff:.3e}");
     }
     drop(renderer);
@@ -135,6 +136,7 @@ fn irregular_data_splats_on_the_gpu_as_on_the_cpu() {
         let shading = s.render.method.splat_shading().expect("splat");
         let cpu = splat_image(&setup(&s, &field, shading), &field, &s.transfer).expect("CPU twin");
         let diff = max_diff(&gpu, &cpu.pixels);
+        eprintln!("GPU vs CPU, torus {method}: {diff:.2e}");
         assert!(diff < GPU_TOLERANCE, "{method}: GPU vs CPU {diff:.3e}");
         let covered = cpu.pixels.iter().filter(|p| p[3] > 0.05).count();
         assert!(covered > 50, "{method}: {covered} pixels show the torus");
@@ -183,6 +185,7 @@ fn splatting_defers_the_octree_and_ray_casting_builds_it() {
     let cpu =
         splat_image(&setup(&s, &eager, Shading::Post), &eager, &s.transfer).expect("CPU twin");
     let diff = max_diff(&gpu, &cpu.pixels);
+    eprintln!("GPU vs CPU, deferred: {diff:.2e}");
     assert!(
         diff < GPU_TOLERANCE,
         "deferred field, GPU vs the eager one's CPU twin {diff:.3e}"
@@ -431,6 +434,7 @@ fn a_new_camera_reuses_the_splatting_kernels_pipelines_and_buffers() {
     )
     .expect("CPU twin");
     let diff = max_diff(&image.pixels, &cpu.pixels);
+    eprintln!("GPU vs CPU, turned: {diff:.2e}");
     assert!(diff < GPU_TOLERANCE, "turned camera: GPU vs CPU {diff:.3e}");
     drop(renderer);
     finish(ctx);

@@ -63,8 +63,10 @@ pub fn gpu_frame(renderer: &mut Renderer, s: &Scene) -> (Vec<[f32; 4]>, SplatRep
 }
 
 /// f32 kernels against the f64 twin: footprints of ≈100 kernels per pixel, each rounded at
-/// ~1e-7 relative, through exp and erfc (A&S, the same polynomial on both sides).
-pub const GPU_TOLERANCE: f64 = 2e-3;
+/// ~1e-7 relative, through exp and erfc (A&S, the same polynomial on both sides). Measured on
+/// lavapipe: 1.2e-6 to 1.4e-6 pre-shaded, 4.3e-6 to 7.0e-6 post-shaded (largest: the
+/// isosurface); about 4× that, for devices whose exp rounds differently.
+pub const GPU_TOLERANCE: f64 = 3e-5;
 
 pub fn rmse(a: &[[f64; 4]], b: &[[f64; 4]]) -> f64 {
     let n = a.len() as f64 * 3.0;
