@@ -37,7 +37,7 @@ pub fn hard_cases() -> Vec<Case> {
         },
         Case {
             name: "tangent-rays",
-            about: "rays grazing a sphere isosurface: the silhouette covers the analytic disc",
+            about: "rays grazing a sphere isosurface: the analytic disc, at steps past its chords too",
             run: tangent_rays,
         },
         Case {
@@ -174,14 +174,16 @@ fn mls_singular(env: &Env<'_>) -> Result<Vec<Outcome>, BenchError> {
             "mls-singular",
             &format!("{name}: max |GPU − CPU| / range"),
             diff.0,
-            Bound::AtMost(2e-3),
+            // Measured: 1.9e-5 on lavapipe, 2.5e-5 on an NVIDIA H200 (the duplicates).
+            Bound::AtMost(1e-4),
             String::new(),
         ));
         out.push(Outcome::new(
             "mls-singular",
             &format!("{name}: fraction of points solving a different basis"),
             diff.2 as f64 / n as f64,
-            Bound::AtMost(0.01),
+            // Measured: none, on both devices.
+            Bound::AtMost(1e-3),
             String::new(),
         ));
         out.push(Outcome::new(
@@ -321,9 +323,11 @@ fn tangent_rays(env: &Env<'_>) -> Result<Vec<Outcome>, BenchError> {
     let size = if env.quick { 64 } else { 128 };
     let volume = super::grid_volume(33, |p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt());
     let (radius, distance, fov) = (0.6f64, 4.0f64, 24.0f64);
+    // The grid's spacing in world units: [-1, 1] over 32 cells.
+    let spacing = 2.0 / 32.0;
     let w = size.to_string();
-    let mut out = Vec::new();
-    for step in [1.0, 0.25] {
+    let mut covered = Vec::new();
+    for step in [0.25, 4.0, 16.0] {
         let step_set = format!("render.step={step}");
         let scene = env.scene(&[
             "transfer.points=[[0.0,0.0,0.0,0.0,0.0],[2.0,0.0,0.0,0.0,0.0]]",
@@ -336,16 +340,36 @@ fn tangent_rays(env: &Env<'_>) -> Result<Vec<Outcome>, BenchError> {
         ])?;
         let field = Field::new(volume.clone(), scene.reconstruction, &scene.octree, |_| {})?;
         let image = env.render(field, &scene)?;
-        let covered = image.pixels.iter().filter(|p| p[3] > 0.5).count() as f64;
-        let angle = (radius / distance).asin();
-        let r_px = angle.tan() / (fov.to_radians() / 2.0).tan() * size as f64 / 2.0;
-        let disc = std::f64::consts::PI * r_px * r_px;
+        let n = image.pixels.iter().filter(|p| p[3] > 0.5).count() as f64;
+        covered.push((step, n));
+    }
+    let angle = (radius / distance).asin();
+    let r_px = angle.tan() / (fov.to_radians() / 2.0).tan() * size as f64 / 2.0;
+    let disc = std::f64::consts::PI * r_px * r_px;
+    let (fine_step, fine) = covered[0];
+    // At a fine step the silhouette is the reconstruction's: linear MLS of |x| is biased
+    // outwards, so the disc shrinks (measured 1.2e-2 at 128², 4.2e-3 at 64², on lavapipe and
+    // on an NVIDIA H200).
+    let mut out = vec![Outcome::new(
+        "tangent-rays",
+        &format!("|covered − analytic disc| / disc, step {fine_step}"),
+        (fine - disc).abs() / disc,
+        Bound::AtMost(0.015),
+        format!("{fine} pixels covered, disc {disc:.1}"),
+    )];
+    // Long steps: a ray whose chord through the sphere is shorter than the step can have no
+    // knot inside it, so a test of the knots' values alone misses it. Those rays fill a ring of
+    // disc · (step / 2r)² pixels; the grazing crossings must still be found (measured: the same
+    // pixels as the fine step, at every step up to 16, on lavapipe).
+    for &(step, n) in &covered[1..] {
+        let half = step * spacing / 2.0;
+        let ring = disc * (half / radius).powi(2).min(1.0);
         out.push(Outcome::new(
             "tangent-rays",
-            &format!("|covered − analytic disc| / disc, step {step}"),
-            (covered - disc).abs() / disc,
-            Bound::AtMost(0.02),
-            format!("{covered} pixels covered, disc {disc:.1}"),
+            &format!("pixels covered at step {step} vs step {fine_step}"),
+            (n - fine).abs(),
+            Bound::AtMost(2.0),
+            format!("{n} against {fine}; a knot-only test could lose up to {ring:.0}"),
         ));
     }
     Ok(out)
@@ -367,7 +391,8 @@ fn eye_inside(env: &Env<'_>) -> Result<Vec<Outcome>, BenchError> {
         "eye-inside",
         "eye inside: RMSE of fixed step 0.5 vs the reference integrator",
         rmse(&image, &reference, scene.camera.width),
-        Bound::AtMost(0.02),
+        // The step's own error: 2.1e-3 measured on lavapipe and on an NVIDIA H200.
+        Bound::AtMost(5e-3),
         String::new(),
     ));
     // On a face and on a corner of the box [-1, 1]³, against the eye a hair outside.
@@ -385,7 +410,8 @@ fn eye_inside(env: &Env<'_>) -> Result<Vec<Outcome>, BenchError> {
             "eye-inside",
             &format!("eye on a {name}: RMSE vs the eye 1e-9 outside"),
             rmse(&at, &off, scene.camera.width),
-            Bound::AtMost(1e-3),
+            // Measured 0 on both devices: the nudge is below f32's resolution there.
+            Bound::AtMost(1e-5),
             String::new(),
         ));
     }
@@ -411,7 +437,8 @@ fn splat_eye_kernel(env: &Env<'_>) -> Result<Vec<Outcome>, BenchError> {
         "splat-eye-kernel",
         "RMSE vs the eye 1e-3 spacings away (and no non-finite pixel)",
         rmse(&a, &b, scene.camera.width),
-        Bound::AtMost(0.01),
+        // Measured 2.0e-5 on lavapipe and on an NVIDIA H200.
+        Bound::AtMost(1e-4),
         format!("{culled} kernels culled at the near plane"),
     )])
 }
