@@ -327,14 +327,20 @@ fn error_messages_quote_short_escaped_excerpts() {
 fn set_volume_file_without_a_scene_replaces_the_generator() {
     let d = dir("set-file");
     let png = d.join("x.png");
+    let stats = d.join("stats.json");
     let set = format!("volume.file={}", s(&data("legacy/image-42-binary.vtk")));
-    let out = render(&["-o", s(&png), "--set", &set]);
+    let out = render(&["-o", s(&png), "--stats", s(&stats), "--set", &set]);
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(image::open(&png).is_ok());
+    // The file's 3 × 4 × 2 points were rendered, not the generator's 41³.
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats")).expect("json");
+    assert_eq!(json["data"]["kind"], "regular grid", "{json}");
+    assert_eq!(json["data"]["samples"], 24, "{json}");
 }
 
 #[test]

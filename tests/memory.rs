@@ -6,7 +6,8 @@
 //! 16 384-query timestamp pool, host RSS grew by about 2.4 MB per frame inside the validation
 //! layer with synchronization validation on (Debian 12's 1.3.239; flat without it). Since the
 //! context reuses those objects (`vk::commands::SubmitObjects`) RSS is flat to the page with
-//! core and synchronization validation, which is what this test asserts.
+//! core and synchronization validation (measured: not one page of growth), which is what this
+//! test asserts, within 16 pages.
 
 mod common;
 
@@ -17,6 +18,9 @@ use vmls::vk::Context;
 /// RSS is the process's: the tests of this file take turns, so that one's warm-up (pipelines,
 /// tables) never lands in another's measurement.
 static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// Host RSS growth a run may show: 16 pages (measured: none at all).
+const RSS_SLACK: u64 = 16 * 4096;
 
 /// Resident set size of this process in bytes (Linux `/proc/self/statm`), or `None`.
 fn rss() -> Option<u64> {
@@ -74,9 +78,14 @@ fn a_thousand_frames_keep_memory_flat() {
         "gpu-allocator's bytes grew with the frame count"
     );
     if let (Some(a), Some(b)) = (rss0, rss1) {
-        // 900 frames: a leak of even 5 KiB per frame would show as 4.4 MiB.
+        eprintln!(
+            "host RSS over 900 frames: {a} -> {b} bytes ({:+})",
+            b as i64 - a as i64
+        );
+        // Measured +0 bytes (twice, release and debug builds); 16 pages leave room for an
+        // allocator's bookkeeping; a leak of 80 bytes a frame over 900 frames exceeds them.
         assert!(
-            b < a + (4 << 20),
+            b <= a + RSS_SLACK,
             "host RSS grew from {a} to {b} bytes over 900 frames"
         );
     }
@@ -102,8 +111,12 @@ fn the_general_path_and_splatting_keep_memory_flat() {
         assert_eq!(live1, live0, "{extra:?}: buffers grew with the frame count");
         assert_eq!(gpu1, gpu0, "{extra:?}: gpu-allocator's bytes grew");
         if let (Some(a), Some(b)) = (rss0, rss1) {
+            eprintln!(
+                "{extra:?}: host RSS over {frames} frames: {a} -> {b} bytes ({:+})",
+                b as i64 - a as i64
+            );
             assert!(
-                b < a + (4 << 20),
+                b <= a + RSS_SLACK,
                 "{extra:?}: host RSS grew from {a} to {b} bytes over {frames} frames"
             );
         }

@@ -362,13 +362,15 @@ fn post_shaded_sheets_converge_to_the_ray_cast_gaussian_field() {
     eprintln!(
         "post-shaded RMSE against the ray-cast Gaussian field, by sheet thickness: {errors:?}"
     );
+    // Measured on lavapipe: 8.5e-3, 2.2e-3, 6.5e-4, 2.3e-4: 2.9× to 3.9× per halving. Thinner sheets converge at about order 2: at
+    // least half the error per halving.
     for w in errors.windows(2) {
         assert!(
-            w[1].1 < w[0].1,
-            "error must fall as the sheets thin: {errors:?}"
+            w[1].1 <= 0.5 * w[0].1,
+            "error must halve as the sheets halve: {errors:?}"
         );
     }
-    assert!(errors[3].1 < 0.01, "finest sheets: {errors:?}");
+    assert!(errors[3].1 < 1e-3, "finest sheets: {errors:?}");
 }
 
 /// Width in pixels over which opacity rises from 10% to 90% of its plateau along row `y`,

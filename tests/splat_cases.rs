@@ -396,13 +396,15 @@ fn post_shaded_sheets_over_a_hull_converge_to_the_ray_cast_gaussian_field() {
     assert!(field.hull.is_some());
     let errors = sheet_convergence(&field, &common, &[1.0, 0.5, 0.25]);
     eprintln!("post-shaded over a hull, RMSE by sheet thickness: {errors:?}");
+    // Measured on lavapipe: 1.4e-2, 4.2e-3, 9.1e-4: 3.4× and 4.6× per halving. Thinner sheets converge at about order 2: at
+    // least half the error per halving.
     for w in errors.windows(2) {
         assert!(
-            w[1].1 < w[0].1,
-            "error must fall as the sheets thin: {errors:?}"
+            w[1].1 <= 0.5 * w[0].1,
+            "error must halve as the sheets halve: {errors:?}"
         );
     }
-    assert!(errors[2].1 < 0.02, "finest sheets: {errors:?}");
+    assert!(errors[2].1 < 3e-3, "finest sheets: {errors:?}");
 }
 
 #[test]
