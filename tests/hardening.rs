@@ -192,7 +192,8 @@ fn outputs_are_all_or_nothing() {
         std::fs::create_dir(&ro).expect("mkdir");
         std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o555)).expect("chmod");
         let probe = ro.join("probe");
-        // Root ignores directory permissions; the check means nothing then.
+        // Root ignores directory permissions, so as root this case is said to be skipped; the
+        // next one stops root too.
         if std::fs::write(&probe, b"").is_err() {
             let map = ro.join("map.png");
             assert_fails(
@@ -200,9 +201,22 @@ fn outputs_are_all_or_nothing() {
                 &["map.png"],
                 &png,
             );
+        } else {
+            eprintln!("outputs_are_all_or_nothing: running as root, the read-only case is skipped");
         }
         let _ = std::fs::remove_file(&probe);
     }
+    // A regular file where the eval map's directory should be: no temporary can be made there,
+    // for any user.
+    let blocker = d.join("blocker");
+    std::fs::write(&blocker, b"not a directory").expect("write");
+    let map = blocker.join("map.png");
+    assert_fails(
+        &render(&["-o", s(&png), "--eval-map", s(&map)]),
+        &["map.png"],
+        &png,
+    );
+    std::fs::remove_file(&blocker).expect("rm");
     assert_eq!(listing(&d), ["ro"], "{:?}", listing(&d));
 }
 

@@ -1,6 +1,6 @@
 //! The persistent renderer: a new camera reuses tables, pipeline and buffers and gives exactly
 //! the one-shot image; a new transfer function rebuilds only the tables, an isosurface only the
-//! pipeline, a new size only the buffers.
+//! pipeline, a new size only the buffers, and each of those frames equals a fresh renderer's.
 mod common;
 
 use common::*;
@@ -32,6 +32,11 @@ fn later_frames_rebuild_only_what_changed() {
     let frame = |r: &mut Renderer, s: &Scene, camera: &vmls::render::camera::Camera| {
         r.render(&s.view_with(camera), |_| {}).expect("frame")
     };
+    // The same view from a renderer that has drawn nothing before: what a reused one must equal.
+    let fresh = |s: &Scene, camera: &vmls::render::camera::Camera| {
+        let mut r = Renderer::new(&ctx, field.clone()).expect("renderer");
+        frame(&mut r, s, camera).0
+    };
     let (_, first) = frame(&mut renderer, &base, &base.camera);
     assert!(first.tables_built && first.pipeline_built && first.targets_allocated);
 
@@ -61,16 +66,20 @@ fn later_frames_rebuild_only_what_changed() {
 
     // A new transfer function: tables only.
     let tf = scene(&["transfer.points=[[0.0, 0.0, 0.0, 0.0, 0.0], [1.0, 1.0, 0.2, 0.1, 5.0]]"]);
-    let (_, third) = frame(&mut renderer, &tf, &turned);
+    let (image, third) = frame(&mut renderer, &tf, &turned);
     assert!(third.tables_built && !third.pipeline_built && !third.targets_allocated);
+    let once = fresh(&tf, &turned);
+    assert_eq!((image.pixels, image.counts), (once.pixels, once.counts));
 
     // An isosurface: a new variant, the same tables.
     let iso = scene(&[
         "transfer.points=[[0.0, 0.0, 0.0, 0.0, 0.0], [1.0, 1.0, 0.2, 0.1, 5.0]]",
         "transfer.isosurfaces=[{ value = 0.5, color = [1.0, 1.0, 1.0], opacity = 1.0 }]",
     ]);
-    let (_, fourth) = frame(&mut renderer, &iso, &turned);
+    let (image, fourth) = frame(&mut renderer, &iso, &turned);
     assert!(!fourth.tables_built && fourth.pipeline_built && !fourth.targets_allocated);
+    let once = fresh(&iso, &turned);
+    assert_eq!((image.pixels, image.counts), (once.pixels, once.counts));
 
     // A new image size: buffers only.
     let mut wide = turned;
@@ -78,6 +87,8 @@ fn later_frames_rebuild_only_what_changed() {
     let (image, fifth) = frame(&mut renderer, &iso, &wide);
     assert!(!fifth.tables_built && !fifth.pipeline_built && fifth.targets_allocated);
     assert_eq!(image.pixels.len(), 32 * 16);
+    let once = fresh(&iso, &wide);
+    assert_eq!((image.pixels, image.counts), (once.pixels, once.counts));
     drop(renderer);
     finish(ctx);
 }
