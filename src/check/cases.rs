@@ -109,11 +109,23 @@ fn value_scale(env: &Env<'_>) -> Result<Vec<Outcome>, BenchError> {
     Ok(out)
 }
 
-/// A field of scattered points with values f, supports as a scene derives them.
+/// A field of scattered points with a linear function's values, supports as a scene derives
+/// them.
 fn point_field(env: &Env<'_>, points: Vec<[f64; 3]>, set: &[&str]) -> Result<Field, BenchError> {
+    point_field_of(env, points, set, |p| {
+        0.3 + 0.2 * p[0] - 0.1 * p[1] + 0.15 * p[2]
+    })
+}
+
+/// A field of scattered points with values f, supports as a scene derives them.
+pub(super) fn point_field_of(
+    env: &Env<'_>,
+    points: Vec<[f64; 3]>,
+    set: &[&str],
+    f: impl Fn([f64; 3]) -> f64,
+) -> Result<Field, BenchError> {
     let scene = env.scene(set)?;
-    let f = |p: &[f64; 3]| (0.3 + 0.2 * p[0] - 0.1 * p[1] + 0.15 * p[2]) as f32;
-    let values = points.iter().map(f).collect();
+    let values = points.iter().map(|p| f(*p) as f32).collect();
     let dataset = Dataset {
         geometry: Geometry::Points { points },
         arrays: vec![DataArray {
