@@ -3,6 +3,9 @@
 //! Errors print one line (`vmls: error: …`, with the cause chain) and exit with status 1; usage
 //! errors exit with clap's status 2. Progress bars appear only when stderr is a terminal.
 
+#![deny(unsafe_code)]
+#![deny(clippy::unwrap_used, clippy::expect_used)]
+
 mod bench;
 mod check;
 mod compare;
