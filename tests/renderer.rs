@@ -154,3 +154,47 @@ fn a_stop_request_ends_frames_of_both_methods_and_the_renderer_goes_on() {
     }
     finish(ctx);
 }
+
+/// The context's pipeline cache (issue 28 §2): readable after a frame, with a header naming
+/// this device; loadable into a new context, whose frame is the same; data of another device
+/// (a changed pipelineCacheUUID) or none at all is ignored and says so.
+#[test]
+fn the_pipeline_cache_reads_back_and_loads_into_a_new_context() {
+    let s = scene(&[]);
+    let field = s.field(|_| {}).expect("field");
+    let frame = |ctx: &vmls::vk::Context| {
+        let mut r = Renderer::new(ctx, field.clone()).expect("renderer");
+        r.render(&s.view(), |_| {}).expect("frame").0
+    };
+    let (first, _) = gpu();
+    let image = frame(&first);
+    let data = first.pipeline_cache_data().expect("cache data");
+    let info = first.info().clone();
+    finish(first);
+    assert!(data.len() >= 32, "{} bytes", data.len());
+    assert_eq!(u32::from_le_bytes([data[0], data[1], data[2], data[3]]), 32);
+    assert_eq!(
+        u32::from_le_bytes([data[8], data[9], data[10], data[11]]),
+        info.vendor_id
+    );
+    assert_eq!(&data[16..32], &info.pipeline_cache_uuid[..]);
+
+    let (second, _) = gpu();
+    assert!(second.load_pipeline_cache(&data).expect("load"));
+    let mut other = data.clone();
+    other[20] ^= 0xFF;
+    assert!(
+        !second
+            .load_pipeline_cache(&other)
+            .expect("another device's")
+    );
+    assert!(!second.load_pipeline_cache(&[]).expect("nothing"));
+    assert!(
+        !second
+            .load_pipeline_cache(&data[..31])
+            .expect("a cut header")
+    );
+    let again = frame(&second);
+    assert_eq!(again.pixels, image.pixels);
+    finish(second);
+}

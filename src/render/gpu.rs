@@ -733,6 +733,9 @@ mod tests {
             subgroup_size: 8,
             subgroup_ops: true,
             storage_texel_formats: crate::vk::TEXEL_FORMATS.to_vec(),
+            vendor_id: 0x10005,
+            device_id: 0,
+            pipeline_cache_uuid: [0; 16],
         }
     }
 

@@ -56,6 +56,10 @@ pub struct DeviceInfo {
     /// The texel-view formats vmls binds (`BindingKind::texel`) that this device supports as
     /// storage texel buffers; a view of any other is refused naming its buffer.
     pub storage_texel_formats: Vec<vk::Format>,
+    /// What a pipeline cache's header must name to be loaded here (`pipeline_cache`).
+    pub vendor_id: u32,
+    pub device_id: u32,
+    pub pipeline_cache_uuid: [u8; 16],
 }
 
 /// Handles of a Vulkan device created by the embedding application.
@@ -93,6 +97,9 @@ pub(crate) struct Shared {
     allocations_before_fault: std::sync::atomic::AtomicU64,
     /// Finished submissions' command pools, fences and query pools, reused by the next ones.
     spare_submits: Mutex<Vec<SubmitObjects>>,
+    /// Every pipeline's cache (`pipeline_cache`), and the lock its merges take.
+    pub(crate) pipeline_cache: vk::PipelineCache,
+    pub(crate) pipeline_cache_merge: Mutex<()>,
     messenger: Option<Messenger>,
     validation: Box<ValidationState>,
     owns_device: bool,
@@ -385,6 +392,9 @@ fn device_info(
         .collect();
     DeviceInfo {
         storage_texel_formats,
+        vendor_id: props.vendor_id,
+        device_id: props.device_id,
+        pipeline_cache_uuid: props.pipeline_cache_uuid,
         name: props
             .device_name_as_c_str()
             .map(|n| n.to_string_lossy().into_owned())
@@ -577,6 +587,7 @@ impl Context {
         };
         let debug_names =
             debug_names.then(|| ash::ext::debug_utils::Device::new(&instance, &device));
+        let pipeline_cache = super::pipeline_cache::create(&device);
         Ok(Self {
             shared: Arc::new(Shared {
                 instance,
@@ -591,6 +602,8 @@ impl Context {
                 allocator: ManuallyDrop::new(Mutex::new(allocator)),
                 allocations_before_fault: std::sync::atomic::AtomicU64::new(u64::MAX),
                 spare_submits: Mutex::new(Vec::new()),
+                pipeline_cache,
+                pipeline_cache_merge: Mutex::new(()),
                 messenger,
                 validation,
                 owns_device,
@@ -738,6 +751,9 @@ impl Drop for Shared {
             for objects in spares {
                 objects.destroy(&self.device);
             }
+            // Ours on any device, the application's too; null is a no-op.
+            self.device
+                .destroy_pipeline_cache(self.pipeline_cache, None);
             ManuallyDrop::drop(&mut self.allocator);
             if self.owns_device {
                 self.device.destroy_device(None);

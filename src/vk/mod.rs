@@ -15,6 +15,7 @@ mod buffer;
 mod commands;
 mod context;
 mod pipeline;
+mod pipeline_cache;
 mod shader;
 mod shader_cache;
 

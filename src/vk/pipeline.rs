@@ -169,8 +169,9 @@ impl ComputePipeline {
             .stage(stage)
             .layout(layout)];
         // SAFETY: the module and layout are live; the module may be destroyed after creation.
+        // The cache is this device's (or null), created without external synchronisation.
         let created =
-            unsafe { device.create_compute_pipelines(vk::PipelineCache::null(), &info, None) };
+            unsafe { device.create_compute_pipelines(ctx.shared.pipeline_cache, &info, None) };
         // SAFETY: pipelines keep no reference to their shader module.
         unsafe { device.destroy_shader_module(module, None) };
         let pipeline = match created {
