@@ -83,9 +83,18 @@ pub(super) fn path(dir: &Path, name: &str, key: u64) -> PathBuf {
     dir.join(format!("{stem}-{key:016x}.spv"))
 }
 
+/// Largest file read: a kernel's SPIR-V is well under 1 MiB, and a bigger file under our name
+/// is not ours.
+const MAX_FILE_BYTES: u64 = 16 << 20;
+
 /// The SPIR-V stored for `key`, if a valid file holds it.
 pub(super) fn load(dir: &Path, name: &str, key: u64) -> Option<Vec<u32>> {
-    let bytes = std::fs::read(path(dir, name, key)).ok()?;
+    let file = path(dir, name, key);
+    let meta = std::fs::metadata(&file).ok()?;
+    if !meta.is_file() || meta.len() > MAX_FILE_BYTES {
+        return None;
+    }
+    let bytes = std::fs::read(&file).ok()?;
     if bytes.len() % 4 != 0 || bytes.len() < 4 * (HEADER_WORDS + 1) {
         return None;
     }
@@ -192,6 +201,18 @@ mod tests {
         });
         assert_eq!(load(&d, "raycast.comp", 9).as_ref(), Some(&spirv));
         assert_eq!(std::fs::read_dir(&d).expect("dir").count(), 1);
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn oversized_files_and_directories_under_a_kernel_name_are_misses() {
+        let d = dir("odd");
+        std::fs::create_dir_all(path(&d, "raycast.comp", 5)).expect("a directory in its place");
+        assert_eq!(load(&d, "raycast.comp", 5), None);
+        let big = std::fs::File::create(path(&d, "raycast.comp", 6)).expect("create");
+        big.set_len(MAX_FILE_BYTES + 4)
+            .expect("a sparse file past the cap");
+        assert_eq!(load(&d, "raycast.comp", 6), None);
         let _ = std::fs::remove_dir_all(&d);
     }
 
