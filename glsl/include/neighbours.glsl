@@ -253,8 +253,16 @@ uvec3 octree_leaf(vec3 x) {
 // sample index (word `begin`), then 16-bit codes from half 2 (begin + 1), two to a word: each
 // adds itself to the running index, and names a sample unless it is the jump 0xFFFF. Code c's
 // address does not depend on the codes before it, so the loads of a loop overlap.
-uint code_half(uint h) {
-    return bitfieldExtract(imageLoad(indices, int(h >> 1u)).x, int((h & 1u) << 4u), 16);
+uint leaf_first(uvec3 leaf) {
+    return leaf.y > 0u ? imageLoad(indices, int(leaf.x)).x : 0u;
+}
+
+// Adds code r of `leaf` to the running index `prev`; false for a jump (no sample).
+bool leaf_code(uvec3 leaf, uint r, inout uint prev) {
+    uint h = 2u * (leaf.x + 1u) + r;
+    uint code = bitfieldExtract(imageLoad(indices, int(h >> 1u)).x, int((h & 1u) << 4u), 16);
+    prev += code;
+    return code != 0xFFFFu;
 }
 
 // M d for sample i's support metric (MLS_FULL_METRIC 0: diagonal metrics only, and the third
@@ -273,13 +281,10 @@ void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float
     uvec3 leaf = octree_leaf(x);
     vec3 scale = vec3(uintBitsToFloat(leaf.z));
     s.inv_h = scale;
-    uint h = 2u * (leaf.x + 1u);
-    uint prev = leaf.y > 0u ? imageLoad(indices, int(leaf.x)).x : 0u;
+    uint prev = leaf_first(leaf);
     uint r = 0u;
     for (; r < leaf.y; ++r) {
-        uint code = code_half(h + r);
-        prev += code;
-        if (code == 0xFFFFu) {
+        if (!leaf_code(leaf, r, prev)) {
             continue;
         }
         int i = int(prev);
@@ -335,13 +340,10 @@ MlsResult gaussian_evaluate(vec3 x) {
     }
 #else
     uvec3 leaf = octree_leaf(x);
-    uint h = 2u * (leaf.x + 1u);
-    uint prev = leaf.y > 0u ? imageLoad(indices, int(leaf.x)).x : 0u;
+    uint prev = leaf_first(leaf);
     uint r = 0u;
     for (; r < leaf.y; ++r) {
-        uint code = code_half(h + r);
-        prev += code;
-        if (code == 0xFFFFu) {
+        if (!leaf_code(leaf, r, prev)) {
             continue;
         }
         int i = int(prev);

@@ -138,6 +138,7 @@ pub fn run_render(
         {
             o.insert("build_gpu_ms".into(), renderer.fast_path_build_ms().into());
         }
+        let shaders = vmls::vk::shader_counts();
         let value = serde_json::json!({
             "device": ctx.info().name,
             "device_type": ctx.info().device_type,
@@ -145,8 +146,8 @@ pub fn run_render(
             "variant": image.variant,
             // Kernel variants compiled by shaderc and read from the disk cache (shader_cache).
             "shaders": {
-                "compiled": vmls::vk::shader_counts().0,
-                "from_disk_cache": vmls::vk::shader_counts().1,
+                "compiled": shaders.0,
+                "from_disk_cache": shaders.1,
             },
             "width": scene.camera.width,
             "height": scene.camera.height,
