@@ -3,9 +3,9 @@
 //! array is sampled, merged duplicates, inverted cells), support statistics and the octree.
 
 use crate::data::dataset::{Dataset, Geometry};
+use crate::field::{Field, RenderError};
 use crate::gpu_types::Sample;
 use crate::recon::{OctreeSettings, Reconstruction};
-use crate::render::{Field, RenderError};
 use crate::samples::{Domain, SampleSet, SampleSettings, metric_rho2, supports};
 use std::collections::BTreeMap;
 use std::fmt::Write;

@@ -8,11 +8,17 @@
 //! - [`data`]: loaders and generators producing a [`data::Volume`].
 //! - [`samples`]: the sample set every input becomes (positions, values, supports, domain).
 //! - [`recon`]: MLS reconstruction (f64 CPU reference) and the redundant octree [OCT].
-//! - [`render`]: cameras, transfer functions, the ray-casting integrator (CPU reference) and the
-//!   GPU renderer that drives the kernels in `glsl/`.
+//! - [`view`]: how a field is looked at: camera, transfer function, shading, settings, `View`.
+//! - [`field`]: the reconstructed field as both renderers see it, and its GPU form.
+//! - [`raycast`]: MLS ray casting with preintegration (CPU twins and the GPU driver).
 //! - [`splat`]: EWA volume splatting, pre- and post-shaded ([BLUR]'s sheets), drawn as a tile
-//!   rasterizer (CPU twins and the GPU driver).
+//!   rasterizer (CPU twins and the GPU driver). `raycast` and `splat` are peers: each imports
+//!   `field` and `view`, never the other.
+//! - [`renderer`]: the persistent [`renderer::Renderer`], the one place that knows both methods.
 //! - [`scene`]: the TOML scene contract.
+//!
+//! With the `cli` feature (on by default) also the command-line program's modules: image files
+//! and plots (`output`), `bench`, `check`, `probe` and `info`.
 
 // The house rules (issue 28): `unsafe` only in the Vulkan layer, and no unwrap/expect on
 // anything a user or a driver can influence (unit tests may).
@@ -20,17 +26,26 @@
 #![deny(clippy::unwrap_used, clippy::expect_used)]
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used))]
 
+#[cfg(feature = "cli")]
 pub mod bench;
+#[cfg(feature = "cli")]
 pub mod check;
 pub mod data;
+pub mod field;
 pub mod files;
 pub mod gpu_types;
+#[cfg(feature = "cli")]
 pub mod info;
+#[cfg(feature = "cli")]
+pub mod output;
+#[cfg(feature = "cli")]
 pub mod probe;
+pub mod raycast;
 pub mod recon;
-pub mod render;
+pub mod renderer;
 pub mod samples;
 pub mod scene;
 pub mod splat;
+pub mod view;
 #[allow(unsafe_code)]
 pub mod vk;

@@ -6,9 +6,10 @@
 //! `probe_memory` measures the two other ceilings a kernel may meet: random 32-bit gathers per
 //! second (through a storage buffer and through a texel-buffer view) and streaming bandwidth.
 
+pub use crate::data::random::Lcg;
+use crate::field::Field;
+use crate::field::gpu::{GpuField, evaluate};
 use crate::gpu_types::{CountPush, binding, binding_defines};
-use crate::render::Field;
-use crate::render::gpu::{GpuField, evaluate};
 use crate::vk::{
     BindGroup, Buffer, BufferUsage, ComputePipeline, Context, ShaderCompiler, ShaderSource, VkError,
 };
@@ -460,29 +461,6 @@ pub struct MlsProbe {
     pub gflops: f64,
 }
 
-/// A deterministic 64-bit linear congruential generator (Knuth's MMIX constants): reproducible
-/// point sets for probes, tests and benchmarks.
-#[derive(Debug, Clone)]
-pub struct Lcg(u64);
-
-impl Lcg {
-    pub fn new(seed: u64) -> Self {
-        Self(
-            seed.wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407),
-        )
-    }
-
-    /// Uniform in [0, 1).
-    pub fn next_f64(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
 /// Deterministic pseudo-random points inside the field's box (shrunk by `margin` per side).
 pub fn random_points(field: &Field, n: usize, margin: f64, seed: u64) -> Vec<[f64; 3]> {
     let (lo, hi) = field.bounds();
@@ -533,7 +511,7 @@ pub fn mls_probe(
         0.0
     };
     Ok(MlsProbe {
-        variant: crate::render::gpu::Variant::of(field).name("mls_eval"),
+        variant: crate::field::variant::Variant::of(field).name("mls_eval"),
         points: points.len(),
         gpu_ms: times,
         evaluations_per_s: rate,

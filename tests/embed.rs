@@ -8,9 +8,9 @@
 use ash::vk;
 use std::ffi::{CStr, c_void};
 use std::sync::atomic::{AtomicU32, Ordering};
+use vmls::field::Field;
+use vmls::field::gpu::{GpuField, evaluate};
 use vmls::recon::{Basis, GradientMode, OctreeSettings, Weight};
-use vmls::render::Field;
-use vmls::render::gpu::{GpuField, evaluate};
 use vmls::scene::{NeighbourMode, Reconstruction};
 use vmls::vk::{Context, RawContext, ShaderCompiler};
 

@@ -6,9 +6,9 @@ mod common;
 
 use common::*;
 use vmls::data::marschner_lobb::{rho, rho_gradient};
+use vmls::field::gpu::{GpuField, evaluate};
 use vmls::probe::random_points;
 use vmls::recon::{Basis, GradientMode, ReconMethod, Weight};
-use vmls::render::gpu::{GpuField, evaluate};
 use vmls::scene::{NeighbourMode, Scene};
 
 #[test]
@@ -72,7 +72,7 @@ fn exact_field_follows_a_moved_grid_on_both_twins() {
     r.method = ReconMethod::Exact;
     let mut volume = vmls::data::marschner_lobb::generate(9);
     volume.origin = volume.origin.map(|o| o + 1e3);
-    let field = vmls::render::Field::new(
+    let field = vmls::field::Field::new(
         volume.clone(),
         r,
         &vmls::recon::OctreeSettings::default(),
@@ -128,10 +128,10 @@ fn gpu_exact_image_matches_the_cpu_reference() {
     let scene = common::general_scene(&set.map(String::from));
     let field = scene.field(|_| {}).expect("field");
     let setup = scene.ray_setup(&field).expect("setup");
-    let cpu = vmls::render::raycast::raycast_image(&setup, &field, &scene.transfer, None)
-        .expect("CPU twin");
+    let cpu =
+        vmls::raycast::raycast_image(&setup, &field, &scene.transfer, None).expect("CPU twin");
     let (ctx, _compiler) = gpu();
-    let mut renderer = vmls::render::renderer::Renderer::new(&ctx, field).expect("renderer");
+    let mut renderer = vmls::renderer::Renderer::new(&ctx, field).expect("renderer");
     let image = common::splat::scene_frame(&mut renderer, &scene);
     drop(renderer);
     finish(ctx);

@@ -9,8 +9,8 @@
 
 mod common;
 
-use vmls::render::RenderError;
-use vmls::render::renderer::Renderer;
+use vmls::field::RenderError;
+use vmls::renderer::Renderer;
 use vmls::scene::Scene;
 use vmls::vk::{Context, VkError};
 

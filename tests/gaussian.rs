@@ -6,12 +6,12 @@ mod common;
 
 use common::*;
 use vmls::data::dataset::Geometry;
+use vmls::field::Field;
+use vmls::field::gpu::{GpuField, evaluate};
 use vmls::probe::Lcg;
+use vmls::raycast::raycast_image;
 use vmls::recon::{OctreeSettings, ReconMethod};
-use vmls::render::Field;
-use vmls::render::gpu::{GpuField, evaluate};
-use vmls::render::raycast::raycast_image;
-use vmls::render::renderer::Renderer;
+use vmls::renderer::Renderer;
 use vmls::scene::Scene;
 
 fn gaussian_scene(extra: &[&str]) -> Scene {

@@ -767,7 +767,7 @@ fn geometry_and_values_beyond_f32_or_without_volume_are_refused_by_name() {
 /// finite images that agree, and show the field where the transfer function makes it opaque.
 #[test]
 fn constant_fields_far_from_zero_render_finite_on_both_renderers() {
-    use vmls::render::renderer::Renderer;
+    use vmls::renderer::Renderer;
     use vmls::scene::Scene;
     let d = dir("constant");
     let (ctx, _) = common::gpu();
@@ -786,7 +786,7 @@ fn constant_fields_far_from_zero_render_finite_on_both_renderers() {
             let scene = Scene::load(None, &set).expect("scene");
             let field = scene.field(|_| {}).expect("field");
             let setup = scene.ray_setup(&field).expect("setup");
-            let cpu = vmls::render::raycast::raycast_frame(
+            let cpu = vmls::raycast::raycast_frame(
                 &setup,
                 &field,
                 &scene.transfer,

@@ -6,10 +6,11 @@ mod common;
 use common::*;
 use std::path::Path;
 use vmls::data::dataset::{DataArray, Dataset, Location};
+use vmls::field::Field;
+use vmls::raycast::build_tables;
+use vmls::raycast::{PixelResult, raycast_image};
 use vmls::recon::{Basis, GradientMode, OctreeSettings, Weight};
-use vmls::render::gpu::GpuImage;
-use vmls::render::raycast::{PixelResult, raycast_image};
-use vmls::render::{Field, build_tables};
+use vmls::renderer::GpuImage;
 use vmls::samples::{SampleSet, SampleSettings};
 use vmls::scene::{NeighbourMode, Scene};
 

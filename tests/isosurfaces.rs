@@ -4,9 +4,11 @@ mod common;
 
 use common::*;
 use vmls::data::Volume;
-use vmls::render::gpu::{GpuField, GpuImage, render};
-use vmls::render::raycast::{PixelResult, raycast_image};
-use vmls::render::{Field, build_tables};
+use vmls::field::Field;
+use vmls::field::gpu::GpuField;
+use vmls::raycast::build_tables;
+use vmls::raycast::{PixelResult, raycast_image};
+use vmls::renderer::{GpuImage, render};
 use vmls::scene::Scene;
 
 const METHODS: [&str; 6] = [

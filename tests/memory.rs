@@ -11,7 +11,7 @@
 
 mod common;
 
-use vmls::render::renderer::Renderer;
+use vmls::renderer::Renderer;
 use vmls::scene::Scene;
 use vmls::vk::Context;
 

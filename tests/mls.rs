@@ -4,12 +4,12 @@ mod common;
 use common::*;
 use vmls::data::Volume;
 
+use vmls::field::Field;
+use vmls::field::gpu::{GpuField, evaluate};
 use vmls::gpu_types::MlsOut;
 use vmls::probe::random_points;
 use vmls::recon::mls::{MlsSettings, mls_evaluate};
 use vmls::recon::{Basis, GradientMode, OctreeSettings, Weight};
-use vmls::render::Field;
-use vmls::render::gpu::{GpuField, evaluate};
 use vmls::scene::{NeighbourMode, Reconstruction};
 
 fn field_of(volume: Volume, r: Reconstruction) -> Field {

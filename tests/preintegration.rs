@@ -2,10 +2,10 @@
 //! Stated bound: every checked node within 1e-5 absolute of the reference (the target);
 //! the f32 storage of the tables alone contributes up to 6e-8.
 
-use vmls::render::preintegration::{
+use vmls::raycast::preintegration::{
     PreintegrationTables, direct_quadrature, remainder_levels, segment_integral, table_lengths,
 };
-use vmls::render::transfer::TransferFunction;
+use vmls::view::transfer::TransferFunction;
 
 fn default_tf() -> TransferFunction {
     TransferFunction::new(vec![
@@ -231,7 +231,8 @@ fn any_length_matches_direct_quadrature_to_table_accuracy() {
 
 #[test]
 fn tables_are_rebuilt_only_when_their_inputs_change() {
-    use vmls::render::{Field, TableCache};
+    use vmls::field::Field;
+    use vmls::raycast::TableCache;
     use vmls::scene::Scene;
     use vmls::scene::load_volume;
     let set = |extra: &[&str]| {

@@ -3,10 +3,12 @@
 mod common;
 
 use common::*;
-use vmls::render::gpu::{GpuField, GpuImage, render};
-use vmls::render::preintegration::PreintegrationTables;
-use vmls::render::raycast::{PixelResult, raycast_image};
-use vmls::render::{Field, build_tables};
+use vmls::field::Field;
+use vmls::field::gpu::GpuField;
+use vmls::raycast::build_tables;
+use vmls::raycast::preintegration::PreintegrationTables;
+use vmls::raycast::{PixelResult, raycast_image};
+use vmls::renderer::{GpuImage, render};
 use vmls::scene::Scene;
 use vmls::scene::load_volume;
 use vmls::vk::Context;

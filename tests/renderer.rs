@@ -4,9 +4,9 @@
 mod common;
 
 use common::*;
-use vmls::render::gpu::{GpuField, render};
-use vmls::render::renderer::Renderer;
+use vmls::renderer::Renderer;
 use vmls::scene::Scene;
+use vmls::{field::gpu::GpuField, renderer::render};
 
 fn scene(extra: &[&str]) -> Scene {
     let mut o: Vec<String> = [
@@ -29,11 +29,11 @@ fn later_frames_rebuild_only_what_changed() {
     let base = scene(&[]);
     let field = base.field(|_| {}).expect("field");
     let mut renderer = Renderer::new(&ctx, field.clone()).expect("renderer");
-    let frame = |r: &mut Renderer, s: &Scene, camera: &vmls::render::camera::Camera| {
+    let frame = |r: &mut Renderer, s: &Scene, camera: &vmls::view::camera::Camera| {
         r.render(&s.view_with(camera), |_| {}).expect("frame")
     };
     // The same view from a renderer that has drawn nothing before: what a reused one must equal.
-    let fresh = |s: &Scene, camera: &vmls::render::camera::Camera| {
+    let fresh = |s: &Scene, camera: &vmls::view::camera::Camera| {
         let mut r = Renderer::new(&ctx, field.clone()).expect("renderer");
         frame(&mut r, s, camera).0
     };
@@ -47,7 +47,7 @@ fn later_frames_rebuild_only_what_changed() {
     let mut moved = base.clone();
     moved.camera = turned;
     let setup = moved.ray_setup(&field).expect("setup");
-    let tables = vmls::render::build_tables(&setup, &field, &moved.transfer, 64, |_| {});
+    let tables = vmls::raycast::build_tables(&setup, &field, &moved.transfer, 64, |_| {});
     let gf = GpuField::upload(&ctx, &field).expect("upload");
     let once = render(
         &ctx,
@@ -101,7 +101,7 @@ fn later_frames_rebuild_only_what_changed() {
 fn a_stop_request_ends_frames_of_both_methods_and_the_renderer_goes_on() {
     use std::sync::Arc;
     use std::sync::atomic::{AtomicBool, Ordering};
-    use vmls::render::RenderError;
+    use vmls::field::RenderError;
     let (ctx, _compiler) = gpu();
     for (extra, tolerance) in [
         (vec![], 0.0f32),

@@ -6,13 +6,13 @@
 mod common;
 
 use common::*;
+use vmls::field::skip::SkipReport;
 use vmls::probe::random_points;
 use vmls::recon::{Basis, GradientMode, Weight};
-use vmls::render::skip::SkipReport;
 use vmls::scene::{NeighbourMode, Scene};
 
 /// RMSE and maximum of |resampled − direct| over `points`, relative to the data range.
-fn difference(field: &vmls::render::Field, points: &[[f64; 3]]) -> (f64, f64) {
+fn difference(field: &vmls::field::Field, points: &[[f64; 3]]) -> (f64, f64) {
     let n = field.neighbours().expect("neighbours");
     let grid = field.grid().expect("grid");
     let (lo, hi) = field.value_range();
@@ -27,7 +27,7 @@ fn difference(field: &vmls::render::Field, points: &[[f64; 3]]) -> (f64, f64) {
     ((sum / points.len() as f64).sqrt(), worst)
 }
 
-fn field(basis: Basis, support: f64, resample: u32) -> vmls::render::Field {
+fn field(basis: Basis, support: f64, resample: u32) -> vmls::field::Field {
     let mut r = recon(
         basis,
         Weight::Wendland,
@@ -89,8 +89,8 @@ fn block_ranges_bound_the_fast_field() {
     let f = field(Basis::Quadratic, 1.8, 2);
     let blocks = f.blocks().expect("blocks");
     let n = f.neighbours().expect("neighbours");
-    let tf = vmls::render::transfer::TransferFunction::new(vec![[0.0, 1.0, 1.0, 1.0, 1.0]]);
-    let table = vmls::render::skip::SkipTable::build(&tf, &[], f.value_range());
+    let tf = vmls::view::transfer::TransferFunction::new(vec![[0.0, 1.0, 1.0, 1.0, 1.0]]);
+    let table = vmls::field::skip::SkipTable::build(&tf, &[], f.value_range());
     let (mut tight, mut count) = (0.0f64, 0);
     for p in random_points(&f, 20_000, 0.0, 21) {
         let v = f.evaluate(n.as_ref(), p).expect("defined").value;
@@ -142,19 +142,14 @@ struct Both {
 fn both(s: &Scene) -> Both {
     let field = s.field(|_| {}).expect("field");
     let setup = s.ray_setup(&field).expect("setup");
-    let cpu = vmls::render::raycast::raycast_frame(
-        &setup,
-        &field,
-        &s.transfer,
-        s.render.table_resolution,
-    )
-    .expect("CPU twin");
+    let cpu = vmls::raycast::raycast_frame(&setup, &field, &s.transfer, s.render.table_resolution)
+        .expect("CPU twin");
     let (ctx, _compiler) = gpu();
-    let mut renderer = vmls::render::renderer::Renderer::new(&ctx, field).expect("renderer");
+    let mut renderer = vmls::renderer::Renderer::new(&ctx, field).expect("renderer");
     let image = common::splat::scene_frame(&mut renderer, s);
     drop(renderer);
     finish(ctx);
-    let cpu_skip = vmls::render::raycast::skip_report(&cpu);
+    let cpu_skip = vmls::raycast::skip_report(&cpu);
     Both {
         gpu_evals: image
             .counts
@@ -354,7 +349,7 @@ fn auto_skipping_is_compiled_in_only_where_most_ray_length_is_empty() {
     assert!(b.variant.contains("-skip"), "{}", b.variant);
     let (g, c) = (b.gpu_skip.expect("GPU skip report"), b.cpu_skip);
     assert!(
-        c.fraction() >= vmls::render::skip::SKIP_AUTO_FRACTION && g.fraction() > 0.7,
+        c.fraction() >= vmls::raycast::setup::SKIP_AUTO_FRACTION && g.fraction() > 0.7,
         "GPU {g:?} CPU {c:?}"
     );
     let w = worst(&b.gpu, &b.cpu);
@@ -371,15 +366,15 @@ fn scene_files_default_to_auto_resample_hermite_intervals_and_auto_skipping() {
     )
     .expect("scene");
     assert!(s.reconstruction.resample_auto);
-    assert_eq!(s.render.interval, vmls::render::IntervalModel::Hermite);
-    assert_eq!(s.render.skip, vmls::render::SkipMode::Auto);
+    assert_eq!(s.render.interval, vmls::view::IntervalModel::Hermite);
+    assert_eq!(s.render.skip, vmls::view::SkipMode::Auto);
     // A constant fit with the local gradient has no slope: linear intervals.
     let s = Scene::load(
         Some(std::path::Path::new("tests/scenes/ml-emission.toml")),
         &["reconstruction.basis=\"constant\"".to_string()],
     )
     .expect("scene");
-    assert_eq!(s.render.interval, vmls::render::IntervalModel::Linear);
+    assert_eq!(s.render.interval, vmls::view::IntervalModel::Linear);
     // Explicit values win.
     let s = Scene::load(
         Some(std::path::Path::new("tests/scenes/ml-emission.toml")),
@@ -391,6 +386,6 @@ fn scene_files_default_to_auto_resample_hermite_intervals_and_auto_skipping() {
     )
     .expect("scene");
     assert!(!s.reconstruction.resample_auto && s.reconstruction.resample == 0);
-    assert_eq!(s.render.interval, vmls::render::IntervalModel::Linear);
-    assert_eq!(s.render.skip, vmls::render::SkipMode::Off);
+    assert_eq!(s.render.interval, vmls::view::IntervalModel::Linear);
+    assert_eq!(s.render.skip, vmls::view::SkipMode::Off);
 }

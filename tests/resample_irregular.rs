@@ -8,9 +8,9 @@ mod common;
 
 use common::*;
 use vmls::data::dataset::{Dataset, Geometry};
+use vmls::field::Field;
 use vmls::probe::Lcg;
 use vmls::recon::{Basis, GradientMode, OctreeSettings, Weight};
-use vmls::render::Field;
 use vmls::scene::NeighbourMode;
 
 /// A smooth field with variation at about the meshes' scale.

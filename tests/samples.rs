@@ -6,11 +6,11 @@ mod common;
 use common::*;
 use std::path::Path;
 use vmls::data::dataset::{CellType, Cells, DataArray, Dataset, Geometry, Location};
+use vmls::field::Field;
+use vmls::field::gpu::{GpuField, evaluate};
 use vmls::probe::Lcg;
 use vmls::recon::mls::{MlsSettings, mls_evaluate};
 use vmls::recon::{Basis, GradientMode, OctreeSettings, Weight};
-use vmls::render::Field;
-use vmls::render::gpu::{GpuField, evaluate};
 use vmls::samples::{Domain, SampleError, SampleSet, SampleSettings, mesh};
 use vmls::scene::NeighbourMode;
 

@@ -7,13 +7,13 @@ mod common;
 use common::splat::*;
 use common::*;
 use glam::DVec3;
-use vmls::render::camera::Projection;
-use vmls::render::renderer::Renderer;
+use vmls::renderer::Renderer;
 use vmls::samples::Metric;
+use vmls::splat::project::KernelKind;
 use vmls::splat::project::{Kernel, sheet_share, splat_footprint, splat_project};
 use vmls::splat::raster::splat_image;
-use vmls::splat::surface::KernelKind;
 use vmls::splat::{QUADRATURE_MAX_SHEET, RINGS, Shading, SheetShare, choose_ring};
+use vmls::view::camera::Projection;
 
 /// ∫ w·G_V(o + t d − p) dt over the whole line, V = σ²M⁻¹ (P = V⁻¹ = M/σ²).
 fn line_integral(w: f64, sigma: f64, m: &Metric, p: DVec3, o: DVec3, d: DVec3) -> f64 {

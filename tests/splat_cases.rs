@@ -7,19 +7,19 @@ mod common;
 use common::splat::*;
 use common::*;
 use vmls::data::dataset::Geometry;
+use vmls::field::{Field, RenderError};
 use vmls::probe::Lcg;
+use vmls::raycast::raycast_image;
 use vmls::recon::OctreeSettings;
 use vmls::recon::support_index::SupportIndex;
-use vmls::render::camera::Projection;
-use vmls::render::raycast::raycast_image;
-use vmls::render::renderer::Renderer;
-use vmls::render::shading::Isosurface;
-use vmls::render::{Field, RenderError};
+use vmls::renderer::Renderer;
 use vmls::scene::Scene;
+use vmls::splat::project::KernelKind;
 use vmls::splat::project::{Cull, Kernel, splat_project};
 use vmls::splat::raster::splat_image;
-use vmls::splat::surface::KernelKind;
 use vmls::splat::{Antialias, Shading, SplatSettings, SplatSetup};
+use vmls::view::camera::Projection;
+use vmls::view::shading::Isosurface;
 
 #[test]
 fn degenerate_kernels_are_culled_or_bounded() {
@@ -413,7 +413,7 @@ fn a_new_camera_reuses_the_splatting_kernels_pipelines_and_buffers() {
     let s = scene(&["render.method=\"splat-post\""]);
     let field = s.field(|_| {}).expect("field");
     let mut renderer = Renderer::new(&ctx, field.clone()).expect("renderer");
-    let mut frame = |camera: &vmls::render::camera::Camera| {
+    let mut frame = |camera: &vmls::view::camera::Camera| {
         renderer
             .render(&s.view_with(camera), |_| {})
             .expect("frame")

@@ -11,7 +11,7 @@ libfuzzer_sys::fuzz_target!(|data: &[u8]| {
     let Some(value) = table.get("v") else {
         return;
     };
-    if let Ok(tf) = vmls::render::transfer::TransferFunction::from_toml(value) {
+    if let Ok(tf) = vmls::view::transfer::TransferFunction::from_toml(value) {
         for s in [-1e30, -1.0, 0.0, 0.25, 0.5, 1.0, 1e30] {
             let (rgb, tau) = tf.lookup(s);
             assert!(

@@ -29,9 +29,9 @@
 //!   120 bytes of its entry and record, against the streaming bandwidth. Both counts come from
 //!   the kernel's own counters.
 
+use crate::field::Field;
 use crate::probe::Ceilings;
 use crate::recon::{Basis, GradientMode, ReconMethod};
-use crate::render::Field;
 
 /// How an evaluation reads memory: which probe is its ceiling.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -144,7 +144,7 @@ pub fn entry_flops(exact: bool, ring: u32, quadrature: bool) -> f64 {
 /// (FMA share, broadcast-load share) of a splatting frame's `splat_raster`.
 pub fn splat_shares(
     c: &Ceilings,
-    report: &crate::render::renderer::SplatReport,
+    report: &crate::renderer::SplatReport,
     exact: bool,
 ) -> (f64, f64) {
     let seconds = report.stage_ms[2] * 1e-3;

@@ -21,8 +21,8 @@ pub mod plot;
 pub mod reference;
 pub mod results;
 
-use crate::render::RenderError;
-use crate::render::renderer::{GpuImage, Renderer};
+use crate::field::RenderError;
+use crate::renderer::{GpuImage, Renderer};
 use crate::scene::{Scene, SceneError};
 use crate::vk::{Context, ShaderCompiler, ShaderSource};
 use reference::{Reference, ReferenceMode, reference_image};
@@ -182,7 +182,7 @@ pub struct BenchOptions {
     /// Files whose rows are merged into the results (`--import`): inputs no output may be.
     pub imports: Vec<PathBuf>,
     /// Render frames (the reference's and each configuration's) that plan more MLS
-    /// evaluations than [`crate::render::WORK_BUDGET`]; without it such a frame ends the run
+    /// evaluations than [`crate::view::WORK_BUDGET`]; without it such a frame ends the run
     /// before its GPU work, naming the configuration.
     pub force: bool,
 }
@@ -301,7 +301,7 @@ pub fn run(
         set.extend(c.iter().cloned());
         scenes.push(Scene::load(opts.scene.as_deref(), &set)?);
     }
-    let budget = (!opts.force).then_some(crate::render::WORK_BUDGET);
+    let budget = (!opts.force).then_some(crate::view::WORK_BUDGET);
     let mut ref_set = opts.set.clone();
     ref_set.push("render.method=\"reference\"".into());
     // [volume] cannot be swept, so every configuration has the base scene's volume.
@@ -343,7 +343,7 @@ pub fn run(
     } else {
         None
     };
-    let mut prepared: Option<(String, crate::render::Field, f64)> = None;
+    let mut prepared: Option<(String, crate::field::Field, f64)> = None;
     // The cost model's k per prepared field: measured once, not per configuration.
     let mut neighbours: Option<(String, f64)> = None;
     let mut rows = Vec::with_capacity(configs.len());

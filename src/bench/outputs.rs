@@ -150,7 +150,7 @@ impl ImagesDir {
             self.recorded.push(name);
             self.save_record()?;
         }
-        crate::render::output::write_image(&path, width, height, pixels)?;
+        crate::output::write_image(&path, width, height, pixels)?;
         Ok(())
     }
 }

@@ -88,7 +88,7 @@ pub fn run_peer(
         let Some(image) = r.variant.strip_prefix("image=") else {
             continue;
         };
-        let (w, h, pixels) = crate::render::output::read_image(Path::new(image))?;
+        let (w, h, pixels) = crate::output::read_image(Path::new(image))?;
         if (w, h) != (reference.width, reference.height) {
             return Err(BenchError::Io {
                 path: image.into(),

@@ -135,7 +135,7 @@ fn draw<DB: DrawingBackend>(
 
 /// The plot as SVG text and as a 1100×750 PNG (`speed_error.svg`, `speed_error.png`).
 pub fn speed_error_files(rows: &[Row], title: &str) -> Result<(Vec<u8>, Vec<u8>), BenchError> {
-    crate::render::output::register_fonts();
+    crate::output::register_fonts();
     let (w, h) = (1100, 750);
     let err = |name: &str, message: String| BenchError::Io {
         path: name.into(),

@@ -16,8 +16,8 @@
 //! file that cannot be read, or has another size, is a miss and is rendered over.
 
 use super::BenchError;
-use crate::render::output::{read_image, write_image};
-use crate::render::renderer::Renderer;
+use crate::output::{read_image, write_image};
+use crate::renderer::Renderer;
 use crate::scene::{Scene, VolumeSource};
 use crate::vk::Context;
 use sha2::{Digest, Sha256};
@@ -123,9 +123,8 @@ fn render(
         }
         ReferenceMode::Cpu => {
             let setup = scene.ray_setup(&field)?;
-            let image =
-                crate::render::raycast::raycast_image(&setup, &field, &scene.transfer, None)
-                    .map_err(crate::render::RenderError::from)?;
+            let image = crate::raycast::raycast_image(&setup, &field, &scene.transfer, None)
+                .map_err(crate::field::RenderError::from)?;
             Ok(image.iter().map(|p| p.rgba.map(|c| c as f32)).collect())
         }
     }

@@ -6,11 +6,11 @@ use super::{Bound, Case, Env, Outcome, rmse};
 use crate::bench::BenchError;
 use crate::data::dataset::{DataArray, Dataset, Geometry, Location};
 use crate::data::{Volume, marschner_lobb};
+use crate::field::Field;
 use crate::probe::Lcg;
-use crate::render::Field;
-use crate::render::preintegration::{PreintegrationTables, segment_integral};
-use crate::render::transfer::TransferFunction;
+use crate::raycast::preintegration::{PreintegrationTables, segment_integral};
 use crate::samples::SampleSet;
+use crate::view::transfer::TransferFunction;
 use crate::vk::ShaderCompiler;
 
 pub fn hard_cases() -> Vec<Case> {
@@ -155,8 +155,8 @@ fn gpu_cpu_difference(
     points: &[[f64; 3]],
 ) -> Result<(f64, usize, usize), BenchError> {
     let compiler = ShaderCompiler::new()?;
-    let gpu_field = crate::render::gpu::GpuField::upload(env.ctx, field)?;
-    let (out, _) = crate::render::gpu::evaluate(env.ctx, &compiler, field, &gpu_field, points, 1)?;
+    let gpu_field = crate::field::gpu::GpuField::upload(env.ctx, field)?;
+    let (out, _) = crate::field::gpu::evaluate(env.ctx, &compiler, field, &gpu_field, points, 1)?;
     let (lo, hi) = field.value_range();
     let range = (hi - lo).max(1e-30);
     let neighbours = field.evaluator()?;

@@ -21,8 +21,8 @@
 
 use super::{Bound, Case, Env, Outcome, grid_volume, rmse};
 use crate::bench::BenchError;
+use crate::field::Field;
 use crate::probe::Lcg;
-use crate::render::Field;
 
 pub fn convergence_cases() -> Vec<Case> {
     vec![
@@ -189,9 +189,9 @@ fn spacing(env: &Env<'_>) -> Result<Vec<Outcome>, BenchError> {
                 .iter()
                 .map(|p| (glam::DVec3::from(*p) - field.frame_origin).to_array())
                 .collect();
-            let gpu_field = crate::render::gpu::GpuField::upload(env.ctx, &field)?;
+            let gpu_field = crate::field::gpu::GpuField::upload(env.ctx, &field)?;
             let (values, _) =
-                crate::render::gpu::evaluate(env.ctx, &compiler, &field, &gpu_field, &at, 1)?;
+                crate::field::gpu::evaluate(env.ctx, &compiler, &field, &gpu_field, &at, 1)?;
             let sum: f64 = values
                 .iter()
                 .zip(&truth)

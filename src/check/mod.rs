@@ -15,8 +15,8 @@ pub mod convergence;
 
 use crate::bench::BenchError;
 use crate::bench::metrics::image_error;
-use crate::render::Field;
-use crate::render::renderer::{GpuImage, Renderer};
+use crate::field::Field;
+use crate::renderer::{GpuImage, Renderer};
 use crate::scene::Scene;
 use crate::vk::Context;
 

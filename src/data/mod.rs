@@ -17,6 +17,7 @@ pub mod marschner_lobb;
 pub mod nifti;
 pub mod nrrd;
 pub mod points;
+pub mod random;
 pub mod values;
 pub mod vtk;
 pub mod vtk_legacy;

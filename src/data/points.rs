@@ -1,7 +1,7 @@
 //! Scattered points from CSV (`.csv`) and PLY (`.ply`) files → [`Geometry::Points`] with one
 //! point [`DataArray`] per scalar column or property.
 //!
-//! CSV contract and choices (read with the `csv` crate):
+//! CSV contract and choices (read with the `csv` crate, cargo feature `csv`, on by default):
 //! - a header row is required (a UTF-8 byte-order mark before it is skipped); fields are
 //!   comma-separated, may be quoted, and are trimmed;
 //! - positions are the columns named `x`, `y`, `z` or ParaView's `Points:0`, `Points:1`,
@@ -71,6 +71,7 @@ fn too_many(path: &Path, n: u64, what: &str) -> DataError {
 }
 
 /// The axis (0, 1, 2) a CSV header names, if any.
+#[cfg(feature = "csv")]
 fn axis(header: &str) -> Option<usize> {
     match header.to_ascii_lowercase().as_str() {
         "x" | "points:0" => Some(0),
@@ -81,6 +82,7 @@ fn axis(header: &str) -> Option<usize> {
 }
 
 /// What a CSV column holds, decided by the header and the first data row.
+#[cfg(feature = "csv")]
 #[derive(Clone, Copy, PartialEq)]
 enum Column {
     Axis(usize),
@@ -90,6 +92,7 @@ enum Column {
 }
 
 /// Parses CSV bytes; `path` only names the file in errors.
+#[cfg(feature = "csv")]
 pub fn parse_csv(path: &Path, bytes: &[u8]) -> Result<Dataset, DataError> {
     // Spreadsheets write a UTF-8 byte-order mark, which would otherwise hide the first name.
     let bytes = bytes.strip_prefix(b"\xef\xbb\xbf").unwrap_or(bytes);
@@ -232,6 +235,18 @@ pub fn parse_csv(path: &Path, bytes: &[u8]) -> Result<Dataset, DataError> {
     Ok(Dataset {
         geometry: Geometry::Points { points },
         arrays,
+    })
+}
+
+/// Without the `csv` feature (an embedder's build with `default-features = false`), a `.csv`
+/// file is refused by name: the CSV reader is the one input format that needs its own crate.
+#[cfg(not(feature = "csv"))]
+pub fn parse_csv(path: &Path, _bytes: &[u8]) -> Result<Dataset, DataError> {
+    Err(DataError::Unsupported {
+        path: path.to_path_buf(),
+        location: "file".into(),
+        what: "CSV points in this build of vmls (it reads them with the cargo feature `csv`)"
+            .into(),
     })
 }
 

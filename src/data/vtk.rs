@@ -38,8 +38,6 @@
 //! Errors name "line N"; in BINARY files they also give the byte offset, since binary data makes
 //! line numbers hard to follow.
 
-pub use super::vtk_legacy::{load_dataset, parse_dataset};
-
 use super::dataset::{DataArray, Location};
 use super::encoding::{Sample, Scalar, decode, decode_values, parse_text};
 use super::{DataError, Volume, check_finite, checked_sample_count};

@@ -1,5 +1,5 @@
-//! VTK legacy reader for every dataset type vmls renders ([`load_dataset`], re-exported as
-//! `vtk::load_dataset`): `STRUCTURED_POINTS`, `RECTILINEAR_GRID`, `STRUCTURED_GRID`,
+//! VTK legacy reader for every dataset type vmls renders ([`load_dataset`]):
+//! `STRUCTURED_POINTS`, `RECTILINEAR_GRID`, `STRUCTURED_GRID`,
 //! `UNSTRUCTURED_GRID` and `POLYDATA`, ASCII or BINARY (big-endian), file versions 2.0 to 5.1
 //! (the version line is not enforced, as in VTK). The tokenizer, number decoding and attribute
 //! parsing are `vtk.rs`'s, shared with the volume API (`vtk::load`).

@@ -87,7 +87,7 @@ pub enum ReconError {
 
 /// Implicit neighbours of a regular grid: the grid points inside the support box of x.
 ///
-/// Positions are relative to the frame origin the caller chose (see `render::Frame`), exactly
+/// Positions are relative to the frame origin the caller chose (see `field::Field::frame_origin`), exactly
 /// as on the GPU.
 #[derive(Debug, Clone, Copy)]
 pub struct GridNeighbours<'a> {

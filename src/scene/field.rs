@@ -3,10 +3,11 @@
 //! renderers take.
 
 use super::{Scene, VolumeSource};
+use crate::field::{Field, RenderError};
+use crate::raycast::RaySetup;
 use crate::recon::resample::AUTO_PILOT_RMSE;
-use crate::render::camera::Camera;
-use crate::render::{Field, RaySetup, RenderError};
 use crate::samples::SampleSet;
+use crate::view::camera::Camera;
 use std::path::Path;
 
 impl Scene {
@@ -26,7 +27,7 @@ impl Scene {
     ) -> Result<Field, RenderError> {
         let grid = self.reconstruction.neighbours == crate::recon::NeighbourMode::Grid;
         let check = |samples: usize, storage| match device {
-            Some(info) if grid => crate::render::gpu::GpuField::check_grid(info, samples, storage),
+            Some(info) if grid => crate::field::gpu::GpuField::check_grid(info, samples, storage),
             _ => Ok(()),
         };
         match &self.volume {
@@ -185,7 +186,7 @@ impl Scene {
             return Vec::new();
         };
         let (lo, hi) = field.bounds();
-        let mut rng = crate::probe::Lcg::new(27);
+        let mut rng = crate::data::random::Lcg::new(27);
         let mut points = Vec::new();
         for (o, d) in self.camera.sample_rays(&basis, field.frame_origin, RAYS) {
             let segments = match &field.hull {
@@ -193,7 +194,7 @@ impl Scene {
                     crate::samples::bvh::Segments::List(s) => s,
                     crate::samples::bvh::Segments::Overflow => Vec::new(),
                 },
-                None => crate::render::camera::clip_box(o, d, lo, hi)
+                None => crate::view::camera::clip_box(o, d, lo, hi)
                     .into_iter()
                     .collect(),
             };
@@ -219,15 +220,15 @@ impl Scene {
         let basis = self.camera.basis().ok()?;
         let (lo, hi) = field.bounds();
         let spacings = match self.render.method {
-            crate::render::Method::Adaptive => (self.render.l_min * self.render.l_max).sqrt(),
-            crate::render::Method::Reference => self.render.reference_step,
+            crate::view::Method::Adaptive => (self.render.l_min * self.render.l_max).sqrt(),
+            crate::view::Method::Reference => self.render.reference_step,
             _ => self.render.step,
         };
         let step = spacings * field.min_spacing();
         let length: f64 = self
             .camera
             .sample_rays(&basis, field.frame_origin, RAYS)
-            .filter_map(|(o, d)| crate::render::camera::clip_box(o, d, lo, hi))
+            .filter_map(|(o, d)| crate::view::camera::clip_box(o, d, lo, hi))
             .map(|(t0, t1)| t1 - t0)
             .sum();
         let pixels = f64::from(self.camera.width.max(1)) * f64::from(self.camera.height.max(1));
@@ -235,13 +236,13 @@ impl Scene {
     }
 
     /// What the persistent renderer draws for this scene: its camera and everything else.
-    pub fn view(&self) -> crate::render::renderer::View<'_> {
+    pub fn view(&self) -> crate::view::View<'_> {
         self.view_with(&self.camera)
     }
 
     /// As [`Scene::view`] with another camera (an orbit, a nudged eye).
-    pub fn view_with<'a>(&'a self, camera: &'a Camera) -> crate::render::renderer::View<'a> {
-        crate::render::renderer::View {
+    pub fn view_with<'a>(&'a self, camera: &'a Camera) -> crate::view::View<'a> {
+        crate::view::View {
             camera,
             settings: &self.render,
             transfer: &self.transfer,

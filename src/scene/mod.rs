@@ -18,15 +18,15 @@ mod splat;
 pub use field::load_volume;
 
 use crate::recon::{Basis, GradientMode, OctreeSettings, ReconMethod, Weight, resample};
-use crate::render::camera::{Camera, Projection};
-use crate::render::shading::{Isosurface, Lighting, MAX_ISOSURFACES};
-use crate::render::transfer::TransferFunction;
+use crate::view::camera::{Camera, Projection};
+use crate::view::shading::{Isosurface, Lighting, MAX_ISOSURFACES};
+use crate::view::transfer::TransferFunction;
 
 // The configuration types live with the layers that use them; the scene re-exports them so
 // that a scene file's vocabulary is in one place.
 pub use crate::recon::{NeighbourMode, Reconstruction};
-pub use crate::render::{AdaptiveCriterion, IntervalModel, Method, RenderSettings, SkipMode};
 use crate::samples::SampleSettings;
+pub use crate::view::{AdaptiveCriterion, IntervalModel, Method, RenderSettings, SkipMode};
 use std::path::{Path, PathBuf};
 use toml::{Table, Value};
 
@@ -70,7 +70,7 @@ pub enum VolumeSource {
 }
 
 /// Largest scene file we read: scenes are a few hundred bytes; a transfer function of
-/// [`crate::render::transfer::MAX_POINTS`] points fits many times over.
+/// [`crate::view::transfer::MAX_POINTS`] points fits many times over.
 pub const MAX_SCENE_BYTES: u64 = 4 << 20;
 
 /// A validated scene.
@@ -331,7 +331,7 @@ impl<'a> Section<'a> {
 
 /// Largest colour component (background, transfer function, isosurfaces): far beyond any
 /// HDR use, and far from f32's overflow when composited.
-pub const MAX_COLOUR: f64 = crate::render::transfer::MAX_COLOUR;
+pub const MAX_COLOUR: f64 = crate::view::transfer::MAX_COLOUR;
 
 /// Smallest step, adaptive interval bound or reference step, in sample spacings. Smaller
 /// steps only cost time (the image converges long before); the work budget bounds the rest.

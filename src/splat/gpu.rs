@@ -8,11 +8,11 @@
 //! submission each, so that every band is timed and a stop request ([`FrameControl::stop`])
 //! ends the frame within one band.
 
-use super::surface::KernelKind;
+use super::project::KernelKind;
 use super::{Antialias, SCAN_BLOCK, Shading, SplatCounts, SplatSetup};
+use crate::field::{Field, RenderError};
 use crate::gpu_types::{RasterPush, ScanPush, Splat, SplatParams, binding, params_copies};
-use crate::render::transfer::TransferFunction;
-use crate::render::{Field, RenderError};
+use crate::view::transfer::TransferFunction;
 use crate::vk::{
     BindGroup, Buffer, BufferUsage, ComputePipeline, Context, ShaderCompiler, ShaderSource, VkError,
 };
@@ -58,7 +58,7 @@ impl GpuKernels {
     pub fn upload(
         ctx: &Context,
         field: &Field,
-        isosurfaces: &[crate::render::shading::Isosurface],
+        isosurfaces: &[crate::view::shading::Isosurface],
         surfaces: Vec<super::project::Kernel>,
     ) -> Result<Self, VkError> {
         let data: Vec<crate::gpu_types::Sample> = super::raster::kernels(field)
@@ -90,7 +90,7 @@ impl GpuKernels {
     }
 
     /// Whether these kernels carry the surface splats of exactly these isosurfaces.
-    pub fn has_surfaces_of(&self, isosurfaces: &[crate::render::shading::Isosurface]) -> bool {
+    pub fn has_surfaces_of(&self, isosurfaces: &[crate::view::shading::Isosurface]) -> bool {
         self.surface_values.len() == isosurfaces.len()
             && self
                 .surface_values
@@ -204,7 +204,7 @@ impl SplatVariant {
             // Raw hits `splat_segments` keeps per pixel: the crossings of PIXEL_SEGMENTS
             // segments, plus room for coincident hits that are merged after sorting. Not
             // bvh::MAX_HITS: each access to the kernel's hit array costs in proportion to its
-            // length on lavapipe (render::gpu::FIRST_HULL_HITS).
+            // length on lavapipe (field::gpu::FIRST_HULL_HITS).
             ("HULL_MAX_HITS".into(), SEGMENT_HITS.to_string()),
         ]);
         d
@@ -492,10 +492,10 @@ fn params(
     let b = &setup.basis;
     let l = &setup.lighting;
     let (projection, tan, half) = match setup.camera.projection {
-        crate::render::camera::Projection::Perspective { fov_y_degrees } => {
+        crate::view::camera::Projection::Perspective { fov_y_degrees } => {
             (0, (fov_y_degrees.to_radians() * 0.5).tan(), 0.0)
         }
-        crate::render::camera::Projection::Orthographic { view_height } => {
+        crate::view::camera::Projection::Orthographic { view_height } => {
             (1, 0.0, 0.5 * view_height)
         }
     };
@@ -594,7 +594,7 @@ pub fn splat_frame(
     let p = params(setup, kernels, tf, gpu_tf.len() as u32);
     let params_buf = Buffer::from_slice(ctx, "splat params", &params_copies(p))?;
     let tf_buf = Buffer::from_slice(ctx, "transfer function", &gpu_tf)?;
-    let isos = crate::render::renderer::iso_buffer_data(&setup.isosurfaces);
+    let isos = crate::view::shading::iso_buffer_data(&setup.isosurfaces);
     let iso_buf = Buffer::from_slice(ctx, "isosurfaces", &isos)?;
     let mut stage_ms = [0.0; 4];
     let groups = kernels.count.div_ceil(GROUP).clamp(1, 65_535);

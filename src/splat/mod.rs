@@ -35,9 +35,11 @@ pub mod project;
 pub mod raster;
 pub mod surface;
 
-use crate::render::camera::{Camera, Projection, ViewBasis};
-use crate::render::shading::{Isosurface, Lighting, MAX_ISOSURFACES};
-use crate::render::{Field, RenderError};
+pub use crate::view::settings::{Antialias, Shading, SheetShare, SplatSettings};
+
+use crate::field::{Field, RenderError};
+use crate::view::camera::{Camera, Projection, ViewBasis};
+use crate::view::shading::{Isosurface, Lighting, MAX_ISOSURFACES};
 use glam::DVec3;
 
 /// Image tile sizes (`splat.tile`): one workgroup rasterizes one tile, one invocation per
@@ -109,95 +111,6 @@ pub fn choose_ring(radii: &[f64], sheets_per_radius: f64) -> u32 {
         .into_iter()
         .min_by(|a, b| work(*a).total_cmp(&work(*b)))
         .unwrap_or(16)
-}
-
-/// Pre- or post-shaded splatting (`render.method = "splat"` or `"splat-post"`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Shading {
-    /// Classify each kernel, splat extinction and emission, resolve each sheet ([EWA]).
-    Pre,
-    /// Splat the field into sheets, then classify and shade per pixel ([BLUR]).
-    Post,
-}
-
-/// `splat.antialias`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Antialias {
-    /// [EWA]'s resampling filter: the footprint convolved with the low-pass Gaussian.
-    Ewa,
-    /// [SWAN]: the footprint scaled uniformly until its minor variance reaches the low-pass's.
-    Swan,
-    /// No low-pass filter (aliases under minification).
-    None,
-}
-
-/// `splat.sheet_share`: how post-shaded splatting shares a kernel's line integral out to the
-/// sheets it crosses (with ring registers, one lateral footprint per pixel and entry).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum SheetShare {
-    /// Φ(z_b) − Φ(z_a) from the erfc at each sheet boundary (|error| ≤ 1.5·10⁻⁷): a division
-    /// and an exponential per sheet.
-    Erfc,
-    /// The Hermite–Simpson rule on each sheet (the Gaussian at both boundaries and the middle,
-    /// its slope at both boundaries; exact for quintics), the Gaussians by a product recurrence
-    /// from two seeds per entry: a few multiplies per sheet. For sheets at most
-    /// [`QUADRATURE_MAX_SHEET`] deviations thick.
-    Quadrature,
-}
-
-/// Scene section `[splat]`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SplatSettings {
-    /// Sheet thickness in sample spacings.
-    pub slab: f64,
-    /// Footprints are cut at this many standard deviations.
-    pub cutoff: f64,
-    /// Variance of the low-pass filter in px² (1: the identity of [EWA] §6).
-    pub lowpass: f64,
-    pub antialias: Antialias,
-    /// Early splat elimination: a tile stops walking its sheets once every pixel in it is
-    /// opaque.
-    pub occlusion: bool,
-    /// Isosurfaces as surface splats (pre-shaded splatting).
-    pub surface: bool,
-    /// Perspective footprints: the exact ray integral per pixel, or [EWA]'s affine footprint
-    /// (about half the accumulation time; errs where kernels are large or thin for their
-    /// distance).
-    pub exact: bool,
-    /// Image tile edge in pixels (one of `TILE_SIZES`); unset: the smallest whose (tile,
-    /// sheet) buckets fit `MAX_BUCKETS`.
-    pub tile: Option<u32>,
-    /// Each kernel split among the sheets its depth range crosses, by the share of its line
-    /// integral in each ([BLUR]'s sheets; exact emission–absorption as the sheets thin), or
-    /// (pre-shaded only) composited whole in the sheet of its centre: [EWA]'s image model
-    /// and 3D Gaussian splatting's, one footprint per kernel and tile instead of one per
-    /// sheet it crosses. Unset: split post-shaded, whole pre-shaded (whose error is its
-    /// classification before the sum: BENCHMARKS.md measured the same RMSE both ways, at 13×
-    /// the time split).
-    pub split: Option<bool>,
-    /// The sheet-share rule of post-shaded splatting; unset: the quadrature where every
-    /// kernel's sheets are thin enough for it (`QUADRATURE_MAX_SHEET`), else the erfc.
-    pub sheet_share: Option<SheetShare>,
-    /// Post-shaded ring size (one of `RINGS`); unset: [`choose_ring`].
-    pub ring: Option<u32>,
-}
-
-impl Default for SplatSettings {
-    fn default() -> Self {
-        Self {
-            slab: 0.5,
-            cutoff: 3.5,
-            lowpass: 1.0,
-            antialias: Antialias::Ewa,
-            occlusion: true,
-            surface: false,
-            exact: true,
-            tile: None,
-            split: None,
-            sheet_share: None,
-            ring: None,
-        }
-    }
 }
 
 /// The host stage `splat_setup`: everything the kernels share in one frame.
@@ -490,7 +403,7 @@ impl SplatSetup {
     /// `entries` (kernel, tile, sheet) entries: `splat_raster` evaluates each entry on every
     /// invocation of its tile's workgroup, and composites every pixel once per sheet (plus the
     /// closing step of post-shading). Footprint evaluations and MLS evaluations cost about the
-    /// same on lavapipe, so both renderers share [`crate::render::WORK_BUDGET`].
+    /// same on lavapipe, so both renderers share [`crate::view::WORK_BUDGET`].
     pub fn work_bound(&self, entries: u64) -> f64 {
         let pixels = f64::from(self.camera.width) * f64::from(self.camera.height);
         let steps = f64::from(self.slabs) + f64::from(u8::from(self.shading == Shading::Post));

@@ -33,12 +33,29 @@
 //! behind the eye) are culled; a footprint variance below `MIN_VARIANCE` px² is raised to it;
 //! det ≤ 0 or any non-finite intermediate culls the kernel as degenerate.
 
-use super::surface::{KernelKind, normal_cos2};
 use super::{Antialias, MIN_VARIANCE, Shading, SheetShare, SplatCounts, SplatSetup};
-use crate::render::shading::shade_cos;
-use crate::render::transfer::TransferFunction;
 use crate::samples::Metric;
+use crate::view::shading::shade_cos;
+use crate::view::transfer::TransferFunction;
 use glam::DVec3;
+
+/// Tangential over normal standard deviation of a surface kernel.
+pub const FLATNESS: f64 = 10.0;
+
+/// What a kernel is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum KernelKind {
+    /// A sample of the volume.
+    Volume,
+    /// A surface splat of isosurface `iso`; its metric is `scale`·(I + (R² − 1)nnᵀ).
+    Surface { iso: u32, scale: f64 },
+}
+
+/// (n·d)² of a surface kernel's metric along unit direction d.
+pub fn normal_cos2(metric: &crate::samples::Metric, scale: f64, d: [f64; 3]) -> f64 {
+    let rho2 = crate::samples::metric_rho2(metric, d);
+    ((rho2 / scale - 1.0) / (FLATNESS * FLATNESS - 1.0)).clamp(0.0, 1.0)
+}
 
 /// A kernel as `splat_project` reads it (frame-relative position).
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -24,15 +24,16 @@
 //!   early-termination opacity ([BLUR]'s early splat elimination, per tile): such pixels never
 //!   composite again, so stopping changes no pixel.
 
+use super::project::KernelKind;
 use super::project::{
     Cull, Kernel, Splat, sheet_share, splat_footprint, splat_profile, splat_project,
 };
-use super::surface::{KernelKind, surface_kernels};
+use super::surface::surface_kernels;
 use super::{Shading, SplatCounts, SplatSetup};
-use crate::render::Field;
-use crate::render::camera::clip_box;
-use crate::render::shading::shade_surface;
-use crate::render::transfer::TransferFunction;
+use crate::field::Field;
+use crate::view::camera::clip_box;
+use crate::view::shading::shade_surface;
+use crate::view::transfer::TransferFunction;
 use glam::DVec3;
 
 /// Pre-shaded sheet channels: D, E.rgb, then (with surface splats) W, Σq·α, C.rgb.

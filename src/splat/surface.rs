@@ -17,28 +17,10 @@
 //! the ray caster's Blinn–Phong shading with |n·d| from the flattened metric
 //! ((n·d)² = (dᵀM_s d / a − 1)/(R² − 1)), so no normal needs storing.
 
-use super::project::Kernel;
-use crate::render::Field;
-use crate::render::shading::Isosurface;
+use super::project::{FLATNESS, Kernel, KernelKind};
+use crate::field::Field;
+use crate::view::shading::Isosurface;
 use rayon::prelude::*;
-
-/// Tangential over normal standard deviation of a surface kernel.
-pub const FLATNESS: f64 = 10.0;
-
-/// What a kernel is.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum KernelKind {
-    /// A sample of the volume.
-    Volume,
-    /// A surface splat of isosurface `iso`; its metric is `scale`·(I + (R² − 1)nnᵀ).
-    Surface { iso: u32, scale: f64 },
-}
-
-/// (n·d)² of a surface kernel's metric along unit direction d.
-pub fn normal_cos2(metric: &crate::samples::Metric, scale: f64, d: [f64; 3]) -> f64 {
-    let rho2 = crate::samples::metric_rho2(metric, d);
-    ((rho2 / scale - 1.0) / (FLATNESS * FLATNESS - 1.0)).clamp(0.0, 1.0)
-}
 
 /// The surface kernels of a field's isosurfaces (frame-relative), in isosurface order.
 pub fn surface_kernels(

@@ -7,8 +7,8 @@ pub mod splat;
 
 use vmls::data::dataset::{CellType, Cells, Geometry};
 use vmls::data::{Volume, marschner_lobb};
+use vmls::field::Field;
 use vmls::recon::{Basis, GradientMode, OctreeSettings, Weight};
-use vmls::render::Field;
 use vmls::scene::{NeighbourMode, Reconstruction, Scene};
 use vmls::vk::{Context, ContextOptions, ShaderCompiler};
 
@@ -170,9 +170,9 @@ pub fn point_data(geometry: Geometry, f: impl Fn([f64; 3]) -> f64) -> vmls::data
 /// difference relative to the value range. Asserts that every GPU evaluation read 8 fine points.
 pub fn fast_path_gpu_vs_cpu(field: &Field, points: &[[f64; 3]]) -> f64 {
     let (ctx, compiler) = gpu();
-    let gpu_field = vmls::render::gpu::GpuField::upload(&ctx, field).expect("upload");
+    let gpu_field = vmls::field::gpu::GpuField::upload(&ctx, field).expect("upload");
     let (out, _) =
-        vmls::render::gpu::evaluate(&ctx, &compiler, field, &gpu_field, points, 1).expect("eval");
+        vmls::field::gpu::evaluate(&ctx, &compiler, field, &gpu_field, points, 1).expect("eval");
     drop(gpu_field);
     finish(ctx);
     let n = field.neighbours().expect("neighbours");
@@ -191,17 +191,14 @@ pub fn fast_path_gpu_vs_cpu(field: &Field, points: &[[f64; 3]]) -> f64 {
 pub fn gpu_and_cpu_frames(
     field: &Field,
     scene: &Scene,
-) -> (
-    vmls::render::gpu::GpuImage,
-    Vec<vmls::render::raycast::PixelResult>,
-) {
+) -> (vmls::renderer::GpuImage, Vec<vmls::raycast::PixelResult>) {
     let setup = scene.ray_setup(field).expect("setup");
-    let tables = vmls::render::build_tables(&setup, field, &scene.transfer, 128, |_| {});
-    let cpu = vmls::render::raycast::raycast_image(&setup, field, &scene.transfer, tables.as_ref())
+    let tables = vmls::raycast::build_tables(&setup, field, &scene.transfer, 128, |_| {});
+    let cpu = vmls::raycast::raycast_image(&setup, field, &scene.transfer, tables.as_ref())
         .expect("CPU twin");
     let (ctx, compiler) = gpu();
-    let gf = vmls::render::gpu::GpuField::upload(&ctx, field).expect("upload");
-    let img = vmls::render::gpu::render(
+    let gf = vmls::field::gpu::GpuField::upload(&ctx, field).expect("upload");
+    let img = vmls::renderer::render(
         &ctx,
         &compiler,
         field,

@@ -4,10 +4,10 @@
 use glam::DVec3;
 use std::path::Path;
 use vmls::data::dataset::Dataset;
+use vmls::field::Field;
+use vmls::raycast::raycast_image;
 use vmls::recon::OctreeSettings;
-use vmls::render::Field;
-use vmls::render::raycast::raycast_image;
-use vmls::render::renderer::{GpuImage, Renderer, SplatReport};
+use vmls::renderer::{GpuImage, Renderer, SplatReport};
 use vmls::samples::Metric;
 use vmls::samples::{SampleSet, SampleSettings};
 use vmls::scene::Scene;

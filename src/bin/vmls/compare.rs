@@ -3,9 +3,9 @@
 use crate::CliError;
 use std::path::Path;
 use vmls::bench::metrics::image_error;
+use vmls::field::RenderError;
 use vmls::files::Outputs;
-use vmls::render::RenderError;
-use vmls::render::output::{encode_image, format_for, format_of, read_image};
+use vmls::output::{encode_image, format_for, format_of, read_image};
 
 pub fn compare(image: &Path, reference: &Path, diff: Option<&Path>) -> Result<(), CliError> {
     // Every name is checked before a byte is read: a wrong extension fails at once.
@@ -58,7 +58,7 @@ pub fn compare(image: &Path, reference: &Path, diff: Option<&Path>) -> Result<()
             .iter()
             .map(|&d| {
                 let [r, g, b] =
-                    vmls::render::evalmap::ramp(d * scale).map(|v| f32::from(v) / 255.0);
+                    vmls::output::evalmap::ramp(d * scale).map(|v| f32::from(v) / 255.0);
                 [r, g, b, 1.0]
             })
             .collect();

@@ -18,8 +18,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
+use vmls::field::RenderError;
 use vmls::files::Outputs;
-use vmls::render::RenderError;
 use vmls::scene::{Scene, SceneError};
 use vmls::vk::{Context, ContextOptions};
 

@@ -2,10 +2,10 @@
 
 use crate::{CliError, DeviceArgs, context, plan_outputs, write_json};
 use std::path::Path;
+use vmls::field::{Field, RenderError};
 use vmls::probe::{
     MemoryMode, coherent_order, fma_probe, median, memory_probe, mls_probe, random_points,
 };
-use vmls::render::{Field, RenderError};
 use vmls::scene::{NeighbourMode, Scene, load_volume};
 use vmls::vk::ShaderCompiler;
 

@@ -7,11 +7,11 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 use vmls::data::dataset::Location;
-use vmls::render::RenderError;
-use vmls::render::evalmap::{check_path, eval_map_image};
-use vmls::render::output::{check_finite, encode_image, format_of};
-use vmls::render::renderer::Renderer;
-use vmls::render::skip::SkipReport;
+use vmls::field::RenderError;
+use vmls::field::skip::SkipReport;
+use vmls::output::evalmap::{check_path, eval_map_image};
+use vmls::output::{check_finite, encode_image, format_of};
+use vmls::renderer::Renderer;
 use vmls::scene::Scene;
 
 /// What `vmls render` was asked for.
@@ -70,7 +70,7 @@ pub fn run_render(
         None => {
             let setup = scene.ray_setup(&field)?;
             if !force {
-                setup.check_budget(vmls::render::WORK_BUDGET)?;
+                setup.check_budget(vmls::view::WORK_BUDGET)?;
             }
             Some(setup.step)
         }
@@ -80,7 +80,7 @@ pub fn run_render(
     let upload_start = Instant::now();
     let mut renderer = Renderer::new(&ctx, field)?;
     renderer.set_stop(stop.clone());
-    renderer.set_work_budget((!force).then_some(vmls::render::WORK_BUDGET));
+    renderer.set_work_budget((!force).then_some(vmls::view::WORK_BUDGET));
     let upload_ms = upload_start.elapsed().as_secs_f64() * 1e3;
     // Frame k turns the camera by 10°·k about its up axis through the target: later frames
     // show what a new camera costs with everything else kept on the GPU.
@@ -256,20 +256,18 @@ pub fn run_render_cpu(
         None => {
             let mut setup = scene.ray_setup(&field)?;
             if !force {
-                setup.check_budget(vmls::render::WORK_BUDGET)?;
+                setup.check_budget(vmls::view::WORK_BUDGET)?;
             }
             check_stop(stop)?;
             setup.resolve_skip(field.blocks(), &scene.transfer, &field);
-            let image = vmls::render::raycast::raycast_frame(
+            let image = vmls::raycast::raycast_frame(
                 &setup,
                 &field,
                 &scene.transfer,
                 scene.render.table_resolution,
             )
             .map_err(RenderError::from)?;
-            let skip = setup
-                .skip
-                .then(|| vmls::render::raycast::skip_report(&image));
+            let skip = setup.skip.then(|| vmls::raycast::skip_report(&image));
             (image.iter().map(|p| p.rgba).collect(), None, skip)
         }
     };

@@ -19,10 +19,10 @@
 //! less than half the distance to the surface: the Hermite is exact for quadratics, so a miss
 //! needs a large fourth-derivative term.
 
-use super::Ray;
-use crate::render::RaySetup;
-use crate::render::preintegration::PreintegrationTables;
-use crate::render::shading::shade_surface;
+use super::ray::Ray;
+use crate::raycast::RaySetup;
+use crate::raycast::preintegration::PreintegrationTables;
+use crate::view::shading::shade_surface;
 
 /// Evaluations spent locating one crossing, at most.
 pub(super) const LOCATE_ITERATIONS: u32 = 12;

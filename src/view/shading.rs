@@ -5,6 +5,7 @@
 //! viewer along the ray, so the half vector is the light vector) and two-sided normals
 //! n = ∇f/|∇f|: rgb = color·(ambient + diffuse·|n·l|) + specular·|n·l|^shininess.
 
+use crate::gpu_types::IsoSurface;
 use glam::DVec3;
 
 /// At most this many isosurfaces per scene (a fixed loop in the kernel).
@@ -60,4 +61,26 @@ pub fn shade_cos(iso: &Isosurface, light: &Lighting, cos: f64) -> [f64; 3] {
     let lit = light.ambient + light.diffuse * cos;
     let spec = light.specular * cos.powf(light.shininess);
     [0, 1, 2].map(|k| iso.opacity * (iso.color[k] * lit + spec))
+}
+
+/// The isosurfaces as kernels read them; never empty, since a zero-sized binding is invalid
+/// (the kernel constants say how many are real).
+pub fn iso_buffer_data(isosurfaces: &[Isosurface]) -> Vec<IsoSurface> {
+    let mut isos: Vec<IsoSurface> = isosurfaces
+        .iter()
+        .map(|i| IsoSurface {
+            color_opacity: [
+                i.color[0] as f32,
+                i.color[1] as f32,
+                i.color[2] as f32,
+                i.opacity as f32,
+            ],
+            value: i.value as f32,
+            _pad: [0.0; 3],
+        })
+        .collect();
+    if isos.is_empty() {
+        isos.push(IsoSurface::default());
+    }
+    isos
 }

@@ -18,7 +18,7 @@
 //! Scalars outside the transfer function's domain use its clamped values, exactly as the
 //! direct lookup does; the table's own s-range is chosen by the caller (it must cover the data).
 
-use super::transfer::TransferFunction;
+use crate::view::transfer::TransferFunction;
 use rayon::prelude::*;
 
 /// Gauss–Legendre nodes and weights on [−1, 1], 5 points.

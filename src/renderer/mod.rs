@@ -1,29 +1,32 @@
 //! Driving `raycast.comp`: [`render`] for one frame and [`Renderer`], the persistent renderer
-//! of one dataset; the frame's stages are in [`super::frame`].
+//! of one dataset; the ray caster's frame stages are in [`crate::raycast::frame`], the
+//! splatter's in [`crate::splat::gpu`].
 //!
 //! [`Renderer`] owns the field's GPU data (uploaded once), its compiled pipelines, the
 //! preintegration tables (rebuilt and re-uploaded only when the transfer function, lengths,
 //! resolution or scalar range change) and the frame buffers (reallocated only when the image
 //! size changes). A new camera therefore costs only the constants and the dispatches.
 
-use super::frame::FrameTargets;
-use super::frame::{
+use crate::field::gpu::GpuField;
+use crate::field::skip::SkipReport;
+use crate::field::{Field, RenderError};
+use crate::raycast::frame::FrameTargets;
+use crate::raycast::frame::{
     Bands, Readback, frame_bindings, frame_constants, frame_pipeline, frame_targets, read_image,
     run_bands, table_buffer,
 };
-pub use super::frame::{default_chunk, iso_buffer_data, outer_steps};
-use super::gpu::{GpuField, Variant};
-use super::preintegration::PreintegrationTables;
-use super::shading::{Isosurface, Lighting};
-use super::skip::SkipReport;
-use super::transfer::TransferFunction;
-use super::{Field, RaySetup, RenderError, RenderSettings, TableCache, check_table_size};
-use crate::render::camera::Camera;
+pub use crate::raycast::frame::{default_chunk, outer_steps};
+use crate::raycast::gpu::variant_for_render;
+use crate::raycast::preintegration::PreintegrationTables;
+use crate::raycast::{RaySetup, TableCache, check_table_size};
 use crate::splat::SplatCounts;
 use crate::splat::SplatSetup;
 use crate::splat::gpu::{
     FrameControl, GpuKernels, SplatPipelines, SplatTargets, SplatVariant, splat_frame,
 };
+use crate::view::View;
+use crate::view::shading::Isosurface;
+use crate::view::transfer::TransferFunction;
 use crate::vk::{Buffer, ComputePipeline, Context, ShaderCompiler, VkError};
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
@@ -104,7 +107,7 @@ pub fn render(
     // Once more with every crossing the CPU twin allows if a ray had more than the first
     // variant keeps (Bands::HullHits).
     let (variant, gpu_ms, bands) = loop {
-        let variant = Variant::for_render(field, &resolved);
+        let variant = variant_for_render(field, &resolved);
         let pipeline = frame_pipeline(
             ctx,
             compiler,
@@ -149,16 +152,6 @@ pub fn render(
     })
 }
 
-/// What a frame is made of besides the dataset.
-#[derive(Debug, Clone, Copy)]
-pub struct View<'a> {
-    pub camera: &'a Camera,
-    pub settings: &'a RenderSettings,
-    pub transfer: &'a TransferFunction,
-    pub isosurfaces: &'a [Isosurface],
-    pub lighting: &'a Lighting,
-}
-
 /// What one frame cost, and what it could reuse.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FrameStats {
@@ -175,7 +168,7 @@ pub struct FrameStats {
     pub targets_allocated: bool,
     pub bands: u32,
     /// `render.skip = "auto"`: the fraction of ray length it found in empty blocks (skipping
-    /// is compiled in at [`crate::render::skip::SKIP_AUTO_FRACTION`] or more); `None` where
+    /// is compiled in at [`crate::raycast::setup::SKIP_AUTO_FRACTION`] or more); `None` where
     /// "auto" did not decide (skipping set, or no fast path).
     pub skip_estimate: Option<f64>,
 }
@@ -218,7 +211,7 @@ impl Renderer {
 
     /// Refuses frames that plan more than `budget` evaluations with
     /// [`RenderError::Budget`] (`None`, the default: no limit; the CLI sets
-    /// [`crate::render::WORK_BUDGET`] unless `--force`). Ray casting is checked before any
+    /// [`crate::view::WORK_BUDGET`] unless `--force`). Ray casting is checked before any
     /// work of the frame ([`RaySetup::check_budget`]); splatting checks its sheets before any
     /// work and its binned footprints after the projection, before the accumulation
     /// ([`SplatSetup::check_budget`]).
@@ -331,7 +324,7 @@ impl Renderer {
         // Once more with every crossing the CPU twin allows if a ray had more than the first
         // variant keeps (Bands::HullHits).
         let (variant, gpu_ms, bands) = loop {
-            let variant = Variant::for_render(&self.field, &setup);
+            let variant = variant_for_render(&self.field, &setup);
             let defines = variant.defines();
             let bindings = frame_bindings(&self.gpu_field, &setup, tables.is_some(), variant.skip);
             let cached = self

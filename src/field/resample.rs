@@ -4,7 +4,7 @@
 //! octree) once per dataset, when the persistent renderer uploads the field.
 
 use super::Field;
-use super::gpu::{Variant, groups_2d, pipeline_for, render_params};
+use super::variant::{Variant, field_params, groups_2d, pipeline_for};
 use crate::gpu_types::{CountPush, binding};
 use crate::recon::resample;
 use crate::vk::{BindGroup, Buffer, BufferUsage, Context, ShaderCompiler, VkError};
@@ -52,7 +52,7 @@ pub fn resample_grid(
     let params = Buffer::from_slice(
         ctx,
         "resample params",
-        &crate::gpu_types::params_copies(render_params(field, None, 0)),
+        &crate::gpu_types::params_copies(field_params(field)),
     )?;
     let fine = Buffer::new(ctx, "resampled grid", points * 16, BufferUsage::Texel)?;
     let mut all = data.to_vec();
@@ -83,7 +83,7 @@ pub fn resample_grid(
     Ok(Some((fine, ms)))
 }
 
-/// The skipping blocks of the GPU's fine grid ([`crate::render::skip::Blocks`]), as
+/// The skipping blocks of the GPU's fine grid ([`crate::field::skip::Blocks`]), as
 /// `vec4(min, max, 0, 0)` per block, and the host's copy (what `render.skip = "auto"` decides
 /// by): the fine grid is read back once and reduced on the host by the same function as the
 /// CPU twin's.
@@ -91,7 +91,7 @@ pub fn block_buffer(
     ctx: &Context,
     field: &Field,
     fine: &Buffer,
-) -> Result<(Buffer, crate::render::skip::Blocks), VkError> {
+) -> Result<(Buffer, crate::field::skip::Blocks), VkError> {
     let g = field.lattice();
     let factor = field.reconstruction.resample;
     let dims = resample::fine_dims(g.dims, factor);
@@ -99,7 +99,7 @@ pub fn block_buffer(
     let h = g.spacing.map(|s| s / f64::from(factor));
     let (blocks, ranges) = resample::block_ranges(
         dims,
-        factor as usize * crate::render::skip::SKIP_BLOCK,
+        factor as usize * crate::field::skip::SKIP_BLOCK,
         |i| resample::point_bounds(data[i].map(f64::from), h),
     );
     // Rounded outwards to f32, so that the kernel's ranges contain the f64 ones.
@@ -117,7 +117,7 @@ pub fn block_buffer(
     let buffer = Buffer::from_slice(ctx, "skipping blocks", &texels)?;
     Ok((
         buffer,
-        crate::render::skip::Blocks::over(g.origin, g.spacing, blocks, ranges),
+        crate::field::skip::Blocks::over(g.origin, g.spacing, blocks, ranges),
     ))
 }
 

@@ -11,7 +11,7 @@
 //! the last top only in whole units of the deepest level, so that every interval it tests has a
 //! table, and composites the remainder (shorter than a unit) as the ray's clipped tail. With
 //! empty-space skipping it looks at each top's start for a run of empty blocks
-//! ([`crate::render::skip::Blocks::run`]) and resumes at the first top reaching past the run,
+//! ([`crate::field::skip::Blocks::run`]) and resumes at the first top reaching past the run,
 //! from a fresh knot; [MLS]'s criterion does not skip.
 //!
 //! - `mls2008` ([MLS] §4): C1 = table(len)(s_a, s_e) against C2 = the halves composited (the
@@ -36,12 +36,13 @@
 //!   pending). Splitting at dyadic midpoints rather than at the Hermite's extremum keeps every
 //!   length a table length.
 
-use super::Ray;
 use super::interval::{Knot, bezier_hull, emit_interval, hermite_midpoint, knot, knot_segment};
-use crate::render::preintegration::PreintegrationTables;
-use crate::render::skip::resume_interval;
-use crate::render::transfer::TransferFunction;
-use crate::render::{AdaptiveCriterion, RaySetup};
+use super::ray::Ray;
+use super::ray::resume_interval;
+use crate::raycast::RaySetup;
+use crate::raycast::preintegration::PreintegrationTables;
+use crate::view::AdaptiveCriterion;
+use crate::view::transfer::TransferFunction;
 
 /// Stack entries needed for l_max/l_min (the shader's `ADAPTIVE_STACK`).
 pub fn stack_size(l_max: f64, l_min: f64) -> usize {

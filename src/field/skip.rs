@@ -29,9 +29,9 @@
 //! images — towards the field (tests bound the change). The adaptive integrator (Hermite
 //! criterion) follows a run only at a top interval's start, whole tops at a time.
 
-use super::shading::Isosurface;
-use super::transfer::TransferFunction;
 use crate::recon::resample::ResampledGrid;
+use crate::view::shading::Isosurface;
+use crate::view::transfer::TransferFunction;
 use glam::DVec3;
 
 /// Grid cells per block edge.
@@ -43,15 +43,6 @@ pub const SKIP_BINS: usize = 1024;
 pub const SKIP_RUN: u32 = 64;
 /// How far past a point [`Blocks::run`] looks up its block, in block edges.
 pub const RUN_NUDGE: f64 = 1e-3;
-/// `render.skip = "auto"` compiles skipping in where at least this fraction of the frame's ray
-/// length lies in empty blocks ([`skippable_fraction`]). On lavapipe a SIMD row of 8 rays
-/// costs what its busiest ray costs and the block lookups run on every lane, so skipping cost
-/// 2× with nothing to skip (the default scene, 512²), 1.6× with 39% skippable (ml-emission),
-/// and won 17% at 77% skippable (the MRI at step 1; lost 6% at step 2) (BENCHMARKS.md).
-pub const SKIP_AUTO_FRACTION: f64 = 0.75;
-/// Rays per image axis [`skippable_fraction`] casts.
-const ESTIMATE_RAYS: u32 = 32;
-
 /// What skipping did in one frame (`--stats` "skip"): summed over the rays.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct SkipReport {
@@ -244,47 +235,6 @@ impl Blocks {
     }
 }
 
-/// The fraction of the ray length inside the setup's box that lies in blocks empty for
-/// `table`, over 32 × 32 of the camera's rays: the estimate `render.skip = "auto"` decides by,
-/// before the frame (a mesh's hull and early termination are not looked at).
-pub fn skippable_fraction(blocks: &Blocks, table: &SkipTable, setup: &super::RaySetup) -> f64 {
-    let nudge = RUN_NUDGE * blocks.size.min_element();
-    let (mut inside, mut empty) = (0.0, 0.0);
-    let rays = setup
-        .camera
-        .sample_rays(&setup.basis, setup.frame_origin, ESTIMATE_RAYS);
-    for (o, d) in rays {
-        let Some((t0, t1)) = super::camera::clip_box(o, d, setup.box_lo, setup.box_hi) else {
-            continue;
-        };
-        inside += t1 - t0;
-        let mut t = t0;
-        while t < t1 {
-            let (is_empty, exit) = blocks.lookup(table, o, d, t + nudge);
-            let exit = exit.min(t1);
-            if exit <= t {
-                break;
-            }
-            if is_empty {
-                empty += exit - t;
-            }
-            t = exit;
-        }
-    }
-    if inside > 0.0 { empty / inside } else { 0.0 }
-}
-
-/// Where the integrators resume after an empty block: the first of the intervals of length `l`
-/// starting at t0 (numbered from 0) that reaches past `exit`, no earlier than `next`.
-pub fn resume_interval(t0: f64, l: f64, exit: f64, next: u64) -> u64 {
-    let j = ((exit - t0) / l).floor();
-    if j.is_finite() && j > next as f64 {
-        j.min(u32::MAX as f64) as u64
-    } else {
-        next
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -318,13 +268,6 @@ mod tests {
         let with_iso = SkipTable::build(&tf(), &[iso], (0.0, 1.0));
         assert!(!with_iso.empty(0.75, 0.85));
         assert!(with_iso.empty(0.6, 0.7));
-    }
-
-    #[test]
-    fn resume_skips_only_whole_intervals() {
-        assert_eq!(resume_interval(0.0, 1.0, 3.5, 1), 3);
-        assert_eq!(resume_interval(0.0, 1.0, 0.5, 1), 1);
-        assert_eq!(resume_interval(0.0, 1.0, f64::INFINITY, 1), 1);
     }
 
     #[test]

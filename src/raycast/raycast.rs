@@ -12,20 +12,19 @@
 //! Where no sample has weight the field is undefined: a midpoint step there adds nothing, and
 //! so does a preintegrated interval with an undefined end. Pixel = (C + T·background, 1 − T).
 
-pub mod adaptive;
-mod interval;
-
-use super::camera::clip_box;
+use super::adaptive;
+use super::interval::{Knot, emit_crossings, emit_interval, hermite_segment, knot, knot_segment};
 use super::preintegration::PreintegrationTables;
-use super::skip::{Blocks, SkipReport, SkipTable, resume_interval};
-use super::transfer::TransferFunction;
-use super::{Field, RaySetup};
+use super::ray::{Ray, Skip, resume_interval};
+use super::setup::RaySetup;
+use crate::field::Field;
+use crate::field::skip::{SkipReport, SkipTable};
 use crate::recon::ReconError;
 use crate::recon::mls::Neighbours;
-use crate::render::{IntervalModel, Method};
 use crate::samples::bvh::Segments;
-use glam::DVec3;
-use interval::{Knot, emit_crossings, emit_interval, hermite_segment, knot, knot_segment};
+use crate::view::camera::clip_box;
+use crate::view::transfer::TransferFunction;
+use crate::view::{IntervalModel, Method};
 use rayon::prelude::*;
 
 /// One pixel of the reference integrator.
@@ -42,68 +41,6 @@ pub struct PixelResult {
     /// The ray crossed the hull more often than `bvh::MAX_HITS`: nothing was integrated (the
     /// GPU renderer fails with an error for such a ray).
     pub hull_overflow: bool,
-}
-
-/// Empty-space skipping's data for one frame: the field's block ranges and the frame's table.
-#[derive(Debug, Clone, Copy)]
-pub struct Skip<'a> {
-    pub blocks: &'a Blocks,
-    pub table: &'a SkipTable,
-}
-
-impl Skip<'_> {
-    /// Stage `skip_block`.
-    fn lookup(&self, o: DVec3, d: DVec3, t: f64) -> (bool, f64) {
-        self.blocks.lookup(self.table, o, d, t)
-    }
-
-    /// Stages `skip_block` then `skip_run` (twin of skip_span): whether the block at t is
-    /// empty and, if so, where the run of empty blocks from it ends (else the block's exit).
-    fn span(&self, o: DVec3, d: DVec3, t: f64, t_end: f64) -> (bool, f64) {
-        let (empty, exit) = self.lookup(o, d, t);
-        if empty {
-            (true, self.run(o, d, exit, t_end))
-        } else {
-            (false, exit)
-        }
-    }
-
-    /// Stage `skip_run`.
-    pub(super) fn run(&self, o: DVec3, d: DVec3, t: f64, t_end: f64) -> f64 {
-        self.blocks.run(self.table, o, d, t, t_end)
-    }
-}
-
-/// Front-to-back accumulation along one ray.
-struct Ray<'a> {
-    o: DVec3,
-    d: DVec3,
-    field: &'a Field,
-    neighbours: &'a dyn Neighbours,
-    skip: Option<Skip<'a>>,
-    color: [f64; 3],
-    transmittance: f64,
-    evaluations: u32,
-    /// Ray length skipped and evaluations saved so far.
-    skipped: f64,
-    saved: u32,
-}
-
-impl Ray<'_> {
-    /// Outer steps skipped over `len` of the ray, of which `restart` knots are evaluated
-    /// anyway (twin of count_skip).
-    fn count_skip(&mut self, len: f64, steps: u64, restart: u64) {
-        self.skipped += len;
-        self.saved += (steps - restart) as u32;
-    }
-
-    /// Composites a premultiplied segment (C, α) behind what is accumulated.
-    fn composite(&mut self, c: [f64; 3], alpha: f64) {
-        for (acc, ci) in self.color.iter_mut().zip(c) {
-            *acc += self.transmittance * ci;
-        }
-        self.transmittance *= 1.0 - alpha;
-    }
 }
 
 /// Midpoint rule (`riemann`, `reference`): n = ⌈L/δ⌉ steps, the last one shortened; isosurfaces
@@ -350,7 +287,7 @@ pub fn raycast_image(
     ];
     let table = setup
         .skip
-        .then(|| SkipTable::build(tf, &setup.isosurfaces, super::scalar_range(field)));
+        .then(|| SkipTable::build(tf, &setup.isosurfaces, crate::field::scalar_range(field)));
     let skip = match (&table, field.blocks()) {
         (Some(table), Some(blocks)) => Some(Skip { blocks, table }),
         _ => None,

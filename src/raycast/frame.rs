@@ -1,5 +1,5 @@
 //! The stages of one ray-cast frame (stage `raycast`'s host side), run by
-//! [`super::renderer`]: each its own function.
+//! [`crate::renderer`]: each its own function.
 //! - `frame_pipeline`: the shader variant the field and setup need (compiled, or cached);
 //! - `frame_constants`: kernel constants, transfer function and isosurfaces (small, per frame);
 //! - `frame_targets`: image, counts, ray-state and skip-report buffers (per image size);
@@ -7,13 +7,17 @@
 //!   loop-limit fallback (LAVAPIPE.md: llvmpipe ends loops after 65 535 iterations);
 //! - `read_image`: pixels, evaluation counts and the skipping report back to the host.
 
-use super::gpu::{GpuField, Variant, pipeline_for, render_params, table_params};
+use super::gpu::{render_params, table_params};
 use super::preintegration::PreintegrationTables;
-use super::shading::Isosurface;
-use super::skip::{SkipReport, SkipTable};
-use super::transfer::TransferFunction;
-use super::{Field, Method, RaySetup};
-use crate::gpu_types::{IsoSurface, RayPush, binding, params_copies, ray_count};
+use super::setup::RaySetup;
+use crate::field::Field;
+use crate::field::gpu::GpuField;
+use crate::field::skip::{SkipReport, SkipTable};
+use crate::field::variant::{Variant, pipeline_for};
+use crate::gpu_types::{RayPush, binding, params_copies, ray_count};
+use crate::view::Method;
+use crate::view::shading::iso_buffer_data;
+use crate::view::transfer::TransferFunction;
 use crate::vk::{
     BindGroup, Buffer, BufferUsage, ComputePipeline, Context, ShaderCompiler, VkError,
 };
@@ -43,7 +47,7 @@ pub fn default_chunk(setup: &RaySetup) -> u32 {
     const EVALUATIONS_PER_DISPATCH: u32 = 256;
     match setup.method {
         Method::Adaptive => {
-            let levels = super::raycast::adaptive::stack_size(setup.l_max, setup.l_min);
+            let levels = super::adaptive::stack_size(setup.l_max, setup.l_min);
             (EVALUATIONS_PER_DISPATCH >> levels.min(8)).max(1)
         }
         _ => EVALUATIONS_PER_DISPATCH,
@@ -51,7 +55,7 @@ pub fn default_chunk(setup: &RaySetup) -> u32 {
 }
 
 /// Binding numbers of the ray caster for a field and setup.
-pub(super) fn frame_bindings(
+pub(crate) fn frame_bindings(
     gpu_field: &GpuField,
     setup: &RaySetup,
     with_tables: bool,
@@ -83,7 +87,7 @@ pub(super) fn frame_bindings(
 }
 
 /// Compiles the ray caster's variant for a field and setup.
-pub(super) fn frame_pipeline(
+pub(crate) fn frame_pipeline(
     ctx: &Context,
     compiler: &ShaderCompiler,
     variant: &Variant,
@@ -100,7 +104,7 @@ pub(super) fn frame_pipeline(
 }
 
 /// The tables as the kernel reads them: every length's table, then the zero-length limits.
-pub(super) fn table_buffer(
+pub(crate) fn table_buffer(
     ctx: &Context,
     tables: &PreintegrationTables,
 ) -> Result<Buffer, VkError> {
@@ -115,15 +119,15 @@ pub(super) fn table_buffer(
 }
 
 /// Per-frame constants: kernel parameters, transfer function, isosurfaces, skip table.
-pub(super) struct FrameConstants {
-    pub(super) params: Buffer,
-    pub(super) tf: Buffer,
-    pub(super) iso: Buffer,
+pub(crate) struct FrameConstants {
+    pub(crate) params: Buffer,
+    pub(crate) tf: Buffer,
+    pub(crate) iso: Buffer,
     /// The frame's [`SkipTable`] (with empty-space skipping).
-    pub(super) skip: Option<Buffer>,
+    pub(crate) skip: Option<Buffer>,
 }
 
-pub(super) fn frame_constants(
+pub(crate) fn frame_constants(
     ctx: &Context,
     field: &Field,
     setup: &RaySetup,
@@ -134,12 +138,12 @@ pub(super) fn frame_constants(
     let gpu_tf = tf.to_gpu();
     let skip = match skip {
         true => {
-            let table = SkipTable::build(tf, &setup.isosurfaces, super::scalar_range(field));
+            let table = SkipTable::build(tf, &setup.isosurfaces, crate::field::scalar_range(field));
             Some(Buffer::from_slice(ctx, "skip table", &table.gpu_words())?)
         }
         false => None,
     };
-    let mut params = render_params(field, Some(setup), gpu_tf.len() as u32);
+    let mut params = render_params(field, setup, gpu_tf.len() as u32);
     if let Some(t) = tables {
         table_params(&mut params, t);
     }
@@ -152,38 +156,16 @@ pub(super) fn frame_constants(
     })
 }
 
-/// The isosurfaces as kernels read them; never empty, since a zero-sized binding is invalid
-/// (the kernel constants say how many are real).
-pub fn iso_buffer_data(isosurfaces: &[Isosurface]) -> Vec<IsoSurface> {
-    let mut isos: Vec<IsoSurface> = isosurfaces
-        .iter()
-        .map(|i| IsoSurface {
-            color_opacity: [
-                i.color[0] as f32,
-                i.color[1] as f32,
-                i.color[2] as f32,
-                i.opacity as f32,
-            ],
-            value: i.value as f32,
-            _pad: [0.0; 3],
-        })
-        .collect();
-    if isos.is_empty() {
-        isos.push(IsoSurface::default());
-    }
-    isos
-}
-
 /// Image, counts and ray-state buffers for `pixels` pixels.
-pub(super) struct FrameTargets {
-    pub(super) pixels: u64,
-    pub(super) image: Buffer,
-    pub(super) counts: Buffer,
-    pub(super) ray_state: Buffer,
-    pub(super) skip_stats: Buffer,
+pub(crate) struct FrameTargets {
+    pub(crate) pixels: u64,
+    pub(crate) image: Buffer,
+    pub(crate) counts: Buffer,
+    pub(crate) ray_state: Buffer,
+    pub(crate) skip_stats: Buffer,
 }
 
-pub(super) fn frame_targets(ctx: &Context, pixels: u64) -> Result<FrameTargets, VkError> {
+pub(crate) fn frame_targets(ctx: &Context, pixels: u64) -> Result<FrameTargets, VkError> {
     Ok(FrameTargets {
         pixels,
         image: Buffer::new(ctx, "image", pixels * 16, BufferUsage::Storage)?,
@@ -194,7 +176,7 @@ pub(super) fn frame_targets(ctx: &Context, pixels: u64) -> Result<FrameTargets, 
 }
 
 /// How [`run_bands`] ended.
-pub(super) enum Bands {
+pub(crate) enum Bands {
     /// Every band finished: GPU ms and submissions.
     Done(f64, u32),
     /// The stop flag was raised.
@@ -206,7 +188,7 @@ pub(super) enum Bands {
 
 /// Binds everything and runs the bands.
 #[allow(clippy::too_many_arguments)]
-pub(super) fn run_bands(
+pub(crate) fn run_bands(
     ctx: &Context,
     pipeline: &ComputePipeline,
     gpu_field: &GpuField,
@@ -324,15 +306,15 @@ pub(super) fn run_bands(
 }
 
 /// A ray-cast frame as read back.
-pub(super) struct Readback {
-    pub(super) pixels: Vec<[f32; 4]>,
+pub(crate) struct Readback {
+    pub(crate) pixels: Vec<[f32; 4]>,
     /// Evaluations per pixel, flags removed.
-    pub(super) counts: Vec<u32>,
-    pub(super) skip: Option<SkipReport>,
+    pub(crate) counts: Vec<u32>,
+    pub(crate) skip: Option<SkipReport>,
 }
 
 /// Pixels and evaluation counts, and the skipping report when the frame skipped.
-pub(super) fn read_image(
+pub(crate) fn read_image(
     ctx: &Context,
     targets: &FrameTargets,
     skip: bool,

@@ -1,8 +1,11 @@
 //! Image files: `.png` is 8-bit RGBA, values clamped to [0,1] with no gamma; `.exr` is 32-bit
 //! float RGBA, linear. Files are written through [`crate::files`]: an exclusive temporary beside
 //! the target, renamed when complete, so a failure never leaves a partial image behind.
+//! [`evalmap`] draws a frame's evaluation counts as a heat map with a scale.
 
-use super::RenderError;
+pub mod evalmap;
+
+use crate::field::RenderError;
 use std::io::{Seek, Write};
 use std::path::Path;
 

@@ -27,7 +27,7 @@ pub fn ramp(u: f64) -> [u8; 3] {
 /// Writes the legend's end values into the strip below the image (rows `top..`), in white.
 fn draw_legend(img: &mut image::RgbImage, top: u32, max: u32) -> Result<(), String> {
     use plotters::prelude::*;
-    super::output::register_fonts();
+    super::register_fonts();
     let (w, h) = img.dimensions();
     let buffer: &mut [u8] = img;
     let root = BitMapBackend::with_buffer(buffer, (w, h)).into_drawing_area();

@@ -1,0 +1,379 @@
+//! The reconstructed field as both renderers see it: the sample set in frame-relative
+//! coordinates, the reconstruction (MLS, Gaussian sum, or the generator's analytic field), its
+//! neighbour structure (grid or redundant octree [OCT]), the boundary hull, the fast path's fine
+//! grid and its skipping blocks, and the field's GPU form ([`gpu::GpuField`]) with the drivers of
+//! the kernels that evaluate it (`mls_eval`, `recon_resample`).
+//!
+//! `raycast` and `splat` read the field only through this module. It imports the layers below
+//! it (`vk`, `files`, `data`, `samples`, `recon`) and `view`'s settings, never a renderer.
+//!
+//! All positions handed to kernels are relative to the *frame origin*, the volume centre, which
+//! is subtracted on the host in f64: f32 then keeps its precision for data far from the world
+//! origin ([MLS] §3's shifted basis does the same inside each evaluation).
+
+mod error;
+pub mod exact;
+mod fast_path;
+pub mod gpu;
+pub mod resample;
+pub mod skip;
+pub mod variant;
+
+pub use error::RenderError;
+
+use crate::data::Volume;
+use crate::recon::ReconMethod;
+use crate::recon::gaussian::{KernelVolumes, gaussian_evaluate};
+use crate::recon::mls::{MlsSettings, MlsValue, Neighbours, Visit, mls_evaluate};
+use crate::recon::resample::ResampledGrid;
+use crate::recon::support_index::SupportIndex;
+use crate::recon::{GridNeighbours, Octree, OctreeSettings, ReconError};
+use crate::recon::{NeighbourMode, Reconstruction};
+use crate::samples::bvh::HullBvh;
+use crate::samples::{Domain, Positions, Provenance, SampleSet, Supports};
+use glam::DVec3;
+
+/// The scalar field of a scene: its sample set in frame-relative coordinates, its MLS settings,
+/// and the redundant octree over its samples (irregular data always; regular grids with
+/// `neighbours = "octree"`).
+#[derive(Debug, Clone)]
+pub struct Field {
+    /// World position subtracted from everything (the centre of the domain's box).
+    pub frame_origin: DVec3,
+    pub samples: SampleSet,
+    pub reconstruction: Reconstruction,
+    /// The octree over the samples, where kernels read one (`octree_wanted`): built with the
+    /// field, or, for a field made by [`Field::from_samples_deferred`] (splatting, which reads
+    /// no octree), at the first [`Field::octree`].
+    octree: std::sync::OnceLock<Result<Option<Octree>, ReconError>>,
+    octree_settings: OctreeSettings,
+    octree_wanted: bool,
+    /// Ray-clipping hierarchy over the boundary, for a hull domain.
+    pub hull: Option<HullBvh>,
+    /// Smallest and largest sample value.
+    range: (f64, f64),
+    /// Whether any support is a rotated ellipsoid.
+    full_metric: bool,
+    /// Gaussian kernel volumes, computed at first use (Gaussian field, splatting).
+    volumes: std::sync::OnceLock<KernelVolumes>,
+    /// Box of every sample's support (frame-relative): where kernels can reach.
+    support_box: (DVec3, DVec3),
+    /// [`SampleSet::thinnest_support`], computed at first use (post-shaded splatting's
+    /// sheet-share rule).
+    thinnest: std::sync::OnceLock<f64>,
+    /// [`SampleSet::radius_quantiles`] at 64ths, computed at first use (post-shaded
+    /// splatting's ring size).
+    radii: std::sync::OnceLock<Vec<f64>>,
+    /// The fast path's fine grid, built at first CPU use (`reconstruction.resample`; the GPU
+    /// builds its own).
+    resampled: std::sync::OnceLock<ResampledGrid>,
+    /// Block ranges of the CPU fine grid, for empty-space skipping.
+    blocks: std::sync::OnceLock<skip::Blocks>,
+    /// Why `reconstruction.resample = "auto"` chose the general path, where it did.
+    fast_path_declined: Option<String>,
+}
+
+impl Field {
+    /// A regular grid with one support h = support × spacing (see [`Field::from_samples`]).
+    pub fn new(
+        volume: Volume,
+        reconstruction: Reconstruction,
+        octree: &OctreeSettings,
+        progress: impl FnMut(f64),
+    ) -> Result<Self, ReconError> {
+        let (lo, hi) = volume.bounds();
+        let samples = SampleSet {
+            positions: Positions::Grid {
+                dims: volume.dims,
+                origin: volume.origin,
+                spacing: volume.spacing,
+            },
+            values: volume.values,
+            supports: Supports::Uniform(volume.spacing.map(|s| s * reconstruction.support)),
+            domain: Domain::Box { lo, hi },
+            spacing: volume.spacing.iter().copied().fold(f64::INFINITY, f64::min),
+            provenance: Provenance {
+                kind: "regular grid",
+                array: "scalars".into(),
+                location: crate::data::dataset::Location::Point,
+                merged: 0,
+                inverted_cells: 0,
+                support_kind: "uniform",
+            },
+        };
+        Self::from_samples(samples, reconstruction, octree, progress)
+    }
+
+    /// Moves the samples into a frame centred on their domain and builds the octree unless the
+    /// implicit grid neighbours serve (a regular grid with `neighbours = "grid"`).
+    pub fn from_samples(
+        samples: SampleSet,
+        reconstruction: Reconstruction,
+        octree: &OctreeSettings,
+        progress: impl FnMut(f64),
+    ) -> Result<Self, ReconError> {
+        let field = Self::from_samples_deferred(samples, reconstruction, octree)?;
+        if field.octree_wanted {
+            let built = Octree::from_samples(&field.samples, octree, progress)?;
+            // The lock is new and empty: this sets it.
+            let _ = field.octree.set(Ok(Some(built)));
+        }
+        Ok(field)
+    }
+
+    /// [`Field::from_samples`] without building the octree: the first [`Field::octree`] builds
+    /// it. For splatting, which reads the samples' kernels and no octree: a cloud of 10⁷
+    /// points splats although its octree would not fit.
+    pub fn from_samples_deferred(
+        mut samples: SampleSet,
+        reconstruction: Reconstruction,
+        octree: &OctreeSettings,
+    ) -> Result<Self, ReconError> {
+        let (lo, hi) = samples.domain_box();
+        let centre = (DVec3::from(lo) + DVec3::from(hi)) * 0.5;
+        samples.translate(centre.to_array());
+        let grid = matches!(samples.positions, Positions::Grid { .. })
+            && matches!(samples.supports, Supports::Uniform(_));
+        // Derived once here: every frame's table key and shader variant read them.
+        let range = samples
+            .values
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(l, h), v| {
+                (l.min(f64::from(v)), h.max(f64::from(v)))
+            });
+        let full_metric = samples.has_full_metric();
+        let (slo, shi) = samples.support_box();
+        let mut field = Self {
+            frame_origin: centre,
+            samples,
+            reconstruction,
+            octree: std::sync::OnceLock::new(),
+            octree_settings: *octree,
+            octree_wanted: !grid || reconstruction.neighbours == NeighbourMode::Octree,
+            hull: None,
+            range,
+            full_metric,
+            volumes: std::sync::OnceLock::new(),
+            support_box: (DVec3::from(slo), DVec3::from(shi)),
+            thinnest: std::sync::OnceLock::new(),
+            radii: std::sync::OnceLock::new(),
+            resampled: std::sync::OnceLock::new(),
+            blocks: std::sync::OnceLock::new(),
+            fast_path_declined: None,
+        };
+        if let Domain::Hull(h) = &field.samples.domain {
+            field.hull = Some(HullBvh::build(h));
+        }
+        field.resolve_auto_resample();
+        if field.reconstruction.resample > 0 {
+            field.check_resample()?;
+        }
+        Ok(field)
+    }
+
+    /// Implicit grid neighbours, for a regular grid with one support.
+    pub fn grid(&self) -> Option<GridNeighbours<'_>> {
+        match (&self.samples.positions, &self.samples.supports) {
+            (
+                Positions::Grid {
+                    dims,
+                    origin,
+                    spacing,
+                },
+                Supports::Uniform(h),
+            ) => Some(GridNeighbours {
+                dims: *dims,
+                origin: *origin,
+                spacing: *spacing,
+                values: &self.samples.values,
+                support: h[0] / spacing[0],
+            }),
+            _ => None,
+        }
+    }
+
+    /// The octree, where kernels read one (`None` for a grid's implicit neighbours); a deferred
+    /// one is built here, once, and its build error returned on every call.
+    pub fn octree(&self) -> Result<Option<&Octree>, ReconError> {
+        let built = self.octree.get_or_init(|| {
+            if self.octree_wanted {
+                Octree::from_samples(&self.samples, &self.octree_settings, |_| {}).map(Some)
+            } else {
+                Ok(None)
+            }
+        });
+        match built {
+            Ok(o) => Ok(o.as_ref()),
+            Err(e) => Err(e.clone()),
+        }
+    }
+
+    /// The octree if it has been built (statistics; never builds one).
+    pub fn octree_if_built(&self) -> Option<&Octree> {
+        self.octree
+            .get()
+            .and_then(|o| o.as_ref().ok())
+            .and_then(Option::as_ref)
+    }
+
+    /// The neighbour structure in use: the octree when kernels read one (built here if it was
+    /// deferred), else the grid. Everything else [`Field::evaluate_direct`] reads is built here
+    /// too (the Gaussian sum's kernel volumes), so that callers can fan out over rayon after
+    /// it: a lazily built value whose builder itself runs on rayon, first asked for inside a
+    /// parallel loop, deadlocks when the building worker, waiting for its own jobs, steals an
+    /// outer job that waits for the same value (the pilot of a Gaussian field hung that way on
+    /// 16 cores).
+    pub fn neighbours(&self) -> Result<Box<dyn Neighbours + Sync + '_>, ReconError> {
+        let neighbours: Box<dyn Neighbours + Sync + '_> = match (self.octree()?, self.grid()) {
+            (Some(o), _) => Box::new(o),
+            (None, Some(g)) => Box::new(g),
+            // Every field that is not a uniform grid wants an octree.
+            (None, None) => Box::new(NoNeighbours),
+        };
+        if self.reconstruction.method == ReconMethod::Gaussian {
+            self.kernel_volumes();
+        }
+        Ok(neighbours)
+    }
+
+    /// [`Field::neighbours`] with everything [`Field::evaluate`] reads built as well (the fast
+    /// path's CPU fine grid): what a CPU twin asks for before its parallel loop.
+    pub fn evaluator(&self) -> Result<Box<dyn Neighbours + Sync + '_>, ReconError> {
+        let neighbours = self.neighbours()?;
+        self.resampled();
+        Ok(neighbours)
+    }
+
+    /// The volume each sample's Gaussian kernel stands for ([`KernelVolumes`]), computed once.
+    pub fn kernel_volumes(&self) -> &KernelVolumes {
+        self.volumes.get_or_init(|| {
+            // The octree where it was built; a deferred one is not built for this (a kd-tree
+            // per class of support radii finds the same kernels in O(n) memory).
+            let neighbours: Box<dyn Neighbours + Sync + '_> =
+                match (self.octree_if_built(), self.grid()) {
+                    (Some(o), _) => Box::new(o),
+                    (None, Some(g)) => Box::new(g),
+                    (None, None) => Box::new(SupportIndex::new(&self.samples)),
+                };
+            KernelVolumes::compute(
+                &self.samples,
+                neighbours.as_ref(),
+                self.reconstruction.sigma,
+            )
+        })
+    }
+
+    /// The reconstructed field and its gradient at x (frame-relative), by the scene's method;
+    /// `None` where it is undefined. With `reconstruction.resample` it is the fast path's
+    /// interpolation of the fine grid (stage `resample_evaluate`), defined everywhere.
+    pub fn evaluate(&self, neighbours: &dyn Neighbours, x: [f64; 3]) -> Option<MlsValue> {
+        if let Some(r) = self.resampled() {
+            return Some(r.evaluate(x)).filter(|v| v.terms > 0);
+        }
+        self.evaluate_direct(neighbours, x)
+    }
+
+    /// The general path: the scene's method solved at x.
+    pub fn evaluate_direct(&self, neighbours: &dyn Neighbours, x: [f64; 3]) -> Option<MlsValue> {
+        match self.reconstruction.method {
+            ReconMethod::Mls => mls_evaluate(&self.mls(), neighbours, x),
+            ReconMethod::Gaussian => gaussian_evaluate(
+                self.reconstruction.sigma,
+                self.kernel_volumes(),
+                neighbours,
+                x,
+            ),
+            ReconMethod::Exact => Some(exact::exact_evaluate(self.grid()?.origin, x)),
+        }
+    }
+
+    /// Why `reconstruction.resample = "auto"` chose the general path, where it did.
+    pub fn fast_path_declined(&self) -> Option<&str> {
+        self.fast_path_declined.as_deref()
+    }
+
+    /// Whether kernels read the octree (else the implicit grid).
+    pub fn uses_octree(&self) -> bool {
+        self.octree_wanted
+    }
+
+    /// Compile-time MLS choices.
+    pub fn mls(&self) -> MlsSettings {
+        MlsSettings {
+            basis: self.reconstruction.basis,
+            weight: self.reconstruction.weight,
+            gradient: self.reconstruction.gradient,
+        }
+    }
+
+    /// Frame-relative bounding box of the domain (rays are clipped to it).
+    pub fn bounds(&self) -> (DVec3, DVec3) {
+        let (lo, hi) = self.samples.domain_box();
+        (DVec3::from(lo), DVec3::from(hi))
+    }
+
+    /// Frame-relative box of every sample's support: where kernels can reach (splatting's
+    /// depth range).
+    pub fn support_box(&self) -> (DVec3, DVec3) {
+        self.support_box
+    }
+
+    /// A lower bound on the shortest half axis of any support ([`SampleSet::thinnest_support`]).
+    pub fn thinnest_support(&self) -> f64 {
+        *self
+            .thinnest
+            .get_or_init(|| self.samples.thinnest_support())
+    }
+
+    /// Support radii at the quantiles 0, 1/64, …, 1 ([`SampleSet::radius_quantiles`]).
+    pub fn radius_quantiles(&self) -> &[f64] {
+        self.radii.get_or_init(|| self.samples.radius_quantiles(64))
+    }
+
+    /// The unit of `render.step` ([`SampleSet::spacing`]).
+    pub fn min_spacing(&self) -> f64 {
+        self.samples.spacing
+    }
+
+    /// Smallest and largest sample value.
+    pub fn value_range(&self) -> (f64, f64) {
+        self.range
+    }
+
+    /// Whether any support is a rotated ellipsoid (the full-metric shader variant).
+    pub fn has_full_metric(&self) -> bool {
+        self.full_metric
+    }
+}
+
+/// No samples anywhere (never used in practice; keeps `neighbours` total).
+struct NoNeighbours;
+
+impl Neighbours for NoNeighbours {
+    fn basis_scale(&self, _x: [f64; 3]) -> [f64; 3] {
+        [1.0; 3]
+    }
+
+    fn for_each(&self, _x: [f64; 3], _visit: &mut Visit<'_>) {}
+}
+
+impl Neighbours for &Octree {
+    fn basis_scale(&self, x: [f64; 3]) -> [f64; 3] {
+        (*self).basis_scale(x)
+    }
+
+    fn for_each(&self, x: [f64; 3], visit: &mut Visit<'_>) {
+        (*self).for_each(x, visit)
+    }
+}
+
+/// The tables' scalar range: the data range with a 5% margin each side. The margin is at
+/// least 5·10⁻⁶ of the values' magnitude, so that a constant field far from zero (fuzzing found
+/// 1e20 everywhere) keeps a range that f32 resolves on the GPU instead of one of zero width,
+/// which made the CPU twin divide 0 by 0.
+pub fn scalar_range(field: &Field) -> (f64, f64) {
+    let (lo, hi) = field.value_range();
+    let magnitude = lo.abs().max(hi.abs());
+    let margin = 0.05 * (hi - lo).max(1e-6).max(1e-4 * magnitude);
+    (lo - margin, hi + margin)
+}

@@ -1,0 +1,93 @@
+//! One ray of the CPU twins: its front-to-back accumulation ([`Ray`]) and its view of
+//! empty-space skipping ([`Skip`], stages `skip_block` and `skip_run`), shared by the midpoint,
+//! fixed-step and adaptive integrators.
+
+use crate::field::Field;
+use crate::field::skip::{Blocks, SkipTable};
+use crate::recon::mls::Neighbours;
+use glam::DVec3;
+
+/// Empty-space skipping's data for one frame: the field's block ranges and the frame's table.
+#[derive(Debug, Clone, Copy)]
+pub struct Skip<'a> {
+    pub blocks: &'a Blocks,
+    pub table: &'a SkipTable,
+}
+
+impl Skip<'_> {
+    /// Stage `skip_block`.
+    pub(super) fn lookup(&self, o: DVec3, d: DVec3, t: f64) -> (bool, f64) {
+        self.blocks.lookup(self.table, o, d, t)
+    }
+
+    /// Stages `skip_block` then `skip_run` (twin of skip_span): whether the block at t is
+    /// empty and, if so, where the run of empty blocks from it ends (else the block's exit).
+    pub(super) fn span(&self, o: DVec3, d: DVec3, t: f64, t_end: f64) -> (bool, f64) {
+        let (empty, exit) = self.lookup(o, d, t);
+        if empty {
+            (true, self.run(o, d, exit, t_end))
+        } else {
+            (false, exit)
+        }
+    }
+
+    /// Stage `skip_run`.
+    pub(super) fn run(&self, o: DVec3, d: DVec3, t: f64, t_end: f64) -> f64 {
+        self.blocks.run(self.table, o, d, t, t_end)
+    }
+}
+
+/// Front-to-back accumulation along one ray.
+pub(super) struct Ray<'a> {
+    pub(super) o: DVec3,
+    pub(super) d: DVec3,
+    pub(super) field: &'a Field,
+    pub(super) neighbours: &'a dyn Neighbours,
+    pub(super) skip: Option<Skip<'a>>,
+    pub(super) color: [f64; 3],
+    pub(super) transmittance: f64,
+    pub(super) evaluations: u32,
+    /// Ray length skipped and evaluations saved so far.
+    pub(super) skipped: f64,
+    pub(super) saved: u32,
+}
+
+impl Ray<'_> {
+    /// Outer steps skipped over `len` of the ray, of which `restart` knots are evaluated
+    /// anyway (twin of count_skip).
+    pub(super) fn count_skip(&mut self, len: f64, steps: u64, restart: u64) {
+        self.skipped += len;
+        self.saved += (steps - restart) as u32;
+    }
+
+    /// Composites a premultiplied segment (C, α) behind what is accumulated.
+    pub(super) fn composite(&mut self, c: [f64; 3], alpha: f64) {
+        for (acc, ci) in self.color.iter_mut().zip(c) {
+            *acc += self.transmittance * ci;
+        }
+        self.transmittance *= 1.0 - alpha;
+    }
+}
+
+/// Where the integrators resume after an empty block: the first of the intervals of length `l`
+/// starting at t0 (numbered from 0) that reaches past `exit`, no earlier than `next`.
+pub fn resume_interval(t0: f64, l: f64, exit: f64, next: u64) -> u64 {
+    let j = ((exit - t0) / l).floor();
+    if j.is_finite() && j > next as f64 {
+        j.min(u32::MAX as f64) as u64
+    } else {
+        next
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn resume_skips_only_whole_intervals() {
+        assert_eq!(resume_interval(0.0, 1.0, 3.5, 1), 3);
+        assert_eq!(resume_interval(0.0, 1.0, 0.5, 1), 1);
+        assert_eq!(resume_interval(0.0, 1.0, f64::INFINITY, 1), 1);
+    }
+}
