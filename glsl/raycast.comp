@@ -638,11 +638,15 @@ void main() {
     float transmittance = 1.0;
     uint evaluations = 0u;
     vec4 state = vec4(0.0);
+    // A truncated chunk stays marked through later chunks of the same dispatch sequence, so
+    // that a frame recorded whole (Renderer::record) still shows it when read after the fence.
+    uint truncated = 0u;
     if (band.first > 0u) {
         uint count = counts[index];
         if ((count & RAY_DONE) != 0u) {
             return;
         }
+        truncated = count & RAY_TRUNCATED;
         color = image[index].rgb;
         transmittance = image[index].a;
         evaluations = count & RAY_EVALUATIONS;
@@ -704,10 +708,10 @@ void main() {
 #endif
     if (outcome == CHUNK_FINISHED) {
         image[index] = vec4(color + transmittance * params.background.rgb, 1.0 - transmittance);
-        counts[index] = evaluations | RAY_DONE;
+        counts[index] = evaluations | RAY_DONE | truncated;
     } else {
         image[index] = vec4(color, transmittance);
-        counts[index] = evaluations | (outcome == CHUNK_TRUNCATED ? RAY_TRUNCATED : 0u);
+        counts[index] = evaluations | truncated | (outcome == CHUNK_TRUNCATED ? RAY_TRUNCATED : 0u);
         ray_state[index] = state;
     }
 }

@@ -94,6 +94,9 @@ pub mod binding {
     pub const GRID_WORDS: u32 = 34;
     /// Splatting: BUCKET_OFFSETS as `r32ui` texels, as splat_raster reads them.
     pub const OFFSET_TEXELS: u32 = 35;
+    /// A recorded frame's pixels packed into the target image's format (`target_pack`):
+    /// `u32` words, as many per pixel as `vk::TargetFormat::bytes` / 4.
+    pub const TARGET_PACKED: u32 = 36;
 
     /// How kernels read a binding: the grid and the octree's samples, nodes and references
     /// through texel-buffer views (one AVX2 gather per 8 lanes on llvmpipe instead of a per-lane
@@ -115,7 +118,7 @@ pub mod binding {
     }
 
     /// Every binding with its macro name.
-    pub const ALL: [(&str, u32); 36] = [
+    pub const ALL: [(&str, u32); 37] = [
         ("BINDING_PARAMS", PARAMS),
         ("BINDING_GRID", GRID),
         ("BINDING_SAMPLES", SAMPLES),
@@ -152,6 +155,7 @@ pub mod binding {
         ("BINDING_TRANSFER_TEXELS", TRANSFER_TEXELS),
         ("BINDING_GRID_WORDS", GRID_WORDS),
         ("BINDING_OFFSET_TEXELS", OFFSET_TEXELS),
+        ("BINDING_TARGET_PACKED", TARGET_PACKED),
     ];
 }
 

@@ -36,6 +36,10 @@ pub enum RenderError {
         budget: f64,
         hint: String,
     },
+    /// A recorded frame that completed wrong (`Renderer::retire`): what cut it short, and
+    /// what the next recordings do instead.
+    #[error("the recorded frame is not right: {0}")]
+    Recorded(String),
     #[error("interrupted: the render stopped and wrote nothing")]
     Interrupted,
     #[error(

@@ -54,6 +54,14 @@ pub fn default_chunk(setup: &RaySetup) -> u32 {
     }
 }
 
+/// Image rows per band: about `BAND_PIXELS` pixels, a multiple of the workgroup's 8 rows.
+pub(crate) fn band_rows(setup: &RaySetup) -> u32 {
+    let (w, h) = (setup.camera.width, setup.camera.height);
+    (BAND_PIXELS / w.max(1))
+        .clamp(8, h.max(8))
+        .next_multiple_of(8)
+}
+
 /// Binding numbers of the ray caster for a field and setup.
 pub(crate) fn frame_bindings(
     gpu_field: &GpuField,
@@ -127,6 +135,39 @@ pub(crate) struct FrameConstants {
     pub(crate) skip: Option<Buffer>,
 }
 
+/// The bytes of a frame's constants, for buffers made per frame ([`frame_constants`]) or
+/// written from a recorded command buffer (`Renderer::record`).
+pub(crate) struct ConstantData {
+    pub(crate) params: Vec<u8>,
+    pub(crate) tf: Vec<u8>,
+    pub(crate) iso: Vec<u8>,
+    pub(crate) skip: Option<Vec<u8>>,
+}
+
+pub(crate) fn constant_data(
+    field: &Field,
+    setup: &RaySetup,
+    tf: &TransferFunction,
+    tables: Option<&PreintegrationTables>,
+    skip: bool,
+) -> ConstantData {
+    let gpu_tf = tf.to_gpu();
+    let skip = skip.then(|| {
+        let table = SkipTable::build(tf, &setup.isosurfaces, crate::field::scalar_range(field));
+        bytemuck::cast_slice(&table.gpu_words()).to_vec()
+    });
+    let mut params = render_params(field, setup, gpu_tf.len() as u32);
+    if let Some(t) = tables {
+        table_params(&mut params, t);
+    }
+    ConstantData {
+        params: bytemuck::cast_slice(&params_copies(params)).to_vec(),
+        tf: bytemuck::cast_slice(&gpu_tf).to_vec(),
+        iso: bytemuck::cast_slice(&iso_buffer_data(&setup.isosurfaces)).to_vec(),
+        skip,
+    }
+}
+
 pub(crate) fn frame_constants(
     ctx: &Context,
     field: &Field,
@@ -135,24 +176,15 @@ pub(crate) fn frame_constants(
     tables: Option<&PreintegrationTables>,
     skip: bool,
 ) -> Result<FrameConstants, VkError> {
-    let gpu_tf = tf.to_gpu();
-    let skip = match skip {
-        true => {
-            let table = SkipTable::build(tf, &setup.isosurfaces, crate::field::scalar_range(field));
-            Some(Buffer::from_slice(ctx, "skip table", &table.gpu_words())?)
-        }
-        false => None,
-    };
-    let mut params = render_params(field, setup, gpu_tf.len() as u32);
-    if let Some(t) = tables {
-        table_params(&mut params, t);
-    }
-    let isos = iso_buffer_data(&setup.isosurfaces);
+    let d = constant_data(field, setup, tf, tables, skip);
     Ok(FrameConstants {
-        params: Buffer::from_slice(ctx, "render params", &params_copies(params))?,
-        tf: Buffer::from_slice(ctx, "transfer function", &gpu_tf)?,
-        iso: Buffer::from_slice(ctx, "isosurfaces", &isos)?,
-        skip,
+        params: Buffer::from_slice(ctx, "render params", &d.params)?,
+        tf: Buffer::from_slice(ctx, "transfer function", &d.tf)?,
+        iso: Buffer::from_slice(ctx, "isosurfaces", &d.iso)?,
+        skip: d
+            .skip
+            .map(|w| Buffer::from_slice(ctx, "skip table", &w))
+            .transpose()?,
     })
 }
 
@@ -173,6 +205,38 @@ pub(crate) fn frame_targets(ctx: &Context, pixels: u64) -> Result<FrameTargets, 
         ray_state: Buffer::new(ctx, "ray state", pixels * 16, BufferUsage::Storage)?,
         skip_stats: Buffer::new(ctx, "skip report", pixels * 16, BufferUsage::Storage)?,
     })
+}
+
+/// Every buffer of a ray-cast frame at its binding (what [`frame_bindings`] lists).
+pub(crate) fn frame_buffers<'a>(
+    gpu_field: &'a GpuField,
+    constants: &'a FrameConstants,
+    targets: &'a FrameTargets,
+    table: Option<&'a Buffer>,
+    setup: &RaySetup,
+) -> Vec<(u32, &'a Buffer)> {
+    let mut all = gpu_field.bindings();
+    all.extend(gpu_field.hull_bindings());
+    all.extend([
+        (binding::PARAMS, &constants.params),
+        (binding::TRANSFER, &constants.tf),
+        (binding::TRANSFER_TEXELS, &constants.tf),
+        (binding::IMAGE, &targets.image),
+        (binding::COUNTS, &targets.counts),
+        (binding::RAY_STATE, &targets.ray_state),
+    ]);
+    if !setup.isosurfaces.is_empty() {
+        all.push((binding::ISO, &constants.iso));
+    }
+    if let Some(t) = table {
+        all.push((binding::PREINT, t));
+    }
+    if let Some(t) = &constants.skip {
+        all.extend(gpu_field.skip_bindings());
+        all.push((binding::SKIP_TABLE, t));
+        all.push((binding::SKIP_STATS, &targets.skip_stats));
+    }
+    all
 }
 
 /// How [`run_bands`] ended.
@@ -199,32 +263,10 @@ pub(crate) fn run_bands(
     progress: &mut dyn FnMut(f64),
     stop: Option<&AtomicBool>,
 ) -> Result<Bands, VkError> {
-    let mut all = gpu_field.bindings();
-    all.extend(gpu_field.hull_bindings());
-    all.extend([
-        (binding::PARAMS, &constants.params),
-        (binding::TRANSFER, &constants.tf),
-        (binding::TRANSFER_TEXELS, &constants.tf),
-        (binding::IMAGE, &targets.image),
-        (binding::COUNTS, &targets.counts),
-        (binding::RAY_STATE, &targets.ray_state),
-    ]);
-    if !setup.isosurfaces.is_empty() {
-        all.push((binding::ISO, &constants.iso));
-    }
-    if let Some(t) = table {
-        all.push((binding::PREINT, t));
-    }
-    if let Some(t) = &constants.skip {
-        all.extend(gpu_field.skip_bindings());
-        all.push((binding::SKIP_TABLE, t));
-        all.push((binding::SKIP_STATS, &targets.skip_stats));
-    }
+    let all = frame_buffers(gpu_field, constants, targets, table, setup);
     let group = BindGroup::new(ctx, pipeline, &all)?;
     let (w, h) = (setup.camera.width, setup.camera.height);
-    let band_rows = (BAND_PIXELS / w.max(1))
-        .clamp(8, h.max(8))
-        .next_multiple_of(8);
+    let band_rows = band_rows(setup);
     let outer = outer_steps(setup);
     let mut chunk = setup.chunk.unwrap_or_else(|| default_chunk(setup));
     let mut gpu_ms = 0.0;

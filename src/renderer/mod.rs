@@ -1,5 +1,7 @@
-//! Driving `raycast.comp`: [`render`] for one frame and [`Renderer`], the persistent renderer
-//! of one dataset; the ray caster's frame stages are in [`crate::raycast::frame`], the
+//! The renderer above both methods: [`Renderer`], the persistent renderer of one dataset, which
+//! renders a frame and reads it back ([`Renderer::render`]) or records it into the
+//! application's command buffer ([`Renderer::record`], module `record`); and [`render`], one
+//! ray-cast frame without a renderer; the ray caster's frame stages are in [`crate::raycast::frame`], the
 //! splatter's in [`crate::splat::gpu`].
 //!
 //! [`Renderer`] owns the field's GPU data (uploaded once), its compiled pipelines, the
@@ -9,6 +11,7 @@
 
 use crate::field::gpu::GpuField;
 use crate::field::skip::SkipReport;
+use crate::field::variant::Variant;
 use crate::field::{Field, RenderError};
 use crate::raycast::frame::FrameTargets;
 use crate::raycast::frame::{
@@ -29,8 +32,17 @@ use crate::view::shading::Isosurface;
 use crate::view::transfer::TransferFunction;
 use crate::vk::{Buffer, ComputePipeline, Context, ShaderCompiler, VkError};
 use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Instant;
+
+mod record;
+pub mod target;
+
+pub use crate::vk::{Access, ExternalCommands, Target, TargetFormat};
+pub use record::{FrameInFlight, RecordedFrame};
+
+/// Renderer identities, so that a frame is retired only by the renderer that recorded it.
+static NEXT_RENDERER: AtomicU64 = AtomicU64::new(1);
 
 /// A rendered image as the GPU produced it.
 #[derive(Debug, Clone)]
@@ -176,6 +188,13 @@ pub struct FrameStats {
 /// A compiled variant: its macro definitions, its bindings and the pipeline.
 type CachedPipeline = (Vec<(String, String)>, Vec<u32>, ComputePipeline);
 
+/// The host half of a ray-cast frame ([`Renderer::ray_frame`]).
+struct RayFrame {
+    setup: RaySetup,
+    tables_built: bool,
+    table_ms: f64,
+}
+
 /// The persistent renderer of one dataset: upload once, render many frames.
 pub struct Renderer {
     ctx: Context,
@@ -185,8 +204,9 @@ pub struct Renderer {
     /// Compiled variants with the bindings they were built for.
     pipelines: Vec<CachedPipeline>,
     tables: TableCache,
-    /// The uploaded tables and the build they came from.
-    table_buffer: Option<(usize, Buffer)>,
+    /// The uploaded tables and the build they came from (shared with recorded frames that
+    /// still read them).
+    table_buffer: Option<(usize, Arc<Buffer>)>,
     targets: Option<FrameTargets>,
     /// Splatting: the kernels (uploaded at the first splatting frame), compiled variants and
     /// frame buffers.
@@ -199,6 +219,23 @@ pub struct Renderer {
     /// MLS or footprint evaluations a frame may plan (`None`: no limit); see
     /// [`Renderer::set_work_budget`].
     budget: Option<f64>,
+    /// This renderer's identity, carried by the frames it records.
+    id: u64,
+    /// Recorded frames' resources, one slot per frame in flight ([`Renderer::record`]).
+    slots: Vec<record::Slot>,
+    record: record::RecordState,
+}
+
+impl Drop for Renderer {
+    fn drop(&mut self) {
+        // A frame recorded and never retired may still be executing: its buffers must not be
+        // freed under it.
+        if self.frames_in_flight() > 0
+            && let Err(e) = self.ctx.wait_queue_idle()
+        {
+            eprintln!("vmls: waiting for recorded frames before freeing them failed: {e}");
+        }
+    }
 }
 
 impl Renderer {
@@ -238,6 +275,9 @@ impl Renderer {
             splat_targets: None,
             stop: None,
             budget: None,
+            id: NEXT_RENDERER.fetch_add(1, Ordering::Relaxed),
+            slots: Vec::new(),
+            record: record::RecordState::default(),
         })
     }
 
@@ -267,53 +307,12 @@ impl Renderer {
         if let Some(shading) = view.settings.method.splat_shading() {
             return self.render_splat(view, shading, start, &mut progress);
         }
-        let mut setup = RaySetup::new(
-            view.camera,
-            view.settings,
-            view.isosurfaces,
-            view.lighting,
-            &self.field,
-        )?;
-        if let Some(budget) = self.budget {
-            setup.check_budget(budget)?;
-        }
-        if !self.gpu_field.has_data() {
-            self.field.octree()?;
-            self.gpu_field.upload_data(&self.ctx, &self.field)?;
-        }
-        setup.resolve_skip(self.gpu_field.blocks(), view.transfer, &self.field);
-        if setup.method.preintegrated() {
-            check_table_size(
-                &setup.table_lengths(view.transfer),
-                view.settings.table_resolution,
-                self.ctx.info().max_storage_buffer_range,
-            )?;
-        }
-        let builds = self.tables.builds();
-        let table_start = Instant::now();
-        self.tables.get(
-            &setup,
-            &self.field,
-            view.transfer,
-            view.settings.table_resolution,
-            |_| {},
-        );
-        let tables_built = self.tables.builds() != builds;
-        let tables = self
-            .tables
-            .current()
-            .filter(|_| setup.method.preintegrated());
-        let table_ms = if tables_built {
-            table_start.elapsed().as_secs_f64() * 1e3
-        } else {
-            0.0
-        };
-        check_tables(&setup, tables)?;
-        if let Some(t) = tables
-            && self.table_buffer.as_ref().map(|(b, _)| *b) != Some(self.tables.builds())
-        {
-            self.table_buffer = Some((self.tables.builds(), table_buffer(&self.ctx, t)?));
-        }
+        let RayFrame {
+            mut setup,
+            tables_built,
+            table_ms,
+        } = self.ray_frame(view)?;
+        let has_tables = setup.method.preintegrated();
         let pixels = u64::from(setup.camera.width) * u64::from(setup.camera.height);
         let targets_allocated = self.targets.as_ref().map(|t| t.pixels) != Some(pixels);
         if targets_allocated {
@@ -325,21 +324,10 @@ impl Renderer {
         // variant keeps (Bands::HullHits).
         let (variant, gpu_ms, bands) = loop {
             let variant = variant_for_render(&self.field, &setup);
-            let defines = variant.defines();
-            let bindings = frame_bindings(&self.gpu_field, &setup, tables.is_some(), variant.skip);
-            let cached = self
-                .pipelines
-                .iter()
-                .position(|(d, b, _)| *d == defines && *b == bindings);
-            pipeline_built |= cached.is_none();
-            let index = match cached {
-                Some(i) => i,
-                None => {
-                    let p = frame_pipeline(&self.ctx, &self.compiler, &variant, &bindings)?;
-                    self.pipelines.push((defines, bindings, p));
-                    self.pipelines.len() - 1
-                }
-            };
+            let bindings = frame_bindings(&self.gpu_field, &setup, has_tables, variant.skip);
+            let (index, built) = self.ray_pipeline(&variant, bindings)?;
+            pipeline_built |= built;
+            let tables = self.tables.current().filter(|_| has_tables);
             let constants = frame_constants(
                 &self.ctx,
                 &self.field,
@@ -352,7 +340,7 @@ impl Renderer {
                 return Err(VkError::Usage("frame buffers missing".into()).into());
             };
             let table = if tables.is_some() {
-                self.table_buffer.as_ref().map(|(_, b)| b)
+                self.table_buffer.as_ref().map(|(_, b)| &**b)
             } else {
                 None
             };
@@ -402,6 +390,85 @@ impl Renderer {
                 skip_estimate: setup.skip_estimate,
             },
         ))
+    }
+
+    /// The host half of a ray-cast frame, shared by [`Renderer::render`] and
+    /// [`Renderer::record`]: the ray setup (checked against the work budget), the field's data
+    /// on the device (uploaded at the first ray-cast frame), the skipping decision, and the
+    /// preintegration tables, built and uploaded only when what they depend on changed.
+    fn ray_frame(&mut self, view: &View<'_>) -> Result<RayFrame, RenderError> {
+        let mut setup = RaySetup::new(
+            view.camera,
+            view.settings,
+            view.isosurfaces,
+            view.lighting,
+            &self.field,
+        )?;
+        if let Some(budget) = self.budget {
+            setup.check_budget(budget)?;
+        }
+        if !self.gpu_field.has_data() {
+            self.field.octree()?;
+            self.gpu_field.upload_data(&self.ctx, &self.field)?;
+        }
+        setup.resolve_skip(self.gpu_field.blocks(), view.transfer, &self.field);
+        if setup.method.preintegrated() {
+            check_table_size(
+                &setup.table_lengths(view.transfer),
+                view.settings.table_resolution,
+                self.ctx.info().max_storage_buffer_range,
+            )?;
+        }
+        let builds = self.tables.builds();
+        let table_start = Instant::now();
+        self.tables.get(
+            &setup,
+            &self.field,
+            view.transfer,
+            view.settings.table_resolution,
+            |_| {},
+        );
+        let tables_built = self.tables.builds() != builds;
+        let tables = self
+            .tables
+            .current()
+            .filter(|_| setup.method.preintegrated());
+        let table_ms = if tables_built {
+            table_start.elapsed().as_secs_f64() * 1e3
+        } else {
+            0.0
+        };
+        check_tables(&setup, tables)?;
+        if let Some(t) = tables
+            && self.table_buffer.as_ref().map(|(b, _)| *b) != Some(self.tables.builds())
+        {
+            self.table_buffer = Some((self.tables.builds(), Arc::new(table_buffer(&self.ctx, t)?)));
+        }
+        Ok(RayFrame {
+            setup,
+            tables_built,
+            table_ms,
+        })
+    }
+
+    /// The pipeline of a ray-caster variant with these bindings (compiled at its first use):
+    /// its index in the cache and whether it was compiled now.
+    fn ray_pipeline(
+        &mut self,
+        variant: &Variant,
+        bindings: Vec<u32>,
+    ) -> Result<(usize, bool), RenderError> {
+        let defines = variant.defines();
+        if let Some(i) = self
+            .pipelines
+            .iter()
+            .position(|(d, b, _)| *d == defines && *b == bindings)
+        {
+            return Ok((i, false));
+        }
+        let p = frame_pipeline(&self.ctx, &self.compiler, variant, &bindings)?;
+        self.pipelines.push((defines, bindings, p));
+        Ok((self.pipelines.len() - 1, true))
     }
 
     /// One splatting frame: kernels uploaded once, variants and buffers kept between frames.

@@ -27,15 +27,28 @@ pub struct DispatchTiming {
 
 /// Records commands into one command buffer; handed out by [`Context::submit`].
 pub struct Recorder<'a> {
-    shared: &'a Shared,
-    cmd: vk::CommandBuffer,
+    pub(super) shared: &'a Shared,
+    pub(super) cmd: vk::CommandBuffer,
     queries: Option<vk::QueryPool>,
     labels: Vec<String>,
     commands: u32,
 }
 
-impl Recorder<'_> {
-    fn barrier(&mut self) {
+impl<'a> Recorder<'a> {
+    /// A recorder on the application's command buffer (`Context::record_into`): dispatches
+    /// untimed.
+    pub(super) fn external(shared: &'a Shared, cmd: vk::CommandBuffer) -> Self {
+        Self {
+            shared,
+            cmd,
+            queries: None,
+            labels: Vec::new(),
+            commands: 0,
+        }
+    }
+
+    /// The global barrier between vmls's commands (none before the first).
+    pub(super) fn barrier(&mut self) {
         if self.commands > 0 {
             let barrier = [vk::MemoryBarrier::default()
                 .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)

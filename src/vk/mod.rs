@@ -9,11 +9,13 @@
 //! - With validation on, the Khronos layer's error messages are counted
 //!   ([`Context::validation_errors`]); tests fail when the count is non-zero.
 //! - Work is recorded through [`Recorder`] and submitted synchronously by [`Context::submit`],
-//!   which returns the GPU time of every dispatch from timestamp queries.
+//!   which returns the GPU time of every dispatch from timestamp queries, or recorded into the
+//!   application's command buffer by [`Context::record_into`], which submits nothing.
 
 mod buffer;
 mod commands;
 mod context;
+mod external;
 mod pipeline;
 mod pipeline_cache;
 mod shader;
@@ -22,6 +24,7 @@ mod shader_cache;
 pub use buffer::{Buffer, BufferUsage, check_size, check_texel_view};
 pub use commands::{DispatchTiming, Recorder};
 pub use context::{Context, ContextOptions, DeviceInfo, FAIL_ALLOCATIONS_VAR, RawContext};
+pub use external::{Access, ExternalCommands, FrameTimer, Target, TargetFormat};
 pub(crate) use pipeline::TEXEL_FORMATS;
 pub use pipeline::{BindGroup, BindingKind, ComputePipeline};
 pub use shader::{ShaderCompiler, ShaderSource, shader_counts, shader_names, source_texts};
@@ -78,6 +81,9 @@ pub enum VkError {
     Shader { name: String, message: String },
     #[error("{0}")]
     Usage(String),
+    /// Work recorded into the application's command buffer has not completed yet.
+    #[error("{0}")]
+    NotReady(String),
 }
 
 /// Attaches the call name and the resource to a raw `vk::Result`.

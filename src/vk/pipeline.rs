@@ -397,10 +397,26 @@ impl<'a> BindGroup<'a> {
     }
 }
 
+impl BindGroup<'_> {
+    /// The group without the borrow of its buffers, for a recorded frame that outlives the
+    /// call that made it: its owner keeps every buffer alive, and the group too, until the
+    /// application reports the frame's submission complete.
+    pub(crate) fn detach(mut self) -> BindGroup<'static> {
+        BindGroup {
+            shared: self.shared.clone(),
+            pool: std::mem::replace(&mut self.pool, vk::DescriptorPool::null()),
+            set: self.set,
+            views: std::mem::take(&mut self.views),
+            _buffers: PhantomData,
+        }
+    }
+}
+
 impl Drop for BindGroup<'_> {
     fn drop(&mut self) {
-        // SAFETY: submissions are synchronous; no pending command buffer uses the set or the
-        // views. Destroying a null pool is a no-op (a group that failed before creating it).
+        // SAFETY: submissions are synchronous, and a detached group's owner drops it only after
+        // its frame completed: no pending command buffer uses the set or the views. Destroying
+        // a null pool is a no-op (a group that failed before creating it, or was detached).
         unsafe {
             self.shared.device.destroy_descriptor_pool(self.pool, None);
             for &view in &self.views {

@@ -47,6 +47,7 @@ static SOURCES: &[(&str, &str)] = embed![
     "splat_raster.comp",
     "splat_segments.comp",
     "mls_eval.comp",
+    "target_pack.comp",
     "recon_resample.comp",
     "probe_fma.comp",
     "probe_memory.comp",

@@ -1,0 +1,478 @@
+//! Recording a frame into the application's command buffer (issue 28 §2):
+//! [`Renderer::record`] records every dispatch of one ray-cast frame and the write of its
+//! pixels into the application's [`Target`], and returns a [`FrameInFlight`]; the application
+//! submits the command buffer when it likes and hands the token back to
+//! [`Renderer::retire`] once the submission has completed (its fence signalled, or its
+//! timeline semaphore reached the value). Several frames may be in flight: each has its own
+//! constants, frame buffers, descriptor set and timestamps (a *slot*), reused only after retire.
+//!
+//! # Synchronisation contract
+//! - vmls's commands read the field's buffers, the preintegration tables and the slot's
+//!   constants, and write only the slot's buffers and the target. The target is written once,
+//!   by a transfer, after waiting for the target's `before` access; the write is made
+//!   available and visible to its `after` access, and an image is left in its `new_layout`.
+//! - The frame's last command is a barrier that makes vmls's writes visible to the host, which
+//!   [`Renderer::retire`] reads (the frame's per-pixel status).
+//! - Submit the command buffer on the context's queue (`RawContext::queue`), or on one the
+//!   application synchronises with it; vmls's own submissions (uploads, `render`) use that queue
+//!   under its lock.
+//! - Keep the target alive and untouched by other work until the frame's submission has
+//!   completed; retire every frame before dropping the renderer (a renderer dropped with frames
+//!   still in flight waits for its queue to go idle first).
+//! - A `record` that fails may leave part of the frame's commands in the command buffer: reset
+//!   or discard it rather than submit it.
+//! - A frame whose transfer function or table resolution changed builds and uploads its
+//!   preintegration tables before recording, and a frame of a new variant compiles its pipeline
+//!   (unless [`Renderer::prepare`] did both before): host work, and on devices whose memory the
+//!   host cannot map, an upload submission of vmls's own.
+//!
+//! # What `render()` does that a recorded frame cannot
+//! The blocking [`Renderer::render`] submits a band at a time and reads its rays' status back
+//! between chunks: it ends early once every ray is done, restarts a band in smaller chunks where
+//! lavapipe's loop limit cut a ray short, and renders again with more hull crossings when a ray
+//! has more than the first variant keeps. A recorded frame records every chunk of every band up
+//! front (chunks after a ray is done return at once), and [`Renderer::retire`] reports a frame
+//! that one of these cut short as an error, after which the renderer records with smaller
+//! chunks or every hull crossing, so that the next frame is right.
+
+use super::Renderer;
+use crate::field::RenderError;
+use crate::field::skip::SkipReport;
+use crate::field::variant::{Variant, groups_2d};
+use crate::gpu_types::{CountPush, RayPush, binding, ray_count};
+use crate::raycast::frame::{
+    FrameConstants, FrameTargets, band_rows, constant_data, default_chunk, frame_bindings,
+    frame_buffers, frame_targets, outer_steps,
+};
+use crate::raycast::gpu::variant_for_render;
+use crate::view::View;
+use crate::vk::{
+    BindGroup, Buffer, BufferUsage, ComputePipeline, ExternalCommands, FrameTimer, Target,
+    TargetFormat, VkError,
+};
+use std::sync::Arc;
+
+/// A recorded frame. Hand it to [`Renderer::retire`] after its submission completed; until
+/// then vmls reuses none of its buffers. Retiring it early is an error that leaves it in flight
+/// (retire it again later); retiring it twice is an error.
+#[derive(Debug)]
+#[must_use = "a recorded frame must be retired, or its buffers are never reused"]
+pub struct FrameInFlight {
+    renderer: u64,
+    slot: usize,
+    generation: u64,
+}
+
+/// What a retired frame did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordedFrame {
+    /// GPU time between the frame's first and last command (`None` where the queue has no
+    /// timestamps).
+    pub gpu_ms: Option<f64>,
+    /// MLS evaluations over all pixels.
+    pub evaluations: u64,
+    /// Dispatches recorded (bands × chunks, plus the format conversion).
+    pub dispatches: u32,
+    /// The kernel variant, as `--stats` names it.
+    pub variant: String,
+    /// What empty-space skipping did, where the frame skipped.
+    pub skip: Option<SkipReport>,
+}
+
+/// The buffers, descriptor sets and timestamps of one frame in flight.
+pub(super) struct Slot {
+    in_flight: bool,
+    generation: u64,
+    /// Constant buffers, reallocated when a frame needs more room.
+    constants: Option<FrameConstants>,
+    targets: Option<FrameTargets>,
+    /// The pixels in the target image's format, where it is not RGBA32F.
+    packed: Option<Buffer>,
+    /// The tables the frame reads, kept alive while it is in flight.
+    table: Option<Arc<Buffer>>,
+    groups: Vec<BindGroup<'static>>,
+    timer: FrameTimer,
+    variant: Option<Variant>,
+    hull_hits: u32,
+    chunk: u32,
+    dispatches: u32,
+}
+
+/// What the renderer learnt from retired frames, applied to the next recordings.
+#[derive(Default)]
+pub(super) struct RecordState {
+    /// Outer steps per dispatch after a retired frame was cut short by the loop limit.
+    pub(super) chunk: Option<u32>,
+    /// Hull crossings after a retired frame had a ray with more than the variant kept.
+    pub(super) hull_hits: Option<u32>,
+    /// Compiled `target_pack` pipelines by format.
+    pub(super) pack: Vec<(TargetFormat, ComputePipeline)>,
+}
+
+/// Bytes needed for `data`, at least 16 (a zero-sized binding is invalid).
+fn room(data: &[u8]) -> u64 {
+    (data.len() as u64).max(16)
+}
+
+impl Renderer {
+    /// Prepares everything a ray-cast frame of `view` needs, so that recording it builds
+    /// nothing: the field's data on the device, the preintegration tables and the pipeline.
+    pub fn prepare(&mut self, view: &View<'_>) -> Result<(), RenderError> {
+        if view.settings.method.splat_shading().is_some() {
+            return Err(splat_not_recorded());
+        }
+        let frame = self.ray_frame(view)?;
+        let mut setup = frame.setup;
+        if let Some(h) = self.record.hull_hits {
+            setup.hull_hits = h;
+        }
+        let has_tables = setup.method.preintegrated();
+        let variant = variant_for_render(&self.field, &setup);
+        let bindings = frame_bindings(&self.gpu_field, &setup, has_tables, variant.skip);
+        self.ray_pipeline(&variant, bindings)?;
+        Ok(())
+    }
+
+    /// Records one ray-cast frame of `view` into `cmd` and the write of its pixels into
+    /// `target` (see the module documentation for the synchronisation contract). Nothing is
+    /// submitted; the returned token must be retired after the submission completes.
+    pub fn record(
+        &mut self,
+        cmd: ExternalCommands,
+        view: &View<'_>,
+        target: &Target,
+    ) -> Result<FrameInFlight, RenderError> {
+        if view.settings.method.splat_shading().is_some() {
+            return Err(splat_not_recorded());
+        }
+        let frame = self.ray_frame(view)?;
+        let mut setup = frame.setup;
+        if let Some(h) = self.record.hull_hits {
+            setup.hull_hits = h;
+        }
+        let chunk = self
+            .record
+            .chunk
+            .unwrap_or_else(|| setup.chunk.unwrap_or_else(|| default_chunk(&setup)));
+        let (w, h) = (setup.camera.width, setup.camera.height);
+        let pixels = u64::from(w) * u64::from(h);
+        target.check(pixels)?;
+        let has_tables = setup.method.preintegrated();
+        let variant = variant_for_render(&self.field, &setup);
+        let bindings = frame_bindings(&self.gpu_field, &setup, has_tables, variant.skip);
+        let (index, _) = self.ray_pipeline(&variant, bindings)?;
+        let format = target.format();
+        let pack = match format {
+            TargetFormat::Rgba32f => None,
+            f => Some(self.pack_pipeline(f)?),
+        };
+        let tables = self.tables.current().filter(|_| has_tables);
+        let data = constant_data(&self.field, &setup, view.transfer, tables, variant.skip);
+        let slot_index = match self.slots.iter().position(|s| !s.in_flight) {
+            Some(i) => i,
+            None => {
+                self.slots.push(Slot {
+                    in_flight: false,
+                    generation: 0,
+                    constants: None,
+                    targets: None,
+                    packed: None,
+                    table: None,
+                    groups: Vec::new(),
+                    timer: FrameTimer::new(&self.ctx)?,
+                    variant: None,
+                    hull_hits: 0,
+                    chunk: 0,
+                    dispatches: 0,
+                });
+                self.slots.len() - 1
+            }
+        };
+        let ctx = self.ctx.clone();
+        let table = if has_tables {
+            self.table_buffer.as_ref().map(|(_, b)| b.clone())
+        } else {
+            None
+        };
+        let slot = &mut self.slots[slot_index];
+        slot.groups.clear();
+        // Room for this frame's constants and pixels, kept for the next frames of the slot.
+        let fits = slot.constants.as_ref().is_some_and(|c| {
+            c.params.size() >= room(&data.params)
+                && c.tf.size() >= room(&data.tf)
+                && c.iso.size() >= room(&data.iso)
+                && match (&data.skip, &c.skip) {
+                    (Some(d), Some(b)) => b.size() >= room(d),
+                    (None, _) => true,
+                    (Some(_), None) => false,
+                }
+        });
+        if !fits {
+            slot.constants = None;
+            let storage =
+                |name: &str, bytes: u64| Buffer::new(&ctx, name, bytes, BufferUsage::Storage);
+            slot.constants = Some(FrameConstants {
+                params: storage("render params", room(&data.params))?,
+                tf: storage("transfer function", room(&data.tf))?,
+                iso: storage("isosurfaces", room(&data.iso))?,
+                skip: data
+                    .skip
+                    .as_ref()
+                    .map(|d| storage("skip table", room(d)))
+                    .transpose()?,
+            });
+        }
+        if slot.targets.as_ref().map(|t| t.pixels) != Some(pixels) {
+            slot.targets = None;
+            slot.targets = Some(frame_targets(&ctx, pixels)?);
+        }
+        let packed_bytes = pixels * format.bytes();
+        match (&pack, &slot.packed) {
+            (Some(_), Some(b)) if b.size() >= packed_bytes => {}
+            (Some(_), _) => {
+                slot.packed = None;
+                slot.packed = Some(Buffer::new(
+                    &ctx,
+                    "target pixels",
+                    packed_bytes,
+                    BufferUsage::Storage,
+                )?);
+            }
+            (None, _) => {}
+        }
+        slot.table = table;
+        let (Some(constants), Some(targets)) = (slot.constants.as_ref(), slot.targets.as_ref())
+        else {
+            return Err(VkError::Usage("recorded frame buffers missing".into()).into());
+        };
+        let pipeline = &self.pipelines[index].2;
+        let buffers = frame_buffers(
+            &self.gpu_field,
+            constants,
+            targets,
+            slot.table.as_deref(),
+            &setup,
+        );
+        let group = BindGroup::new(&ctx, pipeline, &buffers)?;
+        let pack_group = match (&pack, &slot.packed) {
+            (Some(p), Some(out)) => Some(BindGroup::new(
+                &ctx,
+                &self.record.pack[*p].1,
+                &[
+                    (binding::IMAGE, &targets.image),
+                    (binding::TARGET_PACKED, out),
+                ],
+            )?),
+            _ => None,
+        };
+        let outer = outer_steps(&setup);
+        let rows_per_band = band_rows(&setup);
+        let mut dispatches = 0u32;
+        ctx.record_into(cmd, Some(&slot.timer), |rec| {
+            rec.update(&constants.params, &data.params)?;
+            rec.update(&constants.tf, &data.tf)?;
+            rec.update(&constants.iso, &data.iso)?;
+            if let (Some(b), Some(d)) = (&constants.skip, &data.skip) {
+                rec.update(b, d)?;
+            }
+            let mut row = 0;
+            while row < h {
+                let rows = rows_per_band.min(h - row);
+                let mut first = 0;
+                while first < outer {
+                    let push = RayPush {
+                        row_offset: row,
+                        rows,
+                        first,
+                        last: first.saturating_add(chunk).min(outer),
+                    };
+                    rec.dispatch(
+                        pipeline,
+                        &group,
+                        bytemuck::bytes_of(&push),
+                        [w.div_ceil(8), rows.div_ceil(8), 1],
+                        "raycast",
+                    )?;
+                    dispatches += 1;
+                    first = push.last;
+                }
+                row += rows;
+            }
+            match (&pack, &pack_group, &slot.packed) {
+                (Some(p), Some(g), Some(out)) => {
+                    let count = u32::try_from(pixels).unwrap_or(u32::MAX);
+                    let push = CountPush {
+                        count,
+                        ..CountPush::default()
+                    };
+                    rec.dispatch(
+                        &self.record.pack[*p].1,
+                        g,
+                        bytemuck::bytes_of(&push),
+                        groups_2d(count, 64),
+                        "target_pack",
+                    )?;
+                    dispatches += 1;
+                    rec.write_target(out, target, w, h)
+                }
+                _ => rec.write_target(&targets.image, target, w, h),
+            }
+        })?;
+        slot.groups.push(group.detach());
+        if let Some(g) = pack_group {
+            slot.groups.push(g.detach());
+        }
+        slot.variant = Some(variant);
+        slot.hull_hits = setup.hull_hits;
+        slot.chunk = chunk;
+        slot.dispatches = dispatches;
+        slot.in_flight = true;
+        slot.generation += 1;
+        Ok(FrameInFlight {
+            renderer: self.id,
+            slot: slot_index,
+            generation: slot.generation,
+        })
+    }
+
+    /// Takes back a recorded frame whose submission has completed: reads its per-pixel status
+    /// and frees its slot for the next frame. A frame cut short (lavapipe's loop limit, or a
+    /// ray with more hull crossings than the variant kept) is an error naming what happened;
+    /// the renderer then records smaller chunks or every crossing, and the next frame is right.
+    pub fn retire(&mut self, frame: &FrameInFlight) -> Result<RecordedFrame, RenderError> {
+        let stale = || {
+            RenderError::from(VkError::Usage(
+                "retire: the frame was not recorded by this renderer, or was retired already"
+                    .into(),
+            ))
+        };
+        if frame.renderer != self.id {
+            return Err(stale());
+        }
+        let ctx = self.ctx.clone();
+        let slot = self.slots.get_mut(frame.slot).ok_or_else(stale)?;
+        if !slot.in_flight || slot.generation != frame.generation {
+            return Err(stale());
+        }
+        // An error here (queries not yet available) leaves the frame in flight, to be retired
+        // again once it completed.
+        let gpu_ms = slot.timer.gpu_ms()?;
+        slot.in_flight = false;
+        slot.groups.clear();
+        slot.table = None;
+        let (Some(targets), Some(variant)) = (slot.targets.as_ref(), slot.variant) else {
+            return Err(stale());
+        };
+        let counts: Vec<u32> = targets.counts.read(&ctx)?;
+        let counts = &counts[..(targets.pixels as usize).min(counts.len())];
+        let skip = if variant.skip {
+            let rays: Vec<[f32; 4]> = targets.skip_stats.read(&ctx)?;
+            let mut r = SkipReport::default();
+            for p in rays.iter().take(counts.len()) {
+                r.add(f64::from(p[0]), p[1] as u64, f64::from(p[2]));
+            }
+            Some(r)
+        } else {
+            None
+        };
+        let (hull_hits, chunk, dispatches) = (slot.hull_hits, slot.chunk, slot.dispatches);
+        if counts.iter().any(|c| c & ray_count::HULL_OVERFLOW != 0)
+            && (hull_hits as usize) < crate::samples::bvh::MAX_HITS
+        {
+            self.record.hull_hits = Some(crate::samples::bvh::MAX_HITS as u32);
+            return Err(RenderError::Recorded(format!(
+                "a ray crossed the hull more than the {hull_hits} times the variant keeps; the \
+                 next frames keep {} (record again)",
+                crate::samples::bvh::MAX_HITS
+            )));
+        }
+        if counts.iter().any(|c| c & ray_count::TRUNCATED != 0) {
+            if chunk <= 1 {
+                return Err(RenderError::Recorded(
+                    "the device ended a loop early even for one step per dispatch (llvmpipe \
+                     allows 65 535 loop iterations per invocation); this view cannot be \
+                     rendered with these settings"
+                        .into(),
+                ));
+            }
+            self.record.chunk = Some(chunk.div_ceil(2));
+            return Err(RenderError::Recorded(format!(
+                "the device's loop limit cut rays short at {chunk} steps per dispatch; the next \
+                 frames record {} (record again)",
+                chunk.div_ceil(2)
+            )));
+        }
+        if let Some(i) = counts.iter().position(|c| c & ray_count::DONE == 0) {
+            return Err(RenderError::Recorded(format!(
+                "pixel {i} was not finished after every recorded step"
+            )));
+        }
+        Ok(RecordedFrame {
+            gpu_ms,
+            evaluations: counts
+                .iter()
+                .map(|c| u64::from(c & ray_count::EVALUATIONS))
+                .sum(),
+            dispatches,
+            variant: variant.name("raycast"),
+            skip,
+        })
+    }
+
+    /// Frames recorded and not yet retired.
+    pub fn frames_in_flight(&self) -> usize {
+        self.slots.iter().filter(|s| s.in_flight).count()
+    }
+
+    /// The `target_pack` pipeline for `format` (compiled at its first use).
+    fn pack_pipeline(&mut self, format: TargetFormat) -> Result<usize, RenderError> {
+        if let Some(i) = self.record.pack.iter().position(|(f, _)| *f == format) {
+            return Ok(i);
+        }
+        let code = match format {
+            TargetFormat::Rgba16f => 1,
+            TargetFormat::Rgba8Unorm => 2,
+            TargetFormat::Rgba8Srgb => 3,
+            TargetFormat::Rgba32f => {
+                return Err(
+                    VkError::Usage("target_pack: RGBA32F needs no conversion".into()).into(),
+                );
+            }
+        };
+        let mut defines = crate::gpu_types::binding_defines();
+        defines.push(("TARGET_FORMAT".into(), code.to_string()));
+        let spirv = self
+            .compiler
+            .compile(crate::vk::ShaderSource::File("target_pack.comp"), &defines)?;
+        let kinds = [binding::IMAGE, binding::TARGET_PACKED].map(|b| (b, binding::kind(b)));
+        let p = ComputePipeline::with_kinds(
+            &self.ctx,
+            &format!("target_pack:{format:?}"),
+            &spirv,
+            &kinds,
+            std::mem::size_of::<CountPush>() as u32,
+        )?;
+        self.record.pack.push((format, p));
+        Ok(self.record.pack.len() - 1)
+    }
+}
+
+fn splat_not_recorded() -> RenderError {
+    RenderError::Setting {
+        key: "render.method",
+        message: "a splatting frame cannot be recorded into an application's command buffer: \
+                  it reads its footprint count back between its projection and its \
+                  accumulation (to check the work budget and size the entry list); render it \
+                  with Renderer::render, or record a ray-casting method"
+            .into(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn room_is_never_zero() {
+        assert_eq!(super::room(&[]), 16);
+        assert_eq!(super::room(&[0; 40]), 40);
+    }
+}

@@ -1,0 +1,252 @@
+//! `examples/embed.rs` run as a test: an application's own instance, device, image and command
+//! buffers, ray-cast frames recorded by `Renderer::record` with two in flight while the camera
+//! turns, under the validation layer with synchronization validation. Each recorded frame must
+//! equal `Renderer::render`'s image of the same camera: bit for bit in RGBA32F, and through
+//! `target_pack`'s CPU twin in the packed formats.
+
+#[path = "../examples/embed.rs"]
+mod embed;
+
+use std::sync::atomic::Ordering;
+use vmls::renderer::TargetFormat;
+use vmls::renderer::target::pack_pixel;
+
+fn overrides(extra: &[&str]) -> Vec<String> {
+    let mut o: Vec<String> = [
+        "volume.resolution=17",
+        "camera.width=40",
+        "camera.height=24",
+        "render.table_resolution=64",
+        "render.step=0.5",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    o.extend(extra.iter().map(|s| s.to_string()));
+    o
+}
+
+/// The tests of this binary one at a time, with the application's validation on: they share
+/// the message count and the environment variable that `App::new` reads.
+fn validated() -> std::sync::MutexGuard<'static, ()> {
+    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let guard = LOCK.lock().unwrap_or_else(|p| p.into_inner());
+    // SAFETY: every test of this binary holds the lock while it reads or writes the variable.
+    unsafe { std::env::set_var("VMLS_VALIDATION", "1") };
+    guard
+}
+
+/// Runs the example with validation on and checks what it must.
+fn check(extra: &[&str], format: TargetFormat, frames: usize) -> embed::Frames {
+    let _guard = validated();
+    let before = embed::MESSAGES.load(Ordering::SeqCst);
+    let out = embed::run(&overrides(extra), frames, 0.35, format).expect("example runs");
+    assert_eq!(
+        embed::MESSAGES.load(Ordering::SeqCst),
+        before,
+        "validation (synchronization included) reported messages"
+    );
+    assert_eq!(out.frames.len(), frames);
+    assert_eq!(out.rendered.len(), frames);
+    out
+}
+
+#[test]
+fn recorded_frames_equal_render_bit_for_bit() {
+    let out = check(&[], TargetFormat::Rgba32f, 4);
+    for (i, (got, want)) in out.frames.iter().zip(&out.rendered).enumerate() {
+        let want: &[u8] = bytemuck::cast_slice(want);
+        assert_eq!(got.len(), want.len());
+        let differ = got
+            .chunks(4)
+            .zip(want.chunks(4))
+            .filter(|(a, b)| a != b)
+            .count();
+        assert_eq!(
+            differ, 0,
+            "frame {i}: {differ} channels differ from render()"
+        );
+    }
+    // The camera turned: consecutive frames differ.
+    assert_ne!(out.frames[0], out.frames[1]);
+}
+
+#[test]
+fn packed_formats_match_the_cpu_twin() {
+    for format in [
+        TargetFormat::Rgba16f,
+        TargetFormat::Rgba8Unorm,
+        TargetFormat::Rgba8Srgb,
+    ] {
+        let out = check(&["render.method=\"adaptive\""], format, 3);
+        for (i, (got, want)) in out.frames.iter().zip(&out.rendered).enumerate() {
+            let twin: Vec<u8> = want.iter().flat_map(|p| pack_pixel(format, *p)).collect();
+            assert_eq!(got.len(), twin.len());
+            // 8-bit: at most one step where the GPU's rounding of a value on a half step
+            // differs; half floats: at most one unit in the last place (measured: 0 and 0).
+            let worst = match format {
+                TargetFormat::Rgba16f => got
+                    .chunks(2)
+                    .zip(twin.chunks(2))
+                    .map(|(a, b)| {
+                        u16::from_le_bytes([a[0], a[1]]).abs_diff(u16::from_le_bytes([b[0], b[1]]))
+                    })
+                    .max(),
+                _ => got
+                    .iter()
+                    .zip(&twin)
+                    .map(|(a, b)| u16::from(a.abs_diff(*b)))
+                    .max(),
+            };
+            assert!(
+                worst.unwrap_or(0) <= 1,
+                "{format:?} frame {i}: off by {worst:?} units from the twin"
+            );
+        }
+    }
+}
+
+/// A command buffer of the application's, begun, and the pool it came from.
+///
+/// # Safety
+/// `app` outlives the pool; the caller destroys the pool.
+unsafe fn begun(app: &embed::App) -> (ash::vk::CommandPool, ash::vk::CommandBuffer) {
+    use ash::vk;
+    // SAFETY: live device; the pool is destroyed by the caller.
+    unsafe {
+        let pool = app
+            .device
+            .create_command_pool(
+                &vk::CommandPoolCreateInfo::default().queue_family_index(app.family),
+                None,
+            )
+            .expect("pool");
+        let cmd = app
+            .device
+            .allocate_command_buffers(
+                &vk::CommandBufferAllocateInfo::default()
+                    .command_pool(pool)
+                    .command_buffer_count(1),
+            )
+            .expect("command buffer")[0];
+        app.device
+            .begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default())
+            .expect("begin");
+        (pool, cmd)
+    }
+}
+
+/// A buffer target, and what the API refuses: a frame retired before its submission ran,
+/// retired twice or by another renderer, a buffer too small, a splatting method.
+#[test]
+fn buffer_targets_and_misuse() {
+    use ash::vk;
+    use vmls::renderer::{Access, ExternalCommands, Renderer, Target};
+    let _guard = validated();
+    let before = embed::MESSAGES.load(Ordering::SeqCst);
+    let scene = vmls::scene::Scene::load(None, &overrides(&[])).expect("scene");
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let bytes = u64::from(w) * u64::from(h) * 16;
+    // SAFETY: the test is the application; it waits for the queue before reading or destroying.
+    unsafe {
+        let app = embed::App::new().expect("app");
+        let d = &app.device;
+        let buffer = d
+            .create_buffer(
+                &vk::BufferCreateInfo::default()
+                    .size(bytes)
+                    .usage(vk::BufferUsageFlags::TRANSFER_DST),
+                None,
+            )
+            .expect("buffer");
+        let req = d.get_buffer_memory_requirements(buffer);
+        let host = vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT;
+        let index = (0..app.props.memory_type_count)
+            .find(|&i| {
+                req.memory_type_bits & (1 << i) != 0
+                    && app.props.memory_types[i as usize]
+                        .property_flags
+                        .contains(host)
+            })
+            .expect("host memory");
+        let memory = d
+            .allocate_memory(
+                &vk::MemoryAllocateInfo::default()
+                    .allocation_size(req.size)
+                    .memory_type_index(index),
+                None,
+            )
+            .expect("memory");
+        d.bind_buffer_memory(buffer, memory, 0).expect("bind");
+        let (pool, cmd) = begun(&app);
+        {
+            let ctx = app.context().expect("context");
+            let field = scene.field_on(Some(ctx.info()), |_| {}).expect("field");
+            let mut renderer = Renderer::new(&ctx, field.clone()).expect("renderer");
+            let mut other = Renderer::new(&ctx, field).expect("renderer");
+            let target = Target::buffer(buffer, 0, bytes, Access::NONE, Access::HOST_READ);
+            let small = Target::buffer(buffer, 0, bytes - 16, Access::NONE, Access::HOST_READ);
+            let view = scene.view();
+            let err = renderer
+                .record(ExternalCommands::new(cmd), &view, &small)
+                .expect_err("a buffer one pixel short");
+            assert!(err.to_string().contains("target buffer"), "{err}");
+            let mut splat = scene.render.clone();
+            splat.method = vmls::view::Method::Splat;
+            let splat_view = vmls::view::View {
+                settings: &splat,
+                ..view
+            };
+            let err = renderer
+                .record(ExternalCommands::new(cmd), &splat_view, &target)
+                .expect_err("splatting is not recorded");
+            assert!(err.to_string().contains("render.method"), "{err}");
+
+            let frame = renderer
+                .record(ExternalCommands::new(cmd), &view, &target)
+                .expect("record");
+            assert_eq!(renderer.frames_in_flight(), 1);
+            // Not yet submitted: its timestamps are unavailable, and it stays in flight.
+            if ctx.info().timestamp_period_ns.is_some() {
+                let err = renderer.retire(&frame).expect_err("retired early");
+                assert!(
+                    err.to_string().contains("before the GPU completed"),
+                    "{err}"
+                );
+                assert_eq!(renderer.frames_in_flight(), 1);
+            }
+            assert!(other.retire(&frame).is_err(), "another renderer's frame");
+            d.end_command_buffer(cmd).expect("end");
+            let cmds = [cmd];
+            d.queue_submit(
+                app.queue,
+                &[vk::SubmitInfo::default().command_buffers(&cmds)],
+                vk::Fence::null(),
+            )
+            .expect("submit");
+            d.queue_wait_idle(app.queue).expect("wait");
+            let done = renderer.retire(&frame).expect("retire");
+            assert_eq!(renderer.frames_in_flight(), 0);
+            assert!(done.evaluations > 0 && done.dispatches > 0);
+            assert!(renderer.retire(&frame).is_err(), "retired twice");
+            let ptr = d
+                .map_memory(memory, 0, bytes, vk::MemoryMapFlags::empty())
+                .expect("map");
+            let got = std::slice::from_raw_parts(ptr.cast::<u8>(), bytes as usize).to_vec();
+            d.unmap_memory(memory);
+            let (image, _) = renderer.render(&view, |_| {}).expect("render");
+            let want: &[u8] = bytemuck::cast_slice(&image.pixels);
+            assert!(got == want, "the buffer target differs from render()");
+            assert_eq!(ctx.validation_errors(), 0);
+        }
+        d.destroy_command_pool(pool, None);
+        d.destroy_buffer(buffer, None);
+        d.free_memory(memory, None);
+        app.destroy().expect("destroy");
+    }
+    assert_eq!(
+        embed::MESSAGES.load(Ordering::SeqCst),
+        before,
+        "validation reported messages"
+    );
+}
