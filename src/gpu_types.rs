@@ -1,8 +1,8 @@
 //! Structs shared with GLSL, and the binding numbers of every kernel.
 //!
 //! Each struct is `#[repr(C)]` + `Pod` with explicit padding, a size assertion, and a twin of the
-//! same name in `glsl/include/types.glsl` (std430 layout). The test `tests/layout.rs` runs
-//! `glsl/layout_probe.comp`, which writes every field of every twin with a distinct value, and
+//! same name in `glsl/common/types.glsl` (std430 layout). The test `tests/layout.rs` runs
+//! `glsl/probe/layout_probe.comp`, which writes every field of every twin with a distinct value, and
 //! checks that each lands in the Rust field of the same name.
 //!
 //! Binding numbers exist only here: [`binding_defines`] hands them to shaderc as `BINDING_*`
@@ -168,7 +168,7 @@ pub const GRID_PAD: usize = 16;
 
 /// Copies of `RenderParams`/`SplatParams` in the parameters' uniform buffer: kernels index the
 /// block by `gl_WorkGroupID.z` (always 0) so that lavapipe cannot inline its values and recompile
-/// the kernel at every dispatch (glsl/include/params.glsl says why); NIR would fold the index of
+/// the kernel at every dispatch (glsl/common/params.glsl says why); NIR would fold the index of
 /// a one-element array, so the block holds two.
 pub const PARAMS_COPIES: usize = 2;
 

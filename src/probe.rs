@@ -17,7 +17,7 @@ use crate::vk::{
 /// Flops of one `probe_fma` iteration of one invocation.
 pub const FMA_FLOPS_PER_ITERATION: f64 = 256.0;
 
-/// f32 CPU twin of `glsl/probe_fma.comp` for invocation `id`.
+/// f32 CPU twin of `glsl/probe/probe_fma.comp` for invocation `id`.
 pub fn fma_reference(id: u32, iterations: u32) -> [f32; 4] {
     let seed = id as f32 * 1e-7;
     let mut acc = [[0.0f32; 4]; 8];
@@ -116,7 +116,10 @@ pub fn fma_probe(
     iterations: u32,
     repeats: u32,
 ) -> Result<FmaProbe, VkError> {
-    let spirv = compiler.compile(ShaderSource::File("probe_fma.comp"), &binding_defines())?;
+    let spirv = compiler.compile(
+        ShaderSource::File("probe/probe_fma.comp"),
+        &binding_defines(),
+    )?;
     let pipeline = ComputePipeline::new(
         ctx,
         "probe_fma",
@@ -236,7 +239,7 @@ pub fn probe_word(i: u32) -> u32 {
     i.wrapping_mul(2_654_435_761)
 }
 
-/// Wellons' lowbias32 hash, twin of `probe_hash` in `glsl/probe_memory.comp`.
+/// Wellons' lowbias32 hash, twin of `probe_hash` in `glsl/probe/probe_memory.comp`.
 pub fn probe_hash(mut x: u32) -> u32 {
     x ^= x >> 16;
     x = x.wrapping_mul(0x7feb_352d);
@@ -246,7 +249,7 @@ pub fn probe_hash(mut x: u32) -> u32 {
     x
 }
 
-/// CPU twin of `glsl/probe_memory.comp` for invocation `id`: the wrapping sum of its loads
+/// CPU twin of `glsl/probe/probe_memory.comp` for invocation `id`: the wrapping sum of its loads
 /// (the atomic mode: its count of adds; [`atomic_reference`] is what they leave behind).
 pub fn memory_reference(mode: MemoryMode, id: u32, count: u32, iterations: u32) -> u32 {
     let mut sum = 0u32;
@@ -343,7 +346,7 @@ pub fn memory_probe(
         format!("{PROBE_ATOMIC_WORDS}u"),
     ));
     defines.push(("MARCH_DIM".into(), MARCH_DIM.to_string()));
-    let spirv = compiler.compile(ShaderSource::File("probe_memory.comp"), &defines)?;
+    let spirv = compiler.compile(ShaderSource::File("probe/probe_memory.comp"), &defines)?;
     let source_binding = match mode {
         MemoryMode::TexelGather
         | MemoryMode::CoherentTexelGather

@@ -22,7 +22,10 @@ fn take<'a, T: Pod>(bytes: &'a [u8], offset: &mut usize) -> &'a T {
 fn glsl_and_rust_layouts_agree() {
     let (ctx, compiler) = gpu();
     let spirv = compiler
-        .compile(ShaderSource::File("layout_probe.comp"), &binding_defines())
+        .compile(
+            ShaderSource::File("probe/layout_probe.comp"),
+            &binding_defines(),
+        )
         .expect("compile");
     let pipeline =
         ComputePipeline::new(&ctx, "layout_probe", &spirv, &[binding::PROBE], 0).expect("pipeline");

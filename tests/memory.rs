@@ -94,7 +94,7 @@ fn a_thousand_frames_keep_memory_flat() {
 
 /// The general path's ray caster and the splatting kernels keep host memory flat too. Both grew
 /// it on lavapipe at every dispatch until their parameters stopped being inlinable uniforms
-/// (glsl/include/params.glsl): lavapipe compiled and kept a new copy of the kernel each time,
+/// (glsl/common/params.glsl): lavapipe compiled and kept a new copy of the kernel each time,
 /// about 0.3 MB a dispatch (the ray caster runs one a frame at this size: 60 MB over 200 frames;
 /// splatting dozens). Splatting on a 17³ grid keeps each frame under a tenth of a second.
 #[test]

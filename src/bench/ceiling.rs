@@ -1,7 +1,7 @@
 //! Which ceiling a frame's main kernel is bound by, and how close it came: a cost model per
 //! evaluation (or per splat footprint) divided by the rate `vmls probe` measured in the same run.
 //!
-//! The model counts the work the kernels do, by path (`glsl/include/neighbours.glsl`):
+//! The model counts the work the kernels do, by path (`glsl/field/neighbours.glsl`):
 //! - Flops of an MLS evaluation with T basis terms and k weighted neighbours:
 //!   k·(2·(T(T+1)/2 + T) + 11) for the normal equations and weights, plus 2T³/3 + 13 for the
 //!   solve — 39k + 56 for the linear basis, [MLS] Table 2's count. The Gaussian sum: 25 per

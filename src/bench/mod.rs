@@ -406,7 +406,8 @@ pub fn run(
         if let Some(dir) = &opts.dump_spirv {
             for (kernel, defines) in &image.shaders {
                 let spirv = compiler.compile(ShaderSource::File(kernel), defines)?;
-                let stem = kernel.trim_end_matches(".comp");
+                let file = kernel.rsplit('/').next().unwrap_or(kernel);
+                let stem = file.trim_end_matches(".comp");
                 let path = dir.join(format!("{index:03}-{stem}.spv"));
                 crate::files::write_output("--dump-spirv", &path, &input_refs, |out| {
                     out.write_all(bytemuck::cast_slice::<u32, u8>(&spirv))

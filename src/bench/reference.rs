@@ -90,7 +90,7 @@ fn describe(scene: &Scene, mode: ReferenceMode, ctx: &Context) -> String {
     };
     format!(
         "reference integrator, step {} spacings, {field}, on {}",
-        scene.render.reference_step,
+        scene.render.reference_step_spacings,
         match mode {
             ReferenceMode::Gpu => ctx.info().name.clone(),
             ReferenceMode::Cpu => "the CPU (f64 twins)".into(),

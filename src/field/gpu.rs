@@ -269,7 +269,7 @@ pub fn evaluate(
     let pipeline = pipeline_for(
         ctx,
         compiler,
-        "mls_eval.comp",
+        "field/mls_eval.comp",
         &variant,
         &binding_ids,
         std::mem::size_of::<CountPush>() as u32,

@@ -1,4 +1,4 @@
-//! GPU driver of stage `recon_resample` (`glsl/recon_resample.comp`; CPU twin
+//! GPU driver of stage `recon_resample` (`glsl/field/recon_resample.comp`; CPU twin
 //! [`crate::recon::resample::ResampledGrid::build`]): computes the fast path's fine grid over the
 //! field's lattice ([`Field::lattice`]) from the uploaded samples (a grid, or the samples and
 //! octree) once per dataset, when the persistent renderer uploads the field.
@@ -44,7 +44,7 @@ pub fn resample_grid(
     let pipeline = pipeline_for(
         ctx,
         &compiler,
-        "recon_resample.comp",
+        "field/recon_resample.comp",
         &variant,
         &ids,
         std::mem::size_of::<CountPush>() as u32,

@@ -1,5 +1,5 @@
 //! Empty-space skipping (issue 11 §2, DESIGN §4 "Empty-space skipping"): f64 twin of
-//! `glsl/include/skip.glsl`.
+//! `glsl/field/skip.glsl`.
 //!
 //! Two parts:
 //! - per dataset, [`Blocks`]: a value range of the fast path's field (`reconstruction.resample`)

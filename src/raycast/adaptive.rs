@@ -1,4 +1,4 @@
-//! Adaptive integration, f64 twin of `integrate` (RAY_METHOD 2) in `glsl/raycast.comp`, with
+//! Adaptive integration, f64 twin of `integrate` (RAY_METHOD 2) in `glsl/raycast/adaptive.glsl`, with
 //! two acceptance tests (`render.adaptive`, DESIGN.md §4).
 //!
 //! The ray is cut into top intervals of l_max (the last one clipped at the exit); inside a top,
@@ -77,7 +77,7 @@ fn hermite_error(
     };
     let l = e.t - a.t;
     let (m0, m1) = (l * a.slope(ray), l * e.slope(ray));
-    let scale = ray.transmittance * setup.spacing;
+    let scale = ray.transmittance * setup.spacing_world;
     let (lo, hi, deviation) = bezier_hull(f0, f1, m0, m1);
     for iso in &setup.isosurfaces {
         if lo <= iso.value && iso.value <= hi {
@@ -144,16 +144,16 @@ fn integrate_mls2008(
     t0: f64,
     t1: f64,
 ) {
-    let levels = stack_size(setup.l_max, setup.l_min);
+    let levels = stack_size(setup.l_max_world, setup.l_min_world);
     let mut stack: Vec<(Knot, usize)> = Vec::with_capacity(levels);
     // Top interval k is [t0 + k·l_max, min(t0 + (k+1)·l_max, t1)]: computed from k, not
     // accumulated, so that the kernel can start a chunk at any k.
-    let tops = ((t1 - t0) / setup.l_max).ceil() as u64;
+    let tops = ((t1 - t0) / setup.l_max_world).ceil() as u64;
     let mut a = knot(ray, t0);
     for k in 0..tops {
-        let end = t0 + (k + 1) as f64 * setup.l_max;
+        let end = t0 + (k + 1) as f64 * setup.l_max_world;
         let full = end <= t1;
-        let top = if full { setup.l_max } else { t1 - a.t };
+        let top = if full { setup.l_max_world } else { t1 - a.t };
         if top <= 0.0 {
             return;
         }
@@ -163,7 +163,7 @@ fn integrate_mls2008(
             let level = full.then_some(depth);
             let whole = knot_segment(tables, &a, &e, len, level);
             let c1 = whole.0;
-            let can_split = depth + 1 < levels && (full || 0.5 * len >= setup.l_min);
+            let can_split = depth + 1 < levels && (full || 0.5 * len >= setup.l_min_world);
             if can_split {
                 let m = knot(ray, 0.5 * (a.t + e.t));
                 let half = level.map(|k| k + 1);
@@ -210,17 +210,17 @@ fn integrate_hermite(
     t0: f64,
     t1: f64,
 ) {
-    let levels = stack_size(setup.l_max, setup.l_min);
+    let levels = stack_size(setup.l_max_world, setup.l_min_world);
     let units = 1u64 << (levels - 1);
     let mut stack: Vec<(Knot, usize)> = Vec::with_capacity(levels);
-    let tops = ((t1 - t0) / setup.l_max).ceil() as u64;
+    let tops = ((t1 - t0) / setup.l_max_world).ceil() as u64;
     let mut a = knot(ray, t0);
     let mut predicted = 0;
     let (mut k, mut position) = (0u64, 0u64);
     'tops: while k < tops {
         let (t, depth, next) = loop {
-            let start = t0 + k as f64 * setup.l_max;
-            let limit = top_limit(start, t1, setup.l_max, units);
+            let start = t0 + k as f64 * setup.l_max_world;
+            let limit = top_limit(start, t1, setup.l_max_world, units);
             if position == limit {
                 if k + 1 == tops {
                     break 'tops;
@@ -234,14 +234,14 @@ fn integrate_hermite(
                 // first one reaching past the run starts from a fresh knot.
                 if let Some(skip) = ray.skip.filter(|_| position == 0) {
                     let run = skip.run(ray.o, ray.d, start, t1);
-                    let j = resume_interval(t0, setup.l_max, run, k);
+                    let j = resume_interval(t0, setup.l_max_world, run, k);
                     if j >= tops {
                         ray.count_skip(t1 - start, tops - k, 0);
                         return;
                     }
                     if j > k {
-                        ray.count_skip((j - k) as f64 * setup.l_max, j - k, 1);
-                        break (t0 + j as f64 * setup.l_max, 0, Next::Restart(j));
+                        ray.count_skip((j - k) as f64 * setup.l_max_world, j - k, 1);
+                        break (t0 + j as f64 * setup.l_max_world, 0, Next::Restart(j));
                     }
                 }
                 // A new end at the controller's depth, or deeper until the interval is aligned
@@ -251,10 +251,10 @@ fn integrate_hermite(
                     depth += 1;
                 }
                 let to = position + (units >> depth);
-                let t = start + setup.l_max * (to as f64 / units as f64);
+                let t = start + setup.l_max_world * (to as f64 / units as f64);
                 break (t, depth, Next::End);
             };
-            let len = setup.l_max * 0.5f64.powi(depth as i32);
+            let len = setup.l_max_world * 0.5f64.powi(depth as i32);
             let can_split = depth + 1 < levels;
             let (error, mid) = hermite_error(ray, setup, tf, &a, &e);
             if can_split && error > setup.epsilon {

@@ -32,8 +32,8 @@ const BAND_PIXELS: u32 = 16 * 1024;
 pub fn outer_steps(setup: &RaySetup) -> u32 {
     let diagonal = (setup.box_hi - setup.box_lo).length();
     let step = match setup.method {
-        Method::Adaptive => setup.l_max,
-        _ => setup.step,
+        Method::Adaptive => setup.l_max_world,
+        _ => setup.step_world,
     };
     let segments = (crate::samples::bvh::MAX_HITS / 2 + 1) as f64;
     ((diagonal / step).ceil() + segments).min(f64::from(u32::MAX / 2)) as u32
@@ -47,7 +47,7 @@ pub fn default_chunk(setup: &RaySetup) -> u32 {
     const EVALUATIONS_PER_DISPATCH: u32 = 256;
     match setup.method {
         Method::Adaptive => {
-            let levels = super::adaptive::stack_size(setup.l_max, setup.l_min);
+            let levels = super::adaptive::stack_size(setup.l_max_world, setup.l_min_world);
             (EVALUATIONS_PER_DISPATCH >> levels.min(8)).max(1)
         }
         _ => EVALUATIONS_PER_DISPATCH,
@@ -104,7 +104,7 @@ pub(crate) fn frame_pipeline(
     pipeline_for(
         ctx,
         compiler,
-        "raycast.comp",
+        "raycast/raycast.comp",
         variant,
         bindings,
         std::mem::size_of::<RayPush>() as u32,

@@ -16,7 +16,7 @@ const PROJECTION_ORTHOGRAPHIC: u32 = 1;
 pub fn variant_for_render(field: &Field, setup: &RaySetup) -> Variant {
     Variant {
         method: Some(setup.method),
-        adaptive_levels: adaptive::stack_size(setup.l_max, setup.l_min),
+        adaptive_levels: adaptive::stack_size(setup.l_max_world, setup.l_min_world),
         adaptive: setup.adaptive,
         interval: setup.interval,
         isosurfaces: setup.isosurfaces.len(),
@@ -52,12 +52,12 @@ pub fn render_params(field: &Field, setup: &RaySetup, tf_count: u32) -> RenderPa
     p.background = v4(r.background.into(), 0.0);
     p.width = r.camera.width;
     p.height = r.camera.height;
-    p.step = r.step as f32;
+    p.step = r.step_world as f32;
     p.min_transmittance = r.min_transmittance as f32;
     p.integrator = [
         r.epsilon as f32,
         r.early_termination as f32,
-        r.spacing as f32,
+        r.spacing_world as f32,
         0.0,
     ];
     let l = &r.lighting;
@@ -68,7 +68,7 @@ pub fn render_params(field: &Field, setup: &RaySetup, tf_count: u32) -> RenderPa
         l.shininess as f32,
     ];
     p.iso_count = [r.isosurfaces.len() as u32, 0, 0, 0];
-    p.preint_range[3] = r.l_min as f32;
+    p.preint_range[3] = r.l_min_world as f32;
     p
 }
 

@@ -1,5 +1,5 @@
 //! Knots and interval emission, f64 twin of `knot`, `emit_interval` and `locate_crossing` in
-//! `glsl/raycast.comp` (stage `composite_interval`).
+//! `glsl/raycast/raycast.comp` (stage `composite_interval`).
 //!
 //! An interval [a, e] is composited from the tables (its own table when it is a full-length
 //! one, else the clipped composite). Where an isosurface value v lies between the interval's end

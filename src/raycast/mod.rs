@@ -1,6 +1,6 @@
 //! Ray casting with MLS reconstruction and preintegration ([MLS] §4): the ray setup, the
 //! integrators' f64 CPU twins (`raycast`, `adaptive`, `interval`), the preintegration tables,
-//! and the GPU driver of `glsl/raycast.comp` (`gpu`, `frame`).
+//! and the GPU driver of `glsl/raycast/raycast.comp` (`gpu`, `frame`).
 //!
 //! Imports `field` and `view`, never `splat`; the `Renderer` above both methods drives it.
 

@@ -1,4 +1,4 @@
-//! Emission–absorption ray casting, f64 CPU twin of `glsl/raycast.comp` (stage `raycast`).
+//! Emission–absorption ray casting, f64 CPU twin of `glsl/raycast/raycast.comp` (stage `raycast`).
 //!
 //! Per ray: clip to the sample box, then integrate with the setup's method ([MLS] §4):
 //! - `riemann`/`reference`: n = ⌈L/δ⌉ midpoint steps of length δ (the last one shortened to end
@@ -48,14 +48,14 @@ pub struct PixelResult {
 /// isosurfaces, f is also evaluated at the entry and the exit, so that a surface in the half
 /// step before the first sample or after the last is not missed.
 fn integrate_riemann(ray: &mut Ray<'_>, setup: &RaySetup, tf: &TransferFunction, t0: f64, t1: f64) {
-    let steps = ((t1 - t0) / setup.step).ceil() as u64;
+    let steps = ((t1 - t0) / setup.step_world).ceil() as u64;
     let isos = !setup.isosurfaces.is_empty();
     let mut prev: Option<Knot> = isos.then(|| knot(ray, t0));
     let mut occupied_until = f64::NEG_INFINITY;
     let mut i = 0;
     while i < steps {
-        let ta = t0 + i as f64 * setup.step;
-        let dt = setup.step.min(t1 - ta);
+        let ta = t0 + i as f64 * setup.step_world;
+        let dt = setup.step_world.min(t1 - ta);
         if dt <= 0.0 {
             break;
         }
@@ -66,9 +66,9 @@ fn integrate_riemann(ray: &mut Ray<'_>, setup: &RaySetup, tf: &TransferFunction,
         if let Some(skip) = ray.skip.filter(|_| tm >= occupied_until) {
             let (empty, exit) = skip.span(ray.o, ray.d, tm, t1);
             if empty {
-                let j = resume_interval(t0 - 0.5 * setup.step, setup.step, exit, i + 1);
+                let j = resume_interval(t0 - 0.5 * setup.step_world, setup.step_world, exit, i + 1);
                 let to = j.min(steps);
-                let len = (t0 + to as f64 * setup.step).min(t1) - ta;
+                let len = (t0 + to as f64 * setup.step_world).min(t1) - ta;
                 ray.count_skip(len, to - i, u64::from(isos));
                 if isos {
                     prev = Some(knot(ray, exit.min(t1)));
@@ -109,7 +109,7 @@ fn integrate_fixed(
     t0: f64,
     t1: f64,
 ) {
-    let l = setup.step;
+    let l = setup.step_world;
     let steps = ((t1 - t0) / l).ceil() as u64;
     let mut prev = knot(ray, t0);
     let mut occupied_until = f64::NEG_INFINITY;

@@ -59,17 +59,18 @@ pub struct RaySetup {
     pub box_lo: DVec3,
     pub box_hi: DVec3,
     pub method: Method,
-    /// Step length in world units (fixed, riemann, reference).
-    pub step: f64,
+    /// Step length in world units (fixed, riemann, reference): `render.step` (or
+    /// `render.reference_step`) times the sample spacing.
+    pub step_world: f64,
     /// Adaptive interval bounds in world units.
-    pub l_min: f64,
-    pub l_max: f64,
+    pub l_min_world: f64,
+    pub l_max_world: f64,
     pub adaptive: AdaptiveCriterion,
     /// Fixed: how an interval between two knots is composited.
     pub interval: IntervalModel,
     pub epsilon: f64,
     /// The sample spacing in world units: the Hermite criterion's ε is per spacing.
-    pub spacing: f64,
+    pub spacing_world: f64,
     /// Preintegrated methods stop at this opacity.
     pub early_termination: f64,
     /// Empty-space skipping: `render.skip` with the fast path ([`skip`]).
@@ -111,8 +112,8 @@ impl RaySetup {
         let basis = camera.basis().map_err(RenderError::Camera)?;
         let (box_lo, box_hi) = field.bounds();
         let spacings = match render.method {
-            Method::Reference => render.reference_step,
-            _ => render.step,
+            Method::Reference => render.reference_step_spacings,
+            _ => render.step_spacings,
         };
         let unit = field.min_spacing();
         let mls2008 =
@@ -146,13 +147,13 @@ impl RaySetup {
             box_lo,
             box_hi,
             method: render.method,
-            step: spacings * unit,
-            l_min: render.l_min * unit,
-            l_max: render.l_max * unit,
+            step_world: spacings * unit,
+            l_min_world: render.l_min_spacings * unit,
+            l_max_world: render.l_max_spacings * unit,
             adaptive: render.adaptive,
             interval: render.interval,
             epsilon: render.epsilon,
-            spacing: unit,
+            spacing_world: unit,
             early_termination: render.early_termination,
             skip: skip_on,
             skip_auto: render.skip == SkipMode::Auto
@@ -191,8 +192,8 @@ impl RaySetup {
     /// reference step for `reference`), or l_min for `adaptive`.
     fn finest_step(&self) -> f64 {
         match self.method {
-            Method::Adaptive => self.l_min,
-            _ => self.step,
+            Method::Adaptive => self.l_min_world,
+            _ => self.step_world,
         }
     }
 
@@ -264,9 +265,9 @@ impl RaySetup {
     /// halvings for clipped remainders ([`preintegration::remainder_levels`]).
     pub fn table_lengths(&self, tf: &TransferFunction) -> Vec<f64> {
         let (top, bottom) = match (self.method, self.interval) {
-            (Method::Fixed, IntervalModel::Hermite) => (self.step, 0.5 * self.step),
-            (Method::Fixed, IntervalModel::Linear) => (self.step, self.step),
-            (Method::Adaptive, _) => (self.l_max, self.l_min),
+            (Method::Fixed, IntervalModel::Hermite) => (self.step_world, 0.5 * self.step_world),
+            (Method::Fixed, IntervalModel::Linear) => (self.step_world, self.step_world),
+            (Method::Adaptive, _) => (self.l_max_world, self.l_min_world),
             _ => return Vec::new(),
         };
         let mut lengths = vec![top];

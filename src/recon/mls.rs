@@ -1,4 +1,4 @@
-//! MLS reconstruction, f64 CPU reference of `glsl/include/mls.glsl` ([MLS] §3).
+//! MLS reconstruction, f64 CPU reference of `glsl/field/mls.glsl` ([MLS] §3).
 //!
 //! Stage names match the shader: `mls_weight`, `mls_basis`, `mls_accumulate`, `mls_factor`,
 //! `mls_solve`, `mls_evaluate`.

@@ -1,7 +1,7 @@
 //! Reconstruction: the MLS method ([MLS] §3) as an f64 CPU reference, and the neighbour
 //! structures it reads — implicit grid neighbours and the redundant octree ([OCT], [MLS] §5.2).
 //!
-//! The GPU twins are `glsl/include/mls.glsl` and `glsl/include/neighbours.glsl`.
+//! The GPU twins are `glsl/field/mls.glsl` and `glsl/field/neighbours.glsl`.
 
 pub mod gaussian;
 pub mod mls;

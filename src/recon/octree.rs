@@ -2,7 +2,7 @@
 //! ellipsoid intersects the leaf's cell, so a query descends to the leaf containing x and loops
 //! over that list — no neighbour search, no backtracking.
 //!
-//! GPU layout (twin: `octree_leaf` in `glsl/include/neighbours.glsl`): `nodes[i] =
+//! GPU layout (twin: `octree_leaf` in `glsl/field/neighbours.glsl`): `nodes[i] =
 //! (child, begin, count, scale)`; `child = 0` marks a leaf (the root is node 0 and never a
 //! child), otherwise the node's 8 children are `child..child+8` in octant order
 //! `x | y<<1 | z<<2` (bit set = upper half). A leaf's samples are `count` codes from word

@@ -1,5 +1,5 @@
 //! Compact octree references (stage `octree_codes`; twin: `code_half` and the leaf loops in
-//! `glsl/include/neighbours.glsl`): a leaf's sample indices, strictly ascending, as one 32-bit
+//! `glsl/field/neighbours.glsl`): a leaf's sample indices, strictly ascending, as one 32-bit
 //! word holding the first index, then 16-bit gaps from the previous index (the first gap 0),
 //! two to a word. A gap of 0xFFFF or more is written as that many JUMP codes (each adds 0xFFFF
 //! and names no sample) and the remainder. A node addresses its leaf by the word and counts its

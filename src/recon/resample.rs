@@ -6,7 +6,7 @@
 //! sample i depends only on x − x_i ([MLS] §3; DESIGN §7), so the reconstruction is a fixed
 //! convolution, smooth at the scale of the support. Its values and gradients at the fine points
 //! are computed by the general path itself (stage `recon_resample`, GPU twin
-//! `glsl/recon_resample.comp`), boundary cells included; only the interpolation between fine
+//! `glsl/field/recon_resample.comp`), boundary cells included; only the interpolation between fine
 //! points is new, and its error falls as factor⁻² (tested against the direct solve in
 //! `tests/resample.rs`, RMSE and maximum over dense random points).
 //!
@@ -19,7 +19,7 @@
 //! than the fine spacing resolves is interpolated more coarsely where its cells are smallest.
 //!
 //! Contract of [`ResampledGrid::evaluate`] (stage `resample_evaluate`, GPU twin
-//! `resampled_evaluate` in `glsl/include/neighbours.glsl`):
+//! `resampled_evaluate` in `glsl/field/neighbours.glsl`):
 //! - fine point (i, j, k) sits at `origin + (i, j, k) ⊙ spacing / factor` and holds
 //!   (f, ∂f/∂x, ∂f/∂y, ∂f/∂z) of the general path there, zeros where that is undefined (the
 //!   scene requires a support of at least one spacing, so inside the box it never is);

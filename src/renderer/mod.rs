@@ -73,7 +73,7 @@ pub struct SplatReport {
     pub stage_ms: [f64; 4],
     /// Sheets in the frame and their thickness in world units.
     pub slabs: u32,
-    pub slab: f64,
+    pub slab_world: f64,
     /// Image tile edge in pixels, pixels per `splat_raster` workgroup (with the apron) and
     /// its invocations.
     pub tile: u32,
@@ -158,7 +158,7 @@ pub fn render(
         gpu_ms,
         bands,
         variant: variant.name("raycast"),
-        shaders: vec![("raycast.comp", variant.defines())],
+        shaders: vec![("raycast/raycast.comp", variant.defines())],
         splat: None,
         skip,
     })
@@ -375,7 +375,7 @@ impl Renderer {
                 gpu_ms,
                 bands,
                 variant: variant.name("raycast"),
-                shaders: vec![("raycast.comp", variant.defines())],
+                shaders: vec![("raycast/raycast.comp", variant.defines())],
                 splat: None,
                 skip,
             },
@@ -571,7 +571,7 @@ impl Renderer {
                     counts: image.counts,
                     stage_ms: image.stage_ms,
                     slabs: setup.slabs,
-                    slab: setup.slab,
+                    slab_world: setup.slab_world,
                     tile: setup.tile,
                     group_size: setup.group_size(),
                     invocations: variant.group,

@@ -441,9 +441,10 @@ impl Renderer {
         };
         let mut defines = crate::gpu_types::binding_defines();
         defines.push(("TARGET_FORMAT".into(), code.to_string()));
-        let spirv = self
-            .compiler
-            .compile(crate::vk::ShaderSource::File("target_pack.comp"), &defines)?;
+        let spirv = self.compiler.compile(
+            crate::vk::ShaderSource::File("common/target_pack.comp"),
+            &defines,
+        )?;
         let kinds = [binding::IMAGE, binding::TARGET_PACKED].map(|b| (b, binding::kind(b)));
         let p = ComputePipeline::with_kinds(
             &self.ctx,

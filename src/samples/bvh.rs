@@ -1,5 +1,5 @@
 //! Ray–hull clipping: a bounding-volume hierarchy over a domain's boundary triangles and the
-//! inside segments of a ray, f64 twin of `glsl/include/hull.glsl` (stage `hull_segments`).
+//! inside segments of a ray, f64 twin of `glsl/field/hull.glsl` (stage `hull_segments`).
 //!
 //! Contract:
 //! - the hull's triangles face outwards ([`super::mesh`] orients them); a ray crossing one

@@ -220,9 +220,11 @@ impl Scene {
         let basis = self.camera.basis().ok()?;
         let (lo, hi) = field.bounds();
         let spacings = match self.render.method {
-            crate::view::Method::Adaptive => (self.render.l_min * self.render.l_max).sqrt(),
-            crate::view::Method::Reference => self.render.reference_step,
-            _ => self.render.step,
+            crate::view::Method::Adaptive => {
+                (self.render.l_min_spacings * self.render.l_max_spacings).sqrt()
+            }
+            crate::view::Method::Reference => self.render.reference_step_spacings,
+            _ => self.render.step_spacings,
         };
         let step = spacings * field.min_spacing();
         let length: f64 = self

@@ -23,7 +23,7 @@ pub(super) const KEYS: &[&str] = &[
 pub(super) fn parse(sec: &Section<'_>) -> Result<SplatSettings, SceneError> {
     let d = SplatSettings::default();
     Ok(SplatSettings {
-        slab: sec.positive("slab", d.slab, 1e3)?,
+        slab_spacings: sec.positive("slab", d.slab_spacings, 1e3)?,
         cutoff: sec.float("cutoff", d.cutoff, 1.0, 6.0)?,
         lowpass: sec.float("lowpass", d.lowpass, 0.0, 100.0)?,
         antialias: sec.choice(

@@ -214,13 +214,13 @@ impl SplatVariant {
     pub fn kernels(&self) -> Vec<&'static str> {
         let mut k = Vec::new();
         if self.hull {
-            k.push("splat_segments.comp");
+            k.push("splat/splat_segments.comp");
         }
         k.extend([
-            "splat_project.comp",
-            "splat_scan.comp",
-            "splat_bin.comp",
-            "splat_raster.comp",
+            "splat/splat_project.comp",
+            "splat/splat_scan.comp",
+            "splat/splat_bin.comp",
+            "splat/splat_raster.comp",
         ]);
         k
     }
@@ -332,7 +332,7 @@ impl SplatPipelines {
         let scan_push = push(std::mem::size_of::<ScanPush>());
         let scan = |pass: u32, bindings: &[u32]| {
             make(
-                "splat_scan.comp",
+                "splat/splat_scan.comp",
                 &[("SCAN_PASS".into(), pass.to_string())],
                 bindings,
                 scan_push,
@@ -340,27 +340,27 @@ impl SplatPipelines {
         };
         Ok(Self {
             variant: variant.clone(),
-            project: make("splat_project.comp", &[], &project, 0)?,
+            project: make("splat/splat_project.comp", &[], &project, 0)?,
             scan: [
                 scan(0, &SCAN_BINDINGS[..2])?,
                 scan(1, &SCAN_BINDINGS[..3])?,
                 scan(2, &SCAN_BINDINGS)?,
             ],
             bin: make(
-                "splat_bin.comp",
+                "splat/splat_bin.comp",
                 &[],
                 &[PARAMS, SPLAT_WORDS, BUCKET_CURSORS, SPLAT_LIST],
                 0,
             )?,
             raster: make(
-                "splat_raster.comp",
+                "splat/splat_raster.comp",
                 &[],
                 &raster,
                 push(std::mem::size_of::<RasterPush>()),
             )?,
             segments: if variant.hull {
                 Some(make(
-                    "splat_segments.comp",
+                    "splat/splat_segments.comp",
                     &[],
                     &[PARAMS, PIXEL_SEGMENTS, SPLAT_STATS, HULL_NODES, HULL_TRIS],
                     0,
@@ -506,7 +506,7 @@ fn params(
         right: v(b.right, setup.centre[0]),
         up: v(b.up, setup.centre[1]),
         box_min: v(setup.box_lo, setup.slab0),
-        box_max: v(setup.box_hi, setup.slab),
+        box_max: v(setup.box_hi, setup.slab_world),
         background: [
             bg[0] as f32,
             bg[1] as f32,

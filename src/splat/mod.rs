@@ -133,7 +133,8 @@ pub struct SplatSetup {
     pub near: f64,
     /// t where the first sheet starts, sheet thickness, sheet count.
     pub slab0: f64,
-    pub slab: f64,
+    /// Sheet thickness in world units (`splat.slab` times the sample spacing).
+    pub slab_world: f64,
     pub slabs: u32,
     /// Gaussian σ as a fraction of the support radius.
     pub sigma: f64,
@@ -253,7 +254,7 @@ impl SplatSetup {
                 (h / view_height, [f64::MAX; 2], 0.0, a.max(0.0), b)
             }
         };
-        let slab = settings.slab * field.min_spacing();
+        let slab = settings.slab_spacings * field.min_spacing();
         let count = ((t_max - t_min) / slab).ceil().max(1.0);
         if count > f64::from(MAX_SLABS) || !count.is_finite() {
             return Err(RenderError::Setting {
@@ -370,7 +371,7 @@ impl SplatSetup {
             lateral,
             near,
             slab0: t_min,
-            slab,
+            slab_world: slab,
             slabs: count as u32,
             sigma: field.reconstruction.sigma,
             box_lo,
@@ -432,8 +433,8 @@ impl SplatSetup {
 
     /// Sheet k covers t in [slab0 + k·Δs, slab0 + (k+1)·Δs].
     pub fn slab_bounds(&self, k: u32) -> (f64, f64) {
-        let a = self.slab0 + f64::from(k) * self.slab;
-        (a, a + self.slab)
+        let a = self.slab0 + f64::from(k) * self.slab_world;
+        (a, a + self.slab_world)
     }
 
     /// The apron of a tile: post-shaded isosurfaces need every pixel's neighbours in the

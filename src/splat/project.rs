@@ -1,4 +1,4 @@
-//! Stage `splat_project`: f64 twin of `glsl/splat_project.comp` ([EWA] §4–6).
+//! Stage `splat_project`: f64 twin of `glsl/splat/splat_project.comp` ([EWA] §4–6).
 //!
 //! For a kernel at p with object-space covariance V″ = σ²M⁻¹ and weight w:
 //! - viewing transform u = W(p − eye), W's rows right, up, forward;
@@ -406,8 +406,8 @@ pub fn splat_project(
     let depth_reach = exact
         .as_ref()
         .map_or(affine_reach, |x| affine_reach.max(x.reach));
-    let first = ((t - depth_reach - setup.slab0) / setup.slab).floor();
-    let last = ((t + depth_reach - setup.slab0) / setup.slab).floor();
+    let first = ((t - depth_reach - setup.slab0) / setup.slab_world).floor();
+    let last = ((t + depth_reach - setup.slab0) / setup.slab_world).floor();
     let values = [
         amplitude, conic[0], conic[1], conic[2], slope[0], slope[1], t, cond,
     ];
@@ -424,7 +424,7 @@ pub fn splat_project(
         ]
     } else {
         // Whole kernels go to the sheet of their centre.
-        let k = ((t - setup.slab0) / setup.slab)
+        let k = ((t - setup.slab0) / setup.slab_world)
             .floor()
             .clamp(0.0, f64::from(setup.slabs - 1)) as u32;
         [k, k]

@@ -318,7 +318,7 @@ fn composite_post(
 ) {
     let (w, h) = (setup.camera.width as i32, setup.camera.height as i32);
     for l in lanes.iter_mut() {
-        l.values[3] = l.sheet[0] / setup.slab;
+        l.values[3] = l.sheet[0] / setup.slab_world;
         l.sheet[0] = l.ahead.pop_front().unwrap_or(0.0);
     }
     let isosurfaces = !setup.isosurfaces.is_empty();
@@ -382,7 +382,7 @@ fn composite_sheet(setup: &SplatSetup, tf: &TransferFunction, l: &mut Lane, j: i
     let d = l.ray.1;
     let s = setup.basis;
     let gradient = |lateral: [f64; 2], across: f64| {
-        lateral[0] * s.right + lateral[1] * s.up + across / (2.0 * setup.slab) * d
+        lateral[0] * s.right + lateral[1] * s.up + across / (2.0 * setup.slab_world) * d
     };
     if j >= 1 && len > 0.0 && overlap(j - 1) > 0.0 && !setup.isosurfaces.is_empty() {
         let mut hits = Vec::new();

@@ -1,4 +1,4 @@
-//! Cameras: f64 twin of `glsl/include/camera.glsl` (stages `camera_ray`, `clip_box`).
+//! Cameras: f64 twin of `glsl/common/camera.glsl` (stages `camera_ray`, `clip_box`).
 //!
 //! Convention (the scene contract): forward = normalize(target − eye), right =
 //! normalize(forward × up), up′ = right × forward; pixel (px, py), row 0 at the top,

@@ -104,16 +104,17 @@ pub enum IntervalModel {
 #[derive(Debug, Clone, PartialEq)]
 pub struct RenderSettings {
     pub method: Method,
-    /// Step in sample spacings (the smallest spacing of the grid).
-    pub step: f64,
-    /// Step of the reference method, in sample spacings.
-    pub reference_step: f64,
+    /// Step in sample spacings (the smallest spacing of the grid): scene key `render.step`.
+    pub step_spacings: f64,
+    /// Step of the reference method, in sample spacings (`render.reference_step`).
+    pub reference_step_spacings: f64,
     pub background: [f64; 3],
     /// Rays stop when the transmittance falls below this (riemann and reference methods).
     pub min_transmittance: f64,
-    /// Adaptive: shortest and longest interval, in sample spacings ([MLS]: 0.16 and 2.6).
-    pub l_min: f64,
-    pub l_max: f64,
+    /// Adaptive: shortest and longest interval, in sample spacings ([MLS]: 0.16 and 2.6;
+    /// `render.l_min`, `render.l_max`).
+    pub l_min_spacings: f64,
+    pub l_max_spacings: f64,
     /// Adaptive: the acceptance test.
     pub adaptive: AdaptiveCriterion,
     /// Fixed: how an interval between two knots is composited.
@@ -181,8 +182,8 @@ pub enum SheetShare {
 /// Scene section `[splat]`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SplatSettings {
-    /// Sheet thickness in sample spacings.
-    pub slab: f64,
+    /// Sheet thickness in sample spacings (`splat.slab`).
+    pub slab_spacings: f64,
     /// Footprints are cut at this many standard deviations.
     pub cutoff: f64,
     /// Variance of the low-pass filter in px² (1: the identity of [EWA] §6).
@@ -218,7 +219,7 @@ pub struct SplatSettings {
 impl Default for SplatSettings {
     fn default() -> Self {
         Self {
-            slab: 0.5,
+            slab_spacings: 0.5,
             cutoff: 3.5,
             lowpass: 1.0,
             antialias: Antialias::Ewa,

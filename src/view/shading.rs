@@ -1,4 +1,4 @@
-//! Shaded isosurfaces: f64 twin of `shade_surface` in `glsl/include/shading.glsl`.
+//! Shaded isosurfaces: f64 twin of `shade_surface` in `glsl/common/shading.glsl`.
 //!
 //! An isosurface is a Dirac spike in the transfer function (DESIGN §4): where a ray crosses
 //! f = value it composites `color` with `opacity`, lit by Blinn–Phong with a headlight (light and

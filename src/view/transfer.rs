@@ -1,4 +1,4 @@
-//! Piecewise-linear transfer function: f64 twin of `glsl/include/transfer.glsl`
+//! Piecewise-linear transfer function: f64 twin of `glsl/common/transfer.glsl`
 //! (stage `transfer_lookup`). Colour and extinction τ (per world unit) are interpolated
 //! linearly in s between control points and clamped outside their range.
 

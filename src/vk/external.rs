@@ -79,7 +79,7 @@ impl ExternalCommands {
 }
 
 /// The pixel formats an image target may have. Pixels are converted on the GPU where the
-/// format is not the frame's own RGBA32F (see `glsl/target_pack.comp`).
+/// format is not the frame's own RGBA32F (see `glsl/common/target_pack.comp`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum TargetFormat {
     /// `R32G32B32A32_SFLOAT`: the frame as rendered.

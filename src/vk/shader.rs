@@ -2,7 +2,7 @@
 //!
 //! The kernels in `glsl/` are embedded in the binary, so `vmls` runs from any directory; setting
 //! `VMLS_GLSL_DIR` to a directory with the same layout compiles from there instead (for shader
-//! work without rebuilding). Includes are resolved against the `glsl/` root and `glsl/include/`.
+//! work without rebuilding). Includes name files by their path under `glsl/`.
 //! Every variant is a set of macro definitions; results are cached per process by a hash of
 //! the kernel source and its definitions. `VMLS_SPIRV_DUMP=dir` writes every compiled variant
 //! there (for `spirv-dis`) through the output layer like every other writer (a planted symlink
@@ -25,33 +25,37 @@ macro_rules! embed {
     };
 }
 
-/// Every GLSL file of the project, by its path relative to `glsl/`.
+/// Every GLSL file of the project, by its path relative to `glsl/`: shared code in `common/`,
+/// the field's reconstruction and its kernels in `field/`, each method's kernels and
+/// integrators in `raycast/` and `splat/`, the throughput probes in `probe/`. Includes name
+/// files by the same paths.
 static SOURCES: &[(&str, &str)] = embed![
-    "include/types.glsl",
-    "include/params.glsl",
-    "include/mls.glsl",
-    "include/neighbours.glsl",
-    "include/transfer.glsl",
-    "include/camera.glsl",
-    "include/preint.glsl",
-    "include/shading.glsl",
-    "include/interval.glsl",
-    "include/hull.glsl",
-    "include/splat.glsl",
-    "include/splat_params.glsl",
-    "include/skip.glsl",
-    "raycast.comp",
-    "splat_project.comp",
-    "splat_scan.comp",
-    "splat_bin.comp",
-    "splat_raster.comp",
-    "splat_segments.comp",
-    "mls_eval.comp",
-    "target_pack.comp",
-    "recon_resample.comp",
-    "probe_fma.comp",
-    "probe_memory.comp",
-    "layout_probe.comp",
+    "common/types.glsl",
+    "common/params.glsl",
+    "common/camera.glsl",
+    "common/transfer.glsl",
+    "common/shading.glsl",
+    "common/target_pack.comp",
+    "field/mls.glsl",
+    "field/neighbours.glsl",
+    "field/hull.glsl",
+    "field/skip.glsl",
+    "field/mls_eval.comp",
+    "field/recon_resample.comp",
+    "raycast/preintegration.glsl",
+    "raycast/interval.glsl",
+    "raycast/adaptive.glsl",
+    "raycast/raycast.comp",
+    "splat/splat.glsl",
+    "splat/splat_params.glsl",
+    "splat/splat_project.comp",
+    "splat/splat_scan.comp",
+    "splat/splat_bin.comp",
+    "splat/splat_raster.comp",
+    "splat/splat_segments.comp",
+    "probe/probe_fma.comp",
+    "probe/probe_memory.comp",
+    "probe/layout_probe.comp",
 ];
 
 /// Names of the embedded GLSL files.
@@ -234,15 +238,10 @@ impl ShaderCompiler {
         }
         let dir = self.dir.clone();
         options.set_include_callback(move |requested, _kind, _from, _depth| {
-            let found = lookup(&dir, requested)
-                .map(|t| (requested.to_string(), t))
-                .or_else(|_| {
-                    let nested = format!("include/{requested}");
-                    lookup(&dir, &nested).map(|t| (nested, t))
-                })?;
+            let content = lookup(&dir, requested)?;
             Ok(shaderc::ResolvedInclude {
-                resolved_name: found.0,
-                content: found.1,
+                resolved_name: requested.to_string(),
+                content,
             })
         });
         let artifact = self

@@ -72,7 +72,7 @@ pub fn run_render(
             if !force {
                 setup.check_budget(vmls::view::WORK_BUDGET)?;
             }
-            Some(setup.step)
+            Some(setup.step_world)
         }
         Some(_) => None,
     };
@@ -169,7 +169,7 @@ pub fn run_render(
             },
             "splat": image.splat.as_ref().map(|r| serde_json::json!({
                 "sheets": r.slabs,
-                "sheet_thickness_world": r.slab,
+                "sheet_thickness_world": r.slab_world,
                 "kernels_projected": r.counts.projected,
                 "kernels_culled_near": r.counts.culled_near,
                 "kernels_culled_outside": r.counts.culled_outside,

@@ -1,4 +1,4 @@
-// Empty-space skipping (issue 11 §2): f32 twin of src/render/skip.rs. Blocks of SKIP_BLOCK³ grid
+// Empty-space skipping (issue 11 §2): f32 twin of src/field/skip.rs. Blocks of SKIP_BLOCK³ grid
 // cells carry the fast field's value range (exact bounds: the field is trilinear per fine
 // cell); the skip table marks the scalar bins with extinction or an isosurface, as prefix
 // counts. Needs `params` and the fast path (MLS_RESAMPLED > 0).

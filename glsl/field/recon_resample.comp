@@ -8,15 +8,15 @@
 
 layout(local_size_x = 64) in;
 
-#include "types.glsl"
+#include "common/types.glsl"
 
-#include "params.glsl"
+#include "common/params.glsl"
 // A texel-buffer view (binding::kind): its size limit is maxTexelBufferElements (128 M texels on
 // lavapipe), not maxStorageBufferRange (128 MiB).
 layout(binding = BINDING_RESAMPLE_TARGET, rgba32f) uniform writeonly imageBuffer fine;
 layout(push_constant) uniform Push { CountPush push; };
 
-#include "neighbours.glsl"
+#include "field/neighbours.glsl"
 
 void main() {
     load_params();

@@ -1,4 +1,4 @@
-// Shaded isosurfaces: f32 twin of src/render/shading.rs (stage shade_surface). Blinn–Phong with
+// Shaded isosurfaces: f32 twin of src/view/shading.rs (stage shade_surface). Blinn–Phong with
 // a headlight and two-sided normals: rgb = color·(ambient + diffuse·|n·l|) + specular·|n·l|^k,
 // premultiplied by the opacity. Needs `params` declared by the kernel.
 #ifndef VMLS_SHADING_GLSL

@@ -19,7 +19,7 @@
 
 layout(local_size_x = 64) in;
 
-#include "types.glsl"
+#include "common/types.glsl"
 
 layout(std430, binding = BINDING_PROBE) writeonly buffer ProbeBuf { uvec4 probe_out[]; };
 #if PROBE_MODE == 1

@@ -7,14 +7,14 @@
 
 layout(local_size_x = 64) in;
 
-#include "types.glsl"
+#include "common/types.glsl"
 
-#include "splat_params.glsl"
+#include "splat/splat_params.glsl"
 layout(rgba32ui, binding = BINDING_SPLAT_WORDS) readonly uniform uimageBuffer splat_words;
 layout(std430, binding = BINDING_BUCKET_CURSORS) buffer CursorBuf { uint cursors[]; };
 layout(rg32ui, binding = BINDING_SPLAT_LIST) writeonly uniform uimageBuffer list;
 
-#include "splat.glsl"
+#include "splat/splat.glsl"
 
 void main() {
     load_params();

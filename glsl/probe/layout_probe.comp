@@ -5,7 +5,7 @@
 
 layout(local_size_x = 1) in;
 
-#include "types.glsl"
+#include "common/types.glsl"
 
 layout(std430, binding = BINDING_PROBE) writeonly buffer ProbeBuf {
     RenderParams render_params;

@@ -1,5 +1,5 @@
 // Knots and interval emission (stage composite_interval): f32 twin of
-// src/render/raycast/interval.rs. A knot is vec4(t, s, ∇f·d, defined ? 1 : 0). Isosurface
+// src/raycast/interval.rs. A knot is vec4(t, s, ∇f·d, defined ? 1 : 0). Isosurface
 // crossings are located by Illinois regula falsi; a near-tangent double crossing is found from
 // the cubic Hermite through two knots' values and directional derivatives, and the interval is
 // split at the extremum. Needs `params`, mls_evaluate and, for RAY_METHOD != 0, preint.glsl.

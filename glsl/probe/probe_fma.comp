@@ -6,7 +6,7 @@
 
 layout(local_size_x = 64) in;
 
-#include "types.glsl"
+#include "common/types.glsl"
 
 layout(std430, binding = BINDING_PROBE) writeonly buffer ProbeBuf { vec4 probe_out[]; };
 layout(push_constant) uniform Push { CountPush push; };

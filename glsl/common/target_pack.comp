@@ -6,7 +6,7 @@
 
 layout(local_size_x = 64) in;
 
-#include "types.glsl"
+#include "common/types.glsl"
 
 layout(std430, binding = BINDING_IMAGE) readonly buffer ImageBuf { vec4 image[]; };
 layout(std430, binding = BINDING_TARGET_PACKED) writeonly buffer PackedBuf { uint packed[]; };

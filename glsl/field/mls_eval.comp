@@ -5,14 +5,14 @@
 
 layout(local_size_x = 64) in;
 
-#include "types.glsl"
+#include "common/types.glsl"
 
-#include "params.glsl"
+#include "common/params.glsl"
 layout(std430, binding = BINDING_POINTS) readonly buffer PointsBuf { vec4 points[]; };
 layout(std430, binding = BINDING_RESULTS) writeonly buffer ResultsBuf { MlsOut results[]; };
 layout(push_constant) uniform Push { CountPush push; };
 
-#include "neighbours.glsl"
+#include "field/neighbours.glsl"
 
 void main() {
     load_params();

@@ -12,7 +12,7 @@
 
 layout(local_size_x = 256) in;
 
-#include "types.glsl"
+#include "common/types.glsl"
 
 layout(push_constant) uniform PushBlock { ScanPush push; };
 layout(std430, binding = BINDING_BUCKET_COUNTS) readonly buffer CountBuf { uint counts[]; };

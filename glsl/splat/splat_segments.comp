@@ -7,14 +7,14 @@
 
 layout(local_size_x = 8, local_size_y = 8) in;
 
-#include "types.glsl"
+#include "common/types.glsl"
 
-#include "splat_params.glsl"
+#include "splat/splat_params.glsl"
 layout(std430, binding = BINDING_PIXEL_SEGMENTS) writeonly buffer SegBuf { vec2 pixel_segments[]; };
 layout(std430, binding = BINDING_SPLAT_STATS) buffer StatsBuf { uint stats[]; };
 
-#include "camera.glsl"
-#include "hull.glsl"
+#include "common/camera.glsl"
+#include "field/hull.glsl"
 
 // SplatCounts slot 5 (entries) is filled by the host; the GPU counts overflows there.
 const uint STAT_SEGMENT_OVERFLOW = 5u;

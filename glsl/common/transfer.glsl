@@ -1,4 +1,4 @@
-// Piecewise-linear transfer function, twin of TransferFunction::lookup in src/render/transfer.rs:
+// Piecewise-linear transfer function, twin of TransferFunction::lookup in src/view/transfer.rs:
 // colour and extinction interpolated linearly in s between control points, clamped outside.
 #ifndef VMLS_TRANSFER_GLSL
 #define VMLS_TRANSFER_GLSL

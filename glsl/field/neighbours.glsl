@@ -5,7 +5,7 @@
 #ifndef VMLS_NEIGHBOURS_GLSL
 #define VMLS_NEIGHBOURS_GLSL
 
-#include "mls.glsl"
+#include "field/mls.glsl"
 
 // Set when an octree leaf's loop ended before its last reference: a device that cuts long
 // loops short (llvmpipe after 65 535 iterations, LAVAPIPE.md) would otherwise corrupt an
@@ -119,7 +119,7 @@ void mls_gather_rows(vec3 x, inout MlsSystem s) {
     // 3/4 of the kernel's time on lavapipe. Out-of-row values in the window have zero weight;
     // the start is clamped into the buffer for points far outside the grid (all weights 0).
     // The last unit a window may start at: the buffer's padded length (padded_grid_len in
-    // src/render/gpu.rs) in units, less the window.
+    // src/field/gpu.rs) in units, less the window.
     int padded = (dims.x * dims.y * dims.z + 3 * GRID_PAD + 3) / 4 * 4;
     int last_unit = padded / GRID_UNIT - MLS_GRID_WINDOW;
     int x0 = GRID_PAD + clamp(base.x, -GRID_PAD, dims.x);

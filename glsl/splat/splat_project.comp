@@ -11,9 +11,9 @@
 
 layout(local_size_x = 64) in;
 
-#include "types.glsl"
+#include "common/types.glsl"
 
-#include "splat_params.glsl"
+#include "splat/splat_params.glsl"
 layout(rgba32f, binding = BINDING_SPLAT_KERNELS) readonly uniform imageBuffer kernel_texels;
 layout(rgba32f, binding = BINDING_SPLATS) writeonly uniform imageBuffer splat_texels;
 layout(rgba32ui, binding = BINDING_SPLAT_WORDS) writeonly uniform uimageBuffer splat_words;
@@ -21,13 +21,13 @@ layout(rgba32ui, binding = BINDING_SPLAT_WORDS) writeonly uniform uimageBuffer s
 layout(std430, binding = BINDING_BUCKET_COUNTS) buffer CountBuf { uint bucket_counts[]; };
 layout(std430, binding = BINDING_SPLAT_STATS) buffer StatsBuf { uint stats[]; };
 
-#include "splat.glsl"
+#include "splat/splat.glsl"
 
 #if SPLAT_POST == 0
-#include "transfer.glsl"
+#include "common/transfer.glsl"
 #endif
 #if SPLAT_SURFACES == 1
-#include "shading.glsl"
+#include "common/shading.glsl"
 // Tangential over normal standard deviation (src/splat/surface.rs FLATNESS).
 const float FLATNESS = 10.0;
 #endif

@@ -36,14 +36,14 @@
 #define ROWS (EDGE / SPLAT_PIXELS)
 layout(local_size_x = SPLAT_GROUP) in;
 
-#include "types.glsl"
+#include "common/types.glsl"
 
 layout(push_constant) uniform PushBlock { RasterPush push; };
-#include "splat_params.glsl"
+#include "splat/splat_params.glsl"
 layout(rgba32f, binding = BINDING_SPLATS) readonly uniform imageBuffer splat_texels;
 layout(rgba32ui, binding = BINDING_SPLAT_WORDS) readonly uniform uimageBuffer splat_words;
 #define SPLAT_READ
-#include "splat.glsl"
+#include "splat/splat.glsl"
 layout(r32ui, binding = BINDING_OFFSET_TEXELS) readonly uniform uimageBuffer offset_texels;
 layout(rg32ui, binding = BINDING_SPLAT_LIST) readonly uniform uimageBuffer list;
 layout(std430, binding = BINDING_IMAGE) writeonly buffer ImageBuf { vec4 image[]; };
@@ -55,10 +55,10 @@ layout(std430, binding = BINDING_PIXEL_SEGMENTS) readonly buffer SegBuf { vec2 p
 #endif
 // Per pixel and sheet: through the texel view (a storage-buffer load is a per-lane loop).
 #define TRANSFER_TEXELS_BOUND 1
-#include "transfer.glsl"
-#include "camera.glsl"
+#include "common/transfer.glsl"
+#include "common/camera.glsl"
 #if SPLAT_ISOSURFACES == 1
-#include "shading.glsl"
+#include "common/shading.glsl"
 #endif
 #endif
 

@@ -1,4 +1,4 @@
-// Primary rays and box clipping, twin of src/render/camera.rs.
+// Primary rays and box clipping, twin of src/view/camera.rs.
 #ifndef VMLS_CAMERA_GLSL
 #define VMLS_CAMERA_GLSL
 

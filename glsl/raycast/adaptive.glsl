@@ -1,0 +1,327 @@
+// The adaptive integrator (RAY_METHOD 2) of raycast.comp, included there; twin of
+// src/raycast/adaptive.rs.
+#ifndef VMLS_ADAPTIVE_GLSL
+#define VMLS_ADAPTIVE_GLSL
+
+// Adaptive integration of top intervals first .. last_step (top interval k is
+// [t0 + k·l_max, min(t0 + (k+1)·l_max, t1)]); twin of src/raycast/adaptive.rs, whose
+// documentation states both criteria: ADAPTIVE_CRITERION 0 = [MLS] §4 (halves compared),
+// 1 = the Hermite criterion with its step controller. Intervals are dyadic inside a top; a stack
+// entry is a knot whose w holds ±(depth + 1) of the interval it closes, negative when f is
+// undefined there (one vec4 per entry keeps the stack small, which matters on lavapipe; the
+// Hermite kernel also keeps it in registers). `a` is the knot at the chunk's start (evaluated
+// here for the first chunk) and `predicted` the Hermite controller's depth (unused by [MLS]'s
+// criterion), both carried between chunks. Each loop body has few MLS call sites: GLSL inlines
+// every call, and lavapipe's compile time and code size grow with the copies.
+
+#if ADAPTIVE_CRITERION == 1
+float hull_sensitivity(vec3 h) {
+    return transfer_sensitivity(h.x, h.y, h.z, params.tf_count);
+}
+
+// The Hermite criterion's error of [a, e] per sample spacing (twin of hermite_error); `mid`
+// gets the Hermite's midpoint knot (w = 1) unless the hull holds an isosurface value (w = 0).
+float hermite_error(vec4 a, vec4 e, float transmittance, out vec4 mid) {
+    mid = vec4(0.0);
+    bool da = a.w > 0.0;
+    bool de = e.w > 0.0;
+    if (!da && !de) {
+        return 0.0;
+    }
+    if (da != de) {
+        return 3.0e38;
+    }
+    float l = e.x - a.x;
+    float m0 = l * a.z;
+    float m1 = l * e.z;
+    float scale = transmittance * params.integrator.z;
+    vec3 whole = bezier_hull(a.y, e.y, m0, m1);
+#if MAX_ISO > 0
+    for (uint i = 0u; i < params.iso_count.x; ++i) {
+        float v = isos[i].value;
+        if (whole.x <= v && v <= whole.y) {
+            bool between = min(a.y, e.y) <= v && v <= max(a.y, e.y);
+            return between ? scale * hull_sensitivity(whole) : 3.0e38;
+        }
+    }
+#endif
+    float sm = hermite_midpoint(a.y, e.y, m0, m1);
+    float mm = 1.5 * (e.y - a.y) - 0.25 * (m0 + m1);
+    mid = vec4(0.5 * (a.x + e.x), sm, mm / l, 1.0);
+    // One pass over the transfer function for both halves: their hulls' union and the larger
+    // departure.
+    vec3 h0 = bezier_hull(a.y, sm, 0.5 * m0, 0.5 * mm);
+    vec3 h1 = bezier_hull(sm, e.y, 0.5 * mm, 0.5 * m1);
+    return scale * hull_sensitivity(vec3(min(h0.x, h1.x), max(h0.y, h1.y), max(h0.z, h1.z)));
+}
+#endif
+
+#if ADAPTIVE_CRITERION == 1
+// The stack lives in registers: constant-trip loops, unrolled by NIR into selects, stand in for
+// dynamic indexing (LAVAPIPE.md: a dynamically indexed local array in divergent code ran at
+// one core's speed).
+vec4 stack_get(vec4 stack[ADAPTIVE_LEVELS], int i) {
+    vec4 v = stack[0];
+    [[unroll]] for (int k = 1; k < ADAPTIVE_LEVELS; ++k) {
+        v = k == i ? stack[k] : v;
+    }
+    return v;
+}
+
+void stack_set(inout vec4 stack[ADAPTIVE_LEVELS], int i, vec4 v) {
+    [[unroll]] for (int k = 0; k < ADAPTIVE_LEVELS; ++k) {
+        stack[k] = k == i ? v : stack[k];
+    }
+}
+
+// Units of the deepest level covered in the top starting at `start`: all of them in a full top,
+// ⌊r/u⌋ of the ray's last one (length r); the rest is the tail (twin of top_limit).
+uint top_limit(float start, float t1, float l_max, uint units) {
+    if (start + l_max <= t1) {
+        return units;
+    }
+    return min(uint(max(floor((t1 - start) / l_max * float(units)), 0.0)), units);
+}
+
+// The Hermite criterion with its step controller (twin of integrate_hermite). Every iteration
+// of the outer loop evaluates f exactly once, at a new end or at a rejected interval's
+// midpoint; the inner loop composites the intervals that pass in between without evaluating.
+// So the SIMD lanes of a row meet at the one MLS call site whatever state each ray is in.
+// Every interval of the loop has a table length: the ray's last top is covered only up to
+// whole units, and the remainder (the tail, shorter than a unit) is composited after the loop,
+// so the loop never pays the clipped composite's lookups.
+uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step,
+                        inout vec4 a, inout uint predicted, inout vec3 color,
+                        inout float transmittance, inout uint evaluations) {
+    float l_max = params.preint_range.z;
+    float epsilon = params.integrator.x;
+    float termination = params.integrator.y;
+    uint units = 1u << uint(ADAPTIVE_LEVELS - 1);
+    uint tops = uint(ceil((t1 - t0) / l_max));
+    if (first == 0u) {
+        a = knot(o, d, t0, evaluations);
+        predicted = 0u;
+    }
+    vec4 stack[ADAPTIVE_LEVELS];
+    uint last = min(last_step, tops);
+    uint k = first;
+    uint position = 0u;
+    int sp = 0;
+    bool tail = false;
+    while (k < last) {
+        // Composite what passes, until an interval or a new end needs an evaluation.
+        float t_eval = 0.0;
+        uint depth = 0u;
+        bool split = false;
+        bool ended = false;
+        bool top_start = false;
+        while (true) {
+            float start = t0 + float(k) * l_max;
+            uint limit = top_limit(start, t1, l_max, units);
+            if (position == limit) {
+                if (k + 1u == tops) {
+                    tail = true;
+                    ended = true;
+                    break;
+                }
+                k += 1u;
+                position = 0u;
+                if (k == last) {
+                    ended = true;
+                    break;
+                }
+                continue;
+            }
+            if (sp == 0) {
+                // A new end at the controller's depth, or deeper until the interval is aligned
+                // and inside the covered part of the top.
+                depth = predicted;
+                while (position % (units >> depth) != 0u || position + (units >> depth) > limit) {
+                    depth += 1u;
+                }
+                uint to = position + (units >> depth);
+                t_eval = start + l_max * (float(to) / float(units));
+                top_start = position == 0u;
+                break;
+            }
+            vec4 packed = stack_get(stack, sp - 1);
+            depth = uint(abs(packed.w)) - 1u;
+            vec4 e = vec4(packed.xyz, packed.w > 0.0 ? 1.0 : 0.0);
+            float len = l_max * exp2(-float(depth));
+            bool can_split = int(depth) + 1 < ADAPTIVE_LEVELS;
+            vec4 mid;
+            float error = hermite_error(a, e, transmittance, mid);
+            if (can_split && error > epsilon) {
+                t_eval = 0.5 * (a.x + e.x);
+                split = true;
+                break;
+            }
+            predicted = depth > 0u && 0.81 * epsilon >= 4.0 * error ? depth - 1u : depth;
+            // Accepted: the halves through the predicted midpoint when the hull holds no
+            // isosurface value, else the whole interval split at the surfaces it crosses. One
+            // emit_interval call site: GLSL inlines every call, and lavapipe's compile time
+            // grows with the inlined copies of the root finders. Both halves and the whole
+            // interval read a table (adaptive setups build one below the deepest level): no
+            // clipped composite here.
+            bool halves = mid.w > 0.0;
+            vec4 cl = table_segment(halves ? depth + 1u : depth, a, halves ? mid : e);
+            vec4 cr = table_segment(depth + 1u, mid, e);
+            for (uint piece = 0u; piece < (halves ? 2u : 1u); ++piece) {
+                bool left = piece == 0u;
+                emit_interval(o, d, left ? a : mid, halves && left ? mid : e,
+                              halves ? 0.5 * len : len, left ? cl : cr, color, transmittance,
+                              evaluations);
+            }
+            sp -= 1;
+            position += units >> depth;
+            a = e;
+            if (1.0 - transmittance > termination) {
+                return CHUNK_FINISHED;
+            }
+        }
+        if (ended) {
+            break;
+        }
+#if SKIP == 1
+        // At a top's start, outside the inner loop (whose `if` bodies every lane pays): tops
+        // inside a run of empty blocks are skipped, and the first one reaching past the run
+        // starts from a fresh knot (twin of the skip in integrate_hermite).
+        bool restart = false;
+        if (top_start) {
+            float start = t0 + float(k) * l_max;
+            float run = skip_run(o, d, start, t1);
+            uint j = resume_interval(t0, l_max, run, k);
+            if (j >= tops) {
+                count_skip(t1 - start, tops - k, 0u);
+                return CHUNK_FINISHED;
+            }
+            if (j > k) {
+                restart = true;
+                uint to = min(j, last);
+                count_skip(float(to - k) * l_max, to - k, 1u);
+                k = to;
+                t_eval = t0 + float(k) * l_max;
+            }
+        }
+#endif
+        // The one evaluation of this iteration.
+        vec4 m = knot(o, d, t_eval, evaluations);
+#if SKIP == 1
+        if (restart) {
+            a = m;
+            continue;
+        }
+#endif
+        float level = float(depth + (split ? 2u : 1u));
+        if (split) {
+            // Both halves are one level deeper; the left one (closed by m) comes first.
+            vec4 top_entry = stack_get(stack, sp - 1);
+            stack_set(stack, sp - 1, vec4(top_entry.xyz, top_entry.w > 0.0 ? level : -level));
+        }
+        stack_set(stack, sp, vec4(m.xyz, m.w > 0.0 ? level : -level));
+        sp += 1;
+    }
+    if (tail) {
+        // From the last covered unit to t1, clipped, without a test: once per chunk.
+        float len = t1 - a.x;
+        if (len > 0.0) {
+            vec4 e = knot(o, d, t1, evaluations);
+            emit_interval(o, d, a, e, len, knot_segment(a, e, len, false, 0u), color,
+                          transmittance, evaluations);
+        }
+        return CHUNK_FINISHED;
+    }
+    if (k < last) {
+        return CHUNK_TRUNCATED;
+    }
+    return k >= tops ? CHUNK_FINISHED : CHUNK_DONE;
+}
+#else
+uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step,
+                        inout vec4 a, inout uint predicted, inout vec3 color,
+                        inout float transmittance, inout uint evaluations) {
+    float l_max = params.preint_range.z;
+    float l_min = params.preint_range.w;
+    float epsilon = params.integrator.x;
+    float termination = params.integrator.y;
+    uint tops = uint(ceil((t1 - t0) / l_max));
+    if (first == 0u) {
+        a = knot(o, d, t0, evaluations);
+    }
+    vec4 stack[ADAPTIVE_LEVELS];
+    uint last = min(last_step, tops);
+    uint k = first;
+    for (; k < last; ++k) {
+        float end = t0 + float(k + 1u) * l_max;
+        bool full = end <= t1;
+        float top = full ? l_max : t1 - a.x;
+        if (top <= 0.0) {
+            return CHUNK_FINISHED;
+        }
+        vec4 top_end = knot(o, d, full ? end : t1, evaluations);
+        stack[0] = vec4(top_end.xyz, top_end.w > 0.0 ? 1.0 : -1.0);
+        int sp = 1;
+        while (sp > 0) {
+            vec4 packed = stack[sp - 1];
+            uint depth = uint(abs(packed.w)) - 1u;
+            vec4 e = vec4(packed.xyz, packed.w > 0.0 ? 1.0 : 0.0);
+            float len = top * exp2(-float(depth));
+            vec4 c = knot_segment(a, e, len, full, depth);
+            bool halves = false;
+            vec4 m = e;
+            vec4 cl = c;
+            vec4 cr = c;
+            if (int(depth) + 1 < ADAPTIVE_LEVELS && (full || 0.5 * len >= l_min)) {
+                m = knot(o, d, 0.5 * (a.x + e.x), evaluations);
+                cl = knot_segment(a, m, 0.5 * len, full, depth + 1u);
+                cr = knot_segment(m, e, 0.5 * len, full, depth + 1u);
+                vec3 c2 = cl.rgb + (1.0 - cl.a) * cr.rgb;
+                bool sign_change = a.z * e.z < 0.0;
+                if (sign_change || transmittance * length(c.rgb - c2) > epsilon * length(c.rgb)) {
+                    // Both halves are one level deeper; the left one is processed first.
+                    float level = float(depth + 2u);
+                    stack[sp - 1].w = packed.w > 0.0 ? level : -level;
+                    stack[sp] = vec4(m.xyz, m.w > 0.0 ? level : -level);
+                    sp += 1;
+                    continue;
+                }
+                halves = true;
+            }
+            // Accepted: the two halves (or the whole interval at the deepest level), each split
+            // at any isosurface it crosses. One call site: GLSL inlines every call, and
+            // lavapipe's compile time grows with the inlined copies of the root finders.
+            for (uint piece = 0u; piece < (halves ? 2u : 1u); ++piece) {
+                bool left = piece == 0u;
+                emit_interval(o, d, left ? a : m, halves && left ? m : e,
+                              halves ? 0.5 * len : len, left ? cl : cr, color, transmittance,
+                              evaluations);
+            }
+            sp -= 1;
+            a = e;
+            if (1.0 - transmittance > termination) {
+                return CHUNK_FINISHED;
+            }
+        }
+        if (sp > 0) {
+            return CHUNK_TRUNCATED;
+        }
+    }
+    return k >= tops ? CHUNK_FINISHED : (k == last_step ? CHUNK_DONE : CHUNK_TRUNCATED);
+}
+#endif
+
+// The chunk state is the knot `a` with the controller's depth folded into w:
+// ±(predicted + 1), negative when f is undefined at a.
+uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, inout vec4 state,
+               inout vec3 color, inout float transmittance, inout uint evaluations) {
+    uint predicted = uint(abs(state.w));
+    predicted = predicted > 0u ? predicted - 1u : 0u;
+    vec4 a = vec4(state.xyz, state.w > 0.0 ? 1.0 : 0.0);
+    uint outcome = integrate_adaptive(o, d, t0, t1, first, last_step, a, predicted, color,
+                                      transmittance, evaluations);
+    float packed = float(predicted + 1u);
+    state = vec4(a.xyz, a.w > 0.0 ? packed : -packed);
+    return outcome;
+}
+
+#endif
