@@ -97,6 +97,9 @@ pub mod binding {
     /// A recorded frame's pixels packed into the target image's format (`target_pack`):
     /// `u32` words, as many per pixel as `vk::TargetFormat::bytes` / 4.
     pub const TARGET_PACKED: u32 = 36;
+    /// A recorded frame's indirect dispatch arguments, `uvec4(x, y, z, 0)` per band
+    /// (`raycast_next`).
+    pub const DISPATCH_ARGS: u32 = 37;
 
     /// How kernels read a binding: the grid and the octree's samples, nodes and references
     /// through texel-buffer views (one AVX2 gather per 8 lanes on llvmpipe instead of a per-lane
@@ -118,7 +121,7 @@ pub mod binding {
     }
 
     /// Every binding with its macro name.
-    pub const ALL: [(&str, u32); 37] = [
+    pub const ALL: [(&str, u32); 38] = [
         ("BINDING_PARAMS", PARAMS),
         ("BINDING_GRID", GRID),
         ("BINDING_SAMPLES", SAMPLES),
@@ -156,6 +159,7 @@ pub mod binding {
         ("BINDING_GRID_WORDS", GRID_WORDS),
         ("BINDING_OFFSET_TEXELS", OFFSET_TEXELS),
         ("BINDING_TARGET_PACKED", TARGET_PACKED),
+        ("BINDING_DISPATCH_ARGS", DISPATCH_ARGS),
     ];
 }
 
@@ -218,14 +222,11 @@ pub fn binding_defines() -> Vec<(String, String)> {
     d
 }
 
-/// Scene constants of the ray caster and the MLS evaluator. GLSL twin: `RenderParams`.
-///
-/// All positions are relative to the scene's frame origin (the volume centre, subtracted on the
-/// host in f64) so that f32 keeps its precision for data far from the world origin.
+/// The camera of a frame, one definition for the ray caster and the splatter. GLSL twin:
+/// `CameraBlock`. Positions are frame-relative; the vectors' w are unused.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
-pub struct RenderParams {
-    /// Camera position (xyz).
+pub struct CameraBlock {
     pub eye: [f32; 4],
     /// Unit view direction.
     pub forward: [f32; 4],
@@ -233,13 +234,23 @@ pub struct RenderParams {
     pub right: [f32; 4],
     /// Unit up vector (right × forward).
     pub up: [f32; 4],
-    /// Ray clip box, min corner.
-    pub box_min: [f32; 4],
-    /// Ray clip box, max corner.
-    pub box_max: [f32; 4],
-    /// Background RGB.
-    pub background: [f32; 4],
-    /// Position of grid point (0,0,0).
+    pub width: u32,
+    pub height: u32,
+    /// 0 = perspective, 1 = orthographic.
+    pub projection: u32,
+    /// tan(fov_y / 2) (perspective).
+    pub tan_half_fov: f32,
+    /// Half the view height in world units (orthographic).
+    pub ortho_half_height: f32,
+    pub _pad: [f32; 3],
+}
+const _: () = assert!(std::mem::size_of::<CameraBlock>() == 96);
+
+/// The field's lattice, supports and octree. GLSL twin: `FieldBlock`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct FieldBlock {
+    /// Position of grid point (0,0,0) (or of the fast path's fine lattice).
     pub grid_origin: [f32; 4],
     /// 1 / grid spacing per axis.
     pub grid_inv_spacing: [f32; 4],
@@ -249,40 +260,73 @@ pub struct RenderParams {
     pub octree_root: [f32; 4],
     /// Grid samples per axis (xyz), w unused.
     pub grid_dims: [i32; 4],
-    pub width: u32,
-    pub height: u32,
-    /// 0 = perspective, 1 = orthographic.
-    pub projection: u32,
-    /// Number of transfer-function points.
-    pub tf_count: u32,
-    /// tan(fov_y / 2) (perspective).
-    pub tan_half_fov: f32,
-    /// Half the view height in world units (orthographic).
-    pub ortho_half_height: f32,
-    /// Integration step in world units.
-    pub step: f32,
-    /// Stop a ray when its transmittance falls below this.
-    pub min_transmittance: f32,
     /// Support radius in grid-index units (the grid path's search radius).
     pub support_cells: f32,
     /// Gaussian field: σ (fraction of the support radius), and on a grid every sample's weight
     /// v·norm (octree samples carry theirs in `Sample::metric_off.z`).
     pub gauss_sigma: f32,
     pub gauss_weight: f32,
-    pub _pad0: f32,
-    /// Preintegration: s of the first and last table node, longest table length (world), and
-    /// the adaptive method's shortest interval l_min (world).
-    pub preint_range: [f32; 4],
-    /// Preintegration: table resolution N, number of length tables (the zero-length limits
-    /// follow them), unused ×2.
-    pub preint_dims: [u32; 4],
-    /// Adaptive ε, early-termination opacity, sample spacing (the Hermite criterion's ε is per
-    /// spacing), unused.
-    pub integrator: [f32; 4],
+    pub _pad: f32,
+}
+const _: () = assert!(std::mem::size_of::<FieldBlock>() == 96);
+
+/// The ray caster's integrator, lengths in world units. GLSL twin: `IntegratorBlock`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct IntegratorBlock {
+    /// Ray clip box, min and max corner (w unused).
+    pub box_min: [f32; 4],
+    pub box_max: [f32; 4],
+    /// Background RGB (w unused).
+    pub background: [f32; 4],
+    /// Midpoint or fixed step.
+    pub step_world: f32,
+    /// Midpoint rule: stop a ray when its transmittance falls below this.
+    pub min_transmittance: f32,
+    /// Adaptive: the criterion's ε.
+    pub epsilon: f32,
+    /// Preintegrated methods: stop a ray once its opacity exceeds this.
+    pub early_termination: f32,
+    /// The sample spacing (the Hermite criterion's ε is per spacing).
+    pub spacing_world: f32,
+    /// Adaptive: the shortest interval.
+    pub l_min_world: f32,
+    /// Transfer-function points and isosurfaces.
+    pub tf_count: u32,
+    pub iso_count: u32,
+}
+const _: () = assert!(std::mem::size_of::<IntegratorBlock>() == 80);
+
+/// The preintegration tables. GLSL twin: `TableBlock`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct TableBlock {
+    /// s of the first and last table node.
+    pub s_min: f32,
+    pub s_max: f32,
+    /// Length of table 0, the longest (table k has longest · 2^−k).
+    pub longest_world: f32,
+    /// Nodes per scalar axis, and tables of lengths (the zero-length limits follow them).
+    pub resolution: u32,
+    pub lengths: u32,
+    pub _pad: [u32; 3],
+}
+const _: () = assert!(std::mem::size_of::<TableBlock>() == 32);
+
+/// Constants of the ray caster and the field's kernels, in named blocks. GLSL twin:
+/// `RenderParams`.
+///
+/// All positions are relative to the scene's frame origin (the volume centre, subtracted on the
+/// host in f64) so that f32 keeps its precision for data far from the world origin.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct RenderParams {
+    pub camera: CameraBlock,
+    pub field: FieldBlock,
+    pub integrator: IntegratorBlock,
+    pub tables: TableBlock,
     /// Blinn–Phong ambient, diffuse, specular, shininess.
     pub lighting: [f32; 4],
-    /// Number of isosurfaces, unused ×3.
-    pub iso_count: [u32; 4],
 }
 const _: () = assert!(std::mem::size_of::<RenderParams>() == 320);
 
@@ -367,52 +411,64 @@ pub struct CountPush {
 }
 const _: () = assert!(std::mem::size_of::<CountPush>() == 16);
 
-/// Constants of the splatting kernels. GLSL twin: `SplatParams`. Camera fields share their
-/// names with `RenderParams`, so `camera.glsl` and `shading.glsl` serve both renderers.
+/// Push constants of `raycast_next`: the band (its first row and rows) and its slot in the
+/// indirect argument buffer. GLSL twin: `NextPush`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct NextPush {
+    pub row_offset: u32,
+    pub rows: u32,
+    pub args_slot: u32,
+    pub _pad: u32,
+}
+const _: () = assert!(std::mem::size_of::<NextPush>() == 16);
+
+/// Constants of the splatting kernels. GLSL twin: `SplatParams`. The camera is the ray
+/// caster's [`CameraBlock`], so `camera.glsl` serves both renderers.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
 pub struct SplatParams {
-    /// Eye (frame-relative) xyz; w: near-plane distance.
-    pub eye: [f32; 4],
-    /// View direction; w: focal length in pixels (per tangent unit, or per world unit when
-    /// orthographic).
-    pub forward: [f32; 4],
-    /// Right vector; w: pixel x of the optical axis.
-    pub right: [f32; 4],
-    /// Up vector; w: pixel y of the optical axis.
-    pub up: [f32; 4],
-    /// Domain box minimum; w: t where the first sheet starts.
+    pub camera: CameraBlock,
+    /// Domain box minimum and maximum (w unused).
     pub box_min: [f32; 4],
-    /// Domain box maximum; w: sheet thickness Δs.
     pub box_max: [f32; 4],
-    /// Background rgb; w: early-termination opacity.
+    /// Background rgb (w unused).
     pub background: [f32; 4],
-    /// Cutoff (standard deviations), low-pass variance (px²), Gaussian σ (fraction of the
-    /// support), lateral clamp of u₀/u₂.
-    pub kernel_filter: [f32; 4],
     /// Blinn–Phong ambient, diffuse, specular, shininess.
     pub lighting: [f32; 4],
-    pub width: u32,
-    pub height: u32,
-    /// 0 perspective, 1 orthographic.
-    pub projection: u32,
-    pub tf_count: u32,
-    pub tan_half_fov: f32,
-    pub ortho_half_height: f32,
-    /// Lateral clamp of u₁/u₂.
-    pub lateral_y: f32,
+    /// Kernels reaching closer than this to the eye plane are culled.
+    pub near: f32,
+    /// Focal length in pixels (per tangent unit, or per world unit when orthographic).
+    pub focal: f32,
+    /// Pixel coordinates of the optical axis.
+    pub centre_x: f32,
+    pub centre_y: f32,
+    /// t where the first sheet starts, and the sheet thickness.
+    pub slab0_world: f32,
+    pub slab_world: f32,
+    /// Pixels stop compositing beyond this opacity.
+    pub early_termination: f32,
     /// Post-shaded: the transfer function's extinction at value 0 (0: sheets holding no value
     /// composite nothing, and splat_raster skips them).
     pub zero_extinction: f32,
+    /// Footprint cutoff (standard deviations), low-pass variance (px²), Gaussian σ (fraction
+    /// of the support), lateral clamps of u₀/u₂ and u₁/u₂.
+    pub cutoff: f32,
+    pub lowpass: f32,
+    pub sigma: f32,
+    pub lateral_x: f32,
+    pub lateral_y: f32,
+    pub tf_count: u32,
+    pub iso_count: u32,
     /// Sheets in the frame.
     pub slabs: u32,
     /// Occlusion tiles per image row.
     pub tiles_x: u32,
     /// Kernels to project.
     pub kernel_count: u32,
-    pub iso_count: u32,
+    pub _pad: [u32; 2],
 }
-const _: () = assert!(std::mem::size_of::<SplatParams>() == 192);
+const _: () = assert!(std::mem::size_of::<SplatParams>() == 240);
 
 /// One projected kernel (splat_project's output). GLSL twin: `Splat`. The footprint words
 /// depend on the projection (`splat::project::Splat` names them):

@@ -38,36 +38,54 @@ fn glsl_and_rust_layouts_agree() {
     let mut at = 0;
 
     let p: &RenderParams = take(bytes, &mut at);
-    let expected = RenderParams {
+    // The camera block is the same struct in RenderParams and SplatParams.
+    let camera = CameraBlock {
         eye: v(1.0),
         forward: v(2.0),
         right: v(3.0),
         up: v(4.0),
-        box_min: v(5.0),
-        box_max: v(6.0),
-        background: v(7.0),
-        grid_origin: v(8.0),
-        grid_inv_spacing: v(9.0),
-        inv_support: v(10.0),
-        octree_root: v(11.0),
-        grid_dims: [12, 13, 14, 15],
-        width: 16,
-        height: 17,
-        projection: 18,
-        tf_count: 19,
-        tan_half_fov: 20.0,
-        ortho_half_height: 21.0,
-        step: 22.0,
-        min_transmittance: 23.0,
-        support_cells: 24.0,
-        gauss_sigma: 25.0,
-        gauss_weight: 26.0,
-        _pad0: 27.0,
-        preint_range: v(28.0),
-        preint_dims: [29, 30, 31, 32],
-        integrator: v(33.0),
-        lighting: v(34.0),
-        iso_count: [35, 36, 37, 38],
+        width: 5,
+        height: 6,
+        projection: 7,
+        tan_half_fov: 8.0,
+        ortho_half_height: 9.0,
+        _pad: [10.0, 11.0, 12.0],
+    };
+    let expected = RenderParams {
+        camera,
+        field: FieldBlock {
+            grid_origin: v(13.0),
+            grid_inv_spacing: v(14.0),
+            inv_support: v(15.0),
+            octree_root: v(16.0),
+            grid_dims: [17, 18, 19, 20],
+            support_cells: 21.0,
+            gauss_sigma: 22.0,
+            gauss_weight: 23.0,
+            _pad: 24.0,
+        },
+        integrator: IntegratorBlock {
+            box_min: v(25.0),
+            box_max: v(26.0),
+            background: v(27.0),
+            step_world: 28.0,
+            min_transmittance: 29.0,
+            epsilon: 30.0,
+            early_termination: 31.0,
+            spacing_world: 32.0,
+            l_min_world: 33.0,
+            tf_count: 34,
+            iso_count: 35,
+        },
+        tables: TableBlock {
+            s_min: 36.0,
+            s_max: 37.0,
+            longest_world: 38.0,
+            resolution: 39,
+            lengths: 40,
+            _pad: [41, 42, 43],
+        },
+        lighting: v(44.0),
     };
     assert_eq!(*p, expected, "RenderParams");
 
@@ -139,27 +157,30 @@ fn glsl_and_rust_layouts_agree() {
     assert_eq!(
         *sp,
         SplatParams {
-            eye: v(1.0),
-            forward: v(2.0),
-            right: v(3.0),
-            up: v(4.0),
-            box_min: v(5.0),
-            box_max: v(6.0),
-            background: v(7.0),
-            kernel_filter: v(8.0),
-            lighting: v(9.0),
-            width: 10,
-            height: 11,
-            projection: 12,
-            tf_count: 13,
-            tan_half_fov: 14.0,
-            ortho_half_height: 15.0,
-            lateral_y: 16.0,
-            zero_extinction: 17.0,
-            slabs: 18,
-            tiles_x: 19,
-            kernel_count: 20,
-            iso_count: 21,
+            camera,
+            box_min: v(13.0),
+            box_max: v(14.0),
+            background: v(15.0),
+            lighting: v(16.0),
+            near: 17.0,
+            focal: 18.0,
+            centre_x: 19.0,
+            centre_y: 20.0,
+            slab0_world: 21.0,
+            slab_world: 22.0,
+            early_termination: 23.0,
+            zero_extinction: 24.0,
+            cutoff: 25.0,
+            lowpass: 26.0,
+            sigma: 27.0,
+            lateral_x: 28.0,
+            lateral_y: 29.0,
+            tf_count: 30,
+            iso_count: 31,
+            slabs: 32,
+            tiles_x: 33,
+            kernel_count: 34,
+            _pad: [35, 36],
         },
         "SplatParams"
     );
@@ -195,6 +216,17 @@ fn glsl_and_rust_layouts_agree() {
             _pad: [6, 7, 8]
         },
         "RasterPush"
+    );
+    let np: &NextPush = take(bytes, &mut at);
+    assert_eq!(
+        *np,
+        NextPush {
+            row_offset: 1,
+            rows: 2,
+            args_slot: 3,
+            _pad: 4
+        },
+        "NextPush"
     );
 
     drop(group);

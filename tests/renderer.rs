@@ -198,3 +198,80 @@ fn the_pipeline_cache_reads_back_and_loads_into_a_new_context() {
     assert_eq!(again.pixels, image.pixels);
     finish(second);
 }
+
+/// Stage `raycast_next` against its CPU twin: bands whose rays are all done, partly done, or
+/// not started, at a width that is not a multiple of the workgroup.
+#[test]
+fn raycast_next_matches_its_cpu_twin() {
+    use vmls::gpu_types::{NextPush, RenderParams, binding, binding_defines, params_copies};
+    use vmls::renderer::next_groups;
+    use vmls::vk::{BindGroup, Buffer, BufferUsage, ComputePipeline, ShaderSource};
+    let (ctx, compiler) = gpu();
+    let (width, height, rows) = (21u32, 24u32, 8u32);
+    let done = vmls::gpu_types::ray_count::DONE;
+    // Band 0 done, band 1 one unfinished ray, band 2 nothing done.
+    let counts: Vec<u32> = (0..width * height)
+        .map(|i| match i / (width * rows) {
+            0 => done | 3,
+            1 if i == width * rows + 17 => 9,
+            1 => done,
+            _ => 0,
+        })
+        .collect();
+    let mut params = RenderParams::default();
+    params.camera.width = width;
+    params.camera.height = height;
+    let params = Buffer::from_slice(&ctx, "params", &params_copies(params)).expect("params");
+    let counts_buf = Buffer::from_slice(&ctx, "counts", &counts).expect("counts");
+    let args = Buffer::new(&ctx, "args", 16 * 3, BufferUsage::Storage).expect("args");
+    let spirv = compiler
+        .compile(
+            ShaderSource::File("raycast/raycast_next.comp"),
+            &binding_defines(),
+        )
+        .expect("compile");
+    let kinds =
+        [binding::PARAMS, binding::COUNTS, binding::DISPATCH_ARGS].map(|b| (b, binding::kind(b)));
+    let pipeline =
+        ComputePipeline::with_kinds(&ctx, "raycast_next", &spirv, &kinds, 16).expect("pipeline");
+    let group = BindGroup::new(
+        &ctx,
+        &pipeline,
+        &[
+            (binding::PARAMS, &params),
+            (binding::COUNTS, &counts_buf),
+            (binding::DISPATCH_ARGS, &args),
+        ],
+    )
+    .expect("bind");
+    ctx.submit(|rec| {
+        for band in 0..3 {
+            let push = NextPush {
+                row_offset: band * rows,
+                rows,
+                args_slot: band,
+                _pad: 0,
+            };
+            rec.dispatch(
+                &pipeline,
+                &group,
+                bytemuck::bytes_of(&push),
+                [1, 1, 1],
+                "raycast_next",
+            )?;
+        }
+        Ok(())
+    })
+    .expect("submit");
+    let got: Vec<[u32; 4]> = args.read(&ctx).expect("read");
+    let band_pixels = (width * rows) as usize;
+    for (band, (args, counts)) in got.iter().zip(counts.chunks(band_pixels)).enumerate() {
+        let want = next_groups(counts, width, rows);
+        assert_eq!(args[..3], want, "band {band}");
+    }
+    assert_eq!(got[0][0], 0, "a finished band dispatches nothing");
+    assert_eq!(got[1][..3], [3, 1, 1]);
+    drop(group);
+    drop((pipeline, args, counts_buf, params));
+    finish(ctx);
+}

@@ -4,19 +4,19 @@
 
 // Ray through the centre of pixel (px, py), row 0 at the top (the scene contract's convention).
 void camera_ray(uvec2 pixel, out vec3 origin, out vec3 dir) {
-    float w = float(params.width);
-    float h = float(params.height);
+    float w = float(params.camera.width);
+    float h = float(params.camera.height);
     float sx = 2.0 * (float(pixel.x) + 0.5) / w - 1.0;
     float sy = 1.0 - 2.0 * (float(pixel.y) + 0.5) / h;
-    if (params.projection == 0u) {
-        float dx = sx * params.tan_half_fov * w / h;
-        float dy = sy * params.tan_half_fov;
-        origin = params.eye.xyz;
-        dir = normalize(params.forward.xyz + dx * params.right.xyz + dy * params.up.xyz);
+    if (params.camera.projection == 0u) {
+        float dx = sx * params.camera.tan_half_fov * w / h;
+        float dy = sy * params.camera.tan_half_fov;
+        origin = params.camera.eye.xyz;
+        dir = normalize(params.camera.forward.xyz + dx * params.camera.right.xyz + dy * params.camera.up.xyz);
     } else {
-        float hh = params.ortho_half_height;
-        origin = params.eye.xyz + sx * hh * w / h * params.right.xyz + sy * hh * params.up.xyz;
-        dir = params.forward.xyz;
+        float hh = params.camera.ortho_half_height;
+        origin = params.camera.eye.xyz + sx * hh * w / h * params.camera.right.xyz + sy * hh * params.camera.up.xyz;
+        dir = params.camera.forward.xyz;
     }
 }
 

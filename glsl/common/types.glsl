@@ -4,37 +4,71 @@
 #ifndef VMLS_TYPES_GLSL
 #define VMLS_TYPES_GLSL
 
-struct RenderParams {
+// The camera of a frame, one definition for the ray caster and the splatter (twin:
+// CameraBlock). Positions are frame-relative; eye.w and the vectors' w are unused.
+struct CameraBlock {
     vec4 eye;
     vec4 forward;
     vec4 right;
     vec4 up;
-    vec4 box_min;
-    vec4 box_max;
-    vec4 background;
+    uint width;
+    uint height;
+    uint projection;  // 0 perspective, 1 orthographic
+    float tan_half_fov;
+    float ortho_half_height;
+    float _pad0;
+    float _pad1;
+    float _pad2;
+};
+
+// The field's lattice, supports and octree (twin: FieldBlock).
+struct FieldBlock {
     vec4 grid_origin;
     vec4 grid_inv_spacing;
     vec4 inv_support;
-    vec4 octree_root;
+    vec4 octree_root;  // centre xyz, half side w
     ivec4 grid_dims;
-    uint width;
-    uint height;
-    uint projection;
-    uint tf_count;
-    float tan_half_fov;
-    float ortho_half_height;
-    float step;
-    float min_transmittance;
     float support_cells;
     float gauss_sigma;
     float gauss_weight;
     float _pad0;
-    vec4 preint_range;
-    uvec4 preint_dims;
-    vec4 integrator;
-    vec4 lighting;
-    uvec4 iso_count;
 };
+
+// The ray caster's integrator, lengths in world units (twin: IntegratorBlock).
+struct IntegratorBlock {
+    vec4 box_min;
+    vec4 box_max;
+    vec4 background;
+    float step_world;
+    float min_transmittance;
+    float epsilon;
+    float early_termination;
+    float spacing_world;
+    float l_min_world;
+    uint tf_count;
+    uint iso_count;
+};
+
+// The preintegration tables (twin: TableBlock).
+struct TableBlock {
+    float s_min;
+    float s_max;
+    float longest_world;
+    uint resolution;
+    uint lengths;
+    uint _pad0;
+    uint _pad1;
+    uint _pad2;
+};
+
+struct RenderParams {
+    CameraBlock camera;
+    FieldBlock field;
+    IntegratorBlock integrator;
+    TableBlock tables;
+    vec4 lighting;  // Blinn-Phong ambient, diffuse, specular, shininess
+};
+
 
 struct IsoSurface {
     vec4 color_opacity;
@@ -76,6 +110,13 @@ struct RayPush {
     uint last;
 };
 
+struct NextPush {
+    uint row_offset;
+    uint rows;
+    uint args_slot;
+    uint _pad0;
+};
+
 struct CountPush {
     uint count;
     uint iterations;
@@ -84,28 +125,33 @@ struct CountPush {
 };
 
 struct SplatParams {
-    vec4 eye;
-    vec4 forward;
-    vec4 right;
-    vec4 up;
+    CameraBlock camera;
     vec4 box_min;
     vec4 box_max;
     vec4 background;
-    vec4 kernel_filter;
     vec4 lighting;
-    uint width;
-    uint height;
-    uint projection;
-    uint tf_count;
-    float tan_half_fov;
-    float ortho_half_height;
-    float lateral_y;
+    float near;
+    float focal;
+    float centre_x;
+    float centre_y;
+    float slab0_world;
+    float slab_world;
+    float early_termination;
     float zero_extinction;
+    float cutoff;
+    float lowpass;
+    float sigma;
+    float lateral_x;
+    float lateral_y;
+    uint tf_count;
+    uint iso_count;
     uint slabs;
     uint tiles_x;
     uint kernel_count;
-    uint iso_count;
+    uint _pad0;
+    uint _pad1;
 };
+
 
 struct Splat {
     vec4 footprint0;

@@ -103,10 +103,10 @@ void mls_visit_gradient(inout MlsGradient g, vec3 y, float rho2, float f, vec3 m
 // constant, so the row only needs the moments Σw, Σw·y_x, Σw·y_x², Σw·f, Σw·y_x·f (5 FMAs per
 // sample) and the 4×4 system is updated once per row. Same sums as mls_accumulate, reordered.
 void mls_gather_rows(vec3 x, inout MlsSystem s) {
-    vec3 gp = (x - params.grid_origin.xyz) * params.grid_inv_spacing.xyz;
-    float inv_sc = 1.0 / params.support_cells;
-    ivec3 base = ivec3(ceil(gp - params.support_cells));
-    ivec3 dims = params.grid_dims.xyz;
+    vec3 gp = (x - params.field.grid_origin.xyz) * params.field.grid_inv_spacing.xyz;
+    float inv_sc = 1.0 / params.field.support_cells;
+    ivec3 base = ivec3(ceil(gp - params.field.support_cells));
+    ivec3 dims = params.field.grid_dims.xyz;
     float xs[MLS_GRID_BOX];
     bool xin[MLS_GRID_BOX];
     [[unroll]] for (int ii = 0; ii < MLS_GRID_BOX; ++ii) {
@@ -191,7 +191,7 @@ void mls_gather_rows(vec3 x, inout MlsSystem s) {
         }
     }
     s.neighbours = count;
-    s.inv_h = params.inv_support.xyz;
+    s.inv_h = params.field.inv_support.xyz;
 }
 #endif
 
@@ -199,18 +199,18 @@ void mls_gather_rows(vec3 x, inout MlsSystem s) {
 // Visits the grid points inside the support box of x; pass 0 accumulates the normal equations,
 // pass 1 the analytic-gradient correction. y = (i − g) / support_cells = (x_i − x) ⊙ h⁻¹.
 void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float c[MLS_TERMS]) {
-    vec3 gp = (x - params.grid_origin.xyz) * params.grid_inv_spacing.xyz;
-    float sc = params.support_cells;
+    vec3 gp = (x - params.field.grid_origin.xyz) * params.field.grid_inv_spacing.xyz;
+    float sc = params.field.support_cells;
     float inv_sc = 1.0 / sc;
     ivec3 lo = max(ivec3(ceil(gp - sc)), ivec3(0));
-    ivec3 hi = min(ivec3(floor(gp + sc)), params.grid_dims.xyz - 1);
-    vec3 inv_h = params.inv_support.xyz;
+    ivec3 hi = min(ivec3(floor(gp + sc)), params.field.grid_dims.xyz - 1);
+    vec3 inv_h = params.field.inv_support.xyz;
     s.inv_h = inv_h;
     for (int k = lo.z; k <= hi.z; ++k) {
         float yz = (float(k) - gp.z) * inv_sc;
         for (int j = lo.y; j <= hi.y; ++j) {
             float yy = (float(j) - gp.y) * inv_sc;
-            int row = params.grid_dims.x * (j + params.grid_dims.y * k);
+            int row = params.field.grid_dims.x * (j + params.field.grid_dims.y * k);
             for (int i = lo.x; i <= hi.x; ++i) {
                 vec3 y = vec3((float(i) - gp.x) * inv_sc, yy, yz);
                 float rho2 = dot(y, y);
@@ -230,8 +230,8 @@ void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float
 // Descends to the leaf containing x; returns (first word, count, basis-scale bits) of its coded
 // reference list (the scale: 1 / the leaf's mean support radius).
 uvec3 octree_leaf(vec3 x) {
-    vec3 center = params.octree_root.xyz;
-    float half_side = params.octree_root.w;
+    vec3 center = params.field.octree_root.xyz;
+    float half_side = params.field.octree_root.w;
     if (any(greaterThan(abs(x - center), vec3(half_side)))) {
         return uvec3(0u);
     }
@@ -311,25 +311,25 @@ void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float
 // w_i f_i exp(-rho^2 / (2 sigma^2)) over samples with rho < 1, w_i = v_i * norm_i, and its
 // gradient sum w_i f_i exp(...) M_i d / sigma^2 (d = x_i - x). terms = 0 where no kernel reaches.
 MlsResult gaussian_evaluate(vec3 x) {
-    float k = -0.5 / (params.gauss_sigma * params.gauss_sigma);
+    float k = -0.5 / (params.field.gauss_sigma * params.field.gauss_sigma);
     float value = 0.0;
     vec3 grad = vec3(0.0);
     uint count = 0u;
 #if MLS_NEIGHBOURS == 0
-    vec3 gp = (x - params.grid_origin.xyz) * params.grid_inv_spacing.xyz;
-    float sc = params.support_cells;
+    vec3 gp = (x - params.field.grid_origin.xyz) * params.field.grid_inv_spacing.xyz;
+    float sc = params.field.support_cells;
     float inv_sc = 1.0 / sc;
     ivec3 lo = max(ivec3(ceil(gp - sc)), ivec3(0));
-    ivec3 hi = min(ivec3(floor(gp + sc)), params.grid_dims.xyz - 1);
-    vec3 inv_h = params.inv_support.xyz;
+    ivec3 hi = min(ivec3(floor(gp + sc)), params.field.grid_dims.xyz - 1);
+    vec3 inv_h = params.field.inv_support.xyz;
     for (int kk = lo.z; kk <= hi.z; ++kk) {
         for (int j = lo.y; j <= hi.y; ++j) {
-            int row = params.grid_dims.x * (j + params.grid_dims.y * kk);
+            int row = params.field.grid_dims.x * (j + params.field.grid_dims.y * kk);
             for (int i = lo.x; i <= hi.x; ++i) {
                 vec3 y = (vec3(i, j, kk) - gp) * inv_sc;
                 float rho2 = dot(y, y);
                 if (rho2 < 1.0) {
-                    float wf = params.gauss_weight * grid_value(GRID_PAD + row + i) * exp(k * rho2);
+                    float wf = params.field.gauss_weight * grid_value(GRID_PAD + row + i) * exp(k * rho2);
                     value += wf;
                     // M d = d / h^2 = y / h.
                     grad += wf * (y * inv_h);
@@ -363,7 +363,7 @@ MlsResult gaussian_evaluate(vec3 x) {
         g_loop_cut = true;
     }
 #endif
-    return MlsResult(value, grad / (params.gauss_sigma * params.gauss_sigma), count,
+    return MlsResult(value, grad / (params.field.gauss_sigma * params.field.gauss_sigma), count,
                      count > 0u ? 1u : 0u);
 }
 #endif
@@ -374,7 +374,7 @@ MlsResult gaussian_evaluate(vec3 x) {
 // to the generated grid, whose first sample is the function's (-1,-1,-1).
 MlsResult exact_evaluate(vec3 x) {
     const float PI = 3.14159265358979;
-    vec3 w = x - vec3(1.0) - params.grid_origin.xyz;
+    vec3 w = x - vec3(1.0) - params.field.grid_origin.xyz;
     float r = length(w.xy);
     float scale = 1.0 / (2.0 * (1.0 + ML_ALPHA));
     float phase = 2.0 * PI * ML_F_M * cos(PI * r / 2.0);
@@ -400,9 +400,9 @@ layout(binding = BINDING_RESAMPLED, rgba32f) uniform readonly imageBuffer resamp
 // (terms 0) where a corner is (f = the quiet NaN RESAMPLE_UNDEFINED, compared as bits: a NaN
 // compare could be folded away).
 MlsResult resampled_evaluate(vec3 x) {
-    ivec3 dims = (params.grid_dims.xyz - 1) * MLS_RESAMPLED + 1;
-    vec3 h = 1.0 / (params.grid_inv_spacing.xyz * float(MLS_RESAMPLED));
-    vec3 g = (x - params.grid_origin.xyz) * params.grid_inv_spacing.xyz * float(MLS_RESAMPLED);
+    ivec3 dims = (params.field.grid_dims.xyz - 1) * MLS_RESAMPLED + 1;
+    vec3 h = 1.0 / (params.field.grid_inv_spacing.xyz * float(MLS_RESAMPLED));
+    vec3 g = (x - params.field.grid_origin.xyz) * params.field.grid_inv_spacing.xyz * float(MLS_RESAMPLED);
     g = clamp(g, vec3(0.0), vec3(dims - 1));
     ivec3 cell = min(ivec3(g), max(dims - 2, ivec3(0)));
     vec3 u = g - vec3(cell);

@@ -24,10 +24,10 @@ void main() {
     if (n >= push.count) {
         return;
     }
-    uvec3 dims = uvec3(params.grid_dims.xyz - 1) * uint(RESAMPLE_FACTOR) + 1u;
+    uvec3 dims = uvec3(params.field.grid_dims.xyz - 1) * uint(RESAMPLE_FACTOR) + 1u;
     uvec3 idx = uvec3(n % dims.x, (n / dims.x) % dims.y, n / (dims.x * dims.y));
-    vec3 spacing = 1.0 / params.grid_inv_spacing.xyz;
-    vec3 x = params.grid_origin.xyz + vec3(idx) * (spacing / float(RESAMPLE_FACTOR));
+    vec3 spacing = 1.0 / params.field.grid_inv_spacing.xyz;
+    vec3 x = params.field.grid_origin.xyz + vec3(idx) * (spacing / float(RESAMPLE_FACTOR));
     MlsResult m = mls_evaluate(x);
     imageStore(fine, int(n), m.terms > 0u ? vec4(m.value, m.gradient)
                                           : vec4(uintBitsToFloat(RESAMPLE_UNDEFINED), vec3(0.0)));

@@ -20,11 +20,11 @@ int skip_bin(float v, int widen, vec3 header) {
 // Stage `skip_block` (twin of Blocks::lookup): whether the block holding o + t·d (clamped into
 // the grid) is empty, and the ray parameter where the ray leaves it.
 bool skip_block(vec3 o, vec3 d, float t, out float t_exit) {
-    vec3 size = float(SKIP_BLOCK) / params.grid_inv_spacing.xyz;
-    ivec3 blocks = max((params.grid_dims.xyz - 1 + SKIP_BLOCK - 1) / SKIP_BLOCK, ivec3(1));
-    vec3 g = (o + d * t - params.grid_origin.xyz) / size;
+    vec3 size = float(SKIP_BLOCK) / params.field.grid_inv_spacing.xyz;
+    ivec3 blocks = max((params.field.grid_dims.xyz - 1 + SKIP_BLOCK - 1) / SKIP_BLOCK, ivec3(1));
+    vec3 g = (o + d * t - params.field.grid_origin.xyz) / size;
     ivec3 b = min(ivec3(max(floor(g), vec3(0.0))), blocks - 1);
-    vec3 lo = params.grid_origin.xyz + vec3(b) * size;
+    vec3 lo = params.field.grid_origin.xyz + vec3(b) * size;
     vec3 hi = lo + size;
     t_exit = 3.0e38;
     [[unroll]] for (int a = 0; a < 3; ++a) {
@@ -48,7 +48,7 @@ bool skip_block(vec3 o, vec3 d, float t, out float t_exit) {
 // is occupied). Blocks are looked up RUN_NUDGE of an edge past the point, since a point on a
 // face may round into the block just left; a lookup whose exit does not advance ends the run.
 float skip_run(vec3 o, vec3 d, float t, float t_end) {
-    vec3 size = float(SKIP_BLOCK) / params.grid_inv_spacing.xyz;
+    vec3 size = float(SKIP_BLOCK) / params.field.grid_inv_spacing.xyz;
     float nudge = float(RUN_NUDGE) * min(size.x, min(size.y, size.z));
     for (uint n = 0u; n < uint(SKIP_RUN); ++n) {
         float t_exit;

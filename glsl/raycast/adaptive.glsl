@@ -16,7 +16,7 @@
 
 #if ADAPTIVE_CRITERION == 1
 float hull_sensitivity(vec3 h) {
-    return transfer_sensitivity(h.x, h.y, h.z, params.tf_count);
+    return transfer_sensitivity(h.x, h.y, h.z, params.integrator.tf_count);
 }
 
 // The Hermite criterion's error of [a, e] per sample spacing (twin of hermite_error); `mid`
@@ -34,10 +34,10 @@ float hermite_error(vec4 a, vec4 e, float transmittance, out vec4 mid) {
     float l = e.x - a.x;
     float m0 = l * a.z;
     float m1 = l * e.z;
-    float scale = transmittance * params.integrator.z;
+    float scale = transmittance * params.integrator.spacing_world;
     vec3 whole = bezier_hull(a.y, e.y, m0, m1);
 #if MAX_ISO > 0
-    for (uint i = 0u; i < params.iso_count.x; ++i) {
+    for (uint i = 0u; i < params.integrator.iso_count; ++i) {
         float v = isos[i].value;
         if (whole.x <= v && v <= whole.y) {
             bool between = min(a.y, e.y) <= v && v <= max(a.y, e.y);
@@ -93,9 +93,9 @@ uint top_limit(float start, float t1, float l_max, uint units) {
 uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step,
                         inout vec4 a, inout uint predicted, inout vec3 color,
                         inout float transmittance, inout uint evaluations) {
-    float l_max = params.preint_range.z;
-    float epsilon = params.integrator.x;
-    float termination = params.integrator.y;
+    float l_max = params.tables.longest_world;
+    float epsilon = params.integrator.epsilon;
+    float termination = params.integrator.early_termination;
     uint units = 1u << uint(ADAPTIVE_LEVELS - 1);
     uint tops = uint(ceil((t1 - t0) / l_max));
     if (first == 0u) {
@@ -240,10 +240,10 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
 uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step,
                         inout vec4 a, inout uint predicted, inout vec3 color,
                         inout float transmittance, inout uint evaluations) {
-    float l_max = params.preint_range.z;
-    float l_min = params.preint_range.w;
-    float epsilon = params.integrator.x;
-    float termination = params.integrator.y;
+    float l_max = params.tables.longest_world;
+    float l_min = params.integrator.l_min_world;
+    float epsilon = params.integrator.epsilon;
+    float termination = params.integrator.early_termination;
     uint tops = uint(ceil((t1 - t0) / l_max));
     if (first == 0u) {
         a = knot(o, d, t0, evaluations);

@@ -31,7 +31,7 @@ vec4 iso_values = vec4(0.0);
 
 void load_isos() {
     [[unroll]] for (int i = 0; i < MAX_ISO; ++i) {
-        if (uint(i) < params.iso_count.x) {
+        if (uint(i) < params.integrator.iso_count) {
             iso_values[i] = isos[i].value;
         }
     }
@@ -50,7 +50,7 @@ bool needs_surfaces(vec4 a, vec4 e) {
     bool any = false;
     [[unroll]] for (int i = 0; i < MAX_ISO; ++i) {
         float v = iso_values[i];
-        bool live = uint(i) < params.iso_count.x;
+        bool live = uint(i) < params.integrator.iso_count;
         any = any || (live && (crosses(a.y, e.y, v) || (turn && sign_f * v > top)));
     }
     return any && a.w != 0.0 && e.w != 0.0;
@@ -139,7 +139,7 @@ bool split_at_extremum(vec3 o, vec3 d, vec4 a, vec4 e, inout uint evaluations, o
     bool found = false;
     [[unroll]] for (int i = 0; i < MAX_ISO; ++i) {
         float vi = sign_f * isos[i].value;
-        if (uint(i) < params.iso_count.x && vi > top && (!found || vi < v)) {
+        if (uint(i) < params.integrator.iso_count && vi > top && (!found || vi < v)) {
             v = vi;
             found = true;
         }
@@ -184,7 +184,7 @@ uint find_crossings(vec3 o, vec3 d, vec4 a, vec4 e, inout uint evaluations,
     hit_i = uvec4(0u);
     [[unroll]] for (int i = 0; i < MAX_ISO; ++i) {
         hit_g[i] = vec3(0.0);
-        if (uint(i) < params.iso_count.x && crosses(a.y, e.y, isos[i].value)) {
+        if (uint(i) < params.integrator.iso_count && crosses(a.y, e.y, isos[i].value)) {
             vec3 g;
             float t = locate_crossing(o, d, a, e, isos[i].value, evaluations, g);
             // Sorted insertion with constant indices only: find the slot, shift, store.
@@ -239,7 +239,7 @@ void emit_surfaces(vec3 o, vec3 d, vec4 a, vec4 e, inout vec3 color, inout float
 void emit_crossings(vec3 o, vec3 d, vec4 a, vec4 e, inout vec3 color, inout float transmittance,
                     inout uint evaluations) {
 #if MAX_ISO > 0
-    if (params.iso_count.x == 0u || a.w == 0.0 || e.w == 0.0) {
+    if (params.integrator.iso_count == 0u || a.w == 0.0 || e.w == 0.0) {
         return;
     }
     vec4 m;
@@ -302,7 +302,7 @@ vec4 full_segment(vec4 a, vec4 e) {
 #if MAX_ISO > 0
     [[unroll]] for (int i = 0; i < MAX_ISO; ++i) {
         float v = iso_values[i];
-        halves = halves && !(uint(i) < params.iso_count.x && h.x <= v && v <= h.y);
+        halves = halves && !(uint(i) < params.integrator.iso_count && h.x <= v && v <= h.y);
     }
 #endif
     float sm = hermite_midpoint(a.y, e.y, m0, m1);
@@ -365,7 +365,7 @@ void emit_monotone(vec3 o, vec3 d, vec4 a, vec4 e, float len, vec4 plain, bool u
 void emit_interval(vec3 o, vec3 d, vec4 a, vec4 e, float len, vec4 plain,
                    inout vec3 color, inout float transmittance, inout uint evaluations) {
 #if MAX_ISO > 0
-    if (params.iso_count.x > 0u) {
+    if (params.integrator.iso_count > 0u) {
         vec4 m;
         bool split = split_at_extremum(o, d, a, e, evaluations, m);
         float scale = len / (e.x - a.x);

@@ -12,11 +12,11 @@ layout(binding = BINDING_PREINT, rgba32f) uniform readonly imageBuffer preint;
 
 // Bilinear lookup of table k at (s_f, s_b), clamped to the table's scalar range.
 vec4 preint_lookup(uint k, float s_f, float s_b) {
-    uint n = params.preint_dims.x;
+    uint n = params.tables.resolution;
     float n1 = float(n - 1u);
-    float scale = n1 / (params.preint_range.y - params.preint_range.x);
-    float x = clamp((s_f - params.preint_range.x) * scale, 0.0, n1);
-    float y = clamp((s_b - params.preint_range.x) * scale, 0.0, n1);
+    float scale = n1 / (params.tables.s_max - params.tables.s_min);
+    float x = clamp((s_f - params.tables.s_min) * scale, 0.0, n1);
+    float y = clamp((s_b - params.tables.s_min) * scale, 0.0, n1);
     uint x0 = min(uint(x), n - 2u);
     uint y0 = min(uint(y), n - 2u);
     float fx = x - float(x0);
@@ -44,8 +44,8 @@ vec4 preint_segment_if(bool wanted, float s_f, float s_b, float r) {
     vec3 color = vec3(0.0);
     float alpha = 0.0;
     float done = 0.0;
-    uint levels = params.preint_dims.y;
-    float l = params.preint_range.z;
+    uint levels = params.tables.lengths;
+    float l = params.tables.longest_world;
     vec4 zero = vec4(0.0);
     float s0 = s_f;
     uint n = wanted ? levels + 2u : 0u;

@@ -66,9 +66,9 @@ const uint CHUNK_TRUNCATED = 2u; // a loop ended early: the driver's loop limit
 // midpoint rule.
 bool terminated(float transmittance) {
 #if RAY_METHOD == 0
-    return transmittance < params.min_transmittance;
+    return transmittance < params.integrator.min_transmittance;
 #else
-    return 1.0 - transmittance > params.integrator.y;
+    return 1.0 - transmittance > params.integrator.early_termination;
 #endif
 }
 
@@ -84,7 +84,7 @@ bool midpoint_step(vec4 k, float dt, inout vec3 color, inout float transmittance
     if (k.w == 0.0) {
         return false;
     }
-    vec4 ct = transfer_lookup(k.y, params.tf_count);
+    vec4 ct = transfer_lookup(k.y, params.integrator.tf_count);
     float a = 1.0 - exp(-ct.a * dt);
     color += transmittance * a * ct.rgb;
     transmittance *= 1.0 - a;
@@ -93,10 +93,10 @@ bool midpoint_step(vec4 k, float dt, inout vec3 color, inout float transmittance
 
 uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, inout vec4 prev,
                inout vec3 color, inout float transmittance, inout uint evaluations) {
-    uint steps = uint(ceil((t1 - t0) / params.step));
+    uint steps = uint(ceil((t1 - t0) / params.integrator.step_world));
     // A compile-time false without isosurfaces: llvmpipe would run the extra evaluations under
     // a runtime condition anyway.
-    bool isos = MAX_ISO > 0 && params.iso_count.x > 0u;
+    bool isos = MAX_ISO > 0 && params.integrator.iso_count > 0u;
     if (first == 0u && isos) {
         prev = knot(o, d, t0, evaluations);
     }
@@ -124,8 +124,8 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
             i += 1u;
         }
         for (; i < last; ++i) {
-            float ta = t0 + float(i) * params.step;
-            float dt = min(params.step, t1 - ta);
+            float ta = t0 + float(i) * params.integrator.step_world;
+            float dt = min(params.integrator.step_world, t1 - ta);
             if (dt <= 0.0) {
                 exited = true;
                 break;
@@ -138,8 +138,8 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
             if (tm >= occupied_until) {
                 float t_exit;
                 if (skip_span(o, d, tm, t1, t_exit)) {
-                    uint j = min(resume_interval(t0 - 0.5 * params.step, params.step, t_exit, i + 1u), last);
-                    count_skip(min(t0 + float(j) * params.step, t1) - ta, j - i, isos ? 1u : 0u);
+                    uint j = min(resume_interval(t0 - 0.5 * params.integrator.step_world, params.integrator.step_world, t_exit, i + 1u), last);
+                    count_skip(min(t0 + float(j) * params.integrator.step_world, t1) - ta, j - i, isos ? 1u : 0u);
                     if (isos) {
                         prev = knot(o, d, min(t_exit, t1), evaluations);
                     }
@@ -187,7 +187,7 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
 // that stopped, and the ray's last interval follows, once per chunk.
 uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, inout vec4 prev,
                inout vec3 color, inout float transmittance, inout uint evaluations) {
-    float l = params.step;
+    float l = params.integrator.step_world;
     uint steps = uint(ceil((t1 - t0) / l));
     if (first == 0u) {
         prev = knot(o, d, t0, evaluations);
@@ -299,9 +299,9 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
 // exactly as integrate() counts them.
 uint segment_steps(float t0, float t1) {
 #if RAY_METHOD == 2
-    return uint(ceil((t1 - t0) / params.preint_range.z));
+    return uint(ceil((t1 - t0) / params.tables.longest_world));
 #else
-    return uint(ceil((t1 - t0) / params.step));
+    return uint(ceil((t1 - t0) / params.integrator.step_world));
 #endif
 }
 
@@ -311,10 +311,10 @@ void main() {
     load_isos();
 #endif
     uvec2 pixel = uvec2(gl_GlobalInvocationID.x, gl_GlobalInvocationID.y + band.row_offset);
-    if (pixel.x >= params.width || gl_GlobalInvocationID.y >= band.rows || pixel.y >= params.height) {
+    if (pixel.x >= params.camera.width || gl_GlobalInvocationID.y >= band.rows || pixel.y >= params.camera.height) {
         return;
     }
-    uint index = pixel.y * params.width + pixel.x;
+    uint index = pixel.y * params.camera.width + pixel.x;
     vec3 color = vec3(0.0);
     float transmittance = 1.0;
     uint evaluations = 0u;
@@ -350,7 +350,7 @@ void main() {
     vec2 segs[1];
     int segments = 0;
     float b0, b1;
-    if (clip_box(o, d, params.box_min.xyz, params.box_max.xyz, b0, b1)) {
+    if (clip_box(o, d, params.integrator.box_min.xyz, params.integrator.box_max.xyz, b0, b1)) {
         segs[0] = vec2(b0, b1);
         segments = 1;
     }
@@ -388,7 +388,7 @@ void main() {
     skip_stats[index] = vec4(skipped, inside, 0.0);
 #endif
     if (outcome == CHUNK_FINISHED) {
-        image[index] = vec4(color + transmittance * params.background.rgb, 1.0 - transmittance);
+        image[index] = vec4(color + transmittance * params.integrator.background.rgb, 1.0 - transmittance);
         counts[index] = evaluations | RAY_DONE | truncated;
     } else {
         image[index] = vec4(color, transmittance);

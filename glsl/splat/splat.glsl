@@ -50,9 +50,9 @@ vec3 splat_profile(Splat s, float cutoff, vec2 pixel) {
     float m = s.footprint0.z + dot(s.footprint2.xy, d);
     return vec3(c.w * exp_e(-0.5 * q), m, 1.0 / s.footprint0.w);
 #else
-    float f = params.forward.w;
-    float dx = (pixel.x - params.right.w) / f;
-    float dy = (params.up.w - pixel.y) / f;
+    float f = params.focal;
+    float dx = (pixel.x - params.centre_x) / f;
+    float dy = (params.centre_y - pixel.y) / f;
     vec4 q0 = s.footprint0, q1 = s.footprint1, j0 = s.footprint2, j1 = s.footprint3;
     // a' = d'^T Q d', b' = d'^T Q r with d' = (dx, dy, 1).
     vec3 qd = vec3(q0.x * dx + q0.y * dy + q0.w,
@@ -143,7 +143,7 @@ void store_splat(uint i, Splat s) {
 // The inclusive tile range (tx0, ty0, tx1, ty1) whose pixels or aprons meet a pixel box
 // (twin: SplatSetup::tile_rect).
 uvec4 tile_rect(ivec4 bbox) {
-    int tiles_y = int((params.height + uint(SPLAT_TILE) - 1u) / uint(SPLAT_TILE));
+    int tiles_y = int((params.camera.height + uint(SPLAT_TILE) - 1u) / uint(SPLAT_TILE));
     return uvec4(uint(max(bbox.x - SPLAT_APRON, 0) / SPLAT_TILE),
                  uint(max(bbox.y - SPLAT_APRON, 0) / SPLAT_TILE),
                  uint(min((bbox.z + SPLAT_APRON) / SPLAT_TILE, int(params.tiles_x) - 1)),

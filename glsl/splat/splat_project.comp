@@ -101,8 +101,8 @@ bool cutoff_conic(mat3 qm, mat3 jm, vec3 r, float cut, out vec4 box) {
     if (!(f0 < 0.0)) {
         return false;
     }
-    float f = params.forward.w;
-    box = vec4(params.right.w + f * cx, params.up.w - f * cy,
+    float f = params.focal;
+    box = vec4(params.centre_x + f * cx, params.centre_y - f * cy,
                f * sqrt(-f0 * h11 / det), f * sqrt(-f0 * h00 / det));
     return true;
 }
@@ -122,9 +122,9 @@ Splat project(Sample k) {
     if (k.metric_off.w > 0.5) {
         IsoSurface iso = isos[uint(k.metric_off.w) - 1u];
 #if SPLAT_ORTHO == 1
-        vec3 view = params.forward.xyz;
+        vec3 view = params.camera.forward.xyz;
 #else
-        vec3 view = normalize(p - params.eye.xyz);
+        vec3 view = normalize(p - params.camera.eye.xyz);
 #endif
         vec4 m = k.metric, mo = k.metric_off;
         float rho2 = m.x * view.x * view.x + m.y * view.y * view.y + m.z * view.z * view.z
@@ -148,30 +148,30 @@ Splat project(Sample k) {
     if (!metric_inverse(k.metric, k.metric_off, minv)) {
         return culled(CULL_DEGENERATE);
     }
-    float sigma = params.kernel_filter.z;
+    float sigma = params.sigma;
     mat3 v_obj = minv * (sigma * sigma);
-    vec3 right = params.right.xyz, up = params.up.xyz, fwd = params.forward.xyz;
-    vec3 d = p - params.eye.xyz;
+    vec3 right = params.camera.right.xyz, up = params.camera.up.xyz, fwd = params.camera.forward.xyz;
+    vec3 d = p - params.camera.eye.xyz;
     vec3 u = vec3(dot(d, right), dot(d, up), dot(d, fwd));
-    float cutoff = params.kernel_filter.x;
+    float cutoff = params.cutoff;
     float reach = cutoff * sqrt(max(dot(fwd, v_obj * fwd), 0.0));
-    if (u.z - reach <= params.eye.w) {
+    if (u.z - reach <= params.near) {
         return culled(CULL_NEAR);
     }
-    float f = params.forward.w;
+    float f = params.focal;
     vec2 centre;
     float t;
     // Rows of A = J W, stored as the columns of `at` (at = transpose(A)).
 #if SPLAT_ORTHO == 1
-    centre = vec2(params.right.w + f * u.x, params.up.w - f * u.y);
+    centre = vec2(params.centre_x + f * u.x, params.centre_y - f * u.y);
     t = u.z;
     mat3 at = mat3(f * right, -f * up, fwd);
 #else
     float l = length(u);
     float inv = 1.0 / u.z;
-    float cx = clamp(u.x * inv, -params.kernel_filter.w, params.kernel_filter.w);
+    float cx = clamp(u.x * inv, -params.lateral_x, params.lateral_x);
     float cy = clamp(u.y * inv, -params.lateral_y, params.lateral_y);
-    centre = vec2(params.right.w + f * u.x * inv, params.up.w - f * u.y * inv);
+    centre = vec2(params.centre_x + f * u.x * inv, params.centre_y - f * u.y * inv);
     t = l;
     vec3 j0 = vec3(f * inv, 0.0, -f * cx * inv);
     vec3 j1 = vec3(0.0, -f * inv, f * cy * inv);
@@ -188,7 +188,7 @@ Splat project(Sample k) {
     float vtt = v[2][2];
     float det_hat = vhat.x * vhat.z - vhat.y * vhat.y;
     vec3 vf = vec3(max(vhat.x, MIN_VARIANCE), vhat.y, max(vhat.z, MIN_VARIANCE));
-    float lowpass = params.kernel_filter.y;
+    float lowpass = params.lowpass;
 #if SPLAT_ANTIALIAS == 0
     vf += vec3(lowpass, 0.0, lowpass);
 #elif SPLAT_ANTIALIAS == 1
@@ -236,7 +236,7 @@ Splat project(Sample k) {
         return culled(CULL_DEGENERATE);
     }
 #endif
-    float w = float(params.width), h = float(params.height);
+    float w = float(params.camera.width), h = float(params.camera.height);
     ivec4 bbox = ivec4(
         int(min(max(ceil(box.x - box.z), 0.0), w)),
         int(min(max(ceil(box.y - box.w), 0.0), h)),
@@ -252,7 +252,7 @@ Splat project(Sample k) {
     float gershgorin = max(max(dot(abs(v_f[0]), one), dot(abs(v_f[1]), one)), dot(abs(v_f[2]), one));
     depth_reach = max(depth_reach, cutoff * sqrt(gershgorin));
 #endif
-    float slab0 = params.box_min.w, slab = params.box_max.w;
+    float slab0 = params.slab0_world, slab = params.slab_world;
     float first = floor((t - depth_reach - slab0) / slab);
     float last = floor((t + depth_reach - slab0) / slab);
     float checks = amplitude + conic.x + conic.y + conic.z + slope.x + slope.y + t + cond

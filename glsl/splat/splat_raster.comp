@@ -126,8 +126,8 @@ uvec2 next_entry(uint at, uint at_end, uint steps) {
 // t_out], or the sum over the pixel's hull segments (s01, s23: two each, read once per pixel
 // into registers; a storage-buffer read per sheet is a loop over the lanes on lavapipe).
 float slab_overlap(int j, float t_in, float t_out, vec4 s01, vec4 s23) {
-    float a = params.box_min.w + float(j) * params.box_max.w;
-    float b = a + params.box_max.w;
+    float a = params.slab0_world + float(j) * params.slab_world;
+    float b = a + params.slab_world;
 #if SPLAT_HULL == 1
     return max(min(b, s01.y) - max(a, s01.x), 0.0) + max(min(b, s01.w) - max(a, s01.z), 0.0)
            + max(min(b, s23.y) - max(a, s23.x), 0.0) + max(min(b, s23.w) - max(a, s23.z), 0.0);
@@ -219,7 +219,7 @@ struct Pixel {
 
 Pixel pixel_at(int x, int y, bool valid, bool own_tile) {
     Pixel px;
-    int w = int(params.width), h = int(params.height);
+    int w = int(params.camera.width), h = int(params.camera.height);
     px.x = x;
     px.y = y;
     px.inside = valid && x >= 0 && y >= 0 && x < w && y < h;
@@ -272,7 +272,7 @@ Pixel pixel_at(int x, int y, bool valid, bool own_tile) {
 
 // A pixel that still composites.
 bool pixel_open(Pixel px) {
-    return px.own && !(px.acc.w > params.background.w);
+    return px.own && !(px.acc.w > params.early_termination);
 }
 
 // Adds entry (s, covering sheets k .. k + span - 1 of the splat's) to the pixel.
@@ -281,12 +281,12 @@ void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) 
     bool in_box = px.inside && all(greaterThanEqual(ivec2(px.x, px.y), s.bbox.xy))
                   && all(lessThanEqual(ivec2(px.x, px.y), s.bbox.zw));
 #if SPLAT_POST == 0 && SPLAT_OCCLUSION == 1
-    in_box = in_box && !(px.acc.w > params.background.w);
+    in_box = in_box && !(px.acc.w > params.early_termination);
 #endif
     if (!in_box) {
         return;
     }
-    float cutoff = params.kernel_filter.x;
+    float cutoff = params.cutoff;
     vec2 pixel = vec2(px.x, px.y);
     px.evaluated += 1u;
 #if SPLAT_RING > 0
@@ -296,7 +296,7 @@ void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) 
         return;
     }
     px.contributions += 1u;
-    float slab = params.box_max.w;
+    float slab = params.slab_world;
 #if SPLAT_QUADRATURE == 1
     // The Hermite-Simpson rule on each sheet (twin: sheet_share), h deviations thick: with
     // w = A/sqrt(2 pi), w h/30 (7 g_a + 16 g_m + 7 g_b) + w h^2/60 (z_b g_b - z_a g_a) for
@@ -373,7 +373,7 @@ void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) 
     if (d + 1u < span) { \
         za = zb; \
         qa = qb; \
-        zb = (params.box_min.w + float(k + d + 2u) * slab - pr.y) * pr.z; \
+        zb = (params.slab0_world + float(k + d + 2u) * slab - pr.y) * pr.z; \
         qb = normal_tail(zb); \
         px.r += pr.x * phi_from_tails(za, qa, zb, qb); \
     }
@@ -412,7 +412,7 @@ void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) 
 #if SPLAT_POST == 0
 // Composites the pixel's sheet and clears it.
 void finish_pre(inout Pixel px) {
-    float done = params.background.w;
+    float done = params.early_termination;
     if (px.own && !(px.acc.w > done)) {
 #if SPLAT_SURFACES == 1
         // Surface splats first: coverage min(W, 1), normalised opacity and colour.
@@ -439,7 +439,7 @@ void finish_pre(inout Pixel px) {
 // Sheet k is complete: its mean value, and the next sheet's integral from the ring (`live`
 // ring registers hold something).
 float take_sheet(inout Pixel px, uint live) {
-    float v1 = px.sheet / params.box_max.w;
+    float v1 = px.sheet / params.slab_world;
 #if SPLAT_RING > 0
     px.sheet = px.r0;
     if (live > 0u) {
@@ -454,7 +454,7 @@ float take_sheet(inout Pixel px, uint live) {
 // Composites sheet j = k - 1 (value px.v) given sheet k's value v1 and lateral gradient,
 // then shifts the pixel's sheet values.
 void composite_post(inout Pixel px, uint k, float v1, vec2 lat) {
-    float slab = params.box_max.w;
+    float slab = params.slab_world;
     int j = int(k) - 1;
     if (pixel_open(px) && px.in_domain && j >= 0) {
         float len = slab_overlap(j, px.t_in, px.t_out, SEGMENTS(px));
@@ -482,9 +482,9 @@ void composite_post(inout Pixel px, uint k, float v1, vec2 lat) {
             }
             if (hits > 0u) {
                 float across = 0.5 / slab;
-                vec3 g0 = px.lat0.x * params.right.xyz + px.lat0.y * params.up.xyz
+                vec3 g0 = px.lat0.x * params.camera.right.xyz + px.lat0.y * params.camera.up.xyz
                           + (v - px.v_2) * across * px.d;
-                vec3 g1 = px.lat1.x * params.right.xyz + px.lat1.y * params.up.xyz
+                vec3 g1 = px.lat1.x * params.camera.right.xyz + px.lat1.y * params.camera.up.xyz
                           + (v1 - v0) * across * px.d;
                 for (uint hi = 0u; hi < hits; ++hi) {
                     IsoSurface iso = isos[order[hi]];
@@ -567,7 +567,7 @@ void main() {
     Pixel px3 = pixel_at(x, y + 3, valid, OWN(3));
 #endif
 #undef OWN
-    float slab = params.box_max.w;
+    float slab = params.slab_world;
     // Entries walked and entries skipped by this invocation (the counters hold them times
     // the invocations of a workgroup).
     uvec2 walked = uvec2(0u);
@@ -627,7 +627,7 @@ void main() {
         }
 #endif
 #if SPLAT_SPLIT == 1
-        float ta = params.box_min.w + float(k) * slab;
+        float ta = params.slab0_world + float(k) * slab;
         float tb = ta + slab;
 #else
         float ta = 0.0, tb = 0.0;
@@ -679,13 +679,13 @@ void main() {
         }
 #endif
         if (px0.own) {
-            float a = params.box_min.w + float(k) * slab;
+            float a = params.slab0_world + float(k) * slab;
 #if SPLAT_ORTHO == 1
-            float size = 1.0 / params.forward.w;
+            float size = 1.0 / params.focal;
 #else
-            float size = (a + 0.5 * slab) / params.forward.w;
+            float size = (a + 0.5 * slab) / params.focal;
 #endif
-            int w = int(params.width), h = int(params.height);
+            int w = int(params.camera.width), h = int(params.camera.height);
             int mx = max(x - 1, 0) - x, px = min(x + 1, w - 1) - x;
             int my = max(y - 1, 0) - y, py = min(y + 1, h - 1) - y;
             if (px != mx) {

@@ -22,14 +22,14 @@ const uint STAT_SEGMENT_OVERFLOW = 5u;
 void main() {
     load_params();
     uvec2 px = gl_GlobalInvocationID.xy;
-    if (px.x >= params.width || px.y >= params.height) {
+    if (px.x >= params.camera.width || px.y >= params.camera.height) {
         return;
     }
     vec3 o, d;
     camera_ray(px, o, d);
     vec2 seg[HULL_SEGMENTS];
     int n = hull_segments(o, d, seg);
-    uint base = (px.y * params.width + px.x) * uint(SPLAT_SEGMENTS);
+    uint base = (px.y * params.camera.width + px.x) * uint(SPLAT_SEGMENTS);
     if (n < 0 || n > SPLAT_SEGMENTS) {
         atomicAdd(stats[STAT_SEGMENT_OVERFLOW], 1u);
         n = 0;

@@ -245,30 +245,30 @@ pub fn field_params(field: &Field) -> RenderParams {
         // A grid's points, or for irregular data on the fast path the fine grid's lattice
         // where a grid's would be (recon_resample and resampled_evaluate read only these).
         let l = field.lattice();
-        p.grid_origin = v4(l.origin.into(), 0.0);
-        p.grid_inv_spacing = [
+        p.field.grid_origin = v4(l.origin.into(), 0.0);
+        p.field.grid_inv_spacing = [
             (1.0 / l.spacing[0]) as f32,
             (1.0 / l.spacing[1]) as f32,
             (1.0 / l.spacing[2]) as f32,
             0.0,
         ];
-        p.grid_dims = [l.dims[0] as i32, l.dims[1] as i32, l.dims[2] as i32, 0];
+        p.field.grid_dims = [l.dims[0] as i32, l.dims[1] as i32, l.dims[2] as i32, 0];
     }
     if let Some(g) = field.grid() {
         let inv_h = g.inv_support();
-        p.inv_support = [inv_h[0] as f32, inv_h[1] as f32, inv_h[2] as f32, 0.0];
-        p.support_cells = g.support as f32;
+        p.field.inv_support = [inv_h[0] as f32, inv_h[1] as f32, inv_h[2] as f32, 0.0];
+        p.field.support_cells = g.support as f32;
         if field.reconstruction.method == crate::recon::ReconMethod::Gaussian {
             let h = g.spacing.map(|s| s * g.support);
             let metric = crate::samples::supports::diagonal(h);
-            p.gauss_weight = (field.kernel_volumes().get(0)
+            p.field.gauss_weight = (field.kernel_volumes().get(0)
                 * crate::recon::gaussian::gaussian_norm(field.reconstruction.sigma, &metric))
                 as f32;
         }
     }
-    p.gauss_sigma = field.reconstruction.sigma as f32;
+    p.field.gauss_sigma = field.reconstruction.sigma as f32;
     if let Some(o) = field.octree_if_built() {
-        p.octree_root = v4(o.root_center.into(), o.root_half);
+        p.field.octree_root = v4(o.root_center.into(), o.root_half);
     }
     p
 }

@@ -62,6 +62,22 @@ pub(crate) fn band_rows(setup: &RaySetup) -> u32 {
         .next_multiple_of(8)
 }
 
+/// The push constants of the chunk of a band (`rows` rows from `row`) that starts at outer
+/// step `first`: at most `chunk` steps, none past `outer`.
+pub(crate) fn chunk_push(row: u32, rows: u32, first: u32, chunk: u32, outer: u32) -> RayPush {
+    RayPush {
+        row_offset: row,
+        rows,
+        first,
+        last: first.saturating_add(chunk).min(outer),
+    }
+}
+
+/// The workgroups of a band of `rows` rows of `width` pixels (8 × 8 pixels each).
+pub(crate) fn band_groups(width: u32, rows: u32) -> [u32; 3] {
+    [width.div_ceil(8), rows.div_ceil(8), 1]
+}
+
 /// Binding numbers of the ray caster for a field and setup.
 pub(crate) fn frame_bindings(
     gpu_field: &GpuField,
@@ -277,18 +293,13 @@ pub(crate) fn run_bands(
         let mut first = 0;
         let mut band_counts: Vec<u32> = Vec::new();
         while first < outer {
-            let push = RayPush {
-                row_offset: row,
-                rows,
-                first,
-                last: first.saturating_add(chunk).min(outer),
-            };
+            let push = chunk_push(row, rows, first, chunk, outer);
             let timings = ctx.submit(|rec| {
                 rec.dispatch(
                     pipeline,
                     &group,
                     bytemuck::bytes_of(&push),
-                    [w.div_ceil(8), rows.div_ceil(8), 1],
+                    band_groups(w, rows),
                     "raycast",
                 )
             })?;

@@ -39,7 +39,7 @@ mod record;
 pub mod target;
 
 pub use crate::vk::{Access, ExternalCommands, Target, TargetFormat};
-pub use record::{FrameInFlight, RecordedFrame};
+pub use record::{FrameInFlight, RecordedFrame, next_groups};
 
 /// Renderer identities, so that a frame is retired only by the renderer that recorded it.
 static NEXT_RENDERER: AtomicU64 = AtomicU64::new(1);

@@ -31,18 +31,21 @@
 //! between chunks: it ends early once every ray is done, restarts a band in smaller chunks where
 //! lavapipe's loop limit cut a ray short, and renders again with more hull crossings when a ray
 //! has more than the first variant keeps. A recorded frame records every chunk of every band up
-//! front (chunks after a ray is done return at once), and [`Renderer::retire`] reports a frame
-//! that one of these cut short as an error, after which the renderer records with smaller
-//! chunks or every hull crossing, so that the next frame is right.
+//! front, each later chunk an indirect dispatch whose size `raycast_next` sets from the band's
+//! rays (none once they are all done: BENCHMARKS.md measured recorded frames at `render()`'s
+//! cost), and [`Renderer::retire`] reports a frame that the loop limit or the hull cut short as
+//! an error, after which the renderer records with smaller chunks or every hull crossing, so
+//! that the next frame is right.
 
 use super::Renderer;
 use crate::field::RenderError;
 use crate::field::skip::SkipReport;
 use crate::field::variant::{Variant, groups_2d};
-use crate::gpu_types::{CountPush, RayPush, binding, ray_count};
+use crate::gpu_types::{CountPush, NextPush, binding, ray_count};
+use crate::raycast::RaySetup;
 use crate::raycast::frame::{
-    FrameConstants, FrameTargets, band_rows, constant_data, default_chunk, frame_bindings,
-    frame_buffers, frame_targets, outer_steps,
+    FrameConstants, FrameTargets, band_groups, band_rows, chunk_push, constant_data, default_chunk,
+    frame_bindings, frame_buffers, frame_targets, outer_steps,
 };
 use crate::raycast::gpu::variant_for_render;
 use crate::view::View;
@@ -88,6 +91,8 @@ pub(super) struct Slot {
     targets: Option<FrameTargets>,
     /// The pixels in the target image's format, where it is not RGBA32F.
     packed: Option<Buffer>,
+    /// The bands' indirect dispatch arguments (`raycast_next`), 16 bytes a band.
+    args: Option<Buffer>,
     /// The tables the frame reads, kept alive while it is in flight.
     table: Option<Arc<Buffer>>,
     groups: Vec<BindGroup<'static>>,
@@ -107,6 +112,8 @@ pub(super) struct RecordState {
     pub(super) hull_hits: Option<u32>,
     /// Compiled `target_pack` pipelines by format.
     pub(super) pack: Vec<(TargetFormat, ComputePipeline)>,
+    /// The `raycast_next` pipeline (compiled at the first recorded frame).
+    pub(super) next: Option<ComputePipeline>,
 }
 
 /// Bytes needed for `data`, at least 16 (a zero-sized binding is invalid).
@@ -116,21 +123,30 @@ fn room(data: &[u8]) -> u64 {
 
 impl Renderer {
     /// Prepares everything a ray-cast frame of `view` needs, so that recording it builds
-    /// nothing: the field's data on the device, the preintegration tables and the pipeline.
+    /// nothing: the field's data on the device, the preintegration tables, the pipelines.
     pub fn prepare(&mut self, view: &View<'_>) -> Result<(), RenderError> {
+        self.record_setup(view)?;
+        Ok(())
+    }
+
+    /// The host half of a recorded frame ([`Renderer::ray_frame`] with what retired frames
+    /// taught): its ray setup, the ray caster's pipeline (its index) and `raycast_next`'s.
+    fn record_setup(&mut self, view: &View<'_>) -> Result<(RaySetup, usize), RenderError> {
         if view.settings.method.splat_shading().is_some() {
             return Err(splat_not_recorded());
         }
-        let frame = self.ray_frame(view)?;
-        let mut setup = frame.setup;
+        let mut setup = self.ray_frame(view)?.setup;
         if let Some(h) = self.record.hull_hits {
             setup.hull_hits = h;
         }
         let has_tables = setup.method.preintegrated();
         let variant = variant_for_render(&self.field, &setup);
         let bindings = frame_bindings(&self.gpu_field, &setup, has_tables, variant.skip);
-        self.ray_pipeline(&variant, bindings)?;
-        Ok(())
+        let (index, _) = self.ray_pipeline(&variant, bindings)?;
+        if self.record.next.is_none() {
+            self.record.next = Some(self.next_pipeline()?);
+        }
+        Ok((setup, index))
     }
 
     /// Records one ray-cast frame of `view` into `cmd` and the write of its pixels into
@@ -142,14 +158,7 @@ impl Renderer {
         view: &View<'_>,
         target: &Target,
     ) -> Result<FrameInFlight, RenderError> {
-        if view.settings.method.splat_shading().is_some() {
-            return Err(splat_not_recorded());
-        }
-        let frame = self.ray_frame(view)?;
-        let mut setup = frame.setup;
-        if let Some(h) = self.record.hull_hits {
-            setup.hull_hits = h;
-        }
+        let (setup, index) = self.record_setup(view)?;
         let chunk = self
             .record
             .chunk
@@ -159,8 +168,6 @@ impl Renderer {
         target.check(pixels)?;
         let has_tables = setup.method.preintegrated();
         let variant = variant_for_render(&self.field, &setup);
-        let bindings = frame_bindings(&self.gpu_field, &setup, has_tables, variant.skip);
-        let (index, _) = self.ray_pipeline(&variant, bindings)?;
         let format = target.format();
         let pack = match format {
             TargetFormat::Rgba32f => None,
@@ -177,6 +184,7 @@ impl Renderer {
                     constants: None,
                     targets: None,
                     packed: None,
+                    args: None,
                     table: None,
                     groups: Vec::new(),
                     timer: FrameTimer::new(&self.ctx)?,
@@ -240,9 +248,25 @@ impl Renderer {
             }
             (None, _) => {}
         }
+        let rows_per_band = band_rows(&setup);
+        let bands = h.div_ceil(rows_per_band.max(1));
+        let args_bytes = 16 * u64::from(bands.max(1));
+        if slot.args.as_ref().is_none_or(|a| a.size() < args_bytes) {
+            slot.args = None;
+            slot.args = Some(Buffer::new(
+                &ctx,
+                "band dispatch arguments",
+                args_bytes,
+                BufferUsage::Storage,
+            )?);
+        }
         slot.table = table;
-        let (Some(constants), Some(targets)) = (slot.constants.as_ref(), slot.targets.as_ref())
-        else {
+        let (Some(constants), Some(targets), Some(args), Some(next)) = (
+            slot.constants.as_ref(),
+            slot.targets.as_ref(),
+            slot.args.as_ref(),
+            self.record.next.as_ref(),
+        ) else {
             return Err(VkError::Usage("recorded frame buffers missing".into()).into());
         };
         let pipeline = &self.pipelines[index].2;
@@ -265,8 +289,16 @@ impl Renderer {
             )?),
             _ => None,
         };
+        let next_group = BindGroup::new(
+            &ctx,
+            next,
+            &[
+                (binding::PARAMS, &constants.params),
+                (binding::COUNTS, &targets.counts),
+                (binding::DISPATCH_ARGS, args),
+            ],
+        )?;
         let outer = outer_steps(&setup);
-        let rows_per_band = band_rows(&setup);
         let mut dispatches = 0u32;
         ctx.record_into(cmd, Some(&slot.timer), |rec| {
             rec.update(&constants.params, &data.params)?;
@@ -275,28 +307,52 @@ impl Renderer {
             if let (Some(b), Some(d)) = (&constants.skip, &data.skip) {
                 rec.update(b, d)?;
             }
+            // A band's first chunk is dispatched; each later one only for as many workgroups
+            // as raycast_next finds rays unfinished (none once they all ended).
             let mut row = 0;
+            let mut band = 0u32;
             while row < h {
                 let rows = rows_per_band.min(h - row);
                 let mut first = 0;
                 while first < outer {
-                    let push = RayPush {
-                        row_offset: row,
-                        rows,
-                        first,
-                        last: first.saturating_add(chunk).min(outer),
-                    };
-                    rec.dispatch(
-                        pipeline,
-                        &group,
-                        bytemuck::bytes_of(&push),
-                        [w.div_ceil(8), rows.div_ceil(8), 1],
-                        "raycast",
-                    )?;
+                    let push = chunk_push(row, rows, first, chunk, outer);
+                    if first == 0 {
+                        rec.dispatch(
+                            pipeline,
+                            &group,
+                            bytemuck::bytes_of(&push),
+                            band_groups(w, rows),
+                            "raycast",
+                        )?;
+                    } else {
+                        let next_push = NextPush {
+                            row_offset: row,
+                            rows,
+                            args_slot: band,
+                            _pad: 0,
+                        };
+                        rec.dispatch(
+                            next,
+                            &next_group,
+                            bytemuck::bytes_of(&next_push),
+                            [1, 1, 1],
+                            "raycast_next",
+                        )?;
+                        rec.dispatch_indirect(
+                            pipeline,
+                            &group,
+                            bytemuck::bytes_of(&push),
+                            args,
+                            16 * u64::from(band),
+                            "raycast",
+                        )?;
+                        dispatches += 1;
+                    }
                     dispatches += 1;
                     first = push.last;
                 }
                 row += rows;
+                band += 1;
             }
             match (&pack, &pack_group, &slot.packed) {
                 (Some(p), Some(g), Some(out)) => {
@@ -319,6 +375,7 @@ impl Renderer {
             }
         })?;
         slot.groups.push(group.detach());
+        slot.groups.push(next_group.detach());
         if let Some(g) = pack_group {
             slot.groups.push(g.detach());
         }
@@ -424,6 +481,23 @@ impl Renderer {
         self.slots.iter().filter(|s| s.in_flight).count()
     }
 
+    /// The `raycast_next` pipeline.
+    fn next_pipeline(&self) -> Result<ComputePipeline, RenderError> {
+        let spirv = self.compiler.compile(
+            crate::vk::ShaderSource::File("raycast/raycast_next.comp"),
+            &crate::gpu_types::binding_defines(),
+        )?;
+        let kinds = [binding::PARAMS, binding::COUNTS, binding::DISPATCH_ARGS]
+            .map(|b| (b, binding::kind(b)));
+        Ok(ComputePipeline::with_kinds(
+            &self.ctx,
+            "raycast_next",
+            &spirv,
+            &kinds,
+            std::mem::size_of::<NextPush>() as u32,
+        )?)
+    }
+
     /// The `target_pack` pipeline for `format` (compiled at its first use).
     fn pack_pipeline(&mut self, format: TargetFormat) -> Result<usize, RenderError> {
         if let Some(i) = self.record.pack.iter().position(|(f, _)| *f == format) {
@@ -458,6 +532,17 @@ impl Renderer {
     }
 }
 
+/// Stage `raycast_next`: the workgroup counts of a band's next chunk from its rays' counts
+/// after this one (`width` × `rows` of them): the band's groups while any ray is unfinished,
+/// none (x = 0) once every ray is done.
+pub fn next_groups(counts: &[u32], width: u32, rows: u32) -> [u32; 3] {
+    if counts.iter().any(|c| c & ray_count::DONE == 0) {
+        band_groups(width, rows)
+    } else {
+        [0, 1, 1]
+    }
+}
+
 fn splat_not_recorded() -> RenderError {
     RenderError::Setting {
         key: "render.method",
@@ -471,6 +556,13 @@ fn splat_not_recorded() -> RenderError {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn next_groups_stop_a_band_once_its_rays_are_done() {
+        use crate::gpu_types::ray_count::DONE;
+        assert_eq!(super::next_groups(&[DONE, DONE, 7], 20, 12), [3, 2, 1]);
+        assert_eq!(super::next_groups(&[DONE | 5, DONE], 20, 12), [0, 1, 1]);
+    }
+
     #[test]
     fn room_is_never_zero() {
         assert_eq!(super::room(&[]), 16);

@@ -488,55 +488,39 @@ fn params(
     tf: &TransferFunction,
     tf_count: u32,
 ) -> SplatParams {
-    let v = |d: glam::DVec3, w: f64| [d.x as f32, d.y as f32, d.z as f32, w as f32];
-    let b = &setup.basis;
+    let v = |d: glam::DVec3| [d.x as f32, d.y as f32, d.z as f32, 0.0];
     let l = &setup.lighting;
-    let (projection, tan, half) = match setup.camera.projection {
-        crate::view::camera::Projection::Perspective { fov_y_degrees } => {
-            (0, (fov_y_degrees.to_radians() * 0.5).tan(), 0.0)
-        }
-        crate::view::camera::Projection::Orthographic { view_height } => {
-            (1, 0.0, 0.5 * view_height)
-        }
-    };
     let bg = setup.background;
     SplatParams {
-        eye: v(setup.eye, setup.near),
-        forward: v(b.forward, setup.focal),
-        right: v(b.right, setup.centre[0]),
-        up: v(b.up, setup.centre[1]),
-        box_min: v(setup.box_lo, setup.slab0),
-        box_max: v(setup.box_hi, setup.slab_world),
-        background: [
-            bg[0] as f32,
-            bg[1] as f32,
-            bg[2] as f32,
-            setup.early_termination as f32,
-        ],
-        kernel_filter: [
-            setup.settings.cutoff as f32,
-            setup.settings.lowpass as f32,
-            setup.sigma as f32,
-            setup.lateral[0].min(f64::from(f32::MAX)) as f32,
-        ],
+        camera: setup.camera.gpu_block(&setup.basis, setup.eye),
+        box_min: v(setup.box_lo),
+        box_max: v(setup.box_hi),
+        background: [bg[0] as f32, bg[1] as f32, bg[2] as f32, 0.0],
         lighting: [
             l.ambient as f32,
             l.diffuse as f32,
             l.specular as f32,
             l.shininess as f32,
         ],
-        width: setup.camera.width,
-        height: setup.camera.height,
-        projection,
-        tf_count,
-        tan_half_fov: tan as f32,
-        ortho_half_height: half as f32,
-        lateral_y: setup.lateral[1].min(f64::from(f32::MAX)) as f32,
+        near: setup.near as f32,
+        focal: setup.focal as f32,
+        centre_x: setup.centre[0] as f32,
+        centre_y: setup.centre[1] as f32,
+        slab0_world: setup.slab0 as f32,
+        slab_world: setup.slab_world as f32,
+        early_termination: setup.early_termination as f32,
         zero_extinction: tf.lookup(0.0).1 as f32,
+        cutoff: setup.settings.cutoff as f32,
+        lowpass: setup.settings.lowpass as f32,
+        sigma: setup.sigma as f32,
+        lateral_x: setup.lateral[0].min(f64::from(f32::MAX)) as f32,
+        lateral_y: setup.lateral[1].min(f64::from(f32::MAX)) as f32,
+        tf_count,
+        iso_count: setup.isosurfaces.len() as u32,
         slabs: setup.slabs,
         tiles_x: setup.tiles().0,
         kernel_count: kernels.count,
-        iso_count: setup.isosurfaces.len() as u32,
+        _pad: [0; 2],
     }
 }
 

@@ -6,6 +6,7 @@
 //! direction = normalize(forward + dx·right + dy·up′). Orthographic rays start on the plane
 //! through the eye, offset by dx·(view_height/2)·W/H along right and dy·(view_height/2) along up′.
 
+use crate::gpu_types::CameraBlock;
 use glam::DVec3;
 
 /// Perspective or orthographic projection.
@@ -129,6 +130,32 @@ pub fn clip_box(o: DVec3, d: DVec3, lo: DVec3, hi: DVec3) -> Option<(f64, f64)> 
         }
     }
     (t1 > t0).then_some((t0, t1))
+}
+
+impl Camera {
+    /// The camera as the kernels read it ([`CameraBlock`], shared by both renderers), with the
+    /// eye at `eye` (frame-relative) and the view frame `basis`.
+    pub fn gpu_block(&self, basis: &ViewBasis, eye: DVec3) -> CameraBlock {
+        let v = |d: DVec3| [d.x as f32, d.y as f32, d.z as f32, 0.0];
+        let (projection, tan_half_fov, ortho_half_height) = match self.projection {
+            Projection::Perspective { fov_y_degrees } => {
+                (0, (fov_y_degrees.to_radians() * 0.5).tan() as f32, 0.0)
+            }
+            Projection::Orthographic { view_height } => (1, 0.0, (0.5 * view_height) as f32),
+        };
+        CameraBlock {
+            eye: v(eye),
+            forward: v(basis.forward),
+            right: v(basis.right),
+            up: v(basis.up),
+            width: self.width,
+            height: self.height,
+            projection,
+            tan_half_fov,
+            ortho_half_height,
+            _pad: [0.0; 3],
+        }
+    }
 }
 
 #[cfg(test)]

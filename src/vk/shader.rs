@@ -46,6 +46,7 @@ static SOURCES: &[(&str, &str)] = embed![
     "raycast/interval.glsl",
     "raycast/adaptive.glsl",
     "raycast/raycast.comp",
+    "raycast/raycast_next.comp",
     "splat/splat.glsl",
     "splat/splat_params.glsl",
     "splat/splat_project.comp",

@@ -1,0 +1,41 @@
+#version 450
+// Stage `raycast_next` (twin: next_groups in src/renderer/record.rs): after a chunk of a
+// recorded frame, whether any ray of a band is unfinished, written as the workgroup counts of
+// the band's next chunk (x = 0 when every ray is done), which the next chunk dispatches
+// indirectly. A frame recorded whole (Renderer::record) then costs no raycast dispatch for a
+// band whose rays all ended, as render() stops a band by reading its rays back. One workgroup
+// per band.
+
+layout(local_size_x = 64) in;
+
+#include "common/types.glsl"
+
+#include "common/params.glsl"
+layout(std430, binding = BINDING_COUNTS) readonly buffer CountsBuf { uint counts[]; };
+layout(std430, binding = BINDING_DISPATCH_ARGS) writeonly buffer ArgsBuf { uvec4 args[]; };
+layout(push_constant) uniform Push { NextPush push; };
+
+shared uint live;
+
+void main() {
+    load_params();
+    if (gl_LocalInvocationIndex == 0u) {
+        live = 0u;
+    }
+    barrier();
+    uint width = params.camera.width;
+    uint first = push.row_offset * width;
+    uint n = push.rows * width;
+    uint mine = 0u;
+    for (uint i = gl_LocalInvocationIndex; i < n; i += 64u) {
+        mine |= (counts[first + i] & RAY_DONE) == 0u ? 1u : 0u;
+    }
+    if (mine != 0u) {
+        atomicOr(live, 1u);
+    }
+    barrier();
+    if (gl_LocalInvocationIndex == 0u) {
+        args[push.args_slot] = live != 0u ? uvec4((width + 7u) / 8u, (push.rows + 7u) / 8u, 1u, 0u)
+                                          : uvec4(0u, 1u, 1u, 0u);
+    }
+}
