@@ -191,6 +191,18 @@ fn buffer_targets_and_misuse() {
                 .record(ExternalCommands::new(cmd), &view, &small)
                 .expect_err("a buffer one pixel short");
             assert!(err.to_string().contains("target buffer"), "{err}");
+            let left_undefined = Target::image(
+                vk::Image::null(),
+                TargetFormat::Rgba8Unorm,
+                vk::ImageLayout::UNDEFINED,
+                vk::ImageLayout::UNDEFINED,
+                Access::NONE,
+                Access::NONE,
+            );
+            let err = renderer
+                .record(ExternalCommands::new(cmd), &view, &left_undefined)
+                .expect_err("an image cannot be left in UNDEFINED");
+            assert!(err.to_string().contains("target image"), "{err}");
             let mut splat = scene.render.clone();
             splat.method = vmls::view::Method::Splat;
             let splat_view = vmls::view::View {

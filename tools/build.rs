@@ -6,7 +6,7 @@
 //! the packages `glslang-dev` and `spirv-tools` ship, plus the C++ runtime, after shaderc.
 
 fn main() {
-    println!("cargo:rerun-if-changed=build.rs");
+    println!("cargo:rerun-if-changed=tools/build.rs");
     println!("cargo:rerun-if-env-changed=SHADERC_LIB_DIR");
     let target_os = std::env::var("CARGO_CFG_TARGET_OS").unwrap_or_default();
     if target_os != "linux" {
