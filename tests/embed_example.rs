@@ -117,7 +117,9 @@ unsafe fn begun(app: &embed::App) -> (ash::vk::CommandPool, ash::vk::CommandBuff
         let pool = app
             .device
             .create_command_pool(
-                &vk::CommandPoolCreateInfo::default().queue_family_index(app.family),
+                &vk::CommandPoolCreateInfo::default()
+                    .queue_family_index(app.family)
+                    .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER),
                 None,
             )
             .expect("pool");
@@ -214,33 +216,43 @@ fn buffer_targets_and_misuse() {
                 .expect_err("splatting is not recorded");
             assert!(err.to_string().contains("render.method"), "{err}");
 
-            let frame = renderer
-                .record(ExternalCommands::new(cmd), &view, &target)
-                .expect("record");
-            assert_eq!(renderer.frames_in_flight(), 1);
-            // Not yet submitted: its timestamps are unavailable, and it stays in flight.
-            if ctx.info().timestamp_period_ns.is_some() {
+            // Records into `cmd`, retires too early (the frame has not run: it stays in
+            // flight), submits, waits and retires.
+            let frame_cycle = |renderer: &mut Renderer| {
+                let frame = renderer
+                    .record(ExternalCommands::new(cmd), &view, &target)
+                    .expect("record");
+                assert_eq!(renderer.frames_in_flight(), 1);
                 let err = renderer.retire(&frame).expect_err("retired early");
                 assert!(
                     err.to_string().contains("before the GPU completed"),
                     "{err}"
                 );
                 assert_eq!(renderer.frames_in_flight(), 1);
-            }
+                d.end_command_buffer(cmd).expect("end");
+                let cmds = [cmd];
+                d.queue_submit(
+                    app.queue,
+                    &[vk::SubmitInfo::default().command_buffers(&cmds)],
+                    vk::Fence::null(),
+                )
+                .expect("submit");
+                d.queue_wait_idle(app.queue).expect("wait");
+                let done = renderer.retire(&frame).expect("retire");
+                assert_eq!(renderer.frames_in_flight(), 0);
+                assert!(done.evaluations > 0 && done.dispatches > 0);
+                frame
+            };
+            let frame = frame_cycle(&mut renderer);
             assert!(other.retire(&frame).is_err(), "another renderer's frame");
-            d.end_command_buffer(cmd).expect("end");
-            let cmds = [cmd];
-            d.queue_submit(
-                app.queue,
-                &[vk::SubmitInfo::default().command_buffers(&cmds)],
-                vk::Fence::null(),
-            )
-            .expect("submit");
-            d.queue_wait_idle(app.queue).expect("wait");
-            let done = renderer.retire(&frame).expect("retire");
-            assert_eq!(renderer.frames_in_flight(), 0);
-            assert!(done.evaluations > 0 && done.dispatches > 0);
             assert!(renderer.retire(&frame).is_err(), "retired twice");
+            // The same slot again: its earlier frame completed, this one has not yet run.
+            d.reset_command_buffer(cmd, vk::CommandBufferResetFlags::empty())
+                .expect("reset");
+            d.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default())
+                .expect("begin");
+            let again = frame_cycle(&mut renderer);
+            assert!(renderer.retire(&again).is_err(), "retired twice");
             let ptr = d
                 .map_memory(memory, 0, bytes, vk::MemoryMapFlags::empty())
                 .expect("map");

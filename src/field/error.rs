@@ -40,6 +40,9 @@ pub enum RenderError {
     /// what the next recordings do instead.
     #[error("the recorded frame is not right: {0}")]
     Recorded(String),
+    /// `Renderer::retire` of a frame it does not hold (another renderer's, or retired).
+    #[error("retire: {0}")]
+    Retired(String),
     #[error("interrupted: the render stopped and wrote nothing")]
     Interrupted,
     #[error(

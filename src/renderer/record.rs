@@ -13,9 +13,14 @@
 //!   available and visible to its `after` access, and an image is left in its `new_layout`.
 //! - The frame's last command is a barrier that makes vmls's writes visible to the host, which
 //!   [`Renderer::retire`] reads (the frame's per-pixel status).
-//! - Submit the command buffer on the context's queue (`RawContext::queue`), or on one the
-//!   application synchronises with it; vmls's own submissions (uploads, `render`) use that queue
-//!   under its lock.
+//! - Submit the command buffer on the context's queue (`RawContext::queue`), or on another queue
+//!   of the same family that the application synchronises with it. vmls's barriers use
+//!   `VK_QUEUE_FAMILY_IGNORED` (no ownership transfer), and the target's `Access` stages must be
+//!   ones that family supports (a compute-only family has no fragment stage).
+//! - Some calls submit to and wait on the context's queue under vmls's own lock: `render`,
+//!   `prepare`, a `record` whose tables changed on a device whose memory the host cannot map,
+//!   `retire` where it cannot map the frame's status, and dropping a renderer with frames in
+//!   flight. Do not call them while another thread of the application uses that queue.
 //! - Keep the target alive and untouched by other work until the frame's submission has
 //!   completed; retire every frame before dropping the renderer (a renderer dropped with frames
 //!   still in flight waits for its queue to go idle first).
@@ -63,7 +68,7 @@ use std::sync::Arc;
 pub struct FrameInFlight {
     renderer: u64,
     slot: usize,
-    generation: u64,
+    generation: u32,
 }
 
 /// What a retired frame did.
@@ -74,7 +79,8 @@ pub struct RecordedFrame {
     pub gpu_ms: Option<f64>,
     /// MLS evaluations over all pixels.
     pub evaluations: u64,
-    /// Dispatches recorded (bands × chunks, plus the format conversion).
+    /// Dispatches recorded: the ray caster's (bands × chunks, later chunks indirect), the
+    /// `raycast_next` before each later chunk, and the format conversion.
     pub dispatches: u32,
     /// The kernel variant, as `--stats` names it.
     pub variant: String,
@@ -85,7 +91,7 @@ pub struct RecordedFrame {
 /// The buffers, descriptor sets and timestamps of one frame in flight.
 pub(super) struct Slot {
     in_flight: bool,
-    generation: u64,
+    generation: u32,
     /// Constant buffers, reallocated when a frame needs more room.
     constants: Option<FrameConstants>,
     targets: Option<FrameTargets>,
@@ -93,6 +99,9 @@ pub(super) struct Slot {
     packed: Option<Buffer>,
     /// The bands' indirect dispatch arguments (`raycast_next`), 16 bytes a band.
     args: Option<Buffer>,
+    /// The generation of the last frame of this slot that completed: the frame's last command
+    /// writes it, so that `retire` can tell a completed frame from one not yet executed.
+    marker: Buffer,
     /// The tables the frame reads, kept alive while it is in flight.
     table: Option<Arc<Buffer>>,
     groups: Vec<BindGroup<'static>>,
@@ -159,10 +168,10 @@ impl Renderer {
         target: &Target,
     ) -> Result<FrameInFlight, RenderError> {
         let (setup, index) = self.record_setup(view)?;
-        let chunk = self
-            .record
-            .chunk
-            .unwrap_or_else(|| setup.chunk.unwrap_or_else(|| default_chunk(&setup)));
+        // A chunk learned from a cut-short frame applies only where it is smaller than this
+        // setup's own (the adaptive integrator's default is far smaller than the others').
+        let own = setup.chunk.unwrap_or_else(|| default_chunk(&setup));
+        let chunk = self.record.chunk.map_or(own, |learned| learned.min(own));
         let (w, h) = (setup.camera.width, setup.camera.height);
         let pixels = u64::from(w) * u64::from(h);
         target.check(pixels)?;
@@ -185,6 +194,7 @@ impl Renderer {
                     targets: None,
                     packed: None,
                     args: None,
+                    marker: Buffer::new(&self.ctx, "frame completion", 4, BufferUsage::Storage)?,
                     table: None,
                     groups: Vec::new(),
                     timer: FrameTimer::new(&self.ctx)?,
@@ -211,8 +221,9 @@ impl Renderer {
                 && c.iso.size() >= room(&data.iso)
                 && match (&data.skip, &c.skip) {
                     (Some(d), Some(b)) => b.size() >= room(d),
-                    (None, _) => true,
-                    (Some(_), None) => false,
+                    (None, None) => true,
+                    // frame_buffers binds the slot's skip table whenever it has one.
+                    _ => false,
                 }
         });
         if !fits {
@@ -299,6 +310,7 @@ impl Renderer {
             ],
         )?;
         let outer = outer_steps(&setup);
+        let generation = slot.generation.wrapping_add(1);
         let mut dispatches = 0u32;
         ctx.record_into(cmd, Some(&slot.timer), |rec| {
             rec.update(&constants.params, &data.params)?;
@@ -354,7 +366,7 @@ impl Renderer {
                 row += rows;
                 band += 1;
             }
-            match (&pack, &pack_group, &slot.packed) {
+            let written = match (&pack, &pack_group, &slot.packed) {
                 (Some(p), Some(g), Some(out)) => {
                     let count = u32::try_from(pixels).unwrap_or(u32::MAX);
                     let push = CountPush {
@@ -372,7 +384,11 @@ impl Renderer {
                     rec.write_target(out, target, w, h)
                 }
                 _ => rec.write_target(&targets.image, target, w, h),
-            }
+            };
+            written?;
+            // Last: the frame's generation, which `retire` reads back.
+            rec.fill(&slot.marker, generation);
+            Ok(())
         })?;
         slot.groups.push(group.detach());
         slot.groups.push(next_group.detach());
@@ -384,7 +400,7 @@ impl Renderer {
         slot.chunk = chunk;
         slot.dispatches = dispatches;
         slot.in_flight = true;
-        slot.generation += 1;
+        slot.generation = generation;
         Ok(FrameInFlight {
             renderer: self.id,
             slot: slot_index,
@@ -398,10 +414,9 @@ impl Renderer {
     /// the renderer then records smaller chunks or every crossing, and the next frame is right.
     pub fn retire(&mut self, frame: &FrameInFlight) -> Result<RecordedFrame, RenderError> {
         let stale = || {
-            RenderError::from(VkError::Usage(
-                "retire: the frame was not recorded by this renderer, or was retired already"
-                    .into(),
-            ))
+            RenderError::Retired(
+                "the frame was not recorded by this renderer, or was retired already".into(),
+            )
         };
         if frame.renderer != self.id {
             return Err(stale());
@@ -411,14 +426,22 @@ impl Renderer {
         if !slot.in_flight || slot.generation != frame.generation {
             return Err(stale());
         }
-        // An error here (queries not yet available) leaves the frame in flight, to be retired
-        // again once it completed.
+        // A frame not yet executed leaves its slot in flight, to be retired again later.
+        let marker: Vec<u32> = slot.marker.read(&ctx)?;
+        if marker.first() != Some(&frame.generation) {
+            return Err(VkError::NotReady(
+                "a recorded frame was retired before the GPU completed it: retire a frame only \
+                 after the fence or semaphore value of the submission that holds it"
+                    .into(),
+            )
+            .into());
+        }
         let gpu_ms = slot.timer.gpu_ms()?;
         slot.in_flight = false;
         slot.groups.clear();
         slot.table = None;
         let (Some(targets), Some(variant)) = (slot.targets.as_ref(), slot.variant) else {
-            return Err(stale());
+            return Err(VkError::Usage("retire: the frame's buffers are missing".into()).into());
         };
         let counts: Vec<u32> = targets.counts.read(&ctx)?;
         let counts = &counts[..(targets.pixels as usize).min(counts.len())];
@@ -440,6 +463,16 @@ impl Renderer {
             return Err(RenderError::Recorded(format!(
                 "a ray crossed the hull more than the {hull_hits} times the variant keeps; the \
                  next frames keep {} (record again)",
+                crate::samples::bvh::MAX_HITS
+            )));
+        }
+        if let Some(i) = counts
+            .iter()
+            .position(|c| c & ray_count::HULL_OVERFLOW != 0)
+        {
+            return Err(RenderError::Recorded(format!(
+                "the ray through pixel {i} crosses the domain's boundary more than {} times; \
+                 the mesh is too convoluted for the hull clipper",
                 crate::samples::bvh::MAX_HITS
             )));
         }

@@ -54,6 +54,7 @@ impl<'a> Recorder<'a> {
                 .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
                 .dst_access_mask(
                     vk::AccessFlags::INDIRECT_COMMAND_READ
+                        | vk::AccessFlags::UNIFORM_READ
                         | vk::AccessFlags::SHADER_READ
                         | vk::AccessFlags::SHADER_WRITE
                         | vk::AccessFlags::TRANSFER_READ

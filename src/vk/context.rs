@@ -742,7 +742,14 @@ impl Drop for Shared {
         // SAFETY: every resource holding this `Shared` is gone (we are in its drop), so no
         // command uses the device; the allocator is dropped exactly once, before the device.
         unsafe {
-            let _ = self.device.device_wait_idle();
+            // On the application's device only vmls's queue is ours to wait for: a device-wide
+            // wait would need every queue of the application externally synchronised.
+            if self.owns_device {
+                let _ = self.device.device_wait_idle();
+            } else {
+                let queue = self.queue.get_mut().unwrap_or_else(|p| p.into_inner());
+                let _ = self.device.queue_wait_idle(*queue);
+            }
             let spares = std::mem::take(
                 self.spare_submits
                     .get_mut()

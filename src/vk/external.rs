@@ -68,7 +68,10 @@ impl ExternalCommands {
     /// # Safety
     /// `handle` is a command buffer of the context's device, allocated from a pool of the
     /// context's queue family, in the recording state and outside a render pass, and no other
-    /// thread records into it while vmls does.
+    /// thread records into it while vmls does. What vmls records into it must complete before
+    /// the renderer that recorded it is dropped (or the command buffer must be discarded
+    /// unsubmitted), and a command buffer into which a `record` failed must not be submitted:
+    /// the descriptor sets it names are gone.
     pub unsafe fn new(handle: vk::CommandBuffer) -> Self {
         Self { handle }
     }

@@ -55,8 +55,8 @@ typedef struct VmlsScene VmlsScene;
 // The application's Vulkan objects that vmls works with. vmls creates only its own
 // resources on this device and destroys none of these.
 typedef struct VmlsRawContext {
-  // The loader's entry point the instance was created with.
-  PFN_vkGetInstanceProcAddr get_instance_proc_addr;
+  // The loader's entry point the instance was created with (`vkGetInstanceProcAddr`).
+  PFN_vkVoidFunction (*get_instance_proc_addr)(VkInstance, const char*);
   VkInstance instance;
   VkPhysicalDevice physical_device;
   VkDevice device;

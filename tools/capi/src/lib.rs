@@ -20,10 +20,11 @@ use ash::vk;
 use std::cell::RefCell;
 use std::ffi::{CStr, CString, c_char};
 use std::panic::{AssertUnwindSafe, catch_unwind};
+use vmls::field::RenderError;
 use vmls::renderer::{Access, ExternalCommands, FrameInFlight, Renderer, Target, TargetFormat};
 use vmls::scene::Scene;
 use vmls::view::camera::Camera;
-use vmls::vk::{Context, RawContext};
+use vmls::vk::{Context, RawContext, VkError};
 
 pub type VkInstance = vk::Instance;
 pub type VkPhysicalDevice = vk::PhysicalDevice;
@@ -36,7 +37,7 @@ pub type VkImageLayout = vk::ImageLayout;
 pub type VkPipelineStageFlags = vk::PipelineStageFlags;
 pub type VkAccessFlags = vk::AccessFlags;
 #[allow(non_camel_case_types)]
-pub type PFN_vkGetInstanceProcAddr = vk::PFN_vkGetInstanceProcAddr;
+pub type PFN_vkVoidFunction = vk::PFN_vkVoidFunction;
 
 /// What a call did.
 #[repr(C)]
@@ -74,8 +75,9 @@ pub const VMLS_FORMAT_RGBA8_SRGB: u32 = 3;
 /// resources on this device and destroys none of these.
 #[repr(C)]
 pub struct VmlsRawContext {
-    /// The loader's entry point the instance was created with.
-    pub get_instance_proc_addr: PFN_vkGetInstanceProcAddr,
+    /// The loader's entry point the instance was created with (`vkGetInstanceProcAddr`).
+    pub get_instance_proc_addr:
+        Option<unsafe extern "system" fn(VkInstance, *const c_char) -> PFN_vkVoidFunction>,
     pub instance: VkInstance,
     pub physical_device: VkPhysicalDevice,
     pub device: VkDevice,
@@ -221,8 +223,23 @@ pub unsafe extern "C" fn vmls_context_from_raw(
         // SAFETY: per this function's contract.
         let raw = unsafe { get(raw, "raw") }?;
         let out = unsafe { get_mut(out, "out") }?;
+        let Some(get_instance_proc_addr) = raw.get_instance_proc_addr else {
+            return Err(argument(
+                "raw.get_instance_proc_addr: expected a function, found NULL",
+            ));
+        };
+        if raw.instance == vk::Instance::null()
+            || raw.physical_device == vk::PhysicalDevice::null()
+            || raw.device == vk::Device::null()
+            || raw.queue == vk::Queue::null()
+        {
+            return Err(argument(
+                "raw: expected an instance, physical device, device and queue, found \
+                 VK_NULL_HANDLE",
+            ));
+        }
         let static_fn = ash::StaticFn {
-            get_instance_proc_addr: raw.get_instance_proc_addr,
+            get_instance_proc_addr,
         };
         // SAFETY: the application's live handles, loaded through its own entry point.
         let ctx = unsafe {
@@ -312,11 +329,15 @@ pub unsafe extern "C" fn vmls_scene_size(
 ) -> VmlsStatus {
     guard(|| {
         let scene = unsafe { get(scene, "scene") }?;
-        let (w, h) = (unsafe { get_mut(width, "width") }?, unsafe {
-            get_mut(height, "height")
-        }?);
-        *w = scene.camera.width;
-        *h = scene.camera.height;
+        if width.is_null() || height.is_null() {
+            return Err(argument("width, height: expected pointers, found NULL"));
+        }
+        // SAFETY: both writable (the contract); written one after the other, so the same
+        // pointer twice is fine.
+        unsafe {
+            width.write(scene.camera.width);
+            height.write(scene.camera.height);
+        }
         Ok(())
     })
 }
@@ -396,12 +417,15 @@ pub unsafe extern "C" fn vmls_renderer_prepare(
 
 /// The target a C description names, checked.
 fn target_of(t: &VmlsTarget) -> Result<Target, Failure> {
+    // An empty stage mask is invalid in a barrier: nothing before means the top of the pipe,
+    // nothing after the bottom.
+    let or = |stages: VkPipelineStageFlags, none| if stages.is_empty() { none } else { stages };
     let before = Access {
-        stages: t.before_stages,
+        stages: or(t.before_stages, vk::PipelineStageFlags::TOP_OF_PIPE),
         access: t.before_access,
     };
     let after = Access {
-        stages: t.after_stages,
+        stages: or(t.after_stages, vk::PipelineStageFlags::BOTTOM_OF_PIPE),
         access: t.after_access,
     };
     match t.kind {
@@ -496,11 +520,14 @@ pub unsafe extern "C" fn vmls_renderer_retire(
                 drop(unsafe { Box::from_raw(frame) });
                 Ok(())
             }
-            Err(e @ vmls::field::RenderError::Vk(vmls::vk::VkError::NotReady(_))) => {
+            // Not run yet: the frame stays valid and in flight.
+            Err(e @ RenderError::Vk(VkError::NotReady(_))) => {
                 Err(Failure(VMLS_ERROR_NOT_READY, e.to_string()))
             }
+            // Another renderer's, or retired: the frame is not this call's to free.
+            Err(e @ RenderError::Retired(_)) => Err(Failure(VMLS_ERROR_ARGUMENT, e.to_string())),
             Err(e) => {
-                // A frame that completed wrong is retired all the same.
+                // Retired all the same (a frame that completed wrong, or a failed readback).
                 // SAFETY: as above.
                 drop(unsafe { Box::from_raw(frame) });
                 Err(Failure(VMLS_ERROR_RENDER, e.to_string()))
