@@ -337,8 +337,8 @@ pub fn load(path: &Path, array: Option<&str>) -> Result<Volume, DataError> {
     Ok(volume)
 }
 
-/// Loads any supported file as a [`Dataset`] (geometry and every scalar array), validated by
-/// [`Dataset::validate`]: legacy VTK (every dataset type, arrays named as in the file), CSV
+/// Loads any supported file as a [`dataset::Dataset`] (geometry and every scalar array), validated by
+/// [`dataset::Dataset::validate`]: legacy VTK (every dataset type, arrays named as in the file), CSV
 /// and PLY points. Regular-grid formats (NRRD, NIfTI) give an image with one point array
 /// named "scalars".
 pub fn load_dataset(path: &Path) -> Result<dataset::Dataset, DataError> {

@@ -2,14 +2,14 @@
 //! the version number is not enforced), ASCII or BINARY (big-endian). This module holds the
 //! volume API ([`load`], [`parse`]: `DATASET STRUCTURED_POINTS` as a [`Volume`]) and the
 //! tokenizer, number decoding and attribute parsing shared with `vtk_legacy.rs`, whose
-//! [`load_dataset`] reads every dataset type vmls renders as a `Dataset`.
+//! [`super::vtk_legacy::load_dataset`] reads every dataset type vmls renders as a `Dataset`.
 //!
 //! Contract and choices of the volume API:
 //! - geometry: `DIMENSIONS`, `SPACING` (or its old name `ASPECT_RATIO`, each > 0, default 1),
 //!   `ORIGIN` (default 0); a dataset-level `FIELD` block (e.g. `TIME`) is skipped;
 //! - other dataset types (`STRUCTURED_GRID`, `RECTILINEAR_GRID`, `UNSTRUCTURED_GRID`,
 //!   `POLYDATA`, ...) are not volumes: [`load`] reports them as unsupported (use
-//!   [`load_dataset`]); data-object files (no `DATASET`) are unsupported by both;
+//!   [`super::vtk_legacy::load_dataset`]); data-object files (no `DATASET`) are unsupported by both;
 //! - selectable point-data arrays are `SCALARS` (the `LOOKUP_TABLE` line may be absent),
 //!   `COLOR_SCALARS` and the arrays of a `FIELD` block. `array = None` takes the first of them,
 //!   a name takes the array of that name (`%XX` escapes in names are decoded, as VTK does);

@@ -72,7 +72,7 @@ impl Field {
 
     /// The coarse grid the fast path refines: a regular grid's points, or for irregular data a
     /// lattice over the domain's box at the median nearest-sample spacing (the unit of
-    /// `render.step`, [`SampleSet::spacing`]).
+    /// `render.step`, [`crate::samples::SampleSet::spacing`]).
     pub fn lattice(&self) -> Lattice {
         match &self.samples.positions {
             Positions::Grid {

@@ -39,7 +39,7 @@ pub struct Variant {
     pub hull: bool,
     /// Crossings of the hull a ray may have (`HULL_MAX_HITS`): the kernel keeps them in a
     /// local array whose every dynamically indexed access costs in proportion to its length on
-    /// lavapipe, so frames start with [`FIRST_HULL_HITS`] and only a frame with a ray past
+    /// lavapipe, so frames start with [`super::gpu::FIRST_HULL_HITS`] and only a frame with a ray past
     /// them is rendered again with `bvh::MAX_HITS` (the CPU twin's bound).
     pub hull_hits: u32,
     /// The Gaussian-sum field instead of MLS (`reconstruction.method = "gaussian"`).

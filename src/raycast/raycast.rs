@@ -34,7 +34,7 @@ pub struct PixelResult {
     /// MLS evaluations spent on this ray.
     pub evaluations: u32,
     /// Empty-space skipping: ray length skipped and evaluations saved (see
-    /// [`super::skip::SkipReport`]), and the ray's length inside the domain.
+    /// [`crate::field::skip::SkipReport`]), and the ray's length inside the domain.
     pub skipped_length: f64,
     pub evaluations_saved: u32,
     pub inside_length: f64,

@@ -73,7 +73,7 @@ pub struct RaySetup {
     pub spacing_world: f64,
     /// Preintegrated methods stop at this opacity.
     pub early_termination: f64,
-    /// Empty-space skipping: `render.skip` with the fast path ([`skip`]).
+    /// Empty-space skipping: `render.skip` with the fast path ([`crate::field::skip`]).
     pub skip: bool,
     /// `render.skip = "auto"` not yet decided for a frame ([`RaySetup::resolve_skip`]).
     pub skip_auto: bool,

@@ -124,7 +124,7 @@ pub struct RenderSettings {
     /// Preintegrated methods stop a ray once its opacity exceeds this ([MLS]: 0.99).
     pub early_termination: f64,
     /// Empty-space skipping (`render.skip`); it needs the fast path
-    /// (`reconstruction.resample`), whose field has exact block bounds ([`super::skip`]).
+    /// (`reconstruction.resample`), whose field has exact block bounds ([`crate::field::skip`]).
     pub skip: SkipMode,
     /// Preintegration table resolution per scalar axis.
     pub table_resolution: usize,
@@ -132,15 +132,15 @@ pub struct RenderSettings {
     pub splat: SplatSettings,
 }
 
-/// `render.skip`: empty-space skipping off, on, or chosen per frame ([`super::skip`]).
+/// `render.skip`: empty-space skipping off, on, or chosen per frame ([`crate::field::skip`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SkipMode {
     Off,
     /// Skipping in every frame (the fast path required).
     On,
     /// The default: skipping compiled in only where the frame's rays would spend at least
-    /// [`super::skip::SKIP_AUTO_FRACTION`] of their length in empty blocks
-    /// ([`super::skip::skippable_fraction`]), decided from the transfer function and the
+    /// [`crate::raycast::setup::SKIP_AUTO_FRACTION`] of their length in empty blocks
+    /// ([`crate::raycast::setup::skippable_fraction`]), decided from the transfer function and the
     /// block ranges before the frame; off without the fast path.
     Auto,
 }
