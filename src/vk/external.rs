@@ -212,11 +212,11 @@ impl Target {
     pub fn check(&self, pixels: u64) -> Result<(), VkError> {
         match self.kind {
             TargetKind::Buffer { offset, size, .. } => {
-                if !offset.is_multiple_of(4) || size < pixels * 16 {
+                if !offset.is_multiple_of(4) || pixels.checked_mul(16).is_none_or(|b| size < b) {
                     return Err(VkError::Usage(format!(
                         "target buffer: expected at least {} bytes at a 4-aligned offset for \
                          {pixels} RGBA32F pixels, found {size} bytes at offset {offset}",
-                        pixels * 16
+                        pixels.saturating_mul(16)
                     )));
                 }
             }
@@ -384,8 +384,9 @@ impl Recorder<'_> {
                 buffer.size()
             )));
         }
+        // One barrier against earlier commands; the parts write disjoint ranges.
+        self.barrier();
         for (i, part) in bytes.chunks(65536).enumerate() {
-            self.barrier();
             // SAFETY: recording; the buffer is live with TRANSFER_DST usage; the part is at
             // most 65536 bytes, a multiple of 4, at a 4-aligned offset inside the buffer.
             unsafe {
