@@ -65,6 +65,22 @@ pub struct GpuImage {
     pub skip: Option<SkipReport>,
 }
 
+impl GpuImage {
+    /// A ray-cast frame as read back, rendered by `variant` in `bands` submissions.
+    fn ray_cast(readback: Readback, variant: &Variant, gpu_ms: f64, bands: u32) -> Self {
+        Self {
+            pixels: readback.pixels,
+            counts: readback.counts,
+            gpu_ms,
+            bands,
+            variant: variant.name("raycast"),
+            shaders: vec![("raycast/raycast.comp", variant.defines())],
+            splat: None,
+            skip: readback.skip,
+        }
+    }
+}
+
 /// A splatting frame's counters and per-stage GPU time.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SplatReport {
@@ -147,21 +163,8 @@ pub fn render(
             }
         }
     };
-    let Readback {
-        pixels,
-        counts,
-        skip,
-    } = read_image(ctx, &targets, variant.skip)?;
-    Ok(GpuImage {
-        pixels,
-        counts,
-        gpu_ms,
-        bands,
-        variant: variant.name("raycast"),
-        shaders: vec![("raycast/raycast.comp", variant.defines())],
-        splat: None,
-        skip,
-    })
+    let readback = read_image(ctx, &targets, variant.skip)?;
+    Ok(GpuImage::ray_cast(readback, &variant, gpu_ms, bands))
 }
 
 /// What one frame cost, and what it could reuse.
@@ -363,22 +366,9 @@ impl Renderer {
         let Some(targets) = self.targets.as_ref() else {
             return Err(VkError::Usage("frame buffers missing".into()).into());
         };
-        let Readback {
-            pixels,
-            counts,
-            skip,
-        } = read_image(&self.ctx, targets, variant.skip)?;
+        let readback = read_image(&self.ctx, targets, variant.skip)?;
         Ok((
-            GpuImage {
-                pixels,
-                counts,
-                gpu_ms,
-                bands,
-                variant: variant.name("raycast"),
-                shaders: vec![("raycast/raycast.comp", variant.defines())],
-                splat: None,
-                skip,
-            },
+            GpuImage::ray_cast(readback, &variant, gpu_ms, bands),
             FrameStats {
                 gpu_ms,
                 wall_ms: start.elapsed().as_secs_f64() * 1e3,

@@ -139,8 +139,9 @@ impl Renderer {
     }
 
     /// The host half of a recorded frame ([`Renderer::ray_frame`] with what retired frames
-    /// taught): its ray setup, the ray caster's pipeline (its index) and `raycast_next`'s.
-    fn record_setup(&mut self, view: &View<'_>) -> Result<(RaySetup, usize), RenderError> {
+    /// taught): its ray setup and variant, the ray caster's pipeline (its index) and
+    /// `raycast_next`'s.
+    fn record_setup(&mut self, view: &View<'_>) -> Result<(RaySetup, Variant, usize), RenderError> {
         if view.settings.method.splat_shading().is_some() {
             return Err(splat_not_recorded());
         }
@@ -155,7 +156,7 @@ impl Renderer {
         if self.record.next.is_none() {
             self.record.next = Some(self.next_pipeline()?);
         }
-        Ok((setup, index))
+        Ok((setup, variant, index))
     }
 
     /// Records one ray-cast frame of `view` into `cmd` and the write of its pixels into
@@ -167,7 +168,7 @@ impl Renderer {
         view: &View<'_>,
         target: &Target,
     ) -> Result<FrameInFlight, RenderError> {
-        let (setup, index) = self.record_setup(view)?;
+        let (setup, variant, index) = self.record_setup(view)?;
         // A chunk learned from a cut-short frame applies only where it is smaller than this
         // setup's own (the adaptive integrator's default is far smaller than the others').
         let own = setup.chunk.unwrap_or_else(|| default_chunk(&setup));
@@ -176,7 +177,6 @@ impl Renderer {
         let pixels = u64::from(w) * u64::from(h);
         target.check(pixels)?;
         let has_tables = setup.method.preintegrated();
-        let variant = variant_for_render(&self.field, &setup);
         let format = target.format();
         let pack = match format {
             TargetFormat::Rgba32f => None,

@@ -276,9 +276,8 @@ impl SubmitObjects {
                 .query_type(vk::QueryType::TIMESTAMP)
                 .query_count(2 * MAX_TIMED_DISPATCHES);
             // SAFETY: valid create info.
-            objects.queries = Some(
-                unsafe { device.create_query_pool(&info, None) }.call("vkCreateQueryPool", what)?,
-            );
+            let pool = unsafe { device.create_query_pool(&info, None) };
+            objects.queries = Some(pool.call("vkCreateQueryPool", what)?);
         }
         let alloc = vk::CommandBufferAllocateInfo::default()
             .command_pool(pool)

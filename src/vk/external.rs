@@ -253,17 +253,15 @@ impl FrameTimer {
                     .query_type(vk::QueryType::TIMESTAMP)
                     .query_count(2);
                 // SAFETY: valid create info on a live device.
-                Some(
-                    unsafe { shared.device.create_query_pool(&info, None) }
-                        .call("vkCreateQueryPool", || "a frame's timestamps".into())?,
-                )
+                let pool = unsafe { shared.device.create_query_pool(&info, None) };
+                Some(pool.call("vkCreateQueryPool", || "a frame's timestamps".into())?)
             }
         };
         Ok(Self { shared, pool })
     }
 
-    /// The frame's GPU milliseconds once it has completed: `Ok(None)` without timestamps,
-    /// an error if the frame has not completed (its queries are not available yet).
+    /// The frame's GPU milliseconds once it has completed (the owner knows it has): `Ok(None)`
+    /// without timestamps, or if they are not available.
     pub fn gpu_ms(&self) -> Result<Option<f64>, VkError> {
         let (Some(pool), Some(period)) = (self.pool, self.shared.info.timestamp_period_ns) else {
             return Ok(None);
@@ -283,12 +281,7 @@ impl FrameTimer {
             Ok(()) => Ok(Some(
                 stamps[1].saturating_sub(stamps[0]) as f64 * period * 1e-6,
             )),
-            Err(vk::Result::NOT_READY) => Err(VkError::NotReady(
-                "a recorded frame was retired before the GPU completed it (its timestamps are \
-                 not available): retire a frame only after the fence or semaphore value of the \
-                 submission that holds it"
-                    .into(),
-            )),
+            Err(vk::Result::NOT_READY) => Ok(None),
             Err(result) => Err(VkError::Call {
                 call: "vkGetQueryPoolResults",
                 what: "a frame's timestamps".into(),
@@ -422,51 +415,34 @@ impl Recorder<'_> {
         }
         // vmls's own writes to `src` before the copy.
         self.barrier();
-        let device = &self.shared.device;
         let (before, after) = (target.before, target.after);
+        let write = vk::AccessFlags::TRANSFER_WRITE;
         match target.kind {
             TargetKind::Buffer { buffer, offset, .. } => {
-                let wait = [vk::BufferMemoryBarrier::default()
-                    .src_access_mask(before.access)
-                    .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .buffer(buffer)
-                    .offset(offset)
-                    .size(bytes)];
+                let barrier = |src, dst| {
+                    [vk::BufferMemoryBarrier::default()
+                        .src_access_mask(src)
+                        .dst_access_mask(dst)
+                        .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                        .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                        .buffer(buffer)
+                        .offset(offset)
+                        .size(bytes)]
+                };
+                let (wait, release) = (barrier(before.access, write), barrier(write, after.access));
                 let region = [vk::BufferCopy::default().dst_offset(offset).size(bytes)];
-                let release = [vk::BufferMemoryBarrier::default()
-                    .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                    .dst_access_mask(after.access)
-                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .buffer(buffer)
-                    .offset(offset)
-                    .size(bytes)];
-                // SAFETY: recording; `buffer` is the application's live buffer with
-                // TRANSFER_DST usage and offset + bytes within it (Target::buffer, checked
-                // above); `src` is live with TRANSFER_SRC usage and holds `bytes`.
-                unsafe {
-                    device.cmd_pipeline_barrier(
-                        self.cmd,
-                        before.stages,
-                        vk::PipelineStageFlags::TRANSFER,
-                        vk::DependencyFlags::empty(),
-                        &[],
-                        &wait,
-                        &[],
-                    );
-                    device.cmd_copy_buffer(self.cmd, src.handle, buffer, &region);
-                    device.cmd_pipeline_barrier(
-                        self.cmd,
-                        vk::PipelineStageFlags::TRANSFER,
-                        after.stages,
-                        vk::DependencyFlags::empty(),
-                        &[],
-                        &release,
-                        &[],
-                    );
-                }
+                self.around_copy(
+                    before,
+                    after,
+                    (&wait, &[]),
+                    (&release, &[]),
+                    |device, cmd| {
+                        // SAFETY: recording; `buffer` is the application's live buffer with
+                        // TRANSFER_DST usage and offset + bytes within it (Target::buffer, checked
+                        // above); `src` is live with TRANSFER_SRC usage and holds `bytes`.
+                        unsafe { device.cmd_copy_buffer(cmd, src.handle, buffer, &region) }
+                    },
+                );
             }
             TargetKind::Image {
                 image,
@@ -478,15 +454,20 @@ impl Recorder<'_> {
                     .aspect_mask(vk::ImageAspectFlags::COLOR)
                     .level_count(1)
                     .layer_count(1);
-                let wait = [vk::ImageMemoryBarrier::default()
-                    .src_access_mask(before.access)
-                    .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                    .old_layout(old_layout)
-                    .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
-                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .image(image)
-                    .subresource_range(range)];
+                let barrier = |src, dst, old, new| {
+                    [vk::ImageMemoryBarrier::default()
+                        .src_access_mask(src)
+                        .dst_access_mask(dst)
+                        .old_layout(old)
+                        .new_layout(new)
+                        .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                        .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                        .image(image)
+                        .subresource_range(range)]
+                };
+                let dst_layout = vk::ImageLayout::TRANSFER_DST_OPTIMAL;
+                let wait = barrier(before.access, write, old_layout, dst_layout);
+                let release = barrier(write, after.access, dst_layout, new_layout);
                 let region = [vk::BufferImageCopy::default()
                     .image_subresource(
                         vk::ImageSubresourceLayers::default()
@@ -498,48 +479,72 @@ impl Recorder<'_> {
                         height,
                         depth: 1,
                     })];
-                let release = [vk::ImageMemoryBarrier::default()
-                    .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                    .dst_access_mask(after.access)
-                    .old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
-                    .new_layout(new_layout)
-                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .image(image)
-                    .subresource_range(range)];
-                // SAFETY: recording; `image` is the application's live image with
-                // TRANSFER_DST usage, the target's format and at least width × height texels
-                // (Target::image); `src` holds width × height pixels of that format, tightly
-                // packed (checked above).
-                unsafe {
-                    device.cmd_pipeline_barrier(
-                        self.cmd,
-                        before.stages,
-                        vk::PipelineStageFlags::TRANSFER,
-                        vk::DependencyFlags::empty(),
-                        &[],
-                        &[],
-                        &wait,
-                    );
-                    device.cmd_copy_buffer_to_image(
-                        self.cmd,
-                        src.handle,
-                        image,
-                        vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-                        &region,
-                    );
-                    device.cmd_pipeline_barrier(
-                        self.cmd,
-                        vk::PipelineStageFlags::TRANSFER,
-                        after.stages,
-                        vk::DependencyFlags::empty(),
-                        &[],
-                        &[],
-                        &release,
-                    );
-                }
+                self.around_copy(
+                    before,
+                    after,
+                    (&[], &wait),
+                    (&[], &release),
+                    |device, cmd| {
+                        // SAFETY: recording; `image` is the application's live image with
+                        // TRANSFER_DST usage, the target's format and at least width × height
+                        // texels (Target::image), in TRANSFER_DST_OPTIMAL after the wait barrier;
+                        // `src` holds width × height pixels of that format, tightly packed.
+                        unsafe {
+                            device.cmd_copy_buffer_to_image(
+                                cmd, src.handle, image, dst_layout, &region,
+                            )
+                        }
+                    },
+                );
             }
         }
         Ok(())
+    }
+
+    /// `copy` (a transfer into the application's target) between the barriers that wait for
+    /// the target's `before` access and release it to its `after` access.
+    fn around_copy(
+        &mut self,
+        before: Access,
+        after: Access,
+        wait: (
+            &[vk::BufferMemoryBarrier<'_>],
+            &[vk::ImageMemoryBarrier<'_>],
+        ),
+        release: (
+            &[vk::BufferMemoryBarrier<'_>],
+            &[vk::ImageMemoryBarrier<'_>],
+        ),
+        copy: impl FnOnce(&ash::Device, vk::CommandBuffer),
+    ) {
+        let device = &self.shared.device;
+        let transfer = vk::PipelineStageFlags::TRANSFER;
+        let none = vk::DependencyFlags::empty();
+        // SAFETY: recording; the barriers name the application's live target (Target's
+        // constructors) and stages its queue family supports (the record contract).
+        unsafe {
+            device.cmd_pipeline_barrier(
+                self.cmd,
+                before.stages,
+                transfer,
+                none,
+                &[],
+                wait.0,
+                wait.1,
+            )
+        };
+        copy(device, self.cmd);
+        // SAFETY: as above.
+        unsafe {
+            device.cmd_pipeline_barrier(
+                self.cmd,
+                transfer,
+                after.stages,
+                none,
+                &[],
+                release.0,
+                release.1,
+            )
+        };
     }
 }

@@ -168,10 +168,10 @@ impl ComputePipeline {
         let info = [vk::ComputePipelineCreateInfo::default()
             .stage(stage)
             .layout(layout)];
+        let cache = ctx.shared.pipeline_cache;
         // SAFETY: the module and layout are live; the module may be destroyed after creation.
         // The cache is this device's (or null), created without external synchronisation.
-        let created =
-            unsafe { device.create_compute_pipelines(ctx.shared.pipeline_cache, &info, None) };
+        let created = unsafe { device.create_compute_pipelines(cache, &info, None) };
         // SAFETY: pipelines keep no reference to their shader module.
         unsafe { device.destroy_shader_module(module, None) };
         let pipeline = match created {

@@ -222,6 +222,7 @@ pub unsafe extern "C" fn vmls_context_from_raw(
     guard(|| {
         // SAFETY: per this function's contract.
         let raw = unsafe { get(raw, "raw") }?;
+        // SAFETY: as above.
         let out = unsafe { get_mut(out, "out") }?;
         let Some(get_instance_proc_addr) = raw.get_instance_proc_addr else {
             return Err(argument(
@@ -290,6 +291,7 @@ pub unsafe extern "C" fn vmls_scene_load(
     out: *mut *mut VmlsScene,
 ) -> VmlsStatus {
     guard(|| {
+        // SAFETY: per this function's contract (live objects of this API, writable outputs).
         let out = unsafe { get_mut(out, "out") }?;
         let path = if path.is_null() {
             None
@@ -328,6 +330,7 @@ pub unsafe extern "C" fn vmls_scene_size(
     height: *mut u32,
 ) -> VmlsStatus {
     guard(|| {
+        // SAFETY: per this function's contract (live objects of this API, writable outputs).
         let scene = unsafe { get(scene, "scene") }?;
         if width.is_null() || height.is_null() {
             return Err(argument("width, height: expected pointers, found NULL"));
@@ -350,6 +353,7 @@ pub unsafe extern "C" fn vmls_scene_size(
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn vmls_scene_orbit(scene: *mut VmlsScene, radians: f64) -> VmlsStatus {
     guard(|| {
+        // SAFETY: per this function's contract (live objects of this API, writable outputs).
         let scene = unsafe { get_mut(scene, "scene") }?;
         if !radians.is_finite() {
             return Err(argument("radians: expected a finite angle"));
@@ -382,8 +386,11 @@ pub unsafe extern "C" fn vmls_renderer_create(
     out: *mut *mut VmlsRenderer,
 ) -> VmlsStatus {
     guard(|| {
+        // SAFETY: per this function's contract (live objects of this API, writable outputs).
         let ctx = unsafe { get(ctx, "ctx") }?;
+        // SAFETY: as above.
         let scene = unsafe { get(scene, "scene") }?;
+        // SAFETY: as above.
         let out = unsafe { get_mut(out, "out") }?;
         let field = scene
             .scene
@@ -407,7 +414,9 @@ pub unsafe extern "C" fn vmls_renderer_prepare(
     scene: *const VmlsScene,
 ) -> VmlsStatus {
     guard(|| {
+        // SAFETY: per this function's contract (live objects of this API, writable outputs).
         let r = unsafe { get_mut(renderer, "renderer") }?;
+        // SAFETY: as above.
         let s = unsafe { get(scene, "scene") }?;
         r.renderer
             .prepare(&s.scene.view_with(&s.camera))
@@ -416,7 +425,11 @@ pub unsafe extern "C" fn vmls_renderer_prepare(
 }
 
 /// The target a C description names, checked.
-fn target_of(t: &VmlsTarget) -> Result<Target, Failure> {
+///
+/// # Safety
+/// The description's handles are live until the frame that writes the target completes
+/// (`vmls_renderer_record`'s contract).
+unsafe fn target_of(t: &VmlsTarget) -> Result<Target, Failure> {
     // An empty stage mask is invalid in a barrier: nothing before means the top of the pipe,
     // nothing after the bottom.
     let or = |stages: VkPipelineStageFlags, none| if stages.is_empty() { none } else { stages };
@@ -429,8 +442,8 @@ fn target_of(t: &VmlsTarget) -> Result<Target, Failure> {
         access: t.after_access,
     };
     match t.kind {
-        // SAFETY: the caller of vmls_renderer_record promised live handles (its contract).
         VMLS_TARGET_BUFFER => {
+            // SAFETY: live handles, per this function's contract.
             Ok(unsafe { Target::buffer(t.buffer, t.offset, t.size, before, after) })
         }
         VMLS_TARGET_IMAGE => {
@@ -475,9 +488,13 @@ pub unsafe extern "C" fn vmls_renderer_record(
     out: *mut *mut VmlsFrame,
 ) -> VmlsStatus {
     guard(|| {
+        // SAFETY: per this function's contract (live objects of this API, writable outputs).
         let r = unsafe { get_mut(renderer, "renderer") }?;
+        // SAFETY: as above.
         let s = unsafe { get(scene, "scene") }?;
-        let t = target_of(unsafe { get(target, "target") }?)?;
+        // SAFETY: per this function's contract (a live target description with live handles).
+        let t = unsafe { target_of(get(target, "target")?) }?;
+        // SAFETY: per this function's contract (live objects of this API, writable outputs).
         let out = unsafe { get_mut(out, "out") }?;
         if cmd == vk::CommandBuffer::null() {
             return Err(argument(
@@ -508,7 +525,9 @@ pub unsafe extern "C" fn vmls_renderer_retire(
     gpu_ms: *mut f64,
 ) -> VmlsStatus {
     guard(|| {
+        // SAFETY: per this function's contract (live objects of this API, writable outputs).
         let r = unsafe { get_mut(renderer, "renderer") }?;
+        // SAFETY: as above.
         let f = unsafe { get(frame, "frame") }?;
         match r.renderer.retire(&f.frame) {
             Ok(done) => {
@@ -559,6 +578,7 @@ pub unsafe extern "C" fn vmls_renderer_destroy(renderer: *mut VmlsRenderer) {
     if !renderer.is_null() {
         // SAFETY: made by Box::into_raw, destroyed once.
         let _ = catch_unwind(AssertUnwindSafe(|| {
+            // SAFETY: made by Box::into_raw, destroyed once.
             drop(unsafe { Box::from_raw(renderer) })
         }));
     }
