@@ -47,7 +47,7 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 1)]
     warmup: u32,
     /// Output directory: results.csv, results.json, speed_error.svg/.png, images/.
-    #[arg(long, default_value = "bench-out/bench")]
+    #[arg(long, default_value = "target/bench-out/bench")]
     out: PathBuf,
     /// Merge rows measured elsewhere (another device, a peer) into the table and plot
     /// (repeatable; the CSV columns of results.csv).
