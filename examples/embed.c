@@ -1,5 +1,5 @@
 /* vmls from C: the application creates its Vulkan instance, device, an RGBA8 image and a
- * command buffer; vmls (through the C ABI, tools/capi) records ray-cast frames of a scene into
+ * command buffer; vmls (through the C ABI, tools/capi) records frames of a scene into
  * that command buffer, writing the image, while the camera turns; the application copies the
  * last frame to a host buffer and writes it as a PAM file.
  *

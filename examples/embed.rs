@@ -1,6 +1,6 @@
 //! vmls inside an application's own Vulkan code: the application creates the instance, the
-//! device, an image and its command buffers; vmls records ray-cast frames into those command
-//! buffers, writing the application's image, with two frames in flight while the camera turns.
+//! device, an image and its command buffers; vmls records frames (ray cast, or splatted with
+//! `--set 'render.method="splat"'`) into those command buffers, writing the application's image, with two frames in flight while the camera turns.
 //! The application copies each frame to a host buffer in the same command buffer and writes the
 //! last one to a file.
 //!

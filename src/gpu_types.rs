@@ -97,8 +97,8 @@ pub mod binding {
     /// A recorded frame's pixels packed into the target image's format (`target_pack`):
     /// `u32` words, as many per pixel as `vk::TargetFormat::bytes` / 4.
     pub const TARGET_PACKED: u32 = 36;
-    /// A recorded frame's indirect dispatch arguments, `uvec4(x, y, z, 0)` per band
-    /// (`raycast_next`).
+    /// A recorded frame's indirect dispatch arguments, `uvec4(x, y, z, 0)` each: one per band
+    /// (`raycast_next`), or splat_bin's and splat_raster's (`splat_plan`).
     pub const DISPATCH_ARGS: u32 = 37;
 
     /// How kernels read a binding: the grid and the octree's samples, nodes and references
@@ -194,6 +194,15 @@ pub mod ray_count {
     pub const EVALUATIONS: u32 = HULL_OVERFLOW - 1;
 }
 
+/// Words of the splatting kernels' counter buffer (`SplatCounts`) that stop a frame before its
+/// accumulation.
+pub mod splat_stat {
+    /// Pixels whose rays cross the hull into more inside segments than `splat_segments` keeps.
+    pub const SEGMENT_OVERFLOW: usize = 5;
+    /// Kernels that touch more (tile, sheet) buckets than one invocation writes.
+    pub const OVERSIZED: usize = 8;
+}
+
 /// `#define BINDING_* n` for every binding (and `GRID_PAD`, the `RAY_*` count flags), to pass
 /// to the shader compiler.
 pub fn binding_defines() -> Vec<(String, String)> {
@@ -212,6 +221,11 @@ pub fn binding_defines() -> Vec<(String, String)> {
         format!("{:e}", crate::samples::bvh::HIT_MERGE),
     ));
     for (k, v) in [
+        (
+            "SPLAT_STAT_SEGMENT_OVERFLOW",
+            splat_stat::SEGMENT_OVERFLOW as u32,
+        ),
+        ("SPLAT_STAT_OVERSIZED", splat_stat::OVERSIZED as u32),
         ("RAY_DONE", ray_count::DONE),
         ("RAY_TRUNCATED", ray_count::TRUNCATED),
         ("RAY_HULL_OVERFLOW", ray_count::HULL_OVERFLOW),
@@ -423,6 +437,44 @@ pub struct NextPush {
 }
 const _: () = assert!(std::mem::size_of::<NextPush>() == 16);
 
+/// Push constants of `target_pack`: the pixels to convert and, for splatting frames, the
+/// background composited under them (`composite` = 1). GLSL twin: `PackPush`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct PackPush {
+    pub count: u32,
+    /// 1: each pixel becomes (C + (1 − α)·background, α) before conversion.
+    pub composite: u32,
+    pub _pad: [u32; 2],
+    /// Background rgb (w unused).
+    pub background: [f32; 4],
+}
+const _: () = assert!(std::mem::size_of::<PackPush>() == 32);
+
+/// Push constants of `splat_plan`: what a recorded splatting frame's accumulation may take.
+/// GLSL twin: `PlanPush`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct PlanPush {
+    /// (tile, sheet) buckets: the scan's total follows the last one's offset.
+    pub buckets: u32,
+    /// Entries the frame's list holds.
+    pub capacity: u32,
+    /// Most entries the work budget allows (`u32::MAX`: no budget).
+    pub max_entries: u32,
+    /// splat_bin's workgroups.
+    pub bin_groups: u32,
+    /// splat_raster's workgroups: tiles per row and rows.
+    pub tiles_x: u32,
+    pub tiles_y: u32,
+    /// 1 where `splat_segments` ran: a pixel with too many inside segments stops the frame.
+    pub segments: u32,
+    /// Tile rows per dispatch of `splat_raster`: one set of arguments per band follows
+    /// splat_bin's.
+    pub band_rows: u32,
+}
+const _: () = assert!(std::mem::size_of::<PlanPush>() == 32);
+
 /// Constants of the splatting kernels. GLSL twin: `SplatParams`. The camera is the ray
 /// caster's [`CameraBlock`], so `camera.glsl` serves both renderers.
 #[repr(C)]
@@ -505,8 +557,8 @@ pub struct ScanPush {
 }
 const _: () = assert!(std::mem::size_of::<ScanPush>() == 16);
 
-/// Push constants of `splat_raster`: the frame is rasterized in bands of tile rows, one
-/// submission each. GLSL twin: `RasterPush`.
+/// Push constants of `splat_raster`: the frame is rasterized in bands of tile rows (in
+/// `render()`, one submission each). GLSL twin: `RasterPush`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
 pub struct RasterPush {

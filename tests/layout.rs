@@ -228,6 +228,32 @@ fn glsl_and_rust_layouts_agree() {
         },
         "NextPush"
     );
+    let pk: &PackPush = take(bytes, &mut at);
+    assert_eq!(
+        *pk,
+        PackPush {
+            count: 1,
+            composite: 2,
+            _pad: [3, 4],
+            background: v(5.0),
+        },
+        "PackPush"
+    );
+    let pl: &PlanPush = take(bytes, &mut at);
+    assert_eq!(
+        *pl,
+        PlanPush {
+            buckets: 1,
+            capacity: 2,
+            max_entries: 3,
+            bin_groups: 4,
+            tiles_x: 5,
+            tiles_y: 6,
+            segments: 7,
+            band_rows: 8,
+        },
+        "PlanPush"
+    );
 
     drop(group);
     drop((out, pipeline));

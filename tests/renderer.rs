@@ -105,7 +105,7 @@ fn a_stop_request_ends_frames_of_both_methods_and_the_renderer_goes_on() {
     let (ctx, _compiler) = gpu();
     for (extra, tolerance) in [
         (vec![], 0.0f32),
-        // 8² tiles (the default): two bands of tile rows, so three submissions.
+        // 8² tiles (the default) in bands of two tile rows: at least three submissions.
         (vec!["render.method=\"splat\"", "splat.tile=8"], 1e-5),
     ] {
         let s = scene(&extra);

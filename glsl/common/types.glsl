@@ -117,6 +117,25 @@ struct NextPush {
     uint _pad0;
 };
 
+struct PackPush {
+    uint count;
+    uint composite;
+    uint _pad0;
+    uint _pad1;
+    vec4 background;
+};
+
+struct PlanPush {
+    uint buckets;
+    uint capacity;
+    uint max_entries;
+    uint bin_groups;
+    uint tiles_x;
+    uint tiles_y;
+    uint segments;
+    uint band_rows;
+};
+
 struct CountPush {
     uint count;
     uint iterations;

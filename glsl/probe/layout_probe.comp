@@ -20,6 +20,8 @@ layout(std430, binding = BINDING_PROBE) writeonly buffer ProbeBuf {
     ScanPush scan_push;
     RasterPush raster_push;
     NextPush next_push;
+    PackPush pack_push;
+    PlanPush plan_push;
 };
 
 vec4 v(float k) { return vec4(k, k + 0.25, k + 0.5, k + 0.75); }
@@ -147,4 +149,12 @@ void main() {
     next_push.rows = 2u;
     next_push.args_slot = 3u;
     next_push._pad0 = 4u;
+
+    pack_push.count = 1u;
+    pack_push.composite = 2u;
+    pack_push._pad0 = 3u;
+    pack_push._pad1 = 4u;
+    pack_push.background = v(5.0);
+
+    plan_push = PlanPush(1u, 2u, 3u, 4u, 5u, 6u, 7u, 8u);
 }

@@ -243,7 +243,7 @@ pub fn variant_defines(defines: &[(String, String)]) -> Vec<(String, String)> {
 fn kernel_ms(image: &GpuImage) -> Vec<(&'static str, f64)> {
     match &image.splat {
         None => vec![("raycast", image.gpu_ms)],
-        Some(r) => crate::splat::gpu::STAGES
+        Some(r) => crate::splat::frame::STAGES
             .iter()
             .copied()
             .zip(r.stage_ms)

@@ -23,12 +23,8 @@ use crate::raycast::gpu::variant_for_render;
 use crate::raycast::preintegration::PreintegrationTables;
 use crate::raycast::{RaySetup, TableCache, check_table_size};
 use crate::splat::SplatCounts;
-use crate::splat::SplatSetup;
-use crate::splat::gpu::{
-    FrameControl, GpuKernels, SplatPipelines, SplatTargets, SplatVariant, splat_frame,
-};
+use crate::splat::gpu::{GpuKernels, SplatPipelines, SplatTargets};
 use crate::view::View;
-use crate::view::shading::Isosurface;
 use crate::view::transfer::TransferFunction;
 use crate::vk::{Buffer, ComputePipeline, Context, ShaderCompiler, VkError};
 use std::sync::Arc;
@@ -36,6 +32,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Instant;
 
 mod record;
+mod splatting;
 pub mod target;
 
 pub use crate::vk::{Access, ExternalCommands, Target, TargetFormat};
@@ -85,7 +82,7 @@ impl GpuImage {
 #[derive(Debug, Clone, PartialEq)]
 pub struct SplatReport {
     pub counts: SplatCounts,
-    /// GPU ms of `crate::splat::gpu::STAGES`.
+    /// GPU ms of `crate::splat::frame::STAGES`.
     pub stage_ms: [f64; 4],
     /// Sheets in the frame and their thickness in world units.
     pub slabs: u32,
@@ -459,127 +456,5 @@ impl Renderer {
         let p = frame_pipeline(&self.ctx, &self.compiler, variant, &bindings)?;
         self.pipelines.push((defines, bindings, p));
         Ok((self.pipelines.len() - 1, true))
-    }
-
-    /// One splatting frame: kernels uploaded once, variants and buffers kept between frames.
-    fn render_splat(
-        &mut self,
-        view: &View<'_>,
-        shading: crate::splat::Shading,
-        start: Instant,
-        progress: &mut dyn FnMut(f64),
-    ) -> Result<(GpuImage, FrameStats), RenderError> {
-        let setup = SplatSetup::new(
-            shading,
-            &view.settings.splat,
-            view.camera,
-            view.settings.early_termination,
-            view.settings.background,
-            view.isosurfaces,
-            view.lighting,
-            &self.field,
-        )?;
-        if let Some(budget) = self.budget {
-            setup.check_budget(0, budget)?;
-        }
-        let surfaces: &[Isosurface] = if setup.settings.surface {
-            &setup.isosurfaces
-        } else {
-            &[]
-        };
-        if !self
-            .splat_kernels
-            .as_ref()
-            .is_some_and(|k| k.has_surfaces_of(surfaces))
-        {
-            self.splat_kernels = None;
-            let kernels = crate::splat::surface::surface_kernels(&self.field, surfaces)?;
-            self.splat_kernels = Some(GpuKernels::upload(
-                &self.ctx,
-                &self.field,
-                surfaces,
-                kernels,
-            )?);
-        }
-        let Some(kernels) = self.splat_kernels.as_ref() else {
-            return Err(VkError::Usage("splat kernels missing".into()).into());
-        };
-        let variant = SplatVariant::of(&setup, self.ctx.info());
-        let cached = self
-            .splat_pipelines
-            .iter()
-            .position(|p| *p.variant() == variant);
-        let pipeline_built = cached.is_none();
-        let index = match cached {
-            Some(i) => i,
-            None => {
-                let p = SplatPipelines::new(&self.ctx, &self.compiler, &variant)?;
-                self.splat_pipelines.push(p);
-                self.splat_pipelines.len() - 1
-            }
-        };
-        let targets_allocated = !self
-            .splat_targets
-            .as_ref()
-            .is_some_and(|t| t.fits(&setup, kernels));
-        if targets_allocated {
-            self.splat_targets = None;
-            self.splat_targets = Some(SplatTargets::new(&self.ctx, &setup, kernels)?);
-        }
-        let Some(targets) = self.splat_targets.as_mut() else {
-            return Err(VkError::Usage("splat frame buffers missing".into()).into());
-        };
-        let image = splat_frame(
-            &self.ctx,
-            &self.splat_pipelines[index],
-            kernels,
-            targets,
-            &setup,
-            view.transfer,
-            &self.gpu_field.hull_bindings(),
-            FrameControl {
-                budget: self.budget,
-                stop: self.stop.as_deref(),
-                progress,
-            },
-        )?;
-        let gpu_ms = image.gpu_ms();
-        let n = image.pixels.len();
-        Ok((
-            GpuImage {
-                pixels: image.pixels,
-                counts: vec![0; n],
-                gpu_ms,
-                bands: image.submissions,
-                variant: image.variant,
-                shaders: variant
-                    .kernels()
-                    .into_iter()
-                    .map(|k| (k, variant.defines()))
-                    .collect(),
-                splat: Some(SplatReport {
-                    counts: image.counts,
-                    stage_ms: image.stage_ms,
-                    slabs: setup.slabs,
-                    slab_world: setup.slab_world,
-                    tile: setup.tile,
-                    group_size: setup.group_size(),
-                    invocations: variant.group,
-                    ring: variant.ring,
-                    quadrature: variant.quadrature,
-                }),
-                skip: None,
-            },
-            FrameStats {
-                gpu_ms,
-                wall_ms: start.elapsed().as_secs_f64() * 1e3,
-                tables_built: false,
-                table_ms: 0.0,
-                pipeline_built,
-                targets_allocated,
-                bands: image.submissions,
-                skip_estimate: None,
-            },
-        ))
     }
 }

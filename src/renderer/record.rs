@@ -1,6 +1,7 @@
 //! Recording a frame into the application's command buffer (issue 28 §2):
-//! [`Renderer::record`] records every dispatch of one ray-cast frame and the write of its
-//! pixels into the application's [`Target`], and returns a [`FrameInFlight`]; the application
+//! [`Renderer::record`] records every dispatch of one frame, ray cast or splatted (the
+//! splatting half is `splatting.rs`), and the write of its pixels into the application's
+//! [`Target`], and returns a [`FrameInFlight`]; the application
 //! submits the command buffer when it likes and hands the token back to
 //! [`Renderer::retire`] once the submission has completed (its fence signalled, or its
 //! timeline semaphore reached the value). Several frames may be in flight: each has its own
@@ -19,6 +20,7 @@
 //!   ones that family supports (a compute-only family has no fragment stage).
 //! - Some calls submit to and wait on the context's queue under vmls's own lock: `render`,
 //!   `prepare`, a `record` whose tables changed on a device whose memory the host cannot map,
+//!   the first splatting `record` of a renderer that `prepare` did not count entries for,
 //!   `retire` where it cannot map the frame's status, and dropping a renderer with frames in
 //!   flight. Do not call them while another thread of the application uses that queue.
 //! - Keep the target alive and untouched by other work until the frame's submission has
@@ -41,12 +43,19 @@
 //! cost), and [`Renderer::retire`] reports a frame that the loop limit or the hull cut short as
 //! an error, after which the renderer records with smaller chunks or every hull crossing, so
 //! that the next frame is right.
+//!
+//! A splatting frame in `render()` reads its count of footprints back after the projection, to
+//! size the entry list and check the budget. A recorded one reserves its list beforehand, and
+//! `splat_plan` dispatches the accumulation indirectly, or not at all where the count exceeds
+//! the list or the budget; `retire` names which, and after an overflow the next frames reserve
+//! the count it saw. Its sheets are rasterized in one dispatch (`render()` submits bands of
+//! tile rows, for progress and Ctrl-C), and its background is composited by `target_pack`.
 
 use super::Renderer;
 use crate::field::RenderError;
 use crate::field::skip::SkipReport;
 use crate::field::variant::{Variant, groups_2d};
-use crate::gpu_types::{CountPush, NextPush, binding, ray_count};
+use crate::gpu_types::{NextPush, PackPush, binding, ray_count};
 use crate::raycast::RaySetup;
 use crate::raycast::frame::{
     FrameConstants, FrameTargets, band_groups, band_rows, chunk_push, constant_data, default_chunk,
@@ -55,8 +64,8 @@ use crate::raycast::frame::{
 use crate::raycast::gpu::variant_for_render;
 use crate::view::View;
 use crate::vk::{
-    BindGroup, Buffer, BufferUsage, ComputePipeline, ExternalCommands, FrameTimer, Target,
-    TargetFormat, VkError,
+    BindGroup, Buffer, BufferUsage, ComputePipeline, Context, ExternalCommands, FrameTimer,
+    Recorder, Target, TargetFormat, VkError,
 };
 use std::sync::Arc;
 
@@ -77,39 +86,129 @@ pub struct RecordedFrame {
     /// GPU time between the frame's first and last command (`None` where the queue has no
     /// timestamps).
     pub gpu_ms: Option<f64>,
-    /// MLS evaluations over all pixels.
+    /// MLS evaluations over all pixels (ray casting), or footprint evaluations (splatting).
     pub evaluations: u64,
     /// Dispatches recorded: the ray caster's (bands × chunks, later chunks indirect), the
-    /// `raycast_next` before each later chunk, and the format conversion.
+    /// `raycast_next` before each later chunk, and the format conversion; or the splatting
+    /// stages (`splat_plan`, then `splat_bin` and `splat_raster` indirect).
     pub dispatches: u32,
     /// The kernel variant, as `--stats` names it.
     pub variant: String,
     /// What empty-space skipping did, where the frame skipped.
     pub skip: Option<SkipReport>,
+    /// What splatting did (the splatting methods only).
+    pub splat: Option<crate::splat::SplatCounts>,
 }
 
 /// The buffers, descriptor sets and timestamps of one frame in flight.
 pub(super) struct Slot {
     in_flight: bool,
     generation: u32,
+    /// The frame in flight splats (its buffers are `splat`'s).
+    splatting: bool,
     /// Constant buffers, reallocated when a frame needs more room.
     constants: Option<FrameConstants>,
     targets: Option<FrameTargets>,
-    /// The pixels in the target image's format, where it is not RGBA32F.
-    packed: Option<Buffer>,
+    /// The pixels in the target image's format, where it is not RGBA32F (or, splatting, over
+    /// a background).
+    pub(super) packed: Option<Buffer>,
     /// The bands' indirect dispatch arguments (`raycast_next`), 16 bytes a band.
     args: Option<Buffer>,
     /// The generation of the last frame of this slot that completed: the frame's last command
     /// writes it, so that `retire` can tell a completed frame from one not yet executed.
-    marker: Buffer,
+    pub(super) marker: Buffer,
     /// The tables the frame reads, kept alive while it is in flight.
     table: Option<Arc<Buffer>>,
     groups: Vec<BindGroup<'static>>,
-    timer: FrameTimer,
+    pub(super) timer: FrameTimer,
     variant: Option<Variant>,
     hull_hits: u32,
     chunk: u32,
     dispatches: u32,
+    /// Splatting frames' buffers, from the slot's first splatting frame on.
+    pub(super) splat: Option<super::splatting::SplatSlot>,
+}
+
+impl Slot {
+    /// A free slot's buffers for a first frame.
+    fn new(ctx: &Context) -> Result<Self, VkError> {
+        Ok(Self {
+            in_flight: false,
+            generation: 0,
+            splatting: false,
+            constants: None,
+            targets: None,
+            packed: None,
+            args: None,
+            marker: Buffer::new(ctx, "frame completion", 4, BufferUsage::Storage)?,
+            table: None,
+            groups: Vec::new(),
+            timer: FrameTimer::new(ctx)?,
+            variant: None,
+            hull_hits: 0,
+            chunk: 0,
+            dispatches: 0,
+            splat: None,
+        })
+    }
+
+    /// Drops the bind groups of the slot's last frame (retired, or never submitted).
+    pub(super) fn reset_groups(&mut self) {
+        self.groups.clear();
+    }
+
+    /// Keeps bind groups alive while the frame is in flight.
+    pub(super) fn keep_groups(&mut self, groups: impl IntoIterator<Item = BindGroup<'static>>) {
+        self.groups.extend(groups);
+    }
+
+    /// Room for `bytes` of packed pixels (`None`: the frame packs nothing).
+    pub(super) fn ensure_packed(
+        &mut self,
+        ctx: &Context,
+        bytes: Option<u64>,
+    ) -> Result<(), VkError> {
+        match (bytes, &self.packed) {
+            (Some(n), Some(b)) if b.size() >= n => {}
+            (Some(n), _) => {
+                self.packed = None;
+                self.packed = Some(Buffer::new(ctx, "target pixels", n, BufferUsage::Storage)?);
+            }
+            (None, _) => {}
+        }
+        Ok(())
+    }
+
+    /// The generation the slot's next frame writes at its end.
+    pub(super) fn next_generation(&self) -> u32 {
+        self.generation.wrapping_add(1)
+    }
+
+    /// Dispatches of the slot's frame in flight.
+    pub(super) fn dispatches(&self) -> u32 {
+        self.dispatches
+    }
+
+    /// Marks the slot in flight with a frame of `generation` just recorded, and returns its
+    /// token.
+    pub(super) fn begin(
+        &mut self,
+        index: usize,
+        generation: u32,
+        dispatches: u32,
+        splatting: bool,
+        renderer: u64,
+    ) -> FrameInFlight {
+        self.dispatches = dispatches;
+        self.splatting = splatting;
+        self.in_flight = true;
+        self.generation = generation;
+        FrameInFlight {
+            renderer,
+            slot: index,
+            generation,
+        }
+    }
 }
 
 /// What the renderer learnt from retired frames, applied to the next recordings.
@@ -123,6 +222,76 @@ pub(super) struct RecordState {
     pub(super) pack: Vec<(TargetFormat, ComputePipeline)>,
     /// The `raycast_next` pipeline (compiled at the first recorded frame).
     pub(super) next: Option<ComputePipeline>,
+    /// Splatting: the most entries a frame was seen to bin, which recorded frames' lists make
+    /// room for (`None`: the next recorded frame counts them first).
+    pub(super) splat_entries: Option<u64>,
+}
+
+impl RecordState {
+    /// The bind group of `target_pack` pipeline `pack` from `image` into `packed`.
+    pub(super) fn pack_group<'a>(
+        &self,
+        ctx: &Context,
+        pack: usize,
+        image: &'a Buffer,
+        packed: &'a Option<Buffer>,
+    ) -> Result<BindGroup<'a>, VkError> {
+        let (Some((_, p)), Some(out)) = (self.pack.get(pack), packed.as_ref()) else {
+            return Err(VkError::Usage(
+                "target_pack pipeline or buffer missing".into(),
+            ));
+        };
+        BindGroup::new(
+            ctx,
+            p,
+            &[(binding::IMAGE, image), (binding::TARGET_PACKED, out)],
+        )
+    }
+
+    /// Records the write of a frame's `image` (`size` pixels) into `target`: through
+    /// `target_pack` into `packed` where `pack` is given (a format to convert to, or a
+    /// `background` to composite, which is then not black), else copied as it is. Returns the
+    /// dispatches recorded.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn record_write(
+        &self,
+        rec: &mut Recorder<'_>,
+        pack: Option<(usize, &BindGroup<'_>)>,
+        background: [f32; 3],
+        image: &Buffer,
+        packed: Option<&Buffer>,
+        target: &Target,
+        size: (u32, u32),
+    ) -> Result<u32, VkError> {
+        let (w, h) = size;
+        match (pack, packed) {
+            (Some((p, g)), Some(out)) => {
+                let Some((_, pipeline)) = self.pack.get(p) else {
+                    return Err(VkError::Usage("target_pack pipeline missing".into()));
+                };
+                let count = u32::try_from(u64::from(w) * u64::from(h)).unwrap_or(u32::MAX);
+                let push = PackPush {
+                    count,
+                    composite: u32::from(background != [0.0; 3]),
+                    _pad: [0; 2],
+                    background: [background[0], background[1], background[2], 0.0],
+                };
+                rec.dispatch(
+                    pipeline,
+                    g,
+                    bytemuck::bytes_of(&push),
+                    groups_2d(count, 64),
+                    "target_pack",
+                )?;
+                rec.write_target(out, target, w, h)?;
+                Ok(1)
+            }
+            _ => {
+                rec.write_target(image, target, w, h)?;
+                Ok(0)
+            }
+        }
+    }
 }
 
 /// Bytes needed for `data`, at least 16 (a zero-sized binding is invalid).
@@ -131,20 +300,31 @@ fn room(data: &[u8]) -> u64 {
 }
 
 impl Renderer {
-    /// Prepares everything a ray-cast frame of `view` needs, so that recording it builds
-    /// nothing: the field's data on the device, the preintegration tables, the pipelines.
+    /// Prepares everything a frame of `view` needs, so that recording it builds nothing: the
+    /// field's data on the device, the preintegration tables, the pipelines; for splatting the
+    /// kernels, the pipelines and the count of the frame's entries that sizes recorded frames'
+    /// lists (a projection of its own: one submission and a wait on the context's queue).
     pub fn prepare(&mut self, view: &View<'_>) -> Result<(), RenderError> {
+        if let Some(shading) = view.settings.method.splat_shading() {
+            return self.prepare_splat(view, shading);
+        }
         self.record_setup(view)?;
         Ok(())
+    }
+
+    /// A slot with no frame in flight (a new one if every slot has one).
+    pub(super) fn free_slot(&mut self) -> Result<usize, RenderError> {
+        if let Some(i) = self.slots.iter().position(|s| !s.in_flight) {
+            return Ok(i);
+        }
+        self.slots.push(Slot::new(&self.ctx)?);
+        Ok(self.slots.len() - 1)
     }
 
     /// The host half of a recorded frame ([`Renderer::ray_frame`] with what retired frames
     /// taught): its ray setup and variant, the ray caster's pipeline (its index) and
     /// `raycast_next`'s.
     fn record_setup(&mut self, view: &View<'_>) -> Result<(RaySetup, Variant, usize), RenderError> {
-        if view.settings.method.splat_shading().is_some() {
-            return Err(splat_not_recorded());
-        }
         let mut setup = self.ray_frame(view)?.setup;
         if let Some(h) = self.record.hull_hits {
             setup.hull_hits = h;
@@ -159,7 +339,7 @@ impl Renderer {
         Ok((setup, variant, index))
     }
 
-    /// Records one ray-cast frame of `view` into `cmd` and the write of its pixels into
+    /// Records one frame of `view` (ray cast or splatted) into `cmd` and the write of its pixels into
     /// `target` (see the module documentation for the synchronisation contract). Nothing is
     /// submitted; the returned token must be retired after the submission completes.
     pub fn record(
@@ -168,6 +348,9 @@ impl Renderer {
         view: &View<'_>,
         target: &Target,
     ) -> Result<FrameInFlight, RenderError> {
+        if let Some(shading) = view.settings.method.splat_shading() {
+            return self.record_splat(cmd, view, target, shading);
+        }
         let (setup, variant, index) = self.record_setup(view)?;
         // A chunk learned from a cut-short frame applies only where it is smaller than this
         // setup's own (the adaptive integrator's default is far smaller than the others').
@@ -184,28 +367,7 @@ impl Renderer {
         };
         let tables = self.tables.current().filter(|_| has_tables);
         let data = constant_data(&self.field, &setup, view.transfer, tables, variant.skip);
-        let slot_index = match self.slots.iter().position(|s| !s.in_flight) {
-            Some(i) => i,
-            None => {
-                self.slots.push(Slot {
-                    in_flight: false,
-                    generation: 0,
-                    constants: None,
-                    targets: None,
-                    packed: None,
-                    args: None,
-                    marker: Buffer::new(&self.ctx, "frame completion", 4, BufferUsage::Storage)?,
-                    table: None,
-                    groups: Vec::new(),
-                    timer: FrameTimer::new(&self.ctx)?,
-                    variant: None,
-                    hull_hits: 0,
-                    chunk: 0,
-                    dispatches: 0,
-                });
-                self.slots.len() - 1
-            }
-        };
+        let slot_index = self.free_slot()?;
         let ctx = self.ctx.clone();
         let table = if has_tables {
             self.table_buffer.as_ref().map(|(_, b)| b.clone())
@@ -213,7 +375,7 @@ impl Renderer {
             None
         };
         let slot = &mut self.slots[slot_index];
-        slot.groups.clear();
+        slot.reset_groups();
         // Room for this frame's constants and pixels, kept for the next frames of the slot.
         let fits = slot.constants.as_ref().is_some_and(|c| {
             c.params.size() >= room(&data.params)
@@ -245,20 +407,7 @@ impl Renderer {
             slot.targets = None;
             slot.targets = Some(frame_targets(&ctx, pixels)?);
         }
-        let packed_bytes = pixels * format.bytes();
-        match (&pack, &slot.packed) {
-            (Some(_), Some(b)) if b.size() >= packed_bytes => {}
-            (Some(_), _) => {
-                slot.packed = None;
-                slot.packed = Some(Buffer::new(
-                    &ctx,
-                    "target pixels",
-                    packed_bytes,
-                    BufferUsage::Storage,
-                )?);
-            }
-            (None, _) => {}
-        }
+        slot.ensure_packed(&ctx, pack.map(|_| pixels * format.bytes()))?;
         let rows_per_band = band_rows(&setup);
         let bands = h.div_ceil(rows_per_band.max(1));
         let args_bytes = 16 * u64::from(bands.max(1));
@@ -289,16 +438,12 @@ impl Renderer {
             &setup,
         );
         let group = BindGroup::new(&ctx, pipeline, &buffers)?;
-        let pack_group = match (&pack, &slot.packed) {
-            (Some(p), Some(out)) => Some(BindGroup::new(
-                &ctx,
-                &self.record.pack[*p].1,
-                &[
-                    (binding::IMAGE, &targets.image),
-                    (binding::TARGET_PACKED, out),
-                ],
-            )?),
-            _ => None,
+        let pack_group = match pack {
+            Some(p) => Some(
+                self.record
+                    .pack_group(&ctx, p, &targets.image, &slot.packed)?,
+            ),
+            None => None,
         };
         let next_group = BindGroup::new(
             &ctx,
@@ -310,7 +455,7 @@ impl Renderer {
             ],
         )?;
         let outer = outer_steps(&setup);
-        let generation = slot.generation.wrapping_add(1);
+        let generation = slot.next_generation();
         let mut dispatches = 0u32;
         ctx.record_into(cmd, Some(&slot.timer), |rec| {
             rec.update(&constants.params, &data.params)?;
@@ -366,46 +511,26 @@ impl Renderer {
                 row += rows;
                 band += 1;
             }
-            let written = match (&pack, &pack_group, &slot.packed) {
-                (Some(p), Some(g), Some(out)) => {
-                    let count = u32::try_from(pixels).unwrap_or(u32::MAX);
-                    let push = CountPush {
-                        count,
-                        ..CountPush::default()
-                    };
-                    rec.dispatch(
-                        &self.record.pack[*p].1,
-                        g,
-                        bytemuck::bytes_of(&push),
-                        groups_2d(count, 64),
-                        "target_pack",
-                    )?;
-                    dispatches += 1;
-                    rec.write_target(out, target, w, h)
-                }
-                _ => rec.write_target(&targets.image, target, w, h),
-            };
-            written?;
+            dispatches += self.record.record_write(
+                rec,
+                pack.zip(pack_group.as_ref()),
+                [0.0; 3],
+                &targets.image,
+                slot.packed.as_ref(),
+                target,
+                (w, h),
+            )?;
             // Last: the frame's generation, which `retire` reads back.
             rec.fill(&slot.marker, generation);
             Ok(())
         })?;
-        slot.groups.push(group.detach());
-        slot.groups.push(next_group.detach());
-        if let Some(g) = pack_group {
-            slot.groups.push(g.detach());
-        }
+        let mut groups = vec![group.detach(), next_group.detach()];
+        groups.extend(pack_group.map(|g| g.detach()));
+        slot.keep_groups(groups);
         slot.variant = Some(variant);
         slot.hull_hits = setup.hull_hits;
         slot.chunk = chunk;
-        slot.dispatches = dispatches;
-        slot.in_flight = true;
-        slot.generation = generation;
-        Ok(FrameInFlight {
-            renderer: self.id,
-            slot: slot_index,
-            generation: slot.generation,
-        })
+        Ok(slot.begin(slot_index, generation, dispatches, false, self.id))
     }
 
     /// Takes back a recorded frame whose submission has completed: reads its per-pixel status
@@ -440,6 +565,9 @@ impl Renderer {
         slot.in_flight = false;
         slot.groups.clear();
         slot.table = None;
+        if slot.splatting {
+            return self.retire_splat(frame.slot, gpu_ms);
+        }
         let (Some(targets), Some(variant)) = (slot.targets.as_ref(), slot.variant) else {
             return Err(VkError::Usage("retire: the frame's buffers are missing".into()).into());
         };
@@ -506,6 +634,7 @@ impl Renderer {
             dispatches,
             variant: variant.name("raycast"),
             skip,
+            splat: None,
         })
     }
 
@@ -532,7 +661,7 @@ impl Renderer {
     }
 
     /// The `target_pack` pipeline for `format` (compiled at its first use).
-    fn pack_pipeline(&mut self, format: TargetFormat) -> Result<usize, RenderError> {
+    pub(super) fn pack_pipeline(&mut self, format: TargetFormat) -> Result<usize, RenderError> {
         if let Some(i) = self.record.pack.iter().position(|(f, _)| *f == format) {
             return Ok(i);
         }
@@ -540,11 +669,8 @@ impl Renderer {
             TargetFormat::Rgba16f => 1,
             TargetFormat::Rgba8Unorm => 2,
             TargetFormat::Rgba8Srgb => 3,
-            TargetFormat::Rgba32f => {
-                return Err(
-                    VkError::Usage("target_pack: RGBA32F needs no conversion".into()).into(),
-                );
-            }
+            // Splatting frames over a background composite it while copying.
+            TargetFormat::Rgba32f => 0,
         };
         let mut defines = crate::gpu_types::binding_defines();
         defines.push(("TARGET_FORMAT".into(), code.to_string()));
@@ -558,7 +684,7 @@ impl Renderer {
             &format!("target_pack:{format:?}"),
             &spirv,
             &kinds,
-            std::mem::size_of::<CountPush>() as u32,
+            std::mem::size_of::<PackPush>() as u32,
         )?;
         self.record.pack.push((format, p));
         Ok(self.record.pack.len() - 1)
@@ -573,17 +699,6 @@ pub fn next_groups(counts: &[u32], width: u32, rows: u32) -> [u32; 3] {
         band_groups(width, rows)
     } else {
         [0, 1, 1]
-    }
-}
-
-fn splat_not_recorded() -> RenderError {
-    RenderError::Setting {
-        key: "render.method",
-        message: "a splatting frame cannot be recorded into an application's command buffer: \
-                  it reads its footprint count back between its projection and its \
-                  accumulation (to check the work budget and size the entry list); render it \
-                  with Renderer::render, or record a ray-casting method"
-            .into(),
     }
 }
 

@@ -1,5 +1,6 @@
-//! Stage `target_pack`'s CPU twin: a frame's RGBA32F pixel in the format of the application's
-//! image ([`TargetFormat`]), as the bytes `vkCmdCopyBufferToImage` copies. The GPU kernel is
+//! Stage `target_pack`'s CPU twin: a frame's RGBA32F pixel, over its background where the
+//! frame splatted ([`crate::view::shading::composite_background`]), in the format of the application's image
+//! ([`TargetFormat`]), as the bytes `vkCmdCopyBufferToImage` copies. The GPU kernel is
 //! `glsl/common/target_pack.comp`; tests compare the two over every pixel of a frame.
 
 use crate::vk::TargetFormat;

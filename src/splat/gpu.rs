@@ -1,30 +1,18 @@
-//! Driving the splatting kernels (`glsl/splat_*.comp`): uploads, frame buffers, the variant of
-//! a setup, and one frame.
-//!
-//! A frame is a few submissions. The first clears the counters and runs `splat_project`
-//! (which counts the (tile, sheet) buckets) and the three levels of `splat_scan`; the host
-//! reads one number back, the total of entries, to check the work budget and size the entry
-//! list. The second runs `splat_bin`; then `splat_raster` runs in bands of tile rows, one
-//! submission each, so that every band is timed and a stop request ([`FrameControl::stop`])
-//! ends the frame within one band.
+//! The splatting kernels' device side (`glsl/splat/*.comp`): the kernels' upload, the
+//! variant of a setup and its pipelines, and a frame's buffers. A frame's commands are in
+//! [`super::frame`].
 
 use super::project::KernelKind;
-use super::{Antialias, SCAN_BLOCK, Shading, SplatCounts, SplatSetup};
-use crate::field::{Field, RenderError};
-use crate::gpu_types::{RasterPush, ScanPush, Splat, SplatParams, binding, params_copies};
-use crate::view::transfer::TransferFunction;
+use super::{Antialias, SCAN_BLOCK, Shading, SplatSetup};
+use crate::field::Field;
+use crate::gpu_types::{RasterPush, ScanPush, Splat, binding};
 use crate::vk::{
-    BindGroup, Buffer, BufferUsage, ComputePipeline, Context, ShaderCompiler, ShaderSource, VkError,
+    Buffer, BufferUsage, ComputePipeline, Context, ShaderCompiler, ShaderSource, VkError,
 };
-use std::sync::atomic::{AtomicBool, Ordering};
 
-/// Bands of tile rows per frame of `splat_raster` (at most): each band is one submission, so
-/// that Ctrl-C and the progress bar act within a fraction of a long frame, while the wait for
-/// each submission's fence stays small beside the band's work.
-const RASTER_BANDS: u32 = 8;
 /// What `splat_scan`'s passes bind: pass p the first p + 2 of these (counts and block sums;
 /// then the offsets it writes; then the cursors it starts).
-const SCAN_BINDINGS: [u32; 4] = [
+pub(super) const SCAN_BINDINGS: [u32; 4] = [
     binding::BUCKET_COUNTS,
     binding::SCAN_SUMS,
     binding::BUCKET_OFFSETS,
@@ -36,7 +24,7 @@ const RASTER_PIXELS: u32 = 4;
 pub const SEGMENT_HITS: usize = 2 * super::PIXEL_SEGMENTS + 4;
 
 /// Invocations per workgroup of the one-dimensional kernels.
-const GROUP: u32 = 64;
+pub(super) const GROUP: u32 = 64;
 /// `SplatCounts` counters in the stats buffer.
 /// Counter slots: 0–5 and 8 one word each; 64-bit ones: 9 and 10 with high words 11 and 12,
 /// 6 and 7 with high words 13 and 14.
@@ -44,8 +32,8 @@ const STATS: usize = 15;
 
 /// The kernels uploaded once per dataset: one `Sample` each, volume in `metric_off.z`.
 pub struct GpuKernels {
-    buffer: Buffer,
-    count: u32,
+    pub(super) buffer: Buffer,
+    pub(super) count: u32,
     /// The isosurface values whose surface splats follow the volume kernels.
     surface_values: Vec<f64>,
 }
@@ -271,11 +259,13 @@ impl SplatVariant {
 /// The pipelines of a variant.
 pub struct SplatPipelines {
     variant: SplatVariant,
-    project: ComputePipeline,
-    scan: [ComputePipeline; 3],
-    bin: ComputePipeline,
-    raster: ComputePipeline,
-    segments: Option<ComputePipeline>,
+    pub(super) project: ComputePipeline,
+    pub(super) scan: [ComputePipeline; 3],
+    /// `splat_plan`, compiled for recorded frames only (`SplatPipelines::with_plan`).
+    pub(super) plan: Option<ComputePipeline>,
+    pub(super) bin: ComputePipeline,
+    pub(super) raster: ComputePipeline,
+    pub(super) segments: Option<ComputePipeline>,
 }
 
 impl SplatPipelines {
@@ -358,6 +348,7 @@ impl SplatPipelines {
                 &raster,
                 push(std::mem::size_of::<RasterPush>()),
             )?,
+            plan: None,
             segments: if variant.hull {
                 Some(make(
                     "splat/splat_segments.comp",
@@ -375,6 +366,31 @@ impl SplatPipelines {
     pub fn variant(&self) -> &SplatVariant {
         &self.variant
     }
+
+    /// Compiles `splat_plan`, which recorded frames run, if these pipelines lack it.
+    pub fn with_plan(&mut self, ctx: &Context, compiler: &ShaderCompiler) -> Result<(), VkError> {
+        if self.plan.is_some() {
+            return Ok(());
+        }
+        let spirv = compiler.compile(
+            ShaderSource::File("splat/splat_plan.comp"),
+            &crate::gpu_types::binding_defines(),
+        )?;
+        let kinds = [
+            binding::BUCKET_OFFSETS,
+            binding::SPLAT_STATS,
+            binding::DISPATCH_ARGS,
+        ]
+        .map(|b| (b, binding::kind(b)));
+        self.plan = Some(ComputePipeline::with_kinds(
+            ctx,
+            "splat/splat_plan.comp",
+            &spirv,
+            &kinds,
+            std::mem::size_of::<crate::gpu_types::PlanPush>() as u32,
+        )?);
+        Ok(())
+    }
 }
 
 /// Frame buffers of one image size, tile size and kernel count, for up to `bucket_capacity`
@@ -383,15 +399,15 @@ impl SplatPipelines {
 pub struct SplatTargets {
     key: (u32, u32, u32, u32, bool),
     bucket_capacity: u64,
-    splats: Buffer,
-    counts: Buffer,
-    offsets: Buffer,
-    cursors: Buffer,
-    sums: Buffer,
-    image: Buffer,
-    stats: Buffer,
-    list: Option<Buffer>,
-    segments: Option<Buffer>,
+    pub(super) splats: Buffer,
+    pub(super) counts: Buffer,
+    pub(super) offsets: Buffer,
+    pub(super) cursors: Buffer,
+    pub(super) sums: Buffer,
+    pub(super) image: Buffer,
+    pub(super) stats: Buffer,
+    pub(super) list: Option<Buffer>,
+    pub(super) segments: Option<Buffer>,
 }
 
 impl SplatTargets {
@@ -405,7 +421,7 @@ impl SplatTargets {
         )
     }
 
-    fn segments(&self) -> Result<&Buffer, VkError> {
+    pub(super) fn segments(&self) -> Result<&Buffer, VkError> {
         self.segments
             .as_ref()
             .ok_or_else(|| VkError::Usage("pixel hull segments missing".into()))
@@ -414,6 +430,39 @@ impl SplatTargets {
     /// Whether these buffers fit a setup.
     pub fn fits(&self, setup: &SplatSetup, kernels: &GpuKernels) -> bool {
         self.key == Self::key(setup, kernels) && setup.buckets() <= self.bucket_capacity
+    }
+
+    /// The frame's pixels, premultiplied (C, 1 − T), before the background.
+    pub fn image(&self) -> &Buffer {
+        &self.image
+    }
+
+    /// Entries the list holds (0 before the first frame).
+    pub fn list_capacity(&self) -> u64 {
+        self.list.as_ref().map_or(0, |l| l.size() / 8)
+    }
+
+    /// Makes room for `entries` in the list (at most `limit`): a list too small is replaced by
+    /// one half as large again, so that frames whose counts creep up do not reallocate each
+    /// time.
+    pub fn reserve_entries(
+        &mut self,
+        ctx: &Context,
+        entries: u64,
+        limit: u64,
+    ) -> Result<(), VkError> {
+        let needed = 8 * entries.max(1);
+        if self.list.as_ref().is_none_or(|l| l.size() < needed) {
+            self.list = None;
+            let grown = (needed + needed / 2).min(limit * 8).max(needed);
+            self.list = Some(Buffer::new(
+                ctx,
+                "splat entries",
+                grown,
+                BufferUsage::Texel,
+            )?);
+        }
+        Ok(())
     }
 
     /// Allocates the buffers of a setup.
@@ -452,374 +501,4 @@ impl SplatTargets {
             },
         })
     }
-}
-
-/// A splatted frame as the GPU produced it.
-#[derive(Debug, Clone)]
-pub struct SplatGpuImage {
-    /// (C + T·background, 1 − T) per pixel, row 0 at the top.
-    pub pixels: Vec<[f32; 4]>,
-    pub counts: SplatCounts,
-    /// GPU milliseconds of `STAGES`.
-    pub stage_ms: [f64; 4],
-    pub submissions: u32,
-    pub variant: String,
-}
-
-/// The names of [`SplatGpuImage::stage_ms`]: `splat_sort` is `splat_scan` and `splat_bin`.
-pub const STAGES: [&str; 4] = [
-    "splat_project",
-    "splat_sort",
-    "splat_raster",
-    "splat_segments",
-];
-
-impl SplatGpuImage {
-    /// GPU milliseconds of the whole frame.
-    pub fn gpu_ms(&self) -> f64 {
-        self.stage_ms.iter().sum()
-    }
-}
-
-/// The frame's parameters; `tf_count` is the length of `tf`'s GPU table.
-fn params(
-    setup: &SplatSetup,
-    kernels: &GpuKernels,
-    tf: &TransferFunction,
-    tf_count: u32,
-) -> SplatParams {
-    let v = |d: glam::DVec3| [d.x as f32, d.y as f32, d.z as f32, 0.0];
-    let l = &setup.lighting;
-    let bg = setup.background;
-    SplatParams {
-        camera: setup.camera.gpu_block(&setup.basis, setup.eye),
-        box_min: v(setup.box_lo),
-        box_max: v(setup.box_hi),
-        background: [bg[0] as f32, bg[1] as f32, bg[2] as f32, 0.0],
-        lighting: [
-            l.ambient as f32,
-            l.diffuse as f32,
-            l.specular as f32,
-            l.shininess as f32,
-        ],
-        near: setup.near as f32,
-        focal: setup.focal as f32,
-        centre_x: setup.centre[0] as f32,
-        centre_y: setup.centre[1] as f32,
-        slab0_world: setup.slab0 as f32,
-        slab_world: setup.slab_world as f32,
-        early_termination: setup.early_termination as f32,
-        zero_extinction: tf.lookup(0.0).1 as f32,
-        cutoff: setup.settings.cutoff as f32,
-        lowpass: setup.settings.lowpass as f32,
-        sigma: setup.sigma as f32,
-        lateral_x: setup.lateral[0].min(f64::from(f32::MAX)) as f32,
-        lateral_y: setup.lateral[1].min(f64::from(f32::MAX)) as f32,
-        tf_count,
-        iso_count: setup.isosurfaces.len() as u32,
-        slabs: setup.slabs,
-        tiles_x: setup.tiles().0,
-        kernel_count: kernels.count,
-        _pad: [0; 2],
-    }
-}
-
-fn sum_ms(timings: &[crate::vk::DispatchTiming], stage_ms: &mut [f64; 4]) {
-    for t in timings {
-        let i = match t.label.as_str() {
-            "splat_project" => 0,
-            "splat_scan" | "splat_bin" => 1,
-            "splat_raster" => 2,
-            _ => 3,
-        };
-        stage_ms[i] += t.gpu_ms.unwrap_or(0.0);
-    }
-}
-
-/// What the caller of [`splat_frame`] lets a frame do and hears from it.
-pub struct FrameControl<'a> {
-    /// With a budget, a frame whose binned entries plan more evaluations
-    /// ([`SplatSetup::check_budget`]) ends after the projection, before any accumulation.
-    pub budget: Option<f64>,
-    /// Once set, the frame ends after the submission in flight with
-    /// [`RenderError::Interrupted`]: checked after the projection and after each submission of
-    /// the second pass.
-    pub stop: Option<&'a AtomicBool>,
-    /// The fraction of the frame's submissions done, after each.
-    pub progress: &'a mut dyn FnMut(f64),
-}
-
-impl FrameControl<'_> {
-    fn check_stop(&self) -> Result<(), RenderError> {
-        match self.stop {
-            Some(s) if s.load(Ordering::Relaxed) => Err(RenderError::Interrupted),
-            _ => Ok(()),
-        }
-    }
-}
-
-/// Renders one frame; `targets` must fit the setup (see [`SplatTargets::fits`]); `hull` are the
-/// field's hull bindings (`GpuField::hull_bindings`), read by post-shaded frames over a hull.
-#[allow(clippy::too_many_arguments)]
-pub fn splat_frame(
-    ctx: &Context,
-    pipelines: &SplatPipelines,
-    kernels: &GpuKernels,
-    targets: &mut SplatTargets,
-    setup: &SplatSetup,
-    tf: &TransferFunction,
-    hull: &[(u32, &Buffer)],
-    control: FrameControl<'_>,
-) -> Result<SplatGpuImage, RenderError> {
-    if !targets.fits(setup, kernels) {
-        return Err(VkError::Usage("splat frame buffers do not fit the setup".into()).into());
-    }
-    let gpu_tf = tf.to_gpu();
-    let p = params(setup, kernels, tf, gpu_tf.len() as u32);
-    let params_buf = Buffer::from_slice(ctx, "splat params", &params_copies(p))?;
-    let tf_buf = Buffer::from_slice(ctx, "transfer function", &gpu_tf)?;
-    let isos = crate::view::shading::iso_buffer_data(&setup.isosurfaces);
-    let iso_buf = Buffer::from_slice(ctx, "isosurfaces", &isos)?;
-    let mut stage_ms = [0.0; 4];
-    let groups = kernels.count.div_ceil(GROUP).clamp(1, 65_535);
-    let buckets = setup.buckets();
-    let blocks = buckets.div_ceil(u64::from(SCAN_BLOCK)) as u32;
-    let scan_push = ScanPush {
-        buckets: buckets as u32,
-        blocks,
-        _pad: [0; 2],
-    };
-    let (tiles_x, tiles_y) = setup.tiles();
-
-    // Pass 1: project and count, then the scan of the bucket counts.
-    let t = &*targets;
-    let mut project_bind = vec![
-        (binding::PARAMS, &params_buf),
-        (binding::SPLAT_KERNELS, &kernels.buffer),
-        (binding::SPLATS, &t.splats),
-        (binding::SPLAT_WORDS, &t.splats),
-        (binding::BUCKET_COUNTS, &t.counts),
-        (binding::SPLAT_STATS, &t.stats),
-    ];
-    if setup.shading == Shading::Pre {
-        project_bind.push((binding::TRANSFER, &tf_buf));
-    }
-    if pipelines.variant.surfaces {
-        project_bind.push((binding::ISO, &iso_buf));
-    }
-    let group = BindGroup::new(ctx, &pipelines.project, &project_bind)?;
-    // Each pass binds a prefix of the same buffers (SCAN_BINDINGS).
-    let scan_buffers = [&t.counts, &t.sums, &t.offsets, &t.cursors];
-    let scan_bind: Vec<(u32, &Buffer)> = SCAN_BINDINGS.into_iter().zip(scan_buffers).collect();
-    let scan = [
-        BindGroup::new(ctx, &pipelines.scan[0], &scan_bind[..2])?,
-        BindGroup::new(ctx, &pipelines.scan[1], &scan_bind[..3])?,
-        BindGroup::new(ctx, &pipelines.scan[2], &scan_bind)?,
-    ];
-    let segments = match &pipelines.segments {
-        Some(p) => {
-            let mut b = vec![
-                (binding::PARAMS, &params_buf),
-                (binding::PIXEL_SEGMENTS, t.segments()?),
-                (binding::SPLAT_STATS, &t.stats),
-            ];
-            b.extend(hull.iter().copied());
-            Some((p, BindGroup::new(ctx, p, &b)?))
-        }
-        None => None,
-    };
-    let pixel_groups = [
-        setup.camera.width.div_ceil(8),
-        setup.camera.height.div_ceil(8),
-        1,
-    ];
-    let timings = ctx.submit(|rec| {
-        rec.fill(&t.counts, 0);
-        rec.fill(&t.stats, 0);
-        if let Some((p, g)) = &segments {
-            rec.dispatch(p, g, &[], pixel_groups, "splat_segments")?;
-        }
-        rec.dispatch(
-            &pipelines.project,
-            &group,
-            &[],
-            [groups, 1, 1],
-            "splat_project",
-        )?;
-        let push = bytemuck::bytes_of(&scan_push);
-        rec.dispatch(
-            &pipelines.scan[0],
-            &scan[0],
-            push,
-            [blocks, 1, 1],
-            "splat_scan",
-        )?;
-        rec.dispatch(&pipelines.scan[1], &scan[1], push, [1, 1, 1], "splat_scan")?;
-        rec.dispatch(
-            &pipelines.scan[2],
-            &scan[2],
-            push,
-            [blocks, 1, 1],
-            "splat_scan",
-        )
-    })?;
-    drop((group, scan, segments));
-    sum_ms(&timings, &mut stage_ms);
-    let band = tiles_y.div_ceil(RASTER_BANDS).max(1);
-    let submissions_planned = 1 + tiles_y.div_ceil(band);
-    (control.progress)(1.0 / f64::from(submissions_planned));
-    let stats: Vec<u32> = t.stats.read(ctx)?;
-    if let Some(&n) = stats
-        .get(5)
-        .filter(|&&n| n > 0 && pipelines.segments.is_some())
-    {
-        return Err(VkError::Usage(format!(
-            "splatting: the rays of {n} pixels cross the domain's boundary into more than {} \
-             inside segments; post-shaded splatting keeps {0} per pixel: ray cast this mesh",
-            super::PIXEL_SEGMENTS
-        ))
-        .into());
-    }
-    control.check_stop()?;
-    let oversized = stats.get(8).copied().unwrap_or(0);
-    if oversized > 0 {
-        return Err(VkError::Usage(format!(
-            "splatting: {oversized} kernels cover more than {} tile × sheet entries each (one \
-             invocation writes them); raise splat.slab or splat.tile, or lower the image size",
-            super::MAX_KERNEL_ENTRIES
-        ))
-        .into());
-    }
-    // The one number the host needs: how many entries the sort will write.
-    let total: Vec<u32> = t.offsets.read_range(ctx, buckets as usize, 1)?;
-    let total = u64::from(total.first().copied().unwrap_or(0));
-    if let Some(budget) = control.budget {
-        setup.check_budget(total, budget)?;
-    }
-    // One rg32ui texel per entry: the splat and the sheet.
-    let limit = ctx
-        .info()
-        .max_texel_buffer_elements
-        .min(ctx.info().max_heap_bytes / 8);
-    if total > limit {
-        return Err(VkError::Usage(format!(
-            "splatting: {total} binned footprints exceed the entry list's limit of {limit} \
-             (maxTexelBufferElements); raise splat.slab or splat.tile, or lower the image size"
-        ))
-        .into());
-    }
-    let needed = 8 * total.max(1);
-    if targets.list.as_ref().is_none_or(|l| l.size() < needed) {
-        targets.list = None;
-        let grown = (needed + needed / 2).min(limit * 8).max(needed);
-        targets.list = Some(Buffer::new(
-            ctx,
-            "splat entries",
-            grown,
-            BufferUsage::Texel,
-        )?);
-    }
-    let t = &*targets;
-    let Some(list) = t.list.as_ref() else {
-        return Err(VkError::Usage("splat entry list missing".into()).into());
-    };
-
-    // Pass 2: the scatter, then the tiles in bands of rows.
-    let bin = BindGroup::new(
-        ctx,
-        &pipelines.bin,
-        &[
-            (binding::PARAMS, &params_buf),
-            (binding::SPLAT_WORDS, &t.splats),
-            (binding::BUCKET_CURSORS, &t.cursors),
-            (binding::SPLAT_LIST, list),
-        ],
-    )?;
-    let mut raster_bind = vec![
-        (binding::PARAMS, &params_buf),
-        (binding::SPLATS, &t.splats),
-        (binding::SPLAT_WORDS, &t.splats),
-        (binding::OFFSET_TEXELS, &t.offsets),
-        (binding::SPLAT_LIST, list),
-        (binding::IMAGE, &t.image),
-        (binding::SPLAT_STATS, &t.stats),
-    ];
-    if setup.shading == Shading::Post {
-        raster_bind.push((binding::TRANSFER, &tf_buf));
-        raster_bind.push((binding::TRANSFER_TEXELS, &tf_buf));
-        if !setup.isosurfaces.is_empty() {
-            raster_bind.push((binding::ISO, &iso_buf));
-        }
-    }
-    if pipelines.variant.hull {
-        raster_bind.push((binding::PIXEL_SEGMENTS, t.segments()?));
-    }
-    let raster = BindGroup::new(ctx, &pipelines.raster, &raster_bind)?;
-    let mut submissions = 1;
-    let mut row = 0;
-    while row < tiles_y {
-        let rows = band.min(tiles_y - row);
-        let first = row == 0;
-        let push = RasterPush {
-            tile_row: row,
-            _pad: [0; 3],
-        };
-        let timings = ctx.submit(|rec| {
-            if first {
-                rec.dispatch(&pipelines.bin, &bin, &[], [groups, 1, 1], "splat_bin")?;
-            }
-            rec.dispatch(
-                &pipelines.raster,
-                &raster,
-                bytemuck::bytes_of(&push),
-                [tiles_x, rows, 1],
-                "splat_raster",
-            )
-        })?;
-        sum_ms(&timings, &mut stage_ms);
-        submissions += 1;
-        row += rows;
-        (control.progress)(f64::from(submissions) / f64::from(submissions_planned));
-        control.check_stop()?;
-    }
-    drop((bin, raster));
-    let image: Vec<[f32; 4]> = t.image.read(ctx)?;
-    let stats: Vec<u32> = t.stats.read(ctx)?;
-    let bg = setup.background.map(|c| c as f32);
-    let n = (setup.camera.width * setup.camera.height) as usize;
-    let pixels = image
-        .iter()
-        .take(n)
-        .map(|a| {
-            let tr = 1.0 - a[3];
-            [
-                a[0] + tr * bg[0],
-                a[1] + tr * bg[1],
-                a[2] + tr * bg[2],
-                a[3],
-            ]
-        })
-        .collect();
-    let s = |i: usize| u64::from(stats.get(i).copied().unwrap_or(0));
-    // splat_raster counts entries once per invocation of the tile's workgroup.
-    let per_group = |n: u64| n / u64::from(pipelines.variant.group);
-    Ok(SplatGpuImage {
-        pixels,
-        counts: SplatCounts {
-            projected: s(0),
-            culled_near: s(1),
-            culled_outside: s(2),
-            culled_degenerate: s(3),
-            culled_empty: s(4),
-            entries: total,
-            skipped_occluded: per_group(s(6) | s(13) << 32),
-            accumulated: per_group(s(7) | s(14) << 32),
-            oversized: s(8),
-            evaluated: s(9) | s(11) << 32,
-            contributions: s(10) | s(12) << 32,
-        },
-        stage_ms,
-        submissions,
-        variant: pipelines.variant.name(),
-    })
 }

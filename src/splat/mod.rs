@@ -30,6 +30,7 @@
 //!   entry and shared out to the sheets ([`SheetShare`]: a Hermite–Simpson quadrature by a
 //!   product recurrence where the sheets are thin for every kernel, else the erfc at each
 //!   sheet boundary).
+pub mod frame;
 pub mod gpu;
 pub mod project;
 pub mod raster;

@@ -84,3 +84,16 @@ pub fn iso_buffer_data(isosurfaces: &[Isosurface]) -> Vec<IsoSurface> {
     }
     isos
 }
+
+/// A splatted pixel (premultiplied colour C, opacity α) over the background: (C + (1 − α)·bg,
+/// α), in f32 without a fused multiply-add, as `render()` returns it and `target_pack` (twin:
+/// `renderer::target`) writes it with `push.composite` = 1.
+pub fn composite_background(p: [f32; 4], background: [f32; 3]) -> [f32; 4] {
+    let t = 1.0 - p[3];
+    [
+        p[0] + t * background[0],
+        p[1] + t * background[1],
+        p[2] + t * background[2],
+        p[3],
+    ]
+}

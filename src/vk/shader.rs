@@ -54,6 +54,7 @@ static SOURCES: &[(&str, &str)] = embed![
     "splat/splat_bin.comp",
     "splat/splat_raster.comp",
     "splat/splat_segments.comp",
+    "splat/splat_plan.comp",
     "probe/probe_fma.comp",
     "probe/probe_memory.comp",
     "probe/layout_probe.comp",

@@ -160,7 +160,7 @@ pub fn run_render(
             "gpu_ms": match &image.splat {
                 None => serde_json::json!({ "raycast": first.gpu_ms }),
                 Some(r) => serde_json::Value::Object(
-                    vmls::splat::gpu::STAGES
+                    vmls::splat::frame::STAGES
                         .iter()
                         .zip(r.stage_ms)
                         .map(|(n, ms)| (n.to_string(), ms.into()))

@@ -152,7 +152,7 @@ enum VmlsStatus vmls_renderer_create(const struct VmlsContext *ctx,
 // `renderer` and `scene` are live objects of this API, not used by another thread.
 enum VmlsStatus vmls_renderer_prepare(struct VmlsRenderer *renderer, const struct VmlsScene *scene);
 
-// Records one ray-cast frame of the scene's current camera into `cmd` (recording, outside a
+// Records one frame (ray cast or splatted) of the scene's current camera into `cmd` (recording, outside a
 // render pass, of the context's queue family) and the write of its pixels into `target`;
 // `*out` is the frame to retire after the submission completes. Nothing is submitted.
 //

@@ -1,6 +1,6 @@
 //! The C ABI of vmls (issue 28 §2): a context from the application's raw Vulkan handles, a
 //! scene (a scene file and `key=value` overrides, which also name a dataset file), a renderer
-//! of the scene's field, and ray-cast frames recorded into the application's command buffers
+//! of the scene's field, and frames (ray cast or splatted) recorded into the application's command buffers
 //! and retired after the application's fence. The header `include/vmls.h` is generated from
 //! this file by cbindgen at every build.
 //!
@@ -471,7 +471,7 @@ unsafe fn target_of(t: &VmlsTarget) -> Result<Target, Failure> {
     }
 }
 
-/// Records one ray-cast frame of the scene's current camera into `cmd` (recording, outside a
+/// Records one frame (ray cast or splatted) of the scene's current camera into `cmd` (recording, outside a
 /// render pass, of the context's queue family) and the write of its pixels into `target`;
 /// `*out` is the frame to retire after the submission completes. Nothing is submitted.
 ///

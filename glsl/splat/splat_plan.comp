@@ -1,0 +1,33 @@
+#version 450
+// Stage splat_plan (twin: plan_groups in src/splat/frame.rs): in a recorded frame, the one
+// decision render() makes on the host between the projection and the accumulation. From the
+// scan's total of binned entries and the projection's counters it writes the workgroup counts
+// of splat_bin and of each band of push.band_rows tile rows of splat_raster, which all
+// dispatch indirectly: the whole frame where its
+// entries fit the list, the work budget allows them and no kernel or pixel overflowed; none
+// (x = 0) otherwise, so that nothing writes past the list, and Renderer::retire reads the same
+// numbers back and names what stopped the frame.
+
+layout(local_size_x = 1) in;
+
+#include "common/types.glsl"
+
+layout(std430, binding = BINDING_BUCKET_OFFSETS) readonly buffer OffsetBuf { uint offsets[]; };
+layout(std430, binding = BINDING_SPLAT_STATS) readonly buffer StatsBuf { uint stats[]; };
+layout(std430, binding = BINDING_DISPATCH_ARGS) writeonly buffer ArgsBuf { uvec4 args[]; };
+layout(push_constant) uniform Push { PlanPush push; };
+
+void main() {
+    uint total = offsets[push.buckets];
+    bool run = total <= push.capacity && total <= push.max_entries
+               && stats[SPLAT_STAT_OVERSIZED] == 0u
+               && (push.segments == 0u || stats[SPLAT_STAT_SEGMENT_OVERFLOW] == 0u);
+    args[0] = run ? uvec4(push.bin_groups, 1u, 1u, 0u) : uvec4(0u, 1u, 1u, 0u);
+    uint rows = max(push.band_rows, 1u);
+    uint band = 1u;
+    for (uint row = 0u; row < push.tiles_y; row += rows) {
+        uint n = min(rows, push.tiles_y - row);
+        args[band] = run ? uvec4(push.tiles_x, n, 1u, 0u) : uvec4(0u, 1u, 1u, 0u);
+        band += 1u;
+    }
+}

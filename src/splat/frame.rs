@@ -1,0 +1,832 @@
+//! One splatting frame's commands, for [`splat_frame`] (`Renderer::render`) and for a frame
+//! recorded into an application's command buffer ([`SplatRecording`], `Renderer::record`).
+//!
+//! Both run the same stages on the same buffers: `splat_segments` (post-shaded over a hull),
+//! `splat_project`, the three passes of `splat_scan`, `splat_bin` and `splat_raster`. They
+//! differ in how the accumulation learns the projection's outcome:
+//! - [`splat_frame`] is a few submissions. The first runs the projection and the scan; the host
+//!   reads the counters and one number, the total of entries, to check the work budget and size
+//!   the entry list ([`check_projection`]). Then `splat_raster` runs in bands of
+//!   [`RASTER_BAND_ROWS`] tile rows, one submission each, so that every band is timed and a
+//!   stop request ([`FrameControl::stop`]) ends the frame within one band.
+//! - A recorded frame has no host between its commands: its entry list is sized before it is
+//!   recorded (from an earlier count), and `splat_plan` reads the total and the counters on the
+//!   GPU and dispatches `splat_bin` and each band of `splat_raster` indirectly, or none of them
+//!   where the entries do not fit or a check fails ([`plan_groups`], its twin).
+//!   `Renderer::retire` reads the same numbers and names what stopped the frame.
+
+use super::gpu::{GROUP, GpuKernels, SCAN_BINDINGS, SplatPipelines, SplatTargets};
+use super::{Shading, SplatCounts, SplatSetup};
+use crate::field::RenderError;
+use crate::gpu_types::{
+    PlanPush, RasterPush, ScanPush, SplatParams, binding, params_copies, splat_stat,
+};
+use crate::view::transfer::TransferFunction;
+use crate::vk::{BindGroup, Buffer, BufferUsage, Context, Recorder, VkError};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// Tile rows per dispatch of `splat_raster`. Small bands are faster on lavapipe: at 512²
+/// (64 tile rows) two rows a band took 6–9% less GPU and wall time than eight (BENCHMARKS.md,
+/// "Splatting frames recorded"), at 256² 5% less than four. In [`splat_frame`] each band is
+/// also one submission, so that Ctrl-C and the progress bar act within a fraction of a frame.
+pub const RASTER_BAND_ROWS: u32 = 2;
+
+/// A splatted frame as the GPU produced it.
+#[derive(Debug, Clone)]
+pub struct SplatGpuImage {
+    /// (C + T·background, 1 − T) per pixel, row 0 at the top.
+    pub pixels: Vec<[f32; 4]>,
+    pub counts: SplatCounts,
+    /// GPU milliseconds of `STAGES`.
+    pub stage_ms: [f64; 4],
+    pub submissions: u32,
+    pub variant: String,
+}
+
+/// The names of [`SplatGpuImage::stage_ms`]: `splat_sort` is `splat_scan` and `splat_bin`.
+pub const STAGES: [&str; 4] = [
+    "splat_project",
+    "splat_sort",
+    "splat_raster",
+    "splat_segments",
+];
+
+impl SplatGpuImage {
+    /// GPU milliseconds of the whole frame.
+    pub fn gpu_ms(&self) -> f64 {
+        self.stage_ms.iter().sum()
+    }
+}
+
+/// The frame's parameters; `tf_count` is the length of `tf`'s GPU table.
+pub(super) fn params(
+    setup: &SplatSetup,
+    kernels: &GpuKernels,
+    tf: &TransferFunction,
+    tf_count: u32,
+) -> SplatParams {
+    let v = |d: glam::DVec3| [d.x as f32, d.y as f32, d.z as f32, 0.0];
+    let l = &setup.lighting;
+    let bg = setup.background;
+    SplatParams {
+        camera: setup.camera.gpu_block(&setup.basis, setup.eye),
+        box_min: v(setup.box_lo),
+        box_max: v(setup.box_hi),
+        background: [bg[0] as f32, bg[1] as f32, bg[2] as f32, 0.0],
+        lighting: [
+            l.ambient as f32,
+            l.diffuse as f32,
+            l.specular as f32,
+            l.shininess as f32,
+        ],
+        near: setup.near as f32,
+        focal: setup.focal as f32,
+        centre_x: setup.centre[0] as f32,
+        centre_y: setup.centre[1] as f32,
+        slab0_world: setup.slab0 as f32,
+        slab_world: setup.slab_world as f32,
+        early_termination: setup.early_termination as f32,
+        zero_extinction: tf.lookup(0.0).1 as f32,
+        cutoff: setup.settings.cutoff as f32,
+        lowpass: setup.settings.lowpass as f32,
+        sigma: setup.sigma as f32,
+        lateral_x: setup.lateral[0].min(f64::from(f32::MAX)) as f32,
+        lateral_y: setup.lateral[1].min(f64::from(f32::MAX)) as f32,
+        tf_count,
+        iso_count: setup.isosurfaces.len() as u32,
+        slabs: setup.slabs,
+        tiles_x: setup.tiles().0,
+        kernel_count: kernels.count,
+        _pad: [0; 2],
+    }
+}
+
+fn sum_ms(timings: &[crate::vk::DispatchTiming], stage_ms: &mut [f64; 4]) {
+    for t in timings {
+        let i = match t.label.as_str() {
+            "splat_project" => 0,
+            "splat_scan" | "splat_bin" => 1,
+            "splat_raster" => 2,
+            _ => 3,
+        };
+        stage_ms[i] += t.gpu_ms.unwrap_or(0.0);
+    }
+}
+
+/// What the caller of [`splat_frame`] lets a frame do and hears from it.
+pub struct FrameControl<'a> {
+    /// With a budget, a frame whose binned entries plan more evaluations
+    /// ([`SplatSetup::check_budget`]) ends after the projection, before any accumulation.
+    pub budget: Option<f64>,
+    /// Once set, the frame ends after the submission in flight with
+    /// [`RenderError::Interrupted`]: checked after the projection and after each submission of
+    /// the second pass.
+    pub stop: Option<&'a AtomicBool>,
+    /// The fraction of the frame's submissions done, after each.
+    pub progress: &'a mut dyn FnMut(f64),
+}
+
+impl FrameControl<'_> {
+    fn check_stop(&self) -> Result<(), RenderError> {
+        match self.stop {
+            Some(s) if s.load(Ordering::Relaxed) => Err(RenderError::Interrupted),
+            _ => Ok(()),
+        }
+    }
+}
+
+/// The frame's constants as the kernels read them: parameters, transfer function,
+/// isosurfaces.
+pub struct ConstantData {
+    pub params: Vec<u8>,
+    pub tf: Vec<u8>,
+    pub iso: Vec<u8>,
+}
+
+impl ConstantData {
+    /// The constants of a setup with `tf` over `kernels`.
+    pub fn new(setup: &SplatSetup, kernels: &GpuKernels, tf: &TransferFunction) -> Self {
+        let gpu_tf = tf.to_gpu();
+        let p = params(setup, kernels, tf, gpu_tf.len() as u32);
+        let isos = crate::view::shading::iso_buffer_data(&setup.isosurfaces);
+        Self {
+            params: bytemuck::cast_slice(&params_copies(p)).to_vec(),
+            tf: bytemuck::cast_slice(&gpu_tf).to_vec(),
+            iso: bytemuck::cast_slice(&isos).to_vec(),
+        }
+    }
+}
+
+/// The buffers of a frame's constants.
+pub struct SplatConstants {
+    pub params: Buffer,
+    pub tf: Buffer,
+    pub iso: Buffer,
+}
+
+impl SplatConstants {
+    /// Buffers with room for `data` (written later, by a recorded frame's commands).
+    pub fn new(ctx: &Context, data: &ConstantData) -> Result<Self, VkError> {
+        let storage = |name: &str, bytes: &[u8]| {
+            Buffer::new(
+                ctx,
+                name,
+                (bytes.len() as u64).max(16),
+                BufferUsage::Storage,
+            )
+        };
+        Ok(Self {
+            params: storage("splat params", &data.params)?,
+            tf: storage("transfer function", &data.tf)?,
+            iso: storage("isosurfaces", &data.iso)?,
+        })
+    }
+
+    /// Buffers holding `data`, written from the host.
+    pub fn upload(ctx: &Context, data: &ConstantData) -> Result<Self, VkError> {
+        let c = Self::new(ctx, data)?;
+        c.params.write(ctx, &data.params)?;
+        c.tf.write(ctx, &data.tf)?;
+        c.iso.write(ctx, &data.iso)?;
+        Ok(c)
+    }
+
+    /// Whether `data` fits these buffers.
+    pub fn fits(&self, data: &ConstantData) -> bool {
+        self.params.size() >= data.params.len() as u64
+            && self.tf.size() >= data.tf.len() as u64
+            && self.iso.size() >= data.iso.len() as u64
+    }
+
+    /// Writes `data` into these buffers as commands of `rec`.
+    pub fn record_update(
+        &self,
+        rec: &mut Recorder<'_>,
+        data: &ConstantData,
+    ) -> Result<(), VkError> {
+        rec.update(&self.params, &data.params)?;
+        rec.update(&self.tf, &data.tf)?;
+        rec.update(&self.iso, &data.iso)
+    }
+}
+
+/// The entries a frame's list may hold on this device: one `rg32ui` texel each, within
+/// `maxTexelBufferElements` and the largest heap.
+pub fn entry_limit(ctx: &Context) -> u64 {
+    ctx.info()
+        .max_texel_buffer_elements
+        .min(ctx.info().max_heap_bytes / 8)
+}
+
+/// The bind groups of the projection: `splat_segments` (post-shaded over a hull),
+/// `splat_project` and the passes of `splat_scan`.
+struct ProjectionGroups<'a> {
+    segments: Option<BindGroup<'a>>,
+    project: BindGroup<'a>,
+    scan: [BindGroup<'a>; 3],
+}
+
+impl<'a> ProjectionGroups<'a> {
+    fn new(
+        ctx: &Context,
+        pipelines: &SplatPipelines,
+        kernels: &'a GpuKernels,
+        t: &'a SplatTargets,
+        constants: &'a SplatConstants,
+        hull: &[(u32, &'a Buffer)],
+    ) -> Result<Self, VkError> {
+        let mut project_bind = vec![
+            (binding::PARAMS, &constants.params),
+            (binding::SPLAT_KERNELS, &kernels.buffer),
+            (binding::SPLATS, &t.splats),
+            (binding::SPLAT_WORDS, &t.splats),
+            (binding::BUCKET_COUNTS, &t.counts),
+            (binding::SPLAT_STATS, &t.stats),
+        ];
+        if pipelines.variant().shading == Shading::Pre {
+            project_bind.push((binding::TRANSFER, &constants.tf));
+        }
+        if pipelines.variant().surfaces {
+            project_bind.push((binding::ISO, &constants.iso));
+        }
+        // Each pass binds a prefix of the same buffers (SCAN_BINDINGS).
+        let scan_buffers = [&t.counts, &t.sums, &t.offsets, &t.cursors];
+        let scan_bind: Vec<(u32, &Buffer)> = SCAN_BINDINGS.into_iter().zip(scan_buffers).collect();
+        let segments = match &pipelines.segments {
+            Some(p) => {
+                let mut b = vec![
+                    (binding::PARAMS, &constants.params),
+                    (binding::PIXEL_SEGMENTS, t.segments()?),
+                    (binding::SPLAT_STATS, &t.stats),
+                ];
+                b.extend(hull.iter().copied());
+                Some(BindGroup::new(ctx, p, &b)?)
+            }
+            None => None,
+        };
+        Ok(Self {
+            segments,
+            project: BindGroup::new(ctx, &pipelines.project, &project_bind)?,
+            scan: [
+                BindGroup::new(ctx, &pipelines.scan[0], &scan_bind[..2])?,
+                BindGroup::new(ctx, &pipelines.scan[1], &scan_bind[..3])?,
+                BindGroup::new(ctx, &pipelines.scan[2], &scan_bind)?,
+            ],
+        })
+    }
+
+    /// Records the counters' reset, then the projection and the scan.
+    fn record(
+        &self,
+        rec: &mut Recorder<'_>,
+        pipelines: &SplatPipelines,
+        t: &SplatTargets,
+        setup: &SplatSetup,
+        kernels: &GpuKernels,
+    ) -> Result<(), VkError> {
+        let buckets = setup.buckets();
+        let blocks = buckets.div_ceil(u64::from(super::SCAN_BLOCK)) as u32;
+        let scan_push = ScanPush {
+            buckets: buckets as u32,
+            blocks,
+            _pad: [0; 2],
+        };
+        rec.fill(&t.counts, 0);
+        rec.fill(&t.stats, 0);
+        if let (Some(p), Some(g)) = (&pipelines.segments, &self.segments) {
+            rec.dispatch(p, g, &[], pixel_groups(setup), "splat_segments")?;
+        }
+        rec.dispatch(
+            &pipelines.project,
+            &self.project,
+            &[],
+            [kernel_groups(kernels), 1, 1],
+            "splat_project",
+        )?;
+        let push = bytemuck::bytes_of(&scan_push);
+        let passes: [[u32; 3]; 3] = [[blocks, 1, 1], [1, 1, 1], [blocks, 1, 1]];
+        for ((p, g), groups) in pipelines.scan.iter().zip(&self.scan).zip(passes) {
+            rec.dispatch(p, g, push, groups, "splat_scan")?;
+        }
+        Ok(())
+    }
+
+    fn detach(self) -> Vec<BindGroup<'static>> {
+        let mut v: Vec<BindGroup<'static>> =
+            self.segments.into_iter().map(BindGroup::detach).collect();
+        v.push(self.project.detach());
+        v.extend(self.scan.into_iter().map(BindGroup::detach));
+        v
+    }
+}
+
+/// One workgroup of 8 × 8 per pixel block (`splat_segments`).
+fn pixel_groups(setup: &SplatSetup) -> [u32; 3] {
+    [
+        setup.camera.width.div_ceil(8),
+        setup.camera.height.div_ceil(8),
+        1,
+    ]
+}
+
+/// Workgroups of the per-kernel stages (`splat_project`, `splat_bin`: each loops over the
+/// kernels by the grid's stride).
+fn kernel_groups(kernels: &GpuKernels) -> u32 {
+    kernels.count.div_ceil(GROUP).clamp(1, 65_535)
+}
+
+/// The bind groups of the accumulation: `splat_bin` and `splat_raster`.
+struct AccumulationGroups<'a> {
+    bin: BindGroup<'a>,
+    raster: BindGroup<'a>,
+}
+
+impl<'a> AccumulationGroups<'a> {
+    fn new(
+        ctx: &Context,
+        pipelines: &SplatPipelines,
+        t: &'a SplatTargets,
+        constants: &'a SplatConstants,
+        setup: &SplatSetup,
+    ) -> Result<Self, VkError> {
+        let Some(list) = t.list.as_ref() else {
+            return Err(VkError::Usage("splat entry list missing".into()));
+        };
+        let bin = BindGroup::new(
+            ctx,
+            &pipelines.bin,
+            &[
+                (binding::PARAMS, &constants.params),
+                (binding::SPLAT_WORDS, &t.splats),
+                (binding::BUCKET_CURSORS, &t.cursors),
+                (binding::SPLAT_LIST, list),
+            ],
+        )?;
+        let mut raster_bind = vec![
+            (binding::PARAMS, &constants.params),
+            (binding::SPLATS, &t.splats),
+            (binding::SPLAT_WORDS, &t.splats),
+            (binding::OFFSET_TEXELS, &t.offsets),
+            (binding::SPLAT_LIST, list),
+            (binding::IMAGE, &t.image),
+            (binding::SPLAT_STATS, &t.stats),
+        ];
+        if setup.shading == Shading::Post {
+            raster_bind.push((binding::TRANSFER, &constants.tf));
+            raster_bind.push((binding::TRANSFER_TEXELS, &constants.tf));
+            if !setup.isosurfaces.is_empty() {
+                raster_bind.push((binding::ISO, &constants.iso));
+            }
+        }
+        if pipelines.variant().hull {
+            raster_bind.push((binding::PIXEL_SEGMENTS, t.segments()?));
+        }
+        Ok(Self {
+            bin,
+            raster: BindGroup::new(ctx, &pipelines.raster, &raster_bind)?,
+        })
+    }
+}
+
+/// Refuses a frame whose projection left what the accumulation cannot take, as
+/// [`splat_frame`] finds it after its first submission and `Renderer::retire` after a recorded
+/// frame: a pixel with more inside segments than kept (post-shaded over a hull), a kernel with
+/// more entries than one invocation writes, more entries than the work `budget` allows or than
+/// the list can hold on this device (`limit`).
+pub fn check_projection(
+    setup: &SplatSetup,
+    stats: &[u32],
+    total: u64,
+    budget: Option<f64>,
+    limit: u64,
+) -> Result<(), RenderError> {
+    let stat = |i: usize| stats.get(i).copied().unwrap_or(0);
+    let hull = setup.hull && setup.shading == Shading::Post;
+    let n = stat(splat_stat::SEGMENT_OVERFLOW);
+    if hull && n > 0 {
+        return Err(VkError::Usage(format!(
+            "splatting: the rays of {n} pixels cross the domain's boundary into more than {} \
+             inside segments; post-shaded splatting keeps {0} per pixel: ray cast this mesh",
+            super::PIXEL_SEGMENTS
+        ))
+        .into());
+    }
+    let oversized = stat(splat_stat::OVERSIZED);
+    if oversized > 0 {
+        return Err(VkError::Usage(format!(
+            "splatting: {oversized} kernels cover more than {} tile × sheet entries each (one \
+             invocation writes them); raise splat.slab or splat.tile, or lower the image size",
+            super::MAX_KERNEL_ENTRIES
+        ))
+        .into());
+    }
+    if let Some(budget) = budget {
+        setup.check_budget(total, budget)?;
+    }
+    if total > limit {
+        return Err(VkError::Usage(format!(
+            "splatting: {total} binned footprints exceed the entry list's limit of {limit} \
+             (maxTexelBufferElements); raise splat.slab or splat.tile, or lower the image size"
+        ))
+        .into());
+    }
+    Ok(())
+}
+
+/// Stage `splat_plan` (GLSL: `glsl/splat/splat_plan.comp`): the workgroup counts of
+/// `splat_bin`, then of each band of `push.band_rows` tile rows of `splat_raster`, in a recorded
+/// frame, from the scan's `total` and the projection's counters `stats`: the whole frame, or
+/// none (x = 0) where the entries exceed the list or the budget, or a kernel or pixel
+/// overflowed.
+pub fn plan_groups(push: &PlanPush, total: u32, stats: &[u32]) -> Vec<[u32; 3]> {
+    let stat = |i: usize| stats.get(i).copied().unwrap_or(0);
+    let run = total <= push.capacity
+        && total <= push.max_entries
+        && stat(splat_stat::OVERSIZED) == 0
+        && (push.segments == 0 || stat(splat_stat::SEGMENT_OVERFLOW) == 0);
+    let rows = push.band_rows.max(1);
+    let mut groups = vec![if run {
+        [push.bin_groups, 1, 1]
+    } else {
+        [0, 1, 1]
+    }];
+    let mut row = 0;
+    while row < push.tiles_y {
+        let n = rows.min(push.tiles_y - row);
+        groups.push(if run { [push.tiles_x, n, 1] } else { [0, 1, 1] });
+        row += n;
+    }
+    groups
+}
+
+/// Bytes of a recorded frame's indirect arguments: `splat_bin`'s, then one per band.
+pub fn plan_args_bytes(setup: &SplatSetup) -> u64 {
+    16 * (1 + u64::from(setup.tiles().1.div_ceil(RASTER_BAND_ROWS)))
+}
+
+/// The counters of a finished frame; `total` is the scan's total of entries.
+fn frame_counts(stats: &[u32], total: u64, invocations: u32) -> SplatCounts {
+    let s = |i: usize| u64::from(stats.get(i).copied().unwrap_or(0));
+    // splat_raster counts entries once per invocation of the tile's workgroup.
+    let per_group = |n: u64| n / u64::from(invocations.max(1));
+    SplatCounts {
+        projected: s(0),
+        culled_near: s(1),
+        culled_outside: s(2),
+        culled_degenerate: s(3),
+        culled_empty: s(4),
+        entries: total,
+        skipped_occluded: per_group(s(6) | s(13) << 32),
+        accumulated: per_group(s(7) | s(14) << 32),
+        oversized: s(splat_stat::OVERSIZED),
+        evaluated: s(9) | s(11) << 32,
+        contributions: s(10) | s(12) << 32,
+    }
+}
+
+/// A splatting frame recorded into an application's command buffer: its bind groups, built
+/// before recording and kept alive (detached) while the frame is in flight.
+pub struct SplatRecording<'a> {
+    pipelines: &'a SplatPipelines,
+    kernels: &'a GpuKernels,
+    targets: &'a SplatTargets,
+    constants: &'a SplatConstants,
+    args: &'a Buffer,
+    projection: ProjectionGroups<'a>,
+    plan: BindGroup<'a>,
+    accumulation: AccumulationGroups<'a>,
+    push: PlanPush,
+}
+
+impl<'a> SplatRecording<'a> {
+    /// The bind groups of a frame of `setup` into `targets`, whose entry list must be
+    /// allocated; `max_entries` is what the work budget allows (`u32::MAX`: no budget).
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        ctx: &Context,
+        pipelines: &'a SplatPipelines,
+        kernels: &'a GpuKernels,
+        targets: &'a SplatTargets,
+        constants: &'a SplatConstants,
+        args: &'a Buffer,
+        hull: &[(u32, &'a Buffer)],
+        setup: &SplatSetup,
+        max_entries: u32,
+    ) -> Result<Self, VkError> {
+        if !targets.fits(setup, kernels) {
+            return Err(VkError::Usage(
+                "splat frame buffers do not fit the setup".into(),
+            ));
+        }
+        let Some(plan) = &pipelines.plan else {
+            return Err(VkError::Usage("splat_plan is not compiled".into()));
+        };
+        let (tiles_x, tiles_y) = setup.tiles();
+        Ok(Self {
+            pipelines,
+            kernels,
+            targets,
+            constants,
+            args,
+            projection: ProjectionGroups::new(ctx, pipelines, kernels, targets, constants, hull)?,
+            plan: BindGroup::new(
+                ctx,
+                plan,
+                &[
+                    (binding::BUCKET_OFFSETS, &targets.offsets),
+                    (binding::SPLAT_STATS, &targets.stats),
+                    (binding::DISPATCH_ARGS, args),
+                ],
+            )?,
+            accumulation: AccumulationGroups::new(ctx, pipelines, targets, constants, setup)?,
+            push: PlanPush {
+                buckets: u32::try_from(setup.buckets()).unwrap_or(u32::MAX),
+                capacity: u32::try_from(targets.list_capacity()).unwrap_or(u32::MAX),
+                max_entries,
+                bin_groups: kernel_groups(kernels),
+                tiles_x,
+                tiles_y,
+                segments: u32::from(pipelines.segments.is_some()),
+                band_rows: RASTER_BAND_ROWS,
+            },
+        })
+    }
+
+    /// What `splat_plan` was told: the twin [`plan_groups`] of the read-back counters says
+    /// whether the accumulation ran.
+    pub fn plan(&self) -> PlanPush {
+        self.push
+    }
+
+    /// Records the frame: constants, projection, scan, `splat_plan`, then `splat_bin` and
+    /// `splat_raster` for the whole image, both indirect. Returns the dispatches recorded.
+    pub fn record(
+        &self,
+        rec: &mut Recorder<'_>,
+        data: &ConstantData,
+        setup: &SplatSetup,
+    ) -> Result<u32, VkError> {
+        let (pipelines, args) = (self.pipelines, self.args);
+        let Some(plan) = &pipelines.plan else {
+            return Err(VkError::Usage("splat_plan is not compiled".into()));
+        };
+        self.constants.record_update(rec, data)?;
+        self.projection
+            .record(rec, pipelines, self.targets, setup, self.kernels)?;
+        rec.dispatch(
+            plan,
+            &self.plan,
+            bytemuck::bytes_of(&self.push),
+            [1, 1, 1],
+            "splat_plan",
+        )?;
+        rec.dispatch_indirect(
+            &pipelines.bin,
+            &self.accumulation.bin,
+            &[],
+            args,
+            0,
+            "splat_bin",
+        )?;
+        // Band b's arguments follow splat_bin's, at 16 (b + 1).
+        let mut offset = 16;
+        let mut row = 0;
+        while row < self.push.tiles_y {
+            let push = RasterPush {
+                tile_row: row,
+                _pad: [0; 3],
+            };
+            rec.dispatch_indirect(
+                &pipelines.raster,
+                &self.accumulation.raster,
+                bytemuck::bytes_of(&push),
+                args,
+                offset,
+                "splat_raster",
+            )?;
+            offset += 16;
+            row += self.push.band_rows;
+        }
+        let segments = u32::from(pipelines.segments.is_some());
+        let bands = (offset / 16 - 1) as u32;
+        Ok(segments + 1 + 3 + 1 + 1 + bands)
+    }
+
+    /// The bind groups, to keep while the frame is in flight.
+    pub fn detach(self) -> Vec<BindGroup<'static>> {
+        let mut v = self.projection.detach();
+        v.push(self.plan.detach());
+        v.push(self.accumulation.bin.detach());
+        v.push(self.accumulation.raster.detach());
+        v
+    }
+}
+
+/// A retired recorded frame's counters: reads the counters and the total back, refuses the
+/// frame as [`check_projection`] would, or where the entries exceeded the list's `capacity`
+/// (the plan's), and otherwise returns its counts.
+pub fn retired_counts(
+    ctx: &Context,
+    targets: &SplatTargets,
+    setup: &SplatSetup,
+    plan: &PlanPush,
+    budget: Option<f64>,
+    invocations: u32,
+) -> Result<Result<SplatCounts, u64>, RenderError> {
+    let stats: Vec<u32> = targets.stats.read(ctx)?;
+    let total: Vec<u32> = targets
+        .offsets
+        .read_range(ctx, setup.buckets() as usize, 1)?;
+    let total = total.first().copied().unwrap_or(0);
+    if plan_groups(plan, total, &stats)[0][0] == 0 {
+        check_projection(setup, &stats, u64::from(total), budget, entry_limit(ctx))?;
+        if total > plan.max_entries {
+            return Err(RenderError::Budget {
+                planned: setup.work_bound(u64::from(total)),
+                unit: "footprint-pixel evaluations",
+                budget: budget.unwrap_or(0.0),
+                hint: "raise splat.slab or take a smaller image".into(),
+            });
+        }
+        // What is left: the entries did not fit the list.
+        return Ok(Err(u64::from(total)));
+    }
+    Ok(Ok(frame_counts(&stats, u64::from(total), invocations)))
+}
+
+/// The projection as one submission (pass 1 of [`splat_frame`]): the counters, the total of
+/// entries (the one number the host needs: how many entries the sort will write) and the
+/// dispatches' timings.
+fn project(
+    ctx: &Context,
+    pipelines: &SplatPipelines,
+    kernels: &GpuKernels,
+    t: &SplatTargets,
+    constants: &SplatConstants,
+    setup: &SplatSetup,
+    hull: &[(u32, &Buffer)],
+) -> Result<(Vec<u32>, u64, Vec<crate::vk::DispatchTiming>), RenderError> {
+    let projection = ProjectionGroups::new(ctx, pipelines, kernels, t, constants, hull)?;
+    let timings = ctx.submit(|rec| projection.record(rec, pipelines, t, setup, kernels))?;
+    drop(projection);
+    let stats: Vec<u32> = t.stats.read(ctx)?;
+    let total: Vec<u32> = t.offsets.read_range(ctx, setup.buckets() as usize, 1)?;
+    Ok((
+        stats,
+        u64::from(total.first().copied().unwrap_or(0)),
+        timings,
+    ))
+}
+
+/// The entries a frame of `setup` bins, from a projection of its own (one submission and a
+/// wait): how a recorded frame's list is sized before anything counted them. Refuses what
+/// [`check_projection`] refuses.
+#[allow(clippy::too_many_arguments)]
+pub fn count_entries(
+    ctx: &Context,
+    pipelines: &SplatPipelines,
+    kernels: &GpuKernels,
+    targets: &SplatTargets,
+    setup: &SplatSetup,
+    tf: &TransferFunction,
+    hull: &[(u32, &Buffer)],
+    budget: Option<f64>,
+) -> Result<u64, RenderError> {
+    if !targets.fits(setup, kernels) {
+        return Err(VkError::Usage("splat frame buffers do not fit the setup".into()).into());
+    }
+    let constants = SplatConstants::upload(ctx, &ConstantData::new(setup, kernels, tf))?;
+    let (stats, total, _) = project(ctx, pipelines, kernels, targets, &constants, setup, hull)?;
+    check_projection(setup, &stats, total, budget, entry_limit(ctx))?;
+    Ok(total)
+}
+
+/// Renders one frame; `targets` must fit the setup (see [`SplatTargets::fits`]); `hull` are the
+/// field's hull bindings (`GpuField::hull_bindings`), read by post-shaded frames over a hull.
+#[allow(clippy::too_many_arguments)]
+pub fn splat_frame(
+    ctx: &Context,
+    pipelines: &SplatPipelines,
+    kernels: &GpuKernels,
+    targets: &mut SplatTargets,
+    setup: &SplatSetup,
+    tf: &TransferFunction,
+    hull: &[(u32, &Buffer)],
+    control: FrameControl<'_>,
+) -> Result<SplatGpuImage, RenderError> {
+    if !targets.fits(setup, kernels) {
+        return Err(VkError::Usage("splat frame buffers do not fit the setup".into()).into());
+    }
+    let constants = SplatConstants::upload(ctx, &ConstantData::new(setup, kernels, tf))?;
+    let mut stage_ms = [0.0; 4];
+    let (tiles_x, tiles_y) = setup.tiles();
+    let (stats, total, timings) =
+        project(ctx, pipelines, kernels, targets, &constants, setup, hull)?;
+    sum_ms(&timings, &mut stage_ms);
+    let band = RASTER_BAND_ROWS;
+    let submissions_planned = 1 + tiles_y.div_ceil(band);
+    (control.progress)(1.0 / f64::from(submissions_planned));
+    control.check_stop()?;
+    let limit = entry_limit(ctx);
+    check_projection(setup, &stats, total, control.budget, limit)?;
+    targets.reserve_entries(ctx, total, limit)?;
+
+    // Pass 2: the scatter, then the tiles in bands of rows.
+    let t = &*targets;
+    let groups = AccumulationGroups::new(ctx, pipelines, t, &constants, setup)?;
+    let mut submissions = 1;
+    let mut row = 0;
+    while row < tiles_y {
+        let rows = band.min(tiles_y - row);
+        let first = row == 0;
+        let push = RasterPush {
+            tile_row: row,
+            _pad: [0; 3],
+        };
+        let timings = ctx.submit(|rec| {
+            if first {
+                rec.dispatch(
+                    &pipelines.bin,
+                    &groups.bin,
+                    &[],
+                    [kernel_groups(kernels), 1, 1],
+                    "splat_bin",
+                )?;
+            }
+            rec.dispatch(
+                &pipelines.raster,
+                &groups.raster,
+                bytemuck::bytes_of(&push),
+                [tiles_x, rows, 1],
+                "splat_raster",
+            )
+        })?;
+        sum_ms(&timings, &mut stage_ms);
+        submissions += 1;
+        row += rows;
+        (control.progress)(f64::from(submissions) / f64::from(submissions_planned));
+        control.check_stop()?;
+    }
+    drop(groups);
+    let image: Vec<[f32; 4]> = t.image.read(ctx)?;
+    let stats: Vec<u32> = t.stats.read(ctx)?;
+    let bg = setup.background.map(|c| c as f32);
+    let n = (setup.camera.width * setup.camera.height) as usize;
+    let pixels = image
+        .iter()
+        .take(n)
+        .map(|&a| crate::view::shading::composite_background(a, bg))
+        .collect();
+    Ok(SplatGpuImage {
+        pixels,
+        counts: frame_counts(&stats, total, pipelines.variant().group),
+        stage_ms,
+        submissions,
+        variant: pipelines.variant().name(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plan_runs_the_frame_only_where_it_fits() {
+        let push = PlanPush {
+            buckets: 10,
+            capacity: 100,
+            max_entries: 80,
+            bin_groups: 3,
+            tiles_x: 4,
+            tiles_y: 5,
+            segments: 1,
+            band_rows: 2,
+        };
+        let ok = vec![[3, 1, 1], [4, 2, 1], [4, 2, 1], [4, 1, 1]];
+        let none = vec![[0, 1, 1]; 4];
+        let clean = [0u32; 15];
+        assert_eq!(plan_groups(&push, 80, &clean), ok);
+        assert_eq!(plan_groups(&push, 81, &clean), none, "over the budget");
+        let roomy = PlanPush {
+            max_entries: u32::MAX,
+            ..push
+        };
+        assert_eq!(plan_groups(&roomy, 100, &clean), ok);
+        assert_eq!(plan_groups(&roomy, 101, &clean), none, "over the list");
+        let mut oversized = clean;
+        oversized[splat_stat::OVERSIZED] = 1;
+        assert_eq!(plan_groups(&push, 1, &oversized), none);
+        let mut segments = clean;
+        segments[splat_stat::SEGMENT_OVERFLOW] = 2;
+        assert_eq!(plan_groups(&push, 1, &segments), none);
+        let no_hull = PlanPush {
+            segments: 0,
+            ..push
+        };
+        assert_eq!(
+            plan_groups(&no_hull, 1, &segments),
+            ok,
+            "no segments kernel ran"
+        );
+    }
+}
