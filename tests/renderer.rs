@@ -105,8 +105,15 @@ fn a_stop_request_ends_frames_of_both_methods_and_the_renderer_goes_on() {
     let (ctx, _compiler) = gpu();
     for (extra, tolerance) in [
         (vec![], 0.0f32),
-        // 8² tiles (the default) in bands of two tile rows: at least three submissions.
-        (vec!["render.method=\"splat\"", "splat.tile=8"], 1e-5),
+        // 8² tiles (the default), 5 tile rows in bands of two: four submissions.
+        (
+            vec![
+                "render.method=\"splat\"",
+                "splat.tile=8",
+                "camera.height=40",
+            ],
+            1e-5,
+        ),
     ] {
         let s = scene(&extra);
         let field = s.field(|_| {}).expect("field");

@@ -126,7 +126,7 @@ pub(super) struct Slot {
     chunk: u32,
     dispatches: u32,
     /// Splatting frames' buffers, from the slot's first splatting frame on.
-    pub(super) splat: Option<super::splatting::SplatSlot>,
+    pub(super) splat: Option<SplatSlot>,
 }
 
 impl Slot {
@@ -209,6 +209,20 @@ impl Slot {
             generation,
         }
     }
+}
+
+/// A slot's splatting buffers (kept for the slot's next splatting frames) and what its frame
+/// in flight needs at retire.
+pub(super) struct SplatSlot {
+    pub(super) constants: Option<crate::splat::frame::SplatConstants>,
+    pub(super) targets: Option<crate::splat::gpu::SplatTargets>,
+    /// `splat_plan`'s indirect arguments: splat_bin's, then each band of splat_raster's.
+    pub(super) args: Option<Buffer>,
+    pub(super) setup: Option<crate::splat::SplatSetup>,
+    pub(super) plan: crate::gpu_types::PlanPush,
+    pub(super) budget: Option<f64>,
+    pub(super) variant: String,
+    pub(super) invocations: u32,
 }
 
 /// What the renderer learnt from retired frames, applied to the next recordings.

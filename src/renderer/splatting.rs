@@ -10,7 +10,7 @@
 //! accumulation, and [`Renderer::retire`] reports it as [`RenderError::Recorded`] after
 //! growing what the next frames reserve.
 
-use super::record::{FrameInFlight, RecordedFrame, Slot};
+use super::record::{FrameInFlight, RecordedFrame, Slot, SplatSlot};
 use super::{FrameStats, GpuImage, Renderer, SplatReport};
 use crate::field::RenderError;
 use crate::gpu_types::PlanPush;
@@ -33,20 +33,6 @@ struct SplatFrame {
     /// The pipelines' index in `Renderer::splat_pipelines`.
     index: usize,
     pipeline_built: bool,
-}
-
-/// A slot's splatting buffers (kept for the slot's next splatting frames) and what its frame
-/// in flight needs at retire.
-pub(super) struct SplatSlot {
-    constants: Option<SplatConstants>,
-    targets: Option<SplatTargets>,
-    /// `splat_plan`'s indirect arguments: splat_bin's, then each band of splat_raster's.
-    args: Option<Buffer>,
-    setup: Option<SplatSetup>,
-    plan: PlanPush,
-    budget: Option<f64>,
-    variant: String,
-    invocations: u32,
 }
 
 impl Renderer {
