@@ -201,6 +201,8 @@ pub mod splat_stat {
     pub const SEGMENT_OVERFLOW: usize = 5;
     /// Kernels that touch more (tile, sheet) buckets than one invocation writes.
     pub const OVERSIZED: usize = 8;
+    /// Tiles whose walk of their entries llvmpipe's loop limit cut short (`splat_raster`).
+    pub const RASTER_TRUNCATED: usize = 15;
 }
 
 /// `#define BINDING_* n` for every binding (and `GRID_PAD`, the `RAY_*` count flags), to pass
@@ -226,6 +228,10 @@ pub fn binding_defines() -> Vec<(String, String)> {
             splat_stat::SEGMENT_OVERFLOW as u32,
         ),
         ("SPLAT_STAT_OVERSIZED", splat_stat::OVERSIZED as u32),
+        (
+            "SPLAT_STAT_RASTER_TRUNCATED",
+            splat_stat::RASTER_TRUNCATED as u32,
+        ),
         ("RAY_DONE", ray_count::DONE),
         ("RAY_TRUNCATED", ray_count::TRUNCATED),
         ("RAY_HULL_OVERFLOW", ray_count::HULL_OVERFLOW),

@@ -722,6 +722,16 @@ void main() {
 #endif
 #endif
     }
+    // llvmpipe ends an invocation's loops after 65 535 iterations in a dispatch (LAVAPIPE.md),
+    // silently: a walk that stopped before the last sheet with a pixel still open was cut
+    // short, and the host refuses the frame rather than show it.
+    bool open_at_end = false;
+#define OPEN(px) open_at_end = open_at_end || pixel_open(px);
+    EACH(OPEN)
+#undef OPEN
+    if (k < steps && open_at_end) {
+        atomicAdd(stats[SPLAT_STAT_RASTER_TRUNCATED], 1u);
+    }
     walked.x = at - offset_at(first_bucket);
     walked.y = at_end - at;
     uvec2 footprints = uvec2(0u);

@@ -433,6 +433,24 @@ pub fn check_projection(
     Ok(())
 }
 
+/// Refuses a frame in which llvmpipe's loop limit cut a tile's walk of its entries short
+/// (`splat_stat::RASTER_TRUNCATED`, counted by `splat_raster`): its image would be missing
+/// sheets in those tiles.
+pub fn check_raster(stats: &[u32]) -> Result<(), RenderError> {
+    match stats.get(splat_stat::RASTER_TRUNCATED).copied() {
+        Some(n) if n > 0 => Err(RenderError::Setting {
+            key: "splat.slab",
+            message: format!(
+                "expected thicker sheets for this image: walks of image tiles through their \
+                 (tile, sheet) entries passed the 65 535 loop iterations that llvmpipe allows \
+                 an invocation in a dispatch, and were cut short ({n} invocations); raise \
+                 splat.slab or the image size, or lower splat.tile"
+            ),
+        }),
+        _ => Ok(()),
+    }
+}
+
 /// Stage `splat_plan` (GLSL: `glsl/splat/splat_plan.comp`): the workgroup counts of
 /// `splat_bin`, then of each band of `push.band_rows` tile rows of `splat_raster`, in a recorded
 /// frame, from the scan's `total` and the projection's counters `stats`: the whole frame, or
@@ -651,6 +669,7 @@ pub fn retired_counts(
         // What is left: the entries did not fit the list.
         return Ok(Err(u64::from(total)));
     }
+    check_raster(&stats)?;
     Ok(Ok(frame_counts(&stats, u64::from(total), invocations)))
 }
 
@@ -770,6 +789,7 @@ pub fn splat_frame(
     drop(groups);
     let image: Vec<[f32; 4]> = t.image.read(ctx)?;
     let stats: Vec<u32> = t.stats.read(ctx)?;
+    check_raster(&stats)?;
     let bg = setup.background.map(|c| c as f32);
     let n = (setup.camera.width * setup.camera.height) as usize;
     let pixels = image

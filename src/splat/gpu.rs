@@ -27,8 +27,8 @@ pub const SEGMENT_HITS: usize = 2 * super::PIXEL_SEGMENTS + 4;
 pub(super) const GROUP: u32 = 64;
 /// `SplatCounts` counters in the stats buffer.
 /// Counter slots: 0–5 and 8 one word each; 64-bit ones: 9 and 10 with high words 11 and 12,
-/// 6 and 7 with high words 13 and 14.
-const STATS: usize = 15;
+/// 6 and 7 with high words 13 and 14; 15 the tiles cut short (`splat_stat::RASTER_TRUNCATED`).
+const STATS: usize = 16;
 
 /// The kernels uploaded once per dataset: one `Sample` each, volume in `metric_off.z`.
 pub struct GpuKernels {
