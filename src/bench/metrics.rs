@@ -21,6 +21,10 @@ pub struct ImageError {
     pub psnr: f64,
     /// Pixels with a non-finite channel in the image or in the reference.
     pub non_finite: u64,
+    /// The measure `render.tolerance` bounds: the 99th percentile over pixels of the largest
+    /// |difference| of the four channels, alpha included
+    /// (`crate::renderer::tolerance::p99_error`; a non-finite pixel counts as infinite).
+    pub p99: f64,
 }
 
 /// The error of `image` against `reference`, both RGBA rows from the top, `width` wide.
@@ -62,6 +66,7 @@ pub fn image_error(image: &[[f32; 4]], reference: &[[f32; 4]], width: u32) -> Op
         max_y: (at / w) as u32,
         psnr: -20.0 * rmse.log10(),
         non_finite,
+        p99: crate::renderer::tolerance::p99_error(image, reference),
     })
 }
 

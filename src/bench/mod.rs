@@ -505,6 +505,7 @@ pub fn run(
             max_y: error.map(|e| e.max_y),
             psnr: error.map(|e| e.psnr),
             non_finite: error.map(|e| e.non_finite),
+            p99: error.map(|e| e.p99),
             reference: reference.description.clone(),
             variant: image.variant.clone(),
         };

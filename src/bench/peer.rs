@@ -105,6 +105,7 @@ pub fn run_peer(
         r.max_y = e.map(|e| e.max_y);
         r.psnr = e.map(|e| e.psnr);
         r.non_finite = e.map(|e| e.non_finite);
+        r.p99 = e.map(|e| e.p99);
         r.reference = reference.description.clone();
     }
     Ok(rows)

@@ -55,6 +55,10 @@ pub struct Row {
     pub max_y: Option<u32>,
     pub psnr: Option<f64>,
     pub non_finite: Option<u64>,
+    /// 99th percentile of the per-pixel RGBA error (`metrics::ImageError::p99`); missing from
+    /// files written before it.
+    #[serde(default)]
+    pub p99: Option<f64>,
     /// Share of the device's ceilings the frame's ray-casting kernel reached, by the cost model
     /// of [`super::ceiling`] against `probe_fma` and the gather ceiling of its loads
     /// (`probe_memory:coherent-texel-gather`, or `march-texel-gather` for the fast path),
@@ -194,6 +198,7 @@ mod tests {
             max_y: Some(0),
             psnr: Some(-20.0 * rmse.log10()),
             non_finite: Some(0),
+            p99: Some(rmse * 2.0),
             fma_share: Some(0.1),
             memory_share: None,
             bound_by: "fma".into(),

@@ -34,6 +34,7 @@ use std::time::Instant;
 mod record;
 mod splatting;
 pub mod target;
+pub mod tolerance;
 
 pub use crate::vk::{Access, ExternalCommands, Target, TargetFormat};
 pub use record::{FrameInFlight, RecordedFrame, next_groups};
@@ -183,6 +184,9 @@ pub struct FrameStats {
     /// is compiled in at [`crate::raycast::setup::SKIP_AUTO_FRACTION`] or more); `None` where
     /// "auto" did not decide (skipping set, or no fast path).
     pub skip_estimate: Option<f64>,
+    /// What `render.tolerance` chose for this view (its pilot frames ran for the first frame
+    /// of the view only).
+    pub tolerance: Option<tolerance::ToleranceReport>,
 }
 
 /// A compiled variant: its macro definitions, its bindings and the pipeline.
@@ -224,6 +228,8 @@ pub struct Renderer {
     /// Recorded frames' resources, one slot per frame in flight ([`Renderer::record`]).
     slots: Vec<record::Slot>,
     record: record::RecordState,
+    /// The settings `render.tolerance` chose for the last view that had one.
+    tolerance: Option<tolerance::Resolved>,
 }
 
 impl Drop for Renderer {
@@ -278,6 +284,7 @@ impl Renderer {
             id: NEXT_RENDERER.fetch_add(1, Ordering::Relaxed),
             slots: Vec::new(),
             record: record::RecordState::default(),
+            tolerance: None,
         })
     }
 
@@ -304,6 +311,16 @@ impl Renderer {
         mut progress: impl FnMut(f64),
     ) -> Result<(GpuImage, FrameStats), RenderError> {
         let start = Instant::now();
+        if let Some((settings, report)) = self.tolerance_settings(view)? {
+            let resolved = View {
+                settings: &settings,
+                ..*view
+            };
+            let (image, mut stats) = self.render(&resolved, progress)?;
+            stats.wall_ms = start.elapsed().as_secs_f64() * 1e3;
+            stats.tolerance = Some(report);
+            return Ok((image, stats));
+        }
         if let Some(shading) = view.settings.method.splat_shading() {
             return self.render_splat(view, shading, start, &mut progress);
         }
@@ -375,6 +392,7 @@ impl Renderer {
                 targets_allocated,
                 bands,
                 skip_estimate: setup.skip_estimate,
+                tolerance: None,
             },
         ))
     }

@@ -319,6 +319,13 @@ impl Renderer {
     /// kernels, the pipelines and the count of the frame's entries that sizes recorded frames'
     /// lists (a projection of its own: one submission and a wait on the context's queue).
     pub fn prepare(&mut self, view: &View<'_>) -> Result<(), RenderError> {
+        if let Some((settings, _)) = self.tolerance_settings(view)? {
+            let resolved = View {
+                settings: &settings,
+                ..*view
+            };
+            return self.prepare(&resolved);
+        }
         if let Some(shading) = view.settings.method.splat_shading() {
             return self.prepare_splat(view, shading);
         }
@@ -362,6 +369,13 @@ impl Renderer {
         view: &View<'_>,
         target: &Target,
     ) -> Result<FrameInFlight, RenderError> {
+        if let Some((settings, _)) = self.tolerance_settings(view)? {
+            let resolved = View {
+                settings: &settings,
+                ..*view
+            };
+            return self.record(cmd, &resolved, target);
+        }
         if let Some(shading) = view.settings.method.splat_shading() {
             return self.record_splat(cmd, view, target, shading);
         }

@@ -186,6 +186,7 @@ impl Renderer {
                 targets_allocated,
                 bands: image.submissions,
                 skip_estimate: None,
+                tolerance: None,
             },
         ))
     }

@@ -28,7 +28,9 @@ use crate::view::transfer::TransferFunction;
 // that a scene file's vocabulary is in one place.
 pub use crate::recon::{NeighbourMode, Reconstruction};
 use crate::samples::SampleSettings;
-pub use crate::view::{AdaptiveCriterion, IntervalModel, Method, RenderSettings, SkipMode};
+pub use crate::view::{
+    AdaptiveCriterion, GivenKeys, IntervalModel, Method, RenderSettings, SkipMode,
+};
 use std::path::{Path, PathBuf};
 use toml::{Table, Value};
 
@@ -144,6 +146,7 @@ const KNOWN: &[(&str, &[&str])] = &[
             "early_termination",
             "skip",
             "table_resolution",
+            "tolerance",
         ],
     ),
 ];
@@ -180,6 +183,26 @@ step = 0.25
 interval = "hermite"
 background = [0.0, 0.0, 0.0]
 "#;
+
+/// The keys that a tolerance would choose which `table` sets.
+fn given_keys(table: &Table) -> GivenKeys {
+    let has = |section: &str, key: &str| {
+        table
+            .get(section)
+            .and_then(Value::as_table)
+            .is_some_and(|t| t.contains_key(key))
+    };
+    GivenKeys {
+        step: has("render", "step"),
+        reference_step: has("render", "reference_step"),
+        epsilon: has("render", "epsilon"),
+        l_min: has("render", "l_min"),
+        early_termination: has("render", "early_termination"),
+        min_transmittance: has("render", "min_transmittance"),
+        table_resolution: has("render", "table_resolution"),
+        slab: has("splat", "slab"),
+    }
+}
 
 /// `render.interval` left out: Hermite intervals, which measured less error than linear ones
 /// at the same evaluations on every scene (BENCHMARKS.md: Marschner–Lobb, issue 11; the
@@ -236,7 +259,17 @@ impl Scene {
                 PathBuf::from("."),
             ),
         };
-        Self::parse(&text, &origin, &base, overrides)
+        let mut scene = Self::parse(&text, &origin, &base, overrides)?;
+        if path.is_none() {
+            // The built-in scene spells out some defaults (render.step): only the overrides
+            // are the user's choices, which a tolerance must not override.
+            let mut table = Table::new();
+            for arg in overrides {
+                apply_set(&mut table, arg)?;
+            }
+            scene.render.given = given_keys(&table);
+        }
+        Ok(scene)
     }
 
     /// Parses scene text; `origin` names it in errors, `base` resolves relative paths.
@@ -553,6 +586,11 @@ impl Scene {
             },
             table_resolution: ren.int("table_resolution", 512, 2, 4096)? as usize,
             splat: splat::parse(&section("splat"))?,
+            tolerance: match ren.get("tolerance") {
+                None => None,
+                Some(_) => Some(ren.float("tolerance", 0.0, 1e-6, 0.5)?),
+            },
+            given: given_keys(&table),
         };
         if render.skip == SkipMode::On && render.method.splat_shading().is_some() {
             return Err(section("render").err(

@@ -11,8 +11,8 @@ pub mod shading;
 pub mod transfer;
 
 pub use settings::{
-    AdaptiveCriterion, Antialias, IntervalModel, Method, RenderSettings, Shading, SheetShare,
-    SkipMode, SplatSettings,
+    AdaptiveCriterion, Antialias, GivenKeys, IntervalModel, Method, RenderSettings, Shading,
+    SheetShare, SkipMode, SplatSettings,
 };
 
 use camera::Camera;

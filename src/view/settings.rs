@@ -130,6 +130,25 @@ pub struct RenderSettings {
     pub table_resolution: usize,
     /// Splatting settings (scene section `[splat]`).
     pub splat: SplatSettings,
+    /// `render.tolerance`: the accepted 99th-percentile pixel error against the converged
+    /// image; the renderer then chooses the parameters that bound the error
+    /// (`renderer::tolerance`) unless `given` says the scene set them.
+    pub tolerance: Option<f64>,
+    /// Which of the keys that a tolerance chooses the scene gave explicitly.
+    pub given: GivenKeys,
+}
+
+/// The keys a tolerance would choose that a scene set explicitly (they win over it).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct GivenKeys {
+    pub step: bool,
+    pub reference_step: bool,
+    pub epsilon: bool,
+    pub l_min: bool,
+    pub early_termination: bool,
+    pub min_transmittance: bool,
+    pub table_resolution: bool,
+    pub slab: bool,
 }
 
 /// `render.skip`: empty-space skipping off, on, or chosen per frame ([`crate::field::skip`]).

@@ -94,7 +94,7 @@ fn opt(v: Option<f64>, digits: usize) -> String {
 fn header() -> String {
     // A row without GPU timestamps (a peer) shows its wall time, marked w.
     format!(
-        "{:<3} {:<10} {:<38} {:>10} {:>17} {:>10} {:>11} {:>9} {:>9} {:>7}",
+        "{:<3} {:<10} {:<38} {:>10} {:>17} {:>10} {:>11} {:>9} {:>9} {:>9} {:>7}",
         "#",
         "method",
         "settings",
@@ -103,6 +103,7 @@ fn header() -> String {
         "first ms",
         "evals",
         "rmse",
+        "p99 rgba",
         "max",
         "psnr"
     )
@@ -113,7 +114,7 @@ fn line(i: usize, r: &Row) -> String {
     let settings = vmls::files::printable(&r.short_settings(), 35);
     let method = vmls::files::printable(&r.method, 10);
     format!(
-        "{:<3} {:<10} {:<38} {:>10} {:>17} {:>10.1} {:>11} {:>9} {:>9} {:>7}  {}{}",
+        "{:<3} {:<10} {:<38} {:>10} {:>17} {:>10.1} {:>11} {:>9} {:>9} {:>9} {:>7}  {}{}",
         i,
         method,
         settings,
@@ -123,6 +124,7 @@ fn line(i: usize, r: &Row) -> String {
         r.first_frame_wall_ms,
         r.evaluations.map_or("-".into(), |e| e.to_string()),
         opt(r.rmse, 5),
+        opt(r.p99, 5),
         opt(r.max_abs, 4),
         opt(r.psnr, 1),
         match (

@@ -28,8 +28,8 @@ pub fn compare(image: &Path, reference: &Path, diff: Option<&Path>) -> Result<()
         .into());
     };
     println!(
-        "rmse {:.6} max {:.6} at ({}, {}) psnr {:.2} dB",
-        e.rmse, e.max_abs, e.max_x, e.max_y, e.psnr
+        "rmse {:.6} max {:.6} at ({}, {}) psnr {:.2} dB p99-rgba {:.6}",
+        e.rmse, e.max_abs, e.max_x, e.max_y, e.psnr, e.p99
     );
     if e.non_finite > 0 {
         return Err(CliError::Usage(format!(

@@ -76,6 +76,11 @@ enum Command {
         /// mistyped step or sheet from occupying the device for hours.
         #[arg(long)]
         force: bool,
+        /// Render to this accepted error instead of a step: the 99th percentile of the
+        /// per-pixel RGBA error against the converged image (`render.tolerance`; README,
+        /// "Rendering to a tolerance").
+        #[arg(long, value_name = "E")]
+        tolerance: Option<f64>,
         #[command(flatten)]
         device: DeviceArgs,
     },
@@ -293,10 +298,22 @@ fn main() {
             frames,
             cpu,
             force,
+            tolerance,
             device,
         } => {
+            // --tolerance E is `--set render.tolerance=E`, after the other overrides.
+            let set: &Vec<String> = &set
+                .iter()
+                .cloned()
+                .chain(tolerance.map(|e| format!("render.tolerance={e:e}")))
+                .collect();
             if *cpu {
-                if eval_map.is_some() || *frames != 1 {
+                if tolerance.is_some() {
+                    Err(CliError::Usage(
+                        "--cpu renders with the scene's parameters: --tolerance chooses them                          with pilot frames on the GPU"
+                            .into(),
+                    ))
+                } else if eval_map.is_some() || *frames != 1 {
                     Err(CliError::Usage(
                         "--cpu renders one frame without evaluation counts: drop --eval-map and \
                      --frames"

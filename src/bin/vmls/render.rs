@@ -198,7 +198,9 @@ pub fn run_render(
                 "pipeline_built": f.pipeline_built,
                 "buffers_allocated": f.targets_allocated,
                 "skip_auto_fraction": f.skip_estimate,
+                "tolerance": f.tolerance.as_ref().map(tolerance_json),
             })).collect::<Vec<_>>(),
+            "tolerance": first.tolerance.as_ref().map(tolerance_json),
             "bands": image.bands,
             "wall_ms": start.elapsed().as_secs_f64() * 1e3,
             "function_evaluations": evaluations,
@@ -228,6 +230,34 @@ pub fn run_render(
     Ok(outputs.commit()?)
 }
 
+/// What `render.tolerance` chose ([`vmls::renderer::tolerance::ToleranceReport`]).
+fn tolerance_json(r: &vmls::renderer::tolerance::ToleranceReport) -> serde_json::Value {
+    serde_json::json!({
+        "requested": r.tolerance,
+        "measure": "99th percentile over pixels of the largest |error| of R, G, B (premultiplied, over the background) and A",
+        "chosen": r.chosen.map(|(key, value, estimate)| serde_json::json!({
+            "key": key,
+            "value": value,
+            "estimated_error": estimate,
+        })),
+        "observed_order": r.order,
+        "ladder": r.rungs.iter().map(|(v, d)| serde_json::json!({
+            "value": v,
+            "difference_to_next": d,
+        })).collect::<Vec<_>>(),
+        "early_termination": r.early_termination,
+        "table_resolution": r.table_resolution,
+        "table_errors": r.table_moves.iter().map(|(res, d)| serde_json::json!({
+            "resolution": res,
+            "estimated_error": d,
+        })).collect::<Vec<_>>(),
+        "notes": r.notes,
+        "pilot_frames": r.pilots,
+        "pilot_wall_ms": r.pilot_wall_ms,
+        "pilot_gpu_ms": r.pilot_gpu_ms,
+    })
+}
+
 /// `vmls render --cpu`: the f64 CPU twins, rows over all cores.
 pub fn run_render_cpu(
     scene_path: Option<&Path>,
@@ -240,6 +270,13 @@ pub fn run_render_cpu(
     let start = Instant::now();
     format_of(output)?;
     let scene = Scene::load(scene_path, set)?;
+    if scene.render.tolerance.is_some() {
+        return Err(CliError::Usage(
+            "--cpu renders with the scene's parameters: render.tolerance chooses them with \
+             pilot frames on the GPU (drop --cpu, or the key)"
+                .into(),
+        ));
+    }
     let mut outputs = plan_outputs(
         scene_path,
         Some(&scene),

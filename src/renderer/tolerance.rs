@@ -1,0 +1,444 @@
+//! Rendering to a tolerance (issue 29 §1): with `render.tolerance = E` the renderer chooses
+//! the parameters that bound a frame's error, so that the frame meets E without tuning.
+//!
+//! # What E bounds
+//! The error of a pixel is the largest absolute difference over its four channels — colour
+//! premultiplied and composited over the background, as [`Renderer::render`] returns it, and
+//! opacity — from the converged image of the same field (the same reconstruction, integrated
+//! with a vanishing step and no early termination). E bounds its 99th percentile over the
+//! frame's pixels ([`p99_error`]).
+//!
+//! # How the parameters follow from E
+//! E is shared out: E/2 to the discretization of the integral along a ray, E/4 to early ray
+//! termination, E/4 to the preintegration tables' resolution.
+//! - **Early termination**: a ray that stops at transmittance T would have gained at most T
+//!   in any channel from the rest of the ray (colours, opacities and background lie in [0, 1]),
+//!   so the threshold is opacity 1 − E/4 (`render.early_termination`; the reference and
+//!   midpoint integrators stop at transmittance E/4, `render.min_transmittance`).
+//! - **Discretization**: a ladder of pilot frames ([`PILOT_EDGE`] pixels on the longer side,
+//!   the same camera; splatting at the frame's size) at refinement levels k = 0, 1, 2, …: the fixed step (`render.step`) or
+//!   the sheet thickness (`splat.slab`) halves from level to level; the adaptive integrator's
+//!   ε quarters and its shortest interval halves. The difference of consecutive levels,
+//!   d_k = p99(I_k − I_{k+1}), estimates the error left in I_{k+1} by Richardson extrapolation,
+//!   e_{k+1} ≈ d_k / (2^p − 1), with the order p fitted from consecutive differences (clamped
+//!   to [1, 4]; the method's expected order until two differences exist). The ladder stops
+//!   once that estimate is below [`SAFETY`] · E/2; the level is then the power law's, between
+//!   the last two rungs.
+//! - **Tables** (preintegrated methods): the chosen level rendered once more with tables of
+//!   twice the resolution (half again where twice does not fit the device); the move,
+//!   extrapolated at the tables' order 2 in the cell, is the tables' error, and while it
+//!   exceeds E/4 the finer tables are taken (up to 4096).
+//!
+//! Assumptions, each of which a scene can break: the error behaves as C·2^(−p·k) over the
+//! ladder's last rungs (it is in its asymptotic regime there); the pilot's 99th percentile
+//! stands for the frame's (features narrower than a pilot pixel are weighed by their area,
+//! which a resolution change keeps, but sampled more coarsely); and the three shares add. An
+//! explicit key (`render.step`, `render.epsilon`, `render.l_min`, `splat.slab`,
+//! `render.early_termination`, `render.min_transmittance`, `render.table_resolution`) wins over
+//! the tolerance, and the report says so.
+
+use super::Renderer;
+use crate::field::RenderError;
+use crate::view::{Method, RenderSettings, View};
+use std::time::Instant;
+
+/// Pixels on the longer side of a pilot frame.
+pub const PILOT_EDGE: u32 = 96;
+/// The share of the discretization budget the ladder aims at (the rest absorbs the
+/// extrapolation's error).
+pub const SAFETY: f64 = 0.5;
+/// Rungs of the ladder at most.
+const MAX_LEVELS: u32 = 9;
+/// The largest table resolution the tolerance chooses.
+const MAX_TABLE: usize = 4096;
+
+/// Per pixel, the largest absolute difference over the four channels; a non-finite pixel in
+/// either image counts as infinitely wrong.
+pub fn pixel_errors(image: &[[f32; 4]], reference: &[[f32; 4]]) -> Vec<f64> {
+    image
+        .iter()
+        .zip(reference)
+        .map(|(a, b)| {
+            a.iter()
+                .zip(b)
+                .map(|(x, y)| {
+                    let d = (f64::from(*x) - f64::from(*y)).abs();
+                    if d.is_nan() { f64::INFINITY } else { d }
+                })
+                .fold(0.0, f64::max)
+        })
+        .collect()
+}
+
+/// The 99th percentile of [`pixel_errors`], the error that `render.tolerance` bounds: the
+/// ⌈0.99·n⌉-th smallest of the n pixels' errors, so that at most 1% of the pixels are worse.
+/// 0 for empty images.
+pub fn p99_error(image: &[[f32; 4]], reference: &[[f32; 4]]) -> f64 {
+    let mut e = pixel_errors(image, reference);
+    if e.is_empty() {
+        return 0.0;
+    }
+    e.sort_by(f64::total_cmp);
+    let rank = (0.99 * e.len() as f64).ceil() as usize;
+    e[rank.clamp(1, e.len()) - 1]
+}
+
+/// What a tolerance chose for a frame, for `--stats`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ToleranceReport {
+    /// E.
+    pub tolerance: f64,
+    /// The key the ladder chose (`render.step`, `render.epsilon`, `splat.slab`), its value in
+    /// the key's units, and the error the pilots estimate for the frame at that value; `None`
+    /// where an explicit key won.
+    pub chosen: Option<(&'static str, f64, f64)>,
+    /// The observed order in the level (the last fit).
+    pub order: f64,
+    /// Each rung: the level's value of the chosen key and d_k, the difference to the next.
+    pub rungs: Vec<(f64, f64)>,
+    pub early_termination: f64,
+    pub table_resolution: usize,
+    /// Each table resolution tried, and its error extrapolated from the move to a finer
+    /// table.
+    pub table_moves: Vec<(usize, f64)>,
+    /// Explicit keys that won over the tolerance, and other remarks.
+    pub notes: Vec<String>,
+    /// Wall and GPU milliseconds of the pilot frames.
+    pub pilot_wall_ms: f64,
+    pub pilot_gpu_ms: f64,
+    pub pilots: u32,
+}
+
+/// The renderer's last resolution: the view it was for and what it chose.
+pub(super) struct Resolved {
+    key: ViewKey,
+    pub(super) settings: RenderSettings,
+    pub(super) report: ToleranceReport,
+}
+
+/// What a resolution depends on.
+#[derive(Clone, PartialEq)]
+struct ViewKey {
+    camera: crate::view::camera::Camera,
+    settings: RenderSettings,
+    transfer: crate::view::transfer::TransferFunction,
+    isosurfaces: Vec<crate::view::shading::Isosurface>,
+    lighting: crate::view::shading::Lighting,
+}
+
+impl ViewKey {
+    fn of(view: &View<'_>) -> Self {
+        Self {
+            camera: *view.camera,
+            settings: view.settings.clone(),
+            transfer: view.transfer.clone(),
+            isosurfaces: view.isosurfaces.to_vec(),
+            lighting: *view.lighting,
+        }
+    }
+}
+
+/// The refined parameter of a method: its key, its value at level k, the expected order in
+/// the level, and whether the key was given (then it is not refined).
+struct Ladder {
+    key: &'static str,
+    expected_order: f64,
+    given: bool,
+}
+
+fn ladder(settings: &RenderSettings) -> Ladder {
+    let g = &settings.given;
+    match settings.method {
+        Method::Fixed | Method::Riemann => Ladder {
+            key: "render.step",
+            expected_order: 2.0,
+            given: g.step,
+        },
+        Method::Reference => Ladder {
+            key: "render.reference_step",
+            expected_order: 2.0,
+            given: g.reference_step,
+        },
+        Method::Adaptive => Ladder {
+            key: "render.epsilon",
+            expected_order: 2.0,
+            given: g.epsilon,
+        },
+        Method::Splat | Method::SplatPost => Ladder {
+            key: "splat.slab",
+            expected_order: 2.0,
+            given: g.slab,
+        },
+    }
+}
+
+/// The settings at refinement level `k` (continuous): the ladder's parameter refined from its
+/// starting value, everything else as `base`. Returns the settings and the parameter's value.
+fn at_level(base: &RenderSettings, k: f64) -> (RenderSettings, f64) {
+    let mut s = base.clone();
+    let halve = 0.5f64.powf(k);
+    let value = match s.method {
+        Method::Fixed | Method::Riemann => {
+            s.step_spacings = START_STEP * halve;
+            s.step_spacings
+        }
+        Method::Reference => {
+            s.reference_step_spacings = START_STEP * halve;
+            s.reference_step_spacings
+        }
+        Method::Adaptive => {
+            s.epsilon = base.adaptive.default_epsilon() * START_EPSILON * halve * halve;
+            if !base.given.l_min {
+                s.l_min_spacings = (base.l_min_spacings * halve).min(s.l_max_spacings);
+            }
+            s.epsilon
+        }
+        Method::Splat | Method::SplatPost => {
+            s.splat.slab_spacings = START_STEP * halve;
+            s.splat.slab_spacings
+        }
+    };
+    (s, value)
+}
+
+/// Level 0's step or sheet thickness, in sample spacings.
+const START_STEP: f64 = 1.0;
+/// Level 0's ε, in multiples of the criterion's default.
+const START_EPSILON: f64 = 8.0;
+
+/// The order fitted from the last two differences, clamped to [1, 4]; `expected` with fewer.
+fn fitted_order(d: &[f64], expected: f64) -> f64 {
+    match d {
+        [.., a, b] if *a > 0.0 && *b > 0.0 => (a / b).log2().clamp(1.0, 4.0),
+        _ => expected,
+    }
+}
+
+impl Renderer {
+    /// The settings a view's tolerance chooses (cached while the view stays the same), or
+    /// `None` without a tolerance.
+    pub(super) fn tolerance_settings(
+        &mut self,
+        view: &View<'_>,
+    ) -> Result<Option<(RenderSettings, ToleranceReport)>, RenderError> {
+        let Some(tolerance) = view.settings.tolerance else {
+            return Ok(None);
+        };
+        let key = ViewKey::of(view);
+        if let Some(r) = self.tolerance.as_ref().filter(|r| r.key == key) {
+            return Ok(Some((r.settings.clone(), r.report.clone())));
+        }
+        let (settings, report) = self.resolve(view, tolerance)?;
+        self.tolerance = Some(Resolved {
+            key,
+            settings: settings.clone(),
+            report: report.clone(),
+        });
+        Ok(Some((settings, report)))
+    }
+
+    /// Runs the pilots of `view` for tolerance `e` (module documentation).
+    fn resolve(
+        &mut self,
+        view: &View<'_>,
+        e: f64,
+    ) -> Result<(RenderSettings, ToleranceReport), RenderError> {
+        let start = Instant::now();
+        let given = view.settings.given;
+        let mut base = view.settings.clone();
+        base.tolerance = None;
+        let mut notes = Vec::new();
+        // Early termination: E/4 of the budget.
+        if given.early_termination {
+            notes.push(format!(
+                "render.early_termination = {} given: kept",
+                base.early_termination
+            ));
+        } else {
+            base.early_termination = 1.0 - e / 4.0;
+        }
+        if given.min_transmittance {
+            notes.push(format!(
+                "render.min_transmittance = {} given: kept",
+                base.min_transmittance
+            ));
+        } else {
+            base.min_transmittance = e / 4.0;
+        }
+        let mut camera = *view.camera;
+        let scale = f64::from(PILOT_EDGE) / f64::from(camera.width.max(camera.height));
+        // Splatting pilots at the frame's size: a smaller image costs it little less (its
+        // projection and sort are per kernel) and would pack more entries into each tile.
+        if scale < 1.0 && view.settings.method.splat_shading().is_none() {
+            camera.width = ((f64::from(camera.width) * scale).round() as u32).max(1);
+            camera.height = ((f64::from(camera.height) * scale).round() as u32).max(1);
+        }
+        let mut pilots = 0u32;
+        let mut pilot_gpu_ms = 0.0;
+        let mut pilot =
+            |r: &mut Renderer, s: &RenderSettings| -> Result<Vec<[f32; 4]>, RenderError> {
+                let v = View {
+                    camera: &camera,
+                    settings: s,
+                    ..*view
+                };
+                let (image, stats) = r.render(&v, |_| {})?;
+                pilots += 1;
+                pilot_gpu_ms += stats.gpu_ms;
+                Ok(image.pixels)
+            };
+        let lad = ladder(&base);
+        let budget = SAFETY * e / 2.0;
+        let mut rungs: Vec<(f64, f64)> = Vec::new();
+        let mut order = lad.expected_order;
+        let (mut settings, chosen) = if lad.given {
+            notes.push(format!(
+                "{} given: kept, not chosen by the tolerance",
+                lad.key
+            ));
+            (base.clone(), None)
+        } else {
+            let (s0, v0) = at_level(&base, 0.0);
+            let mut previous = pilot(self, &s0)?;
+            let mut last_value = v0;
+            let mut d = Vec::new();
+            let mut level = 0u32;
+            // The estimate at the last rung rendered, and the level.
+            let mut estimate = f64::INFINITY;
+            loop {
+                let (s, v) = at_level(&base, f64::from(level + 1));
+                // A rung the scene cannot render (too many sheets, past the work budget) ends
+                // the ladder at the last one rendered.
+                let image = match pilot(self, &s) {
+                    Err(e @ (RenderError::Setting { .. } | RenderError::Budget { .. })) => {
+                        notes.push(format!("{} = {v:.4} refused: {e}", lad.key));
+                        break;
+                    }
+                    r => r?,
+                };
+                level += 1;
+                let dk = p99_error(&previous, &image);
+                rungs.push((last_value, dk));
+                d.push(dk);
+                order = fitted_order(&d, lad.expected_order);
+                estimate = dk / (2f64.powf(order) - 1.0);
+                previous = image;
+                last_value = v;
+                if estimate <= budget || level >= MAX_LEVELS {
+                    break;
+                }
+            }
+            if estimate > budget {
+                notes.push(format!(
+                    "{} = {last_value:.4} after {level} refinements still estimates \
+                     {estimate:.2e} > {budget:.2e}: the tolerance is not met",
+                    lad.key
+                ));
+            }
+            // The power law between the last two rungs: refine no further than the last,
+            // coarsen at most to the one before.
+            let extra = if estimate > 0.0 {
+                (estimate / budget).log2() / order
+            } else {
+                -1.0
+            };
+            let k = f64::from(level) + extra.clamp(-1.0, 0.0);
+            let (s, v) = at_level(&base, k);
+            let at_k = estimate * 2f64.powf(order * (f64::from(level) - k));
+            (s, Some((lad.key, v, at_k)))
+        };
+        // Tables: their error, extrapolated from the move to a finer table at their order 2
+        // in the cell (`vmls check`'s converge-table), must stay within E/4; else the finer.
+        let mut table_moves = Vec::new();
+        if settings.method.preintegrated() {
+            if given.table_resolution {
+                notes.push(format!(
+                    "render.table_resolution = {} given: kept",
+                    settings.table_resolution
+                ));
+            } else {
+                let mut image = pilot(self, &settings)?;
+                'finer: while settings.table_resolution < MAX_TABLE {
+                    let r = settings.table_resolution;
+                    // Twice as fine, or half again where that does not fit the device.
+                    let mut found = None;
+                    for finer_r in [2 * r, r + r / 2] {
+                        let mut finer = settings.clone();
+                        finer.table_resolution = finer_r.min(MAX_TABLE);
+                        match pilot(self, &finer) {
+                            Err(RenderError::Setting {
+                                key: "render.table_resolution",
+                                ..
+                            }) => continue,
+                            result => {
+                                found = Some((finer, result?));
+                                break;
+                            }
+                        }
+                    }
+                    let Some((finer, fine)) = found else {
+                        notes.push(format!(
+                            "tables finer than {r} do not fit this device: their share of the \
+                             tolerance is not verified"
+                        ));
+                        break 'finer;
+                    };
+                    let ratio = r as f64 / finer.table_resolution as f64;
+                    let error = p99_error(&image, &fine) / (1.0 - ratio * ratio);
+                    table_moves.push((r, error));
+                    if error <= e / 4.0 {
+                        break;
+                    }
+                    settings = finer;
+                    image = fine;
+                }
+            }
+        }
+        let report = ToleranceReport {
+            tolerance: e,
+            chosen,
+            order,
+            rungs,
+            early_termination: settings.early_termination,
+            table_resolution: settings.table_resolution,
+            table_moves,
+            notes,
+            pilot_wall_ms: start.elapsed().as_secs_f64() * 1e3,
+            pilot_gpu_ms,
+            pilots,
+        };
+        Ok((settings, report))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn p99_is_the_rank_of_the_99th_percentile() {
+        let zero = [[0.0f32; 4]; 200];
+        let mut img = zero;
+        // Two pixels of 200 wrong: 1% of them may be, so the 99th percentile is 0.
+        img[3] = [0.0, 0.5, 0.0, 0.0];
+        img[7] = [0.0, 0.0, 0.0, -0.25];
+        assert_eq!(p99_error(&img, &zero), 0.0);
+        // A third: the smallest of the three is the 198th smallest error.
+        img[9] = [0.125, 0.0, 0.0, 0.0];
+        assert_eq!(p99_error(&img, &zero), 0.125);
+        assert_eq!(p99_error(&zero, &zero), 0.0);
+        let mut nan = zero;
+        nan[0][0] = f32::NAN;
+        nan[1][0] = f32::NAN;
+        nan[2][0] = f32::NAN;
+        assert!(p99_error(&nan, &zero).is_infinite());
+    }
+
+    #[test]
+    fn the_order_comes_from_the_last_two_differences() {
+        assert_eq!(fitted_order(&[0.1], 2.0), 2.0);
+        assert!((fitted_order(&[0.4, 0.1, 0.0125], 2.0) - 3.0).abs() < 1e-12);
+        assert_eq!(fitted_order(&[0.1, 0.2], 2.0), 1.0, "clamped below");
+        assert_eq!(fitted_order(&[1.0, 1e-6], 2.0), 4.0, "clamped above");
+    }
+}

@@ -1,0 +1,169 @@
+//! `render.tolerance` (issue 29): a frame rendered to a tolerance E meets it against the
+//! converged image of the same field (the reference integrator at a step of 1/64 spacing with
+//! no early termination), and is not wastefully better; explicit keys win and are reported.
+mod common;
+
+use common::*;
+use vmls::field::Field;
+use vmls::renderer::Renderer;
+use vmls::renderer::tolerance::p99_error;
+use vmls::scene::Scene;
+
+/// Marschner–Lobb 17³ on the fast path's fine grid (as a scene's default chooses it), 48², with
+/// `extra` after.
+fn scene(extra: &[&str]) -> Scene {
+    let mut o: Vec<String> = [
+        "volume.resolution=17",
+        "camera.width=48",
+        "camera.height=48",
+        "reconstruction.resample=2",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    o.extend(extra.iter().map(|s| s.to_string()));
+    Scene::load(None, &o).expect("scene")
+}
+
+/// The converged image of the scene's field.
+fn converged(renderer: &mut Renderer, field_scene: &Scene) -> Vec<[f32; 4]> {
+    let mut s = field_scene.render.clone();
+    s.method = vmls::view::Method::Reference;
+    s.reference_step_spacings = 1.0 / 64.0;
+    s.min_transmittance = 1e-7;
+    s.tolerance = None;
+    let view = vmls::view::View {
+        settings: &s,
+        ..field_scene.view()
+    };
+    renderer.render(&view, |_| {}).expect("reference").0.pixels
+}
+
+#[test]
+fn fixed_steps_and_the_adaptive_integrator_meet_the_tolerance() {
+    let (ctx, _compiler) = gpu();
+    let base = scene(&[]);
+    let field: Field = base.field(|_| {}).expect("field");
+    let mut renderer = Renderer::new(&ctx, field).expect("renderer");
+    let truth = converged(&mut renderer, &base);
+    for method in ["fixed", "adaptive"] {
+        let mut chosen = Vec::new();
+        for e in [1e-2, 3e-3] {
+            let m = format!("render.method=\"{method}\"");
+            let t = format!("render.tolerance={e}");
+            let s = scene(&[&m, &t]);
+            let (image, stats) = renderer.render(&s.view(), |_| {}).expect("render");
+            let report = stats.tolerance.expect("a tolerance report");
+            let (key, value, estimate) = report.chosen.expect("the tolerance chose");
+            let measured = p99_error(&image.pixels, &truth);
+            eprintln!(
+                "{method} E = {e}: {key} = {value:.4}, estimated {estimate:.2e}, measured \
+                 {measured:.2e}, early termination {}, tables {}, {} pilots, notes {:?}",
+                report.early_termination, report.table_resolution, report.pilots, report.notes
+            );
+            assert!(measured <= e, "{method}: E = {e}, measured {measured:e}");
+            // Not wastefully accurate. Measured on lavapipe: fixed 3.05e-3 at E = 1e-2 and
+            // 1.05e-3 at 3e-3 (0.31 E, 0.35 E), adaptive 2.34e-3 and 8.76e-4 (0.23 E, 0.29 E);
+            // issue 29 asks ≥ E/10 of most cases, one scene here bounds it at E/30.
+            assert!(
+                measured >= e / 30.0,
+                "{method}: E = {e}, measured {measured:e}"
+            );
+            assert!((report.early_termination - (1.0 - e / 4.0)).abs() < 1e-12);
+            chosen.push(value);
+            // The same view again reuses the choice: no pilots.
+            let (_, again) = renderer.render(&s.view(), |_| {}).expect("render");
+            assert_eq!(again.tolerance.map(|r| r.chosen), Some(report.chosen));
+        }
+        assert!(
+            chosen[1] < chosen[0],
+            "{method}: a smaller E refines: {chosen:?}"
+        );
+    }
+    drop(renderer);
+    finish(ctx);
+}
+
+#[test]
+fn explicit_keys_win_over_the_tolerance_and_are_reported() {
+    let (ctx, _compiler) = gpu();
+    let s = scene(&[
+        "render.tolerance=0.01",
+        "render.step=0.5",
+        "render.early_termination=0.9",
+    ]);
+    let field = s.field(|_| {}).expect("field");
+    let mut renderer = Renderer::new(&ctx, field).expect("renderer");
+    let (_, stats) = renderer.render(&s.view(), |_| {}).expect("render");
+    let report = stats.tolerance.expect("report");
+    assert_eq!(report.chosen, None);
+    assert_eq!(report.early_termination, 0.9);
+    let notes = report.notes.join("; ");
+    assert!(notes.contains("render.step given"), "{notes}");
+    assert!(
+        notes.contains("render.early_termination = 0.9 given"),
+        "{notes}"
+    );
+    // The built-in scene spells render.step out, but that is not the user's choice.
+    let default = Scene::load(None, &["render.tolerance=0.01".to_string()]).expect("scene");
+    assert!(!default.render.given.step);
+    assert_eq!(default.render.tolerance, Some(0.01));
+    for bad in ["0", "0.7", "-1e-3", "\"small\""] {
+        let err =
+            Scene::load(None, &[format!("render.tolerance={bad}")]).expect_err("out of range");
+        assert!(err.to_string().contains("render.tolerance"), "{err}");
+    }
+    drop(renderer);
+    finish(ctx);
+}
+
+/// `vmls render --tolerance E` writes what it chose into `--stats`; `--cpu` refuses it (its
+/// pilots run on the GPU) and leaves no image.
+#[test]
+fn the_command_line_takes_a_tolerance() {
+    use common::cli::*;
+    let d = dir("tolerance");
+    let (png, stats) = (d.join("t.png"), d.join("t.json"));
+    let small = [
+        "--set",
+        "volume.resolution=17",
+        "--set",
+        "camera.width=32",
+        "--set",
+        "camera.height=24",
+    ];
+    let mut args = vec![
+        "render",
+        "-o",
+        s(&png),
+        "--stats",
+        s(&stats),
+        "--tolerance",
+        "0.01",
+    ];
+    args.extend(small);
+    let out = vmls(&args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&stats).expect("stats")).expect("json");
+    let t = &json["tolerance"];
+    assert_eq!(t["requested"], 0.01);
+    assert_eq!(t["chosen"]["key"], "render.step");
+    assert!(
+        t["chosen"]["value"]
+            .as_f64()
+            .is_some_and(|v| v > 0.0 && v < 1.0)
+    );
+    assert!(t["pilot_frames"].as_u64().is_some_and(|n| n >= 3));
+    assert_eq!(json["frames"][0]["tolerance"], *t);
+
+    let cpu_png = d.join("cpu.png");
+    let mut args = vec!["render", "--cpu", "-o", s(&cpu_png), "--tolerance", "0.01"];
+    args.extend(small);
+    assert_fails(&vmls(&args), &["--tolerance"], &cpu_png);
+    let _ = std::fs::remove_dir_all(&d);
+}
