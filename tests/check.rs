@@ -37,6 +37,7 @@ fn quick_suite_passes_and_reports_json() {
         "converge-table",
         "converge-spacing",
         "converge-epsilon",
+        "tolerance-thin-peak",
     ] {
         assert!(stdout.contains(case), "{case} missing:\n{stdout}");
     }

@@ -469,7 +469,7 @@ fn keys_that_set_work_or_memory_are_range_checked_by_name() {
         &[
             "render.table_resolution",
             "expected at most",
-            "maxStorageBufferRange",
+            "maxTexelBufferElements",
         ],
         &png,
     );

@@ -12,6 +12,7 @@
 
 pub mod cases;
 pub mod convergence;
+pub mod tolerance;
 
 use crate::bench::BenchError;
 use crate::bench::metrics::image_error;
@@ -175,6 +176,7 @@ pub struct Case {
 pub fn all_cases() -> Vec<Case> {
     let mut c = cases::hard_cases();
     c.extend(convergence::convergence_cases());
+    c.extend(tolerance::tolerance_cases());
     c
 }
 

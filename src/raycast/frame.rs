@@ -139,7 +139,9 @@ pub(crate) fn table_buffer(
         .chain(&tables.limits)
         .copied()
         .collect();
-    Buffer::from_slice(ctx, "preintegration tables", &data)
+    // Read through a texel view only: bounded by maxTexelBufferElements (128 M on lavapipe),
+    // not by the 128 MiB of maxStorageBufferRange, which held 9 tables to 965² entries.
+    Buffer::from_slice_as(ctx, "preintegration tables", &data, BufferUsage::Texel)
 }
 
 /// Per-frame constants: kernel parameters, transfer function, isosurfaces, skip table.

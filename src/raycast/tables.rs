@@ -30,9 +30,9 @@ pub fn build_tables(
 }
 
 /// Refuses tables the device cannot bind before they are built: `lengths` tables and the
-/// zero-length limits, each `resolution`² entries of 16 bytes, in one storage buffer of at
-/// most `limit` bytes (the device's maxStorageBufferRange). The error names the key and the
-/// largest resolution this scene can have on this device.
+/// zero-length limits, each `resolution`² entries of 16 bytes, in one texel buffer of at most
+/// `limit` bytes (the device's maxTexelBufferElements × 16, within its largest heap). The
+/// error names the key and the largest resolution this scene can have on this device.
 pub fn check_table_size(lengths: &[f64], resolution: usize, limit: u64) -> Result<(), RenderError> {
     let tables = lengths.len() as u64 + 1;
     let bytes = |r: u64| tables * r * r * 16;
@@ -46,7 +46,8 @@ pub fn check_table_size(lengths: &[f64], resolution: usize, limit: u64) -> Resul
         message: format!(
             "expected at most {largest} for this scene on this device: {resolution} needs \
              {} bytes ({tables} tables of {resolution}² entries × 16 bytes), more than the \
-             device's maxStorageBufferRange of {limit} bytes",
+             {limit} bytes that one texel buffer may hold on this device \
+             (maxTexelBufferElements × 16, within the largest heap)",
             bytes(r)
         ),
     })

@@ -421,7 +421,8 @@ impl Renderer {
             check_table_size(
                 &setup.table_lengths(view.transfer),
                 view.settings.table_resolution,
-                self.ctx.info().max_storage_buffer_range,
+                (16 * self.ctx.info().max_texel_buffer_elements)
+                    .min(self.ctx.info().max_heap_bytes),
             )?;
         }
         let builds = self.tables.builds();

@@ -101,6 +101,9 @@ pub struct ToleranceReport {
     /// Each table resolution tried, and its error extrapolated from the move to a finer
     /// table.
     pub table_moves: Vec<(usize, f64)>,
+    /// Whether every share of E was shown to hold (`notes` says which did not: a ladder
+    /// that ran out of levels, tables the device cannot hold finer).
+    pub met: bool,
     /// Explicit keys that won over the tolerance, and other remarks.
     pub notes: Vec<String>,
     /// Wall and GPU milliseconds of the pilot frames.
@@ -248,6 +251,8 @@ impl Renderer {
         let mut base = view.settings.clone();
         base.tolerance = None;
         let mut notes = Vec::new();
+        // Cleared where a share of E cannot be shown to hold.
+        let mut met = true;
         // Early termination: E/4 of the budget.
         if given.early_termination {
             notes.push(format!(
@@ -328,11 +333,13 @@ impl Renderer {
                     break;
                 }
             }
-            if estimate > budget {
+            if estimate > e / 2.0 {
+                met = false;
                 notes.push(format!(
                     "{} = {last_value:.4} after {level} refinements still estimates \
-                     {estimate:.2e} > {budget:.2e}: the tolerance is not met",
-                    lad.key
+                     {estimate:.2e}, more than its share E/2 = {:.2e}: the tolerance is not met",
+                    lad.key,
+                    e / 2.0
                 ));
             }
             // The power law between the last two rungs: refine no further than the last,
@@ -358,7 +365,10 @@ impl Renderer {
                 ));
             } else {
                 let mut image = pilot(self, &settings)?;
-                'finer: while settings.table_resolution < MAX_TABLE {
+                // The error of the tables taken, extrapolated from the last move to them
+                // (`None`: not measured); `Some(0.0)` once a finer table moved too little.
+                let mut current: Option<f64> = None;
+                while settings.table_resolution < MAX_TABLE {
                     let r = settings.table_resolution;
                     // Twice as fine, or half again where that does not fit the device.
                     let mut found = None;
@@ -377,20 +387,38 @@ impl Renderer {
                         }
                     }
                     let Some((finer, fine)) = found else {
-                        notes.push(format!(
-                            "tables finer than {r} do not fit this device: their share of the \
-                             tolerance is not verified"
-                        ));
-                        break 'finer;
+                        break;
                     };
                     let ratio = r as f64 / finer.table_resolution as f64;
                     let error = p99_error(&image, &fine) / (1.0 - ratio * ratio);
                     table_moves.push((r, error));
                     if error <= e / 4.0 {
+                        current = Some(error);
                         break;
                     }
+                    // The finer table's error at the tables' order 2.
+                    current = Some(error * ratio * ratio);
                     settings = finer;
                     image = fine;
+                }
+                match current {
+                    Some(c) if c <= e / 4.0 => {}
+                    Some(c) => {
+                        met = false;
+                        notes.push(format!(
+                            "tables of {} estimate {c:.2e}, more than their share E/4, and \
+                             finer ones do not fit this device: the tolerance is not met",
+                            settings.table_resolution
+                        ));
+                    }
+                    None => {
+                        met = false;
+                        notes.push(format!(
+                            "tables finer than {} do not fit this device: their share E/4 of \
+                             the tolerance is not verified, so it is not met",
+                            settings.table_resolution
+                        ));
+                    }
                 }
             }
         }
@@ -402,6 +430,7 @@ impl Renderer {
             early_termination: settings.early_termination,
             table_resolution: settings.table_resolution,
             table_moves,
+            met,
             notes,
             pilot_wall_ms: start.elapsed().as_secs_f64() * 1e3,
             pilot_gpu_ms,

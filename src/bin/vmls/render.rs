@@ -251,6 +251,7 @@ fn tolerance_json(r: &vmls::renderer::tolerance::ToleranceReport) -> serde_json:
             "resolution": res,
             "estimated_error": d,
         })).collect::<Vec<_>>(),
+        "met": r.met,
         "notes": r.notes,
         "pilot_frames": r.pilots,
         "pilot_wall_ms": r.pilot_wall_ms,
