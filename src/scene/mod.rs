@@ -197,6 +197,7 @@ fn given_keys(table: &Table) -> GivenKeys {
         reference_step: has("render", "reference_step"),
         epsilon: has("render", "epsilon"),
         l_min: has("render", "l_min"),
+        l_max: has("render", "l_max"),
         early_termination: has("render", "early_termination"),
         min_transmittance: has("render", "min_transmittance"),
         table_resolution: has("render", "table_resolution"),

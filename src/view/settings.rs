@@ -145,6 +145,7 @@ pub struct GivenKeys {
     pub reference_step: bool,
     pub epsilon: bool,
     pub l_min: bool,
+    pub l_max: bool,
     pub early_termination: bool,
     pub min_transmittance: bool,
     pub table_resolution: bool,
