@@ -59,6 +59,14 @@ pub struct Row {
     /// files written before it.
     #[serde(default)]
     pub p99: Option<f64>,
+    /// With `render.tolerance`: E, the error its pilots estimated for the step they chose
+    /// (beside the measured `p99`), and whether every share of E was shown to hold.
+    #[serde(default)]
+    pub tolerance: Option<f64>,
+    #[serde(default)]
+    pub tolerance_estimate: Option<f64>,
+    #[serde(default)]
+    pub tolerance_met: Option<bool>,
     /// Share of the device's ceilings the frame's ray-casting kernel reached, by the cost model
     /// of [`super::ceiling`] against `probe_fma` and the gather ceiling of its loads
     /// (`probe_memory:coherent-texel-gather`, or `march-texel-gather` for the fast path),
@@ -199,6 +207,9 @@ mod tests {
             psnr: Some(-20.0 * rmse.log10()),
             non_finite: Some(0),
             p99: Some(rmse * 2.0),
+            tolerance: None,
+            tolerance_estimate: None,
+            tolerance_met: None,
             fma_share: Some(0.1),
             memory_share: None,
             bound_by: "fma".into(),
