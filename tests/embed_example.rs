@@ -223,6 +223,31 @@ unsafe fn host_buffer(app: &embed::App, bytes: u64) -> (ash::vk::Buffer, ash::vk
     }
 }
 
+/// Destroys what a test made on the application's device, then the application, and checks
+/// that validation reported nothing since `before`.
+///
+/// # Safety
+/// The device is idle; nothing else uses these objects.
+unsafe fn teardown(
+    app: embed::App,
+    pool: ash::vk::CommandPool,
+    (buffer, memory): (ash::vk::Buffer, ash::vk::DeviceMemory),
+    before: u32,
+) {
+    // SAFETY: per this function's contract.
+    unsafe {
+        app.device.destroy_command_pool(pool, None);
+        app.device.destroy_buffer(buffer, None);
+        app.device.free_memory(memory, None);
+        app.destroy().expect("destroy");
+    }
+    assert_eq!(
+        embed::MESSAGES.load(Ordering::SeqCst),
+        before,
+        "validation reported messages"
+    );
+}
+
 /// A buffer target, and what the API refuses: a frame retired before its submission ran,
 /// retired twice or by another renderer, a buffer too small, a splatting method.
 #[test]
@@ -311,16 +336,8 @@ fn buffer_targets_and_misuse() {
             assert!(got == want, "the buffer target differs from render()");
             assert_eq!(ctx.validation_errors(), 0);
         }
-        d.destroy_command_pool(pool, None);
-        d.destroy_buffer(buffer, None);
-        d.free_memory(memory, None);
-        app.destroy().expect("destroy");
+        teardown(app, pool, (buffer, memory), before);
     }
-    assert_eq!(
-        embed::MESSAGES.load(Ordering::SeqCst),
-        before,
-        "validation reported messages"
-    );
 }
 
 /// A recorded splatting frame sizes its entry list before it runs: from `prepare`'s count of
@@ -437,14 +454,6 @@ fn recorded_splatting_learns_its_entry_count() {
             run(&mut renderer, &thin.view()).expect("without the budget it runs");
             assert_eq!(ctx.validation_errors(), 0);
         }
-        d.destroy_command_pool(pool, None);
-        d.destroy_buffer(buffer, None);
-        d.free_memory(memory, None);
-        app.destroy().expect("destroy");
+        teardown(app, pool, (buffer, memory), before);
     }
-    assert_eq!(
-        embed::MESSAGES.load(Ordering::SeqCst),
-        before,
-        "validation reported messages"
-    );
 }

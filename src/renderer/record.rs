@@ -262,12 +262,30 @@ impl RecordState {
         )
     }
 
-    /// Records the write of a frame's `image` (`size` pixels) into `target`: through
-    /// `target_pack` into `packed` where `pack` is given (a format to convert to, or a
-    /// `background` to composite, which is then not black), else copied as it is. Returns the
-    /// dispatches recorded.
+    /// Records the end of a frame: the write of its `image` (`size` pixels) into `target`,
+    /// through `target_pack` into `packed` where `pack` is given (a format to convert to, or a
+    /// `background` to composite, which is then not black), else copied as it is; then, last,
+    /// the frame's generation into its completion `marker`, which `retire` reads back. Returns
+    /// the dispatches recorded.
     #[allow(clippy::too_many_arguments)]
-    pub(super) fn record_write(
+    pub(super) fn record_finish(
+        &self,
+        rec: &mut Recorder<'_>,
+        pack: Option<(usize, &BindGroup<'_>)>,
+        background: [f32; 3],
+        (image, packed): (&Buffer, Option<&Buffer>),
+        target: &Target,
+        size: (u32, u32),
+        (marker, generation): (&Buffer, u32),
+    ) -> Result<u32, VkError> {
+        let dispatches = self.record_write(rec, pack, background, image, packed, target, size)?;
+        rec.fill(marker, generation);
+        Ok(dispatches)
+    }
+
+    /// The write of a frame's pixels into the target ([`RecordState::record_finish`]).
+    #[allow(clippy::too_many_arguments)]
+    fn record_write(
         &self,
         rec: &mut Recorder<'_>,
         pack: Option<(usize, &BindGroup<'_>)>,
@@ -539,17 +557,15 @@ impl Renderer {
                 row += rows;
                 band += 1;
             }
-            dispatches += self.record.record_write(
+            dispatches += self.record.record_finish(
                 rec,
                 pack.zip(pack_group.as_ref()),
                 [0.0; 3],
-                &targets.image,
-                slot.packed.as_ref(),
+                (&targets.image, slot.packed.as_ref()),
                 target,
                 (w, h),
+                (&slot.marker, generation),
             )?;
-            // Last: the frame's generation, which `retire` reads back.
-            rec.fill(&slot.marker, generation);
             Ok(())
         })?;
         let mut groups = vec![group.detach(), next_group.detach()];

@@ -338,17 +338,15 @@ impl Renderer {
         let mut dispatches = 0;
         ctx.record_into(cmd, Some(&slot.timer), |rec| {
             dispatches = recording.record(rec, &data, setup)?;
-            dispatches += self.record.record_write(
+            dispatches += self.record.record_finish(
                 rec,
                 pack.zip(pack_group.as_ref()),
                 background,
-                targets.image(),
-                slot.packed.as_ref(),
+                (targets.image(), slot.packed.as_ref()),
                 target,
                 (w, h),
+                (&slot.marker, generation),
             )?;
-            // Last: the frame's generation, which `retire` reads back.
-            rec.fill(&slot.marker, generation);
             Ok(())
         })?;
         s.plan = recording.plan();
