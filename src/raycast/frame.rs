@@ -3,8 +3,10 @@
 //! - `frame_pipeline`: the shader variant the field and setup need (compiled, or cached);
 //! - `frame_constants`: kernel constants, transfer function and isosurfaces (small, per frame);
 //! - `frame_targets`: image, counts, ray-state and skip-report buffers (per image size);
-//! - `run_bands`: the image in bands of rows, one submission per chunk of outer steps, with the
-//!   loop-limit fallback (LAVAPIPE.md: llvmpipe ends loops after 65 535 iterations);
+//! - `BandCommands`: one band of rows as commands, its chunks of outer steps after the first
+//!   dispatched indirectly by `raycast_next` (what `Renderer::record` records for every band);
+//! - `run_bands`: the image a band at a time, one submission each, with the loop-limit
+//!   fallback (LAVAPIPE.md: llvmpipe ends loops after 65 535 iterations);
 //! - `read_image`: pixels, evaluation counts and the skipping report back to the host.
 
 use super::gpu::{render_params, table_params};
@@ -18,6 +20,7 @@ use crate::gpu_types::{RayPush, binding, params_copies, ray_count};
 use crate::view::Method;
 use crate::view::shading::iso_buffer_data;
 use crate::view::transfer::TransferFunction;
+use crate::vk::Recorder;
 use crate::vk::{
     BindGroup, Buffer, BufferUsage, ComputePipeline, Context, ShaderCompiler, VkError,
 };
@@ -213,6 +216,9 @@ pub(crate) struct FrameTargets {
     pub(crate) counts: Buffer,
     pub(crate) ray_state: Buffer,
     pub(crate) skip_stats: Buffer,
+    /// One band's indirect dispatch arguments (`raycast_next`), for [`run_bands`], which
+    /// submits a band at a time.
+    pub(crate) args: Buffer,
 }
 
 pub(crate) fn frame_targets(ctx: &Context, pixels: u64) -> Result<FrameTargets, VkError> {
@@ -222,7 +228,116 @@ pub(crate) fn frame_targets(ctx: &Context, pixels: u64) -> Result<FrameTargets, 
         counts: Buffer::new(ctx, "evaluation counts", pixels * 4, BufferUsage::Storage)?,
         ray_state: Buffer::new(ctx, "ray state", pixels * 16, BufferUsage::Storage)?,
         skip_stats: Buffer::new(ctx, "skip report", pixels * 16, BufferUsage::Storage)?,
+        args: Buffer::new(ctx, "band dispatch arguments", 16, BufferUsage::Storage)?,
     })
+}
+
+/// The `raycast_next` pipeline.
+pub(crate) fn next_pipeline(
+    ctx: &Context,
+    compiler: &ShaderCompiler,
+) -> Result<ComputePipeline, VkError> {
+    let spirv = compiler.compile(
+        crate::vk::ShaderSource::File("raycast/raycast_next.comp"),
+        &crate::gpu_types::binding_defines(),
+    )?;
+    let kinds =
+        [binding::PARAMS, binding::COUNTS, binding::DISPATCH_ARGS].map(|b| (b, binding::kind(b)));
+    ComputePipeline::with_kinds(
+        ctx,
+        "raycast_next",
+        &spirv,
+        &kinds,
+        std::mem::size_of::<crate::gpu_types::NextPush>() as u32,
+    )
+}
+
+/// The `raycast_next` bind group of a frame: its parameters, its rays' counts, and the
+/// indirect arguments it writes.
+pub(crate) fn next_group<'a>(
+    ctx: &Context,
+    next: &ComputePipeline,
+    constants: &'a FrameConstants,
+    targets: &'a FrameTargets,
+    args: &'a Buffer,
+) -> Result<BindGroup<'a>, VkError> {
+    BindGroup::new(
+        ctx,
+        next,
+        &[
+            (binding::PARAMS, &constants.params),
+            (binding::COUNTS, &targets.counts),
+            (binding::DISPATCH_ARGS, args),
+        ],
+    )
+}
+
+/// One band of a ray-cast frame as commands, for `render()` (a submission per band) and for a
+/// recorded frame (every band): the band's first chunk dispatched for its groups, each later
+/// chunk indirectly for as many workgroups as `raycast_next` finds rays unfinished in the
+/// band (none once they all ended), from arguments at slot `slot` of `args`. Returns the
+/// dispatches recorded.
+pub(crate) struct BandCommands<'a> {
+    pub(crate) pipeline: &'a ComputePipeline,
+    pub(crate) group: &'a BindGroup<'a>,
+    pub(crate) next: &'a ComputePipeline,
+    pub(crate) next_group: &'a BindGroup<'a>,
+    pub(crate) args: &'a Buffer,
+    pub(crate) width: u32,
+    pub(crate) outer: u32,
+}
+
+impl BandCommands<'_> {
+    /// Records rows `row .. row + rows` in chunks of `chunk` outer steps.
+    pub(crate) fn record(
+        &self,
+        rec: &mut Recorder<'_>,
+        row: u32,
+        rows: u32,
+        chunk: u32,
+        slot: u32,
+    ) -> Result<u32, VkError> {
+        let mut dispatches = 0;
+        let mut first = 0;
+        while first < self.outer {
+            let push = chunk_push(row, rows, first, chunk, self.outer);
+            if first == 0 {
+                rec.dispatch(
+                    self.pipeline,
+                    self.group,
+                    bytemuck::bytes_of(&push),
+                    band_groups(self.width, rows),
+                    "raycast",
+                )?;
+            } else {
+                let next_push = crate::gpu_types::NextPush {
+                    row_offset: row,
+                    rows,
+                    args_slot: slot,
+                    _pad: 0,
+                };
+                rec.dispatch(
+                    self.next,
+                    self.next_group,
+                    bytemuck::bytes_of(&next_push),
+                    [1, 1, 1],
+                    "raycast_next",
+                )?;
+                rec.dispatch_indirect(
+                    self.pipeline,
+                    self.group,
+                    bytemuck::bytes_of(&push),
+                    self.args,
+                    16 * u64::from(slot),
+                    "raycast",
+                )?;
+                dispatches += 1;
+            }
+            dispatches += 1;
+            first = push.last;
+        }
+        Ok(dispatches)
+    }
 }
 
 /// Every buffer of a ray-cast frame at its binding (what [`frame_bindings`] lists).
@@ -268,11 +383,20 @@ pub(crate) enum Bands {
     HullHits,
 }
 
-/// Binds everything and runs the bands.
+/// The pipelines a ray-cast frame runs: the ray caster's variant and `raycast_next`.
+pub(crate) struct FramePipelines<'a> {
+    pub(crate) raycast: &'a ComputePipeline,
+    pub(crate) next: &'a ComputePipeline,
+}
+
+/// Binds everything and runs the bands: each band is recorded as a recorded frame records it
+/// ([`BandCommands`]) and submitted alone, and its rays' counts read back, so that progress and
+/// a stop request act between bands and a band that the loop limit cut short runs again in
+/// smaller chunks.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn run_bands(
     ctx: &Context,
-    pipeline: &ComputePipeline,
+    pipelines: FramePipelines<'_>,
     gpu_field: &GpuField,
     constants: &FrameConstants,
     targets: &FrameTargets,
@@ -282,39 +406,38 @@ pub(crate) fn run_bands(
     stop: Option<&AtomicBool>,
 ) -> Result<Bands, VkError> {
     let all = frame_buffers(gpu_field, constants, targets, table, setup);
-    let group = BindGroup::new(ctx, pipeline, &all)?;
+    let group = BindGroup::new(ctx, pipelines.raycast, &all)?;
+    let next_group = next_group(ctx, pipelines.next, constants, targets, &targets.args)?;
     let (w, h) = (setup.camera.width, setup.camera.height);
     let band_rows = band_rows(setup);
     let outer = outer_steps(setup);
+    let commands = BandCommands {
+        pipeline: pipelines.raycast,
+        group: &group,
+        next: pipelines.next,
+        next_group: &next_group,
+        args: &targets.args,
+        width: w,
+        outer,
+    };
     let mut chunk = setup.chunk.unwrap_or_else(|| default_chunk(setup));
     let mut gpu_ms = 0.0;
     let mut bands = 0;
     let mut row = 0;
     while row < h {
         let rows = band_rows.min(h - row);
-        let mut first = 0;
-        let mut band_counts: Vec<u32> = Vec::new();
-        while first < outer {
-            let push = chunk_push(row, rows, first, chunk, outer);
-            let timings = ctx.submit(|rec| {
-                rec.dispatch(
-                    pipeline,
-                    &group,
-                    bytemuck::bytes_of(&push),
-                    band_groups(w, rows),
-                    "raycast",
-                )
-            })?;
+        let band_counts: Vec<u32> = loop {
+            let timings =
+                ctx.submit(|rec| commands.record(rec, row, rows, chunk, 0).map(|_| ()))?;
             gpu_ms += timings.iter().filter_map(|t| t.gpu_ms).sum::<f64>();
             bands += 1;
             if stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
                 return Ok(Bands::Stopped);
             }
-            band_counts =
-                targets
-                    .counts
-                    .read_range(ctx, (row * w) as usize, (rows * w) as usize)?;
-            if band_counts.iter().any(|c| c & ray_count::TRUNCATED != 0) {
+            let counts = targets
+                .counts
+                .read_range(ctx, (row * w) as usize, (rows * w) as usize)?;
+            if counts.iter().any(|c| c & ray_count::TRUNCATED != 0) {
                 // The driver cut a loop short: this band again, from its start, in halves.
                 if chunk == 1 {
                     return Err(VkError::Usage(format!(
@@ -325,14 +448,10 @@ pub(crate) fn run_bands(
                     )));
                 }
                 chunk = chunk.div_ceil(2);
-                first = 0;
                 continue;
             }
-            if band_counts.iter().all(|c| c & ray_count::DONE != 0) {
-                break;
-            }
-            first = push.last;
-        }
+            break counts;
+        };
         let pixel_of = |i: usize| (i as u32 % w, row + i as u32 / w);
         if let Some(i) = band_counts
             .iter()

@@ -15,8 +15,8 @@ use crate::field::variant::Variant;
 use crate::field::{Field, RenderError};
 use crate::raycast::frame::FrameTargets;
 use crate::raycast::frame::{
-    Bands, Readback, frame_bindings, frame_constants, frame_pipeline, frame_targets, read_image,
-    run_bands, table_buffer,
+    Bands, FramePipelines, Readback, frame_bindings, frame_constants, frame_pipeline,
+    frame_targets, next_pipeline, read_image, run_bands, table_buffer,
 };
 pub use crate::raycast::frame::{default_chunk, outer_steps};
 use crate::raycast::gpu::variant_for_render;
@@ -130,6 +130,7 @@ pub fn render(
     let table = tables.map(|t| table_buffer(ctx, t)).transpose()?;
     let (w, h) = (resolved.camera.width, resolved.camera.height);
     let targets = frame_targets(ctx, u64::from(w) * u64::from(h))?;
+    let next = next_pipeline(ctx, compiler)?;
     // Once more with every crossing the CPU twin allows if a ray had more than the first
     // variant keeps (Bands::HullHits).
     let (variant, gpu_ms, bands) = loop {
@@ -143,7 +144,10 @@ pub fn render(
         let constants = frame_constants(ctx, field, &resolved, tf, tables, variant.skip)?;
         match run_bands(
             ctx,
-            &pipeline,
+            FramePipelines {
+                raycast: &pipeline,
+                next: &next,
+            },
             gpu_field,
             &constants,
             &targets,
@@ -353,7 +357,11 @@ impl Renderer {
                 tables,
                 variant.skip,
             )?;
-            let Some(targets) = self.targets.as_ref() else {
+            if self.record.next.is_none() {
+                self.record.next = Some(next_pipeline(&self.ctx, &self.compiler)?);
+            }
+            let (Some(targets), Some(next)) = (self.targets.as_ref(), self.record.next.as_ref())
+            else {
                 return Err(VkError::Usage("frame buffers missing".into()).into());
             };
             let table = if tables.is_some() {
@@ -363,7 +371,10 @@ impl Renderer {
             };
             match run_bands(
                 &self.ctx,
-                &self.pipelines[index].2,
+                FramePipelines {
+                    raycast: &self.pipelines[index].2,
+                    next,
+                },
                 &self.gpu_field,
                 &constants,
                 targets,

@@ -34,15 +34,15 @@
 //!   host cannot map, an upload submission of vmls's own.
 //!
 //! # What `render()` does that a recorded frame cannot
-//! The blocking [`Renderer::render`] submits a band at a time and reads its rays' status back
-//! between chunks: it ends early once every ray is done, restarts a band in smaller chunks where
-//! lavapipe's loop limit cut a ray short, and renders again with more hull crossings when a ray
-//! has more than the first variant keeps. A recorded frame records every chunk of every band up
-//! front, each later chunk an indirect dispatch whose size `raycast_next` sets from the band's
-//! rays (none once they are all done: BENCHMARKS.md measured recorded frames at `render()`'s
-//! cost), and [`Renderer::retire`] reports a frame that the loop limit or the hull cut short as
-//! an error, after which the renderer records with smaller chunks or every hull crossing, so
-//! that the next frame is right.
+//! The blocking [`Renderer::render`] records each band exactly as a recorded frame does
+//! (`raycast::frame::BandCommands`: the first chunk, then each later chunk indirect, its size
+//! set by `raycast_next` from the band's rays) but submits it alone and reads its rays' status
+//! back before the next: progress and a stop request act between bands, a band that lavapipe's
+//! loop limit cut short runs again in smaller chunks, and a frame with a ray of more hull
+//! crossings than the first variant keeps renders again with every crossing. A recorded frame
+//! records every band up front, and [`Renderer::retire`] reports a frame that the loop limit or
+//! the hull cut short as an error, after which the renderer records with smaller chunks or every
+//! hull crossing, so that the next frame is right.
 //!
 //! A splatting frame in `render()` reads its count of footprints back after the projection, to
 //! size the entry list and check the budget. A recorded one reserves its list beforehand, and
@@ -54,12 +54,13 @@
 use super::Renderer;
 use crate::field::RenderError;
 use crate::field::skip::SkipReport;
-use crate::field::variant::{Variant, groups_2d};
-use crate::gpu_types::{NextPush, PackPush, binding, ray_count};
+use crate::field::variant::Variant;
+use crate::gpu_types::ray_count;
 use crate::raycast::RaySetup;
 use crate::raycast::frame::{
-    FrameConstants, FrameTargets, band_groups, band_rows, chunk_push, constant_data, default_chunk,
-    frame_bindings, frame_buffers, frame_targets, outer_steps,
+    BandCommands, FrameConstants, FrameTargets, band_groups, band_rows, constant_data,
+    default_chunk, frame_bindings, frame_buffers, frame_targets, next_group, next_pipeline,
+    outer_steps,
 };
 use crate::raycast::gpu::variant_for_render;
 use crate::view::View;
@@ -242,26 +243,6 @@ pub(super) struct RecordState {
 }
 
 impl RecordState {
-    /// The bind group of `target_pack` pipeline `pack` from `image` into `packed`.
-    pub(super) fn pack_group<'a>(
-        &self,
-        ctx: &Context,
-        pack: usize,
-        image: &'a Buffer,
-        packed: &'a Option<Buffer>,
-    ) -> Result<BindGroup<'a>, VkError> {
-        let (Some((_, p)), Some(out)) = (self.pack.get(pack), packed.as_ref()) else {
-            return Err(VkError::Usage(
-                "target_pack pipeline or buffer missing".into(),
-            ));
-        };
-        BindGroup::new(
-            ctx,
-            p,
-            &[(binding::IMAGE, image), (binding::TARGET_PACKED, out)],
-        )
-    }
-
     /// Records the end of a frame: the write of its `image` (`size` pixels) into `target`,
     /// through `target_pack` into `packed` where `pack` is given (a format to convert to, or a
     /// `background` to composite, which is then not black), else copied as it is; then, last,
@@ -281,48 +262,6 @@ impl RecordState {
         let dispatches = self.record_write(rec, pack, background, image, packed, target, size)?;
         rec.fill(marker, generation);
         Ok(dispatches)
-    }
-
-    /// The write of a frame's pixels into the target ([`RecordState::record_finish`]).
-    #[allow(clippy::too_many_arguments)]
-    fn record_write(
-        &self,
-        rec: &mut Recorder<'_>,
-        pack: Option<(usize, &BindGroup<'_>)>,
-        background: [f32; 3],
-        image: &Buffer,
-        packed: Option<&Buffer>,
-        target: &Target,
-        size: (u32, u32),
-    ) -> Result<u32, VkError> {
-        let (w, h) = size;
-        match (pack, packed) {
-            (Some((p, g)), Some(out)) => {
-                let Some((_, pipeline)) = self.pack.get(p) else {
-                    return Err(VkError::Usage("target_pack pipeline missing".into()));
-                };
-                let count = u32::try_from(u64::from(w) * u64::from(h)).unwrap_or(u32::MAX);
-                let push = PackPush {
-                    count,
-                    composite: u32::from(background != [0.0; 3]),
-                    _pad: [0; 2],
-                    background: [background[0], background[1], background[2], 0.0],
-                };
-                rec.dispatch(
-                    pipeline,
-                    g,
-                    bytemuck::bytes_of(&push),
-                    groups_2d(count, 64),
-                    "target_pack",
-                )?;
-                rec.write_target(out, target, w, h)?;
-                Ok(1)
-            }
-            _ => {
-                rec.write_target(image, target, w, h)?;
-                Ok(0)
-            }
-        }
     }
 }
 
@@ -373,7 +312,7 @@ impl Renderer {
         let bindings = frame_bindings(&self.gpu_field, &setup, has_tables, variant.skip);
         let (index, _) = self.ray_pipeline(&variant, bindings)?;
         if self.record.next.is_none() {
-            self.record.next = Some(self.next_pipeline()?);
+            self.record.next = Some(next_pipeline(&self.ctx, &self.compiler)?);
         }
         Ok((setup, variant, index))
     }
@@ -491,15 +430,7 @@ impl Renderer {
             ),
             None => None,
         };
-        let next_group = BindGroup::new(
-            &ctx,
-            next,
-            &[
-                (binding::PARAMS, &constants.params),
-                (binding::COUNTS, &targets.counts),
-                (binding::DISPATCH_ARGS, args),
-            ],
-        )?;
+        let next_group = next_group(&ctx, next, constants, targets, args)?;
         let outer = outer_steps(&setup);
         let generation = slot.next_generation();
         let mut dispatches = 0u32;
@@ -510,50 +441,22 @@ impl Renderer {
             if let (Some(b), Some(d)) = (&constants.skip, &data.skip) {
                 rec.update(b, d)?;
             }
-            // A band's first chunk is dispatched; each later one only for as many workgroups
-            // as raycast_next finds rays unfinished (none once they all ended).
+            // Every band; each later chunk of a band only for as many workgroups as
+            // raycast_next finds rays unfinished (none once they all ended).
+            let commands = BandCommands {
+                pipeline,
+                group: &group,
+                next,
+                next_group: &next_group,
+                args,
+                width: w,
+                outer,
+            };
             let mut row = 0;
             let mut band = 0u32;
             while row < h {
                 let rows = rows_per_band.min(h - row);
-                let mut first = 0;
-                while first < outer {
-                    let push = chunk_push(row, rows, first, chunk, outer);
-                    if first == 0 {
-                        rec.dispatch(
-                            pipeline,
-                            &group,
-                            bytemuck::bytes_of(&push),
-                            band_groups(w, rows),
-                            "raycast",
-                        )?;
-                    } else {
-                        let next_push = NextPush {
-                            row_offset: row,
-                            rows,
-                            args_slot: band,
-                            _pad: 0,
-                        };
-                        rec.dispatch(
-                            next,
-                            &next_group,
-                            bytemuck::bytes_of(&next_push),
-                            [1, 1, 1],
-                            "raycast_next",
-                        )?;
-                        rec.dispatch_indirect(
-                            pipeline,
-                            &group,
-                            bytemuck::bytes_of(&push),
-                            args,
-                            16 * u64::from(band),
-                            "raycast",
-                        )?;
-                        dispatches += 1;
-                    }
-                    dispatches += 1;
-                    first = push.last;
-                }
+                dispatches += commands.record(rec, row, rows, chunk, band)?;
                 row += rows;
                 band += 1;
             }
@@ -685,53 +588,6 @@ impl Renderer {
     /// Frames recorded and not yet retired.
     pub fn frames_in_flight(&self) -> usize {
         self.slots.iter().filter(|s| s.in_flight).count()
-    }
-
-    /// The `raycast_next` pipeline.
-    fn next_pipeline(&self) -> Result<ComputePipeline, RenderError> {
-        let spirv = self.compiler.compile(
-            crate::vk::ShaderSource::File("raycast/raycast_next.comp"),
-            &crate::gpu_types::binding_defines(),
-        )?;
-        let kinds = [binding::PARAMS, binding::COUNTS, binding::DISPATCH_ARGS]
-            .map(|b| (b, binding::kind(b)));
-        Ok(ComputePipeline::with_kinds(
-            &self.ctx,
-            "raycast_next",
-            &spirv,
-            &kinds,
-            std::mem::size_of::<NextPush>() as u32,
-        )?)
-    }
-
-    /// The `target_pack` pipeline for `format` (compiled at its first use).
-    pub(super) fn pack_pipeline(&mut self, format: TargetFormat) -> Result<usize, RenderError> {
-        if let Some(i) = self.record.pack.iter().position(|(f, _)| *f == format) {
-            return Ok(i);
-        }
-        let code = match format {
-            TargetFormat::Rgba16f => 1,
-            TargetFormat::Rgba8Unorm => 2,
-            TargetFormat::Rgba8Srgb => 3,
-            // Splatting frames over a background composite it while copying.
-            TargetFormat::Rgba32f => 0,
-        };
-        let mut defines = crate::gpu_types::binding_defines();
-        defines.push(("TARGET_FORMAT".into(), code.to_string()));
-        let spirv = self.compiler.compile(
-            crate::vk::ShaderSource::File("common/target_pack.comp"),
-            &defines,
-        )?;
-        let kinds = [binding::IMAGE, binding::TARGET_PACKED].map(|b| (b, binding::kind(b)));
-        let p = ComputePipeline::with_kinds(
-            &self.ctx,
-            &format!("target_pack:{format:?}"),
-            &spirv,
-            &kinds,
-            std::mem::size_of::<PackPush>() as u32,
-        )?;
-        self.record.pack.push((format, p));
-        Ok(self.record.pack.len() - 1)
     }
 }
 

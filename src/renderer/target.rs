@@ -1,9 +1,18 @@
 //! Stage `target_pack`'s CPU twin: a frame's RGBA32F pixel, over its background where the
 //! frame splatted ([`crate::view::shading::composite_background`]), in the format of the application's image
-//! ([`TargetFormat`]), as the bytes `vkCmdCopyBufferToImage` copies. The GPU kernel is
-//! `glsl/common/target_pack.comp`; tests compare the two over every pixel of a frame.
+//! ([`TargetFormat`]), as the bytes `vkCmdCopyBufferToImage` copies, and the kernel's driver
+//! (pipelines per format, bind group, dispatch and the write into the application's target).
+//! The GPU kernel is `glsl/common/target_pack.comp`; tests compare the two over every pixel of
+//! a frame.
 
-use crate::vk::TargetFormat;
+use super::Renderer;
+use super::record::RecordState;
+use crate::field::RenderError;
+use crate::field::variant::groups_2d;
+use crate::gpu_types::{PackPush, binding};
+use crate::vk::{
+    BindGroup, Buffer, ComputePipeline, Context, Recorder, Target, TargetFormat, VkError,
+};
 
 /// The sRGB transfer function (IEC 61966-2-1) of a linear value clamped to [0, 1].
 pub fn srgb_encode(c: f64) -> f64 {
@@ -38,6 +47,103 @@ pub fn pack_pixel(format: TargetFormat, p: [f32; 4]) -> Vec<u8> {
                 unorm8(a),
             ]
         }
+    }
+}
+
+/// Stage `target_pack`'s driver: its pipelines, bind groups and dispatch.
+impl RecordState {
+    /// The bind group of `target_pack` pipeline `pack` from `image` into `packed`.
+    pub(super) fn pack_group<'a>(
+        &self,
+        ctx: &Context,
+        pack: usize,
+        image: &'a Buffer,
+        packed: &'a Option<Buffer>,
+    ) -> Result<BindGroup<'a>, VkError> {
+        let (Some((_, p)), Some(out)) = (self.pack.get(pack), packed.as_ref()) else {
+            return Err(VkError::Usage(
+                "target_pack pipeline or buffer missing".into(),
+            ));
+        };
+        BindGroup::new(
+            ctx,
+            p,
+            &[(binding::IMAGE, image), (binding::TARGET_PACKED, out)],
+        )
+    }
+
+    /// The write of a frame's pixels into the target ([`RecordState::record_finish`]).
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn record_write(
+        &self,
+        rec: &mut Recorder<'_>,
+        pack: Option<(usize, &BindGroup<'_>)>,
+        background: [f32; 3],
+        image: &Buffer,
+        packed: Option<&Buffer>,
+        target: &Target,
+        size: (u32, u32),
+    ) -> Result<u32, VkError> {
+        let (w, h) = size;
+        match (pack, packed) {
+            (Some((p, g)), Some(out)) => {
+                let Some((_, pipeline)) = self.pack.get(p) else {
+                    return Err(VkError::Usage("target_pack pipeline missing".into()));
+                };
+                let count = u32::try_from(u64::from(w) * u64::from(h)).unwrap_or(u32::MAX);
+                let push = PackPush {
+                    count,
+                    composite: u32::from(background != [0.0; 3]),
+                    _pad: [0; 2],
+                    background: [background[0], background[1], background[2], 0.0],
+                };
+                rec.dispatch(
+                    pipeline,
+                    g,
+                    bytemuck::bytes_of(&push),
+                    groups_2d(count, 64),
+                    "target_pack",
+                )?;
+                rec.write_target(out, target, w, h)?;
+                Ok(1)
+            }
+            _ => {
+                rec.write_target(image, target, w, h)?;
+                Ok(0)
+            }
+        }
+    }
+}
+
+impl Renderer {
+    /// The `target_pack` pipeline for `format` (compiled at its first use).
+    pub(super) fn pack_pipeline(&mut self, format: TargetFormat) -> Result<usize, RenderError> {
+        if let Some(i) = self.record.pack.iter().position(|(f, _)| *f == format) {
+            return Ok(i);
+        }
+        let code = match format {
+            TargetFormat::Rgba16f => 1,
+            TargetFormat::Rgba8Unorm => 2,
+            TargetFormat::Rgba8Srgb => 3,
+            // Splatting frames over a background composite it while copying.
+            TargetFormat::Rgba32f => 0,
+        };
+        let mut defines = crate::gpu_types::binding_defines();
+        defines.push(("TARGET_FORMAT".into(), code.to_string()));
+        let spirv = self.compiler.compile(
+            crate::vk::ShaderSource::File("common/target_pack.comp"),
+            &defines,
+        )?;
+        let kinds = [binding::IMAGE, binding::TARGET_PACKED].map(|b| (b, binding::kind(b)));
+        let p = ComputePipeline::with_kinds(
+            &self.ctx,
+            &format!("target_pack:{format:?}"),
+            &spirv,
+            &kinds,
+            std::mem::size_of::<PackPush>() as u32,
+        )?;
+        self.record.pack.push((format, p));
+        Ok(self.record.pack.len() - 1)
     }
 }
 
