@@ -168,3 +168,39 @@ fn the_command_line_takes_a_tolerance() {
     assert_fails(&vmls(&args), &["--tolerance"], &cpu_png);
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// `vmls bench` with a swept tolerance: its rows carry E, the estimate and `met`, and it draws
+/// the measured-against-requested plot.
+#[test]
+fn the_bench_plots_measured_against_requested_error() {
+    use common::cli::*;
+    let d = dir("tolerance-bench");
+    let out = vmls(&quick_bench(&d, &["--sweep", "render.tolerance=1e-2,3e-3"]));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for plot in ["tolerance.svg", "tolerance.png"] {
+        let bytes = std::fs::read(d.join(plot)).expect("the tolerance plot");
+        assert!(bytes.len() > 1000, "{plot}: {} bytes", bytes.len());
+    }
+    let svg = std::fs::read_to_string(d.join("tolerance.svg")).expect("svg");
+    assert!(svg.contains("requested E"), "axis label missing");
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("results.json")).expect("json"))
+            .expect("valid");
+    let rows = json["rows"].as_array().expect("rows");
+    assert_eq!(rows.len(), 2);
+    for r in rows {
+        let e = r["tolerance"].as_f64().expect("E");
+        assert!(e == 0.01 || e == 0.003, "{r}");
+        assert!(
+            r["tolerance_estimate"].as_f64().is_some_and(|v| v > 0.0),
+            "{r}"
+        );
+        assert!(r["tolerance_met"].is_boolean(), "{r}");
+        assert!(r["p99"].as_f64().is_some_and(f64::is_finite), "{r}");
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}

@@ -195,13 +195,20 @@ pub fn bench(args: &BenchArgs) -> Result<(), CliError> {
     })?;
     let base = vmls::scene::Scene::load(args.scene.as_deref(), &args.set)?;
     let inputs = vmls::bench::inputs(&opts, &base);
-    let names = [
+    let mut names = vec![
         "results.csv",
         "results.json",
         "speed_error.svg",
         "speed_error.png",
     ];
-    let paths = names.map(|n| args.out.join(n));
+    // Rendered to a tolerance (the scene, --set or a sweep): the measured-against-requested
+    // plot too.
+    let tolerance_plot =
+        base.render.tolerance.is_some() || opts.sweeps.iter().any(|s| s.key == "render.tolerance");
+    if tolerance_plot {
+        names.extend(["tolerance.svg", "tolerance.png"]);
+    }
+    let paths: Vec<std::path::PathBuf> = names.iter().map(|n| args.out.join(n)).collect();
     let planned: Vec<(&str, &std::path::Path)> = names
         .iter()
         .zip(&paths)
@@ -283,7 +290,11 @@ pub fn bench(args: &BenchArgs) -> Result<(), CliError> {
     let context = run_context(&ctx, &opts, &reference, measured_ceilings.as_ref());
     let write_all = |mut outputs: Outputs, rows: &[Row]| -> Result<(), CliError> {
         let (svg, png) = plot::speed_error_files(rows, &title)?;
-        let contents = [csv_bytes(rows)?, json_bytes(&context, rows)?, svg, png];
+        let mut contents = vec![csv_bytes(rows)?, json_bytes(&context, rows)?, svg, png];
+        if tolerance_plot {
+            let (svg, png) = plot::tolerance_files(rows, &title)?;
+            contents.extend([svg, png]);
+        }
         for (path, bytes) in paths.iter().zip(&contents) {
             outputs.write(path, |w| std::io::Write::write_all(w, bytes))?;
         }
@@ -327,8 +338,13 @@ pub fn bench(args: &BenchArgs) -> Result<(), CliError> {
             .join(", ")
     );
     println!(
-        "wrote {} (and results.json, speed_error.svg/.png, images/)",
-        args.out.join("results.csv").display()
+        "wrote {} (and results.json, speed_error.svg/.png, {}images/)",
+        args.out.join("results.csv").display(),
+        if tolerance_plot {
+            "tolerance.svg/.png, "
+        } else {
+            ""
+        }
     );
     Ok(())
 }
