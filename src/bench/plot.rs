@@ -14,6 +14,36 @@ use plotters::prelude::*;
 /// Smallest error drawn: a row identical to the reference sits on the bottom edge.
 const ERROR_FLOOR: f64 = 1e-7;
 
+/// A log–log chart on `root` with the project's margins, fonts and labels: each axis its
+/// range and description, and the tick label formats of x and y.
+#[allow(clippy::type_complexity)]
+fn log_log<'a, DB: DrawingBackend>(
+    root: &'a DrawingArea<DB, Shift>,
+    title: &str,
+    (x, x_desc): (std::ops::Range<f64>, &str),
+    (y, y_desc): (std::ops::Range<f64>, &str),
+    (x_fmt, y_fmt): (fn(&f64) -> String, fn(&f64) -> String),
+) -> Result<ChartContext<'a, DB, Cartesian2d<LogCoord<f64>, LogCoord<f64>>>, String> {
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    let mut chart = ChartBuilder::on(root)
+        .margin(16)
+        .caption(title, ("sans-serif", 20))
+        .x_label_area_size(44)
+        .y_label_area_size(64)
+        .build_cartesian_2d(x.log_scale(), y.log_scale())
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .x_label_formatter(&x_fmt)
+        .y_label_formatter(&y_fmt)
+        .label_style(("sans-serif", 13))
+        .draw()
+        .map_err(err)?;
+    Ok(chart)
+}
+
 /// The (time, error) a row is drawn at, if it has both.
 fn point(r: &Row) -> Option<(f64, f64)> {
     let t = r.gpu_ms.unwrap_or(r.wall_ms);
@@ -49,22 +79,16 @@ fn draw<DB: DrawingBackend>(
     };
     let (t0, t1) = bounds(|p| p.0);
     let (e0, e1) = bounds(|p| p.1);
-    let mut chart = ChartBuilder::on(&root)
-        .margin(16)
-        .caption(title, ("sans-serif", 20))
-        .x_label_area_size(44)
-        .y_label_area_size(64)
-        .build_cartesian_2d((t0..t1).log_scale(), (e0..e1).log_scale())
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc("frame time, ms (GPU timestamps; wall time for peers without them)")
-        .y_desc("RMSE against the reference")
-        .x_label_formatter(&|v| format!("{v}"))
-        .y_label_formatter(&|v| format!("{v:.1e}"))
-        .label_style(("sans-serif", 13))
-        .draw()
-        .map_err(err)?;
+    let mut chart = log_log(
+        &root,
+        title,
+        (
+            t0..t1,
+            "frame time, ms (GPU timestamps; wall time for peers without them)",
+        ),
+        (e0..e1, "RMSE against the reference"),
+        (|v| format!("{v}"), |v| format!("{v:.1e}")),
+    )?;
     let mut names: Vec<String> = rows.iter().map(series_name).collect();
     names.sort();
     names.dedup();
@@ -193,22 +217,16 @@ fn draw_tolerance<DB: DrawingBackend>(
     } else {
         (1e-4, 1e-1)
     };
-    let mut chart = ChartBuilder::on(&root)
-        .margin(16)
-        .caption(title, ("sans-serif", 20))
-        .x_label_area_size(44)
-        .y_label_area_size(64)
-        .build_cartesian_2d((lo..hi).log_scale(), (lo..hi).log_scale())
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc("requested E (render.tolerance)")
-        .y_desc("measured: p99 of the RGBA error against the reference")
-        .x_label_formatter(&|v| format!("{v:.0e}"))
-        .y_label_formatter(&|v| format!("{v:.0e}"))
-        .label_style(("sans-serif", 13))
-        .draw()
-        .map_err(err)?;
+    let mut chart = log_log(
+        &root,
+        title,
+        (lo..hi, "requested E (render.tolerance)"),
+        (
+            lo..hi,
+            "measured: p99 of the RGBA error against the reference",
+        ),
+        (|v| format!("{v:.0e}"), |v| format!("{v:.0e}")),
+    )?;
     for (factor, label) in [(1.0, "measured = E"), (0.1, "measured = E/10")] {
         let style = if factor == 1.0 {
             BLACK.stroke_width(2)
