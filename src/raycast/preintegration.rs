@@ -503,7 +503,33 @@ impl PreintegrationTables {
         resolution: usize,
         progress: impl Fn(f64) + Sync,
     ) -> Self {
+        Self::build_reusing(tf, s_range, lengths, resolution, None, progress)
+    }
+
+    /// [`PreintegrationTables::build`], taking the table of any length that `previous` holds
+    /// (built by this function for the same transfer function, range and resolution, which
+    /// the caller guarantees) instead of building it again: a table depends on nothing else,
+    /// so it is the same to the bit. A step ladder that halves its step shares all lengths but
+    /// one with the rung before (`renderer::tolerance`).
+    pub fn build_reusing(
+        tf: &TransferFunction,
+        s_range: (f64, f64),
+        lengths: &[f64],
+        resolution: usize,
+        previous: Option<&PreintegrationTables>,
+        progress: impl Fn(f64) + Sync,
+    ) -> Self {
         let n = resolution.max(2);
+        let reuse = |l: f64| {
+            previous
+                .filter(|p| p.resolution == n && p.tables.len() == p.lengths.len())
+                .and_then(|p| {
+                    p.lengths
+                        .iter()
+                        .position(|&pl| pl.to_bits() == l.to_bits())
+                        .map(|i| p.tables[i].clone())
+                })
+        };
         let (s_min, s_max) = table_range(s_range);
         let mut tables = Self {
             s_min,
@@ -546,6 +572,10 @@ impl PreintegrationTables {
         };
         let mut built = Vec::with_capacity(lengths.len());
         for &l in lengths {
+            if let Some(table) = reuse(l) {
+                built.push(table);
+                continue;
+            }
             let mut table = vec![[0.0f32; 4]; n * n];
             for i in 0..n {
                 table[i + n * i] = entry(segment_integral(tf, t.node(i), t.node(i), l));
@@ -640,6 +670,37 @@ impl PreintegrationTables {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn reused_tables_equal_fresh_ones_to_the_bit() {
+        let tf = TransferFunction::new(vec![
+            [0.0, 1.0, 0.5, 0.2, 0.0],
+            [0.4, 1.0, 0.5, 0.2, 6.0],
+            [1.0, 0.2, 0.5, 1.0, 1.0],
+        ]);
+        let first = PreintegrationTables::build(&tf, (0.0, 1.0), &[0.5, 0.25], 24, |_| {});
+        // The next rung of a halving ladder: one length shared, one new.
+        let lengths = [0.25, 0.125];
+        let reused = PreintegrationTables::build_reusing(
+            &tf,
+            (0.0, 1.0),
+            &lengths,
+            24,
+            Some(&first),
+            |_| {},
+        );
+        let fresh = PreintegrationTables::build(&tf, (0.0, 1.0), &lengths, 24, |_| {});
+        assert_eq!(reused.tables, fresh.tables);
+        assert_eq!(reused.limits, fresh.limits);
+        assert_eq!(
+            reused.tables[0], first.tables[1],
+            "the shared length was taken over"
+        );
+        // Another resolution is never taken over.
+        let other =
+            PreintegrationTables::build_reusing(&tf, (0.0, 1.0), &[0.25], 16, Some(&first), |_| {});
+        assert_eq!(other.tables[0].len(), 16 * 16);
+    }
 
     #[test]
     fn lengths_halve_down_to_l_min() {

@@ -87,7 +87,16 @@ impl TableCache {
             scalar_range(field),
         );
         if self.key.as_ref() != Some(&key) {
-            self.tables = build_tables(setup, field, tf, resolution, progress);
+            // Tables of the same transfer function, resolution and range are reused length by
+            // length; only the new lengths are built.
+            let previous = self
+                .key
+                .as_ref()
+                .filter(|k| k.0 == key.0 && k.2 == key.2 && k.3 == key.3)
+                .and(self.tables.as_ref());
+            self.tables = Some(PreintegrationTables::build_reusing(
+                tf, key.3, &key.1, resolution, previous, progress,
+            ));
             self.key = Some(key);
             self.builds += 1;
         }
