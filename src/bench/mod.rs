@@ -469,6 +469,7 @@ pub fn run(
             }
             _ => None,
         };
+        let tolerance = first.tolerance.as_ref();
         let row = Row {
             fma_share: shares.map(|s| s.0),
             memory_share: shares.map(|s| s.1),
@@ -506,9 +507,9 @@ pub fn run(
             psnr: error.map(|e| e.psnr),
             non_finite: error.map(|e| e.non_finite),
             p99: error.map(|e| e.p99),
-            tolerance: first.tolerance.as_ref().map(|t| t.tolerance),
-            tolerance_estimate: first.tolerance.as_ref().and_then(|t| t.chosen).map(|c| c.2),
-            tolerance_met: first.tolerance.as_ref().map(|t| t.met),
+            tolerance: tolerance.map(|t| t.tolerance),
+            tolerance_estimate: tolerance.and_then(|t| t.chosen).map(|c| c.2),
+            tolerance_met: tolerance.map(|t| t.met),
             reference: reference.description.clone(),
             variant: image.variant.clone(),
         };

@@ -20,9 +20,8 @@ use crate::gpu_types::{RayPush, binding, params_copies, ray_count};
 use crate::view::Method;
 use crate::view::shading::iso_buffer_data;
 use crate::view::transfer::TransferFunction;
-use crate::vk::Recorder;
 use crate::vk::{
-    BindGroup, Buffer, BufferUsage, ComputePipeline, Context, ShaderCompiler, VkError,
+    BindGroup, Buffer, BufferUsage, ComputePipeline, Context, Recorder, ShaderCompiler, VkError,
 };
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -272,11 +271,9 @@ pub(crate) fn next_group<'a>(
     )
 }
 
-/// One band of a ray-cast frame as commands, for `render()` (a submission per band) and for a
-/// recorded frame (every band): the band's first chunk dispatched for its groups, each later
-/// chunk indirectly for as many workgroups as `raycast_next` finds rays unfinished in the
-/// band (none once they all ended), from arguments at slot `slot` of `args`. Returns the
-/// dispatches recorded.
+/// What a band of a ray-cast frame records, for `render()` (a submission per band) and for a
+/// recorded frame (every band): the ray caster and `raycast_next` with their bind groups, the
+/// indirect arguments, the image width and the frame's outer steps.
 pub(crate) struct BandCommands<'a> {
     pub(crate) pipeline: &'a ComputePipeline,
     pub(crate) group: &'a BindGroup<'a>,
@@ -288,7 +285,10 @@ pub(crate) struct BandCommands<'a> {
 }
 
 impl BandCommands<'_> {
-    /// Records rows `row .. row + rows` in chunks of `chunk` outer steps.
+    /// Records rows `row .. row + rows` in chunks of `chunk` outer steps: the first chunk
+    /// dispatched for the band's groups, each later one indirectly for as many workgroups as
+    /// `raycast_next` finds rays unfinished in the band (none once they all ended), from the
+    /// arguments at slot `slot` of `args`. Returns the dispatches recorded.
     pub(crate) fn record(
         &self,
         rec: &mut Recorder<'_>,

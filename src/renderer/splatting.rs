@@ -15,8 +15,8 @@ use super::{FrameStats, GpuImage, Renderer, SplatReport};
 use crate::field::RenderError;
 use crate::gpu_types::PlanPush;
 use crate::splat::frame::{
-    ConstantData, FrameControl, SplatConstants, SplatRecording, count_entries, entry_limit,
-    plan_args_bytes, retired_counts, splat_frame,
+    ConstantData, FrameControl, Retired, SplatConstants, SplatRecording, count_entries,
+    entry_limit, plan_args_bytes, retired_counts, splat_frame,
 };
 use crate::splat::gpu::{GpuKernels, SplatPipelines, SplatTargets, SplatVariant};
 use crate::splat::{Shading, SplatSetup};
@@ -308,13 +308,7 @@ impl Renderer {
         else {
             return Err(VkError::Usage("recorded splat buffers missing".into()).into());
         };
-        let max_entries = match self.budget {
-            // setup.work_bound(entries) ≤ budget, solved for the entries.
-            Some(b) => ((b - setup.work_bound(0)) / f64::from(setup.group_size()))
-                .floor()
-                .clamp(0.0, f64::from(u32::MAX)) as u32,
-            None => u32::MAX,
-        };
+        let max_entries = setup.max_entries(self.budget);
         let pipelines = &self.splat_pipelines[frame.index];
         let hull = self.gpu_field.hull_bindings();
         let recording = SplatRecording::new(
@@ -382,7 +376,7 @@ impl Renderer {
             return Err(VkError::Usage("retire: the frame's buffers are missing".into()).into());
         };
         match retired_counts(&ctx, targets, setup, plan, *budget, *invocations)? {
-            Ok(counts) => Ok(RecordedFrame {
+            Retired::Counts(counts) => Ok(RecordedFrame {
                 gpu_ms,
                 evaluations: counts.evaluated,
                 dispatches,
@@ -390,7 +384,7 @@ impl Renderer {
                 skip: None,
                 splat: Some(counts),
             }),
-            Err(total) => {
+            Retired::Overflowed(total) => {
                 let held = plan.capacity;
                 let learned = self.record.splat_entries.unwrap_or(0).max(total);
                 self.record.splat_entries = Some(learned);

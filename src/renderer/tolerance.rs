@@ -115,8 +115,8 @@ pub struct ToleranceReport {
 /// The renderer's last resolution: the view it was for and what it chose.
 pub(super) struct Resolved {
     key: ViewKey,
-    pub(super) settings: RenderSettings,
-    pub(super) report: ToleranceReport,
+    settings: RenderSettings,
+    report: ToleranceReport,
 }
 
 /// What a resolution depends on.
@@ -141,37 +141,18 @@ impl ViewKey {
     }
 }
 
-/// The refined parameter of a method: its key, its value at level k, the expected order in
-/// the level, and whether the key was given (then it is not refined).
-struct Ladder {
-    key: &'static str,
-    expected_order: f64,
-    given: bool,
-}
+/// The order in the level assumed until two differences measure one: every ladder's
+/// parameter enters its method's error to the second order ([`fitted_order`] takes over).
+const EXPECTED_ORDER: f64 = 2.0;
 
-fn ladder(settings: &RenderSettings) -> Ladder {
+/// The key a method's ladder refines, and whether the scene gave it (then it is not refined).
+fn ladder_key(settings: &RenderSettings) -> (&'static str, bool) {
     let g = &settings.given;
     match settings.method {
-        Method::Fixed | Method::Riemann => Ladder {
-            key: "render.step",
-            expected_order: 2.0,
-            given: g.step,
-        },
-        Method::Reference => Ladder {
-            key: "render.reference_step",
-            expected_order: 2.0,
-            given: g.reference_step,
-        },
-        Method::Adaptive => Ladder {
-            key: "render.epsilon",
-            expected_order: 2.0,
-            given: g.epsilon,
-        },
-        Method::Splat | Method::SplatPost => Ladder {
-            key: "splat.slab",
-            expected_order: 2.0,
-            given: g.slab,
-        },
+        Method::Fixed | Method::Riemann => ("render.step", g.step),
+        Method::Reference => ("render.reference_step", g.reference_step),
+        Method::Adaptive => ("render.epsilon", g.epsilon),
+        Method::Splat | Method::SplatPost => ("splat.slab", g.slab),
     }
 }
 
@@ -288,27 +269,23 @@ impl Renderer {
         }
         let mut pilots = 0u32;
         let mut pilot_gpu_ms = 0.0;
-        let mut pilot =
-            |r: &mut Renderer, s: &RenderSettings| -> Result<Vec<[f32; 4]>, RenderError> {
-                let v = View {
-                    camera: &camera,
-                    settings: s,
-                    ..*view
-                };
-                let (image, stats) = r.render(&v, |_| {})?;
-                pilots += 1;
-                pilot_gpu_ms += stats.gpu_ms;
-                Ok(image.pixels)
+        let mut pilot = |r: &mut Renderer, s: &RenderSettings| -> Result<Image, RenderError> {
+            let v = View {
+                camera: &camera,
+                settings: s,
+                ..*view
             };
-        let lad = ladder(&base);
+            let (image, stats) = r.render(&v, |_| {})?;
+            pilots += 1;
+            pilot_gpu_ms += stats.gpu_ms;
+            Ok(image.pixels)
+        };
+        let (key, key_given) = ladder_key(&base);
         let budget = SAFETY * e / 2.0;
         let mut rungs: Vec<(f64, f64)> = Vec::new();
-        let mut order = lad.expected_order;
-        let (mut settings, chosen) = if lad.given {
-            notes.push(format!(
-                "{} given: kept, not chosen by the tolerance",
-                lad.key
-            ));
+        let mut order = EXPECTED_ORDER;
+        let (mut settings, chosen) = if key_given {
+            notes.push(format!("{} given: kept, not chosen by the tolerance", key));
             (base.clone(), None)
         } else {
             let (s0, v0) = at_level(&base, 0.0);
@@ -324,7 +301,7 @@ impl Renderer {
                 // the ladder at the last one rendered.
                 let image = match pilot(self, &s) {
                     Err(e @ (RenderError::Setting { .. } | RenderError::Budget { .. })) => {
-                        notes.push(format!("{} = {v:.4} refused: {e}", lad.key));
+                        notes.push(format!("{} = {v:.4} refused: {e}", key));
                         break;
                     }
                     r => r?,
@@ -333,7 +310,7 @@ impl Renderer {
                 let dk = p99_error(&previous, &image);
                 rungs.push((last_value, dk));
                 d.push(dk);
-                order = fitted_order(&d, lad.expected_order);
+                order = fitted_order(&d, EXPECTED_ORDER);
                 estimate = dk / (2f64.powf(order) - 1.0);
                 previous = image;
                 last_value = v;
@@ -346,7 +323,7 @@ impl Renderer {
                 notes.push(format!(
                     "{} = {last_value:.4} after {level} refinements still estimates \
                      {estimate:.2e}, more than its share E/2 = {:.2e}: the tolerance is not met",
-                    lad.key,
+                    key,
                     e / 2.0
                 ));
             }
@@ -360,10 +337,8 @@ impl Renderer {
             let k = f64::from(level) + extra.clamp(-1.0, 0.0);
             let (s, v) = at_level(&base, k);
             let at_k = estimate * 2f64.powf(order * (f64::from(level) - k));
-            (s, Some((lad.key, v, at_k)))
+            (s, Some((key, v, at_k)))
         };
-        // Tables: their error, extrapolated from the move to a finer table at their order 2
-        // in the cell (`vmls check`'s converge-table), must stay within E/4; else the finer.
         let mut table_moves = Vec::new();
         if settings.method.preintegrated() {
             if given.table_resolution {
@@ -372,61 +347,11 @@ impl Renderer {
                     settings.table_resolution
                 ));
             } else {
-                let mut image = pilot(self, &settings)?;
-                // The error of the tables taken, extrapolated from the last move to them
-                // (`None`: not measured); `Some(0.0)` once a finer table moved too little.
-                let mut current: Option<f64> = None;
-                while settings.table_resolution < MAX_TABLE {
-                    let r = settings.table_resolution;
-                    // Twice as fine, or half again where that does not fit the device.
-                    let mut found = None;
-                    for finer_r in [2 * r, r + r / 2] {
-                        let mut finer = settings.clone();
-                        finer.table_resolution = finer_r.min(MAX_TABLE);
-                        match pilot(self, &finer) {
-                            Err(RenderError::Setting {
-                                key: "render.table_resolution",
-                                ..
-                            }) => continue,
-                            result => {
-                                found = Some((finer, result?));
-                                break;
-                            }
-                        }
-                    }
-                    let Some((finer, fine)) = found else {
-                        break;
-                    };
-                    let ratio = r as f64 / finer.table_resolution as f64;
-                    let error = p99_error(&image, &fine) / (1.0 - ratio * ratio);
-                    table_moves.push((r, error));
-                    if error <= e / 4.0 {
-                        current = Some(error);
-                        break;
-                    }
-                    // The finer table's error at the tables' order 2.
-                    current = Some(error * ratio * ratio);
-                    settings = finer;
-                    image = fine;
-                }
-                match current {
-                    Some(c) if c <= e / 4.0 => {}
-                    Some(c) => {
-                        met = false;
-                        notes.push(format!(
-                            "tables of {} estimate {c:.2e}, more than their share E/4, and \
-                             finer ones do not fit this device: the tolerance is not met",
-                            settings.table_resolution
-                        ));
-                    }
-                    None => {
-                        met = false;
-                        notes.push(format!(
-                            "tables finer than {} do not fit this device: their share E/4 of \
-                             the tolerance is not verified, so it is not met",
-                            settings.table_resolution
-                        ));
-                    }
+                let refined = refine_tables(self, &mut settings, e, &mut pilot)?;
+                table_moves = refined.moves;
+                if let Some(note) = refined.miss {
+                    met = false;
+                    notes.push(note);
                 }
             }
         }
@@ -446,6 +371,88 @@ impl Renderer {
         };
         Ok((settings, report))
     }
+}
+
+/// A frame's pixels.
+type Image = Vec<[f32; 4]>;
+
+/// A pilot frame of the view being resolved at these settings (counted in the report).
+type Pilot<'a> = dyn FnMut(&mut Renderer, &RenderSettings) -> Result<Image, RenderError> + 'a;
+
+/// What [`refine_tables`] found: each resolution tried with its extrapolated error, and why
+/// the tables' share could not be shown where it could not.
+struct TableRefinement {
+    moves: Vec<(usize, f64)>,
+    miss: Option<String>,
+}
+
+/// The tables' share (module documentation): their error, extrapolated from the move to a
+/// finer table at their order 2 in the cell (`vmls check`'s converge-table), must stay within
+/// E/4, else the finer ones are taken.
+fn refine_tables(
+    renderer: &mut Renderer,
+    settings: &mut RenderSettings,
+    e: f64,
+    pilot: &mut Pilot<'_>,
+) -> Result<TableRefinement, RenderError> {
+    let mut moves = Vec::new();
+    let mut image = pilot(renderer, settings)?;
+    // The error of the tables taken, extrapolated from the last move to them (`None`: not
+    // measured).
+    let mut current: Option<f64> = None;
+    while settings.table_resolution < MAX_TABLE {
+        let r = settings.table_resolution;
+        let Some((finer, fine)) = finer_tables(renderer, settings, pilot)? else {
+            break;
+        };
+        let ratio = r as f64 / finer.table_resolution as f64;
+        let error = p99_error(&image, &fine) / (1.0 - ratio * ratio);
+        moves.push((r, error));
+        if error <= e / 4.0 {
+            current = Some(error);
+            break;
+        }
+        // The finer table's error at the tables' order 2.
+        current = Some(error * ratio * ratio);
+        *settings = finer;
+        image = fine;
+    }
+    let miss = match current {
+        Some(c) if c <= e / 4.0 => None,
+        Some(c) => Some(format!(
+            "tables of {} estimate {c:.2e}, more than their share E/4, and finer ones do not \
+             fit this device: the tolerance is not met",
+            settings.table_resolution
+        )),
+        None => Some(format!(
+            "tables finer than {} do not fit this device: their share E/4 of the tolerance is \
+             not verified, so it is not met",
+            settings.table_resolution
+        )),
+    };
+    Ok(TableRefinement { moves, miss })
+}
+
+/// The pilot with tables twice as fine, or half again as fine where twice does not fit the
+/// device (`None`: neither does).
+fn finer_tables(
+    renderer: &mut Renderer,
+    settings: &RenderSettings,
+    pilot: &mut Pilot<'_>,
+) -> Result<Option<(RenderSettings, Image)>, RenderError> {
+    let r = settings.table_resolution;
+    for finer_r in [2 * r, r + r / 2] {
+        let mut finer = settings.clone();
+        finer.table_resolution = finer_r.min(MAX_TABLE);
+        match pilot(renderer, &finer) {
+            Err(RenderError::Setting {
+                key: "render.table_resolution",
+                ..
+            }) => continue,
+            result => return Ok(Some((finer, result?))),
+        }
+    }
+    Ok(None)
 }
 
 #[cfg(test)]

@@ -576,8 +576,8 @@ impl<'a> SplatRecording<'a> {
         self.push
     }
 
-    /// Records the frame: constants, projection, scan, `splat_plan`, then `splat_bin` and
-    /// `splat_raster` for the whole image, both indirect. Returns the dispatches recorded.
+    /// Records the frame: constants, projection, scan, `splat_plan`, then `splat_bin` and each
+    /// band of `splat_raster`, all indirect. Returns the dispatches recorded.
     pub fn record(
         &self,
         rec: &mut Recorder<'_>,
@@ -606,6 +606,8 @@ impl<'a> SplatRecording<'a> {
             0,
             "splat_bin",
         )?;
+        // Segments, project, three scan passes, plan and bin, then a band at a time.
+        let mut dispatches = u32::from(pipelines.segments.is_some()) + 6;
         // Band b's arguments follow splat_bin's, at 16 (b + 1).
         let mut offset = 16;
         let mut row = 0;
@@ -624,10 +626,9 @@ impl<'a> SplatRecording<'a> {
             )?;
             offset += 16;
             row += self.push.band_rows;
+            dispatches += 1;
         }
-        let segments = u32::from(pipelines.segments.is_some());
-        let bands = (offset / 16 - 1) as u32;
-        Ok(segments + 1 + 3 + 1 + 1 + bands)
+        Ok(dispatches)
     }
 
     /// The bind groups, to keep while the frame is in flight.
@@ -640,8 +641,16 @@ impl<'a> SplatRecording<'a> {
     }
 }
 
+/// How a recorded frame ended ([`retired_counts`]).
+pub enum Retired {
+    /// It ran whole: its counters.
+    Counts(SplatCounts),
+    /// It binned this many entries, more than its list held, and accumulated nothing.
+    Overflowed(u64),
+}
+
 /// A retired recorded frame's counters: reads the counters and the total back, refuses the
-/// frame as [`check_projection`] would, or where the entries exceeded the list's `capacity`
+/// frame as [`check_projection`] would, says where the entries exceeded the list's `capacity`
 /// (the plan's), and otherwise returns its counts.
 pub fn retired_counts(
     ctx: &Context,
@@ -650,12 +659,8 @@ pub fn retired_counts(
     plan: &PlanPush,
     budget: Option<f64>,
     invocations: u32,
-) -> Result<Result<SplatCounts, u64>, RenderError> {
-    let stats: Vec<u32> = targets.stats.read(ctx)?;
-    let total: Vec<u32> = targets
-        .offsets
-        .read_range(ctx, setup.buckets() as usize, 1)?;
-    let total = total.first().copied().unwrap_or(0);
+) -> Result<Retired, RenderError> {
+    let (stats, total) = read_counters(ctx, targets, setup)?;
     if plan_groups(plan, total, &stats)[0][0] == 0 {
         check_projection(setup, &stats, u64::from(total), budget, entry_limit(ctx))?;
         if total > plan.max_entries {
@@ -667,10 +672,14 @@ pub fn retired_counts(
             });
         }
         // What is left: the entries did not fit the list.
-        return Ok(Err(u64::from(total)));
+        return Ok(Retired::Overflowed(u64::from(total)));
     }
     check_raster(&stats)?;
-    Ok(Ok(frame_counts(&stats, u64::from(total), invocations)))
+    Ok(Retired::Counts(frame_counts(
+        &stats,
+        u64::from(total),
+        invocations,
+    )))
 }
 
 /// The projection as one submission (pass 1 of [`splat_frame`]): the counters, the total of
@@ -688,13 +697,19 @@ fn project(
     let projection = ProjectionGroups::new(ctx, pipelines, kernels, t, constants, hull)?;
     let timings = ctx.submit(|rec| projection.record(rec, pipelines, t, setup, kernels))?;
     drop(projection);
+    let (stats, total) = read_counters(ctx, t, setup)?;
+    Ok((stats, u64::from(total), timings))
+}
+
+/// The projection's counters and the scan's total of entries, read back.
+fn read_counters(
+    ctx: &Context,
+    t: &SplatTargets,
+    setup: &SplatSetup,
+) -> Result<(Vec<u32>, u32), VkError> {
     let stats: Vec<u32> = t.stats.read(ctx)?;
     let total: Vec<u32> = t.offsets.read_range(ctx, setup.buckets() as usize, 1)?;
-    Ok((
-        stats,
-        u64::from(total.first().copied().unwrap_or(0)),
-        timings,
-    ))
+    Ok((stats, total.first().copied().unwrap_or(0)))
 }
 
 /// The entries a frame of `setup` bins, from a projection of its own (one submission and a

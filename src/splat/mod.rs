@@ -412,6 +412,17 @@ impl SplatSetup {
         entries as f64 * f64::from(self.group_size()) + steps * pixels
     }
 
+    /// The most binned entries whose [`SplatSetup::work_bound`] stays within `budget`
+    /// (`u32::MAX` without one): what a recorded frame's `splat_plan` lets through.
+    pub fn max_entries(&self, budget: Option<f64>) -> u32 {
+        match budget {
+            Some(b) => ((b - self.work_bound(0)) / f64::from(self.group_size()))
+                .floor()
+                .clamp(0.0, f64::from(u32::MAX)) as u32,
+            None => u32::MAX,
+        }
+    }
+
     /// Refuses a frame whose [`SplatSetup::work_bound`] exceeds `budget`: with `entries` = 0
     /// before any GPU work (the sheets alone), then with the binned count before the
     /// accumulation.

@@ -459,11 +459,10 @@ unsafe fn target_of(t: &VmlsTarget) -> Result<Target, Failure> {
                 }
             };
             // SAFETY: as above.
-            Ok(
-                unsafe {
-                    Target::image(t.image, format, t.old_layout, t.new_layout, before, after)
-                },
-            )
+            let image = unsafe {
+                Target::image(t.image, format, t.old_layout, t.new_layout, before, after)
+            };
+            Ok(image)
         }
         other => Err(argument(&format!(
             "target.kind: expected VMLS_TARGET_BUFFER or VMLS_TARGET_IMAGE, found {other}"
