@@ -86,9 +86,10 @@ pub mod binding {
     /// The transfer function's `TfPoint`s as rgba32f texels (two per point), for the Hermite
     /// criterion's loop over its pieces (one gather per read instead of a per-lane loop).
     pub const TRANSFER_TEXELS: u32 = 32;
-    /// Empty-space skipping's report per pixel, `vec4(ray length skipped, evaluations saved,
-    /// ray length inside the domain, 0)` (written by raycast.comp's skipping variants).
-    pub const SKIP_STATS: u32 = 33;
+    /// Per pixel, `vec4(ray length skipped, evaluations saved, ray length inside the domain,
+    /// the adaptive criterion's error estimate)`: written by raycast.comp's skipping variants
+    /// (xyz) and its adaptive ones (w), bound where either is compiled in.
+    pub const RAY_STATS: u32 = 33;
     /// The grid of 8- or 16-bit samples, kept at their size (`data::Values`), as `r32ui`
     /// words (read-only): the twin of GRID for `GRID_BITS` < 32.
     pub const GRID_WORDS: u32 = 34;
@@ -154,7 +155,7 @@ pub mod binding {
         ("BINDING_RESAMPLE_TARGET", RESAMPLE_TARGET),
         ("BINDING_SKIP_BLOCKS", SKIP_BLOCKS),
         ("BINDING_SKIP_TABLE", SKIP_TABLE),
-        ("BINDING_SKIP_STATS", SKIP_STATS),
+        ("BINDING_RAY_STATS", RAY_STATS),
         ("BINDING_TRANSFER_TEXELS", TRANSFER_TEXELS),
         ("BINDING_GRID_WORDS", GRID_WORDS),
         ("BINDING_OFFSET_TEXELS", OFFSET_TEXELS),
@@ -329,7 +330,12 @@ pub struct TableBlock {
     /// Nodes per scalar axis, and tables of lengths (the zero-length limits follow them).
     pub resolution: u32,
     pub lengths: u32,
-    pub _pad: [u32; 3],
+    /// The transfer function's largest τ or τ·c_k per world unit ([`TransferFunction::peak`]):
+    /// what an interval's error estimate can be at most per unit length.
+    ///
+    /// [`TransferFunction::peak`]: crate::view::transfer::TransferFunction::peak
+    pub peak: f32,
+    pub _pad: [u32; 2],
 }
 const _: () = assert!(std::mem::size_of::<TableBlock>() == 32);
 

@@ -83,7 +83,8 @@ fn glsl_and_rust_layouts_agree() {
             longest_world: 38.0,
             resolution: 39,
             lengths: 40,
-            _pad: [41, 42, 43],
+            peak: 41.0,
+            _pad: [42, 43],
         },
         lighting: v(44.0),
     };

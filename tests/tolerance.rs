@@ -6,7 +6,7 @@ mod common;
 use common::*;
 use vmls::field::Field;
 use vmls::renderer::Renderer;
-use vmls::renderer::tolerance::p99_error;
+use vmls::renderer::tolerance::{p99_error, p99_of, pixel_errors, pixel_estimates};
 use vmls::scene::Scene;
 
 /// Marschner–Lobb 17³ on the fast path's fine grid (as a scene's default chooses it), 48², with
@@ -64,7 +64,7 @@ fn fixed_steps_and_the_adaptive_integrator_meet_the_tolerance() {
             assert!(report.met, "{method}: E = {e}: {:?}", report.notes);
             assert!(measured <= e, "{method}: E = {e}, measured {measured:e}");
             // Not wastefully accurate. Measured on lavapipe: fixed 3.05e-3 at E = 1e-2 and
-            // 1.05e-3 at 3e-3 (0.31 E, 0.35 E), adaptive 3.88e-3 and 1.16e-3 (0.39 E);
+            // 1.05e-3 at 3e-3 (0.31 E, 0.35 E), adaptive 2.74e-3 and 1.30e-3 (0.27 E, 0.43 E);
             // issue 29 asks ≥ E/10 of most cases, one scene here bounds it at E/30.
             assert!(
                 measured >= e / 30.0,
@@ -166,6 +166,31 @@ fn the_command_line_takes_a_tolerance() {
     let mut args = vec!["render", "--cpu", "-o", s(&cpu_png), "--tolerance", "0.01"];
     args.extend(small);
     assert_fails(&vmls(&args), &["--tolerance"], &cpu_png);
+
+    // Adaptive frames report their own error estimate, on the GPU and on the CPU twin alike.
+    for cpu in [false, true] {
+        let mut args = vec!["render", "-o", s(&png), "--stats", s(&stats), "--force"];
+        if cpu {
+            args.push("--cpu");
+        }
+        args.extend(small);
+        args.extend(["--set", "render.method=\"adaptive\""]);
+        let out = vmls(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let json: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&stats).expect("stats")).expect("json");
+        let e = &json["error_estimate"];
+        let (p99, max) = (e["p99"].as_f64(), e["max"].as_f64());
+        assert!(
+            p99.zip(max)
+                .is_some_and(|(p, m)| 0.0 < p && p <= m && m < 1.0),
+            "cpu {cpu}: {e}"
+        );
+    }
     let _ = std::fs::remove_dir_all(&d);
 }
 
@@ -203,4 +228,103 @@ fn the_bench_plots_measured_against_requested_error() {
         assert!(r["p99"].as_f64().is_some_and(f64::is_finite), "{r}");
     }
     let _ = std::fs::remove_dir_all(&d);
+}
+
+/// The adaptive integrator's own estimate of each pixel's error (its criterion's local
+/// estimates along the ray, weighted by the transmittance, plus what early termination left)
+/// is honest: on the analytic field rendered to E = 1e-3, it is at least the measured error in
+/// 99% of the pixels (with the tables' estimated share added), and not vacuous.
+#[test]
+fn the_adaptive_error_estimate_covers_the_measured_error() {
+    let (ctx, _compiler) = gpu();
+    let base = scene(&["reconstruction.method=\"exact\""]);
+    let field: Field = base.field(|_| {}).expect("field");
+    let mut renderer = Renderer::new(&ctx, field).expect("renderer");
+    let truth = converged(&mut renderer, &base);
+    let e = 1e-3;
+    let s = scene(&[
+        "reconstruction.method=\"exact\"",
+        "render.method=\"adaptive\"",
+        "render.tolerance=1e-3",
+    ]);
+    let (image, stats) = renderer.render(&s.view(), |_| {}).expect("render");
+    let report = stats.tolerance.expect("report");
+    let ray = image
+        .error_estimate
+        .as_ref()
+        .expect("adaptive frames estimate their error");
+    let estimated = pixel_estimates(&image.pixels, ray, report.early_termination);
+    let tables = report.table_moves.last().map_or(0.0, |m| m.1);
+    let measured = pixel_errors(&image.pixels, &truth);
+    let covered = measured
+        .iter()
+        .zip(&estimated)
+        .filter(|(m, est)| **est + tables >= **m)
+        .count();
+    let (p99_measured, p99_estimated) = (p99_of(measured.clone()), p99_of(estimated.clone()));
+    eprintln!(
+        "E = {e}: measured p99 {p99_measured:.2e}, estimated {p99_estimated:.2e} (+ tables \
+         {tables:.1e}), covered {covered} of {} pixels",
+        measured.len()
+    );
+    assert!(
+        covered as f64 >= 0.99 * measured.len() as f64,
+        "the estimate is below the measured error in {} of {} pixels",
+        measured.len() - covered,
+        measured.len()
+    );
+    // Measured on lavapipe at 96²: 13× the measured 99th percentile (a bound: no cancellation
+    // between intervals is assumed).
+    assert!(
+        p99_estimated <= 40.0 * p99_measured.max(e / 10.0),
+        "estimate {p99_estimated:e} against measured {p99_measured:e}"
+    );
+    drop(renderer);
+    finish(ctx);
+}
+
+/// The GPU's per-ray error estimate is its f64 twin's, for both criteria, up to the f32
+/// decisions that flip an acceptance.
+#[test]
+fn the_error_estimate_matches_its_cpu_twin() {
+    let (ctx, _compiler) = gpu();
+    for criterion in ["hermite", "mls2008"] {
+        let c = format!("render.adaptive=\"{criterion}\"");
+        let s = scene(&[
+            "render.method=\"adaptive\"",
+            &c,
+            "render.table_resolution=256",
+            "render.early_termination=0.999",
+        ]);
+        let field: Field = s.field(|_| {}).expect("field");
+        let mut renderer = Renderer::new(&ctx, field.clone()).expect("renderer");
+        let (image, _) = renderer.render(&s.view(), |_| {}).expect("render");
+        let gpu = image.error_estimate.expect("estimate");
+        let setup = s.ray_setup(&field).expect("setup");
+        let cpu = vmls::raycast::raycast_frame(&setup, &field, &s.transfer, 256).expect("cpu");
+        let largest = cpu.iter().map(|p| p.error_estimate).fold(0.0, f64::max);
+        let diffs: Vec<f64> = cpu
+            .iter()
+            .zip(&gpu)
+            .map(|(p, g)| (p.error_estimate - f64::from(*g)).abs())
+            .collect();
+        let mean = |v: &mut dyn Iterator<Item = f64>| v.sum::<f64>() / diffs.len() as f64;
+        let (mean_cpu, mean_gpu) = (
+            mean(&mut cpu.iter().map(|p| p.error_estimate)),
+            mean(&mut gpu.iter().map(|g| f64::from(*g))),
+        );
+        let p99 = p99_of(diffs);
+        eprintln!(
+            "{criterion}: largest {largest:.2e}, p99 |GPU − CPU| {p99:.2e}, means {mean_cpu:.3e} \
+             {mean_gpu:.3e}"
+        );
+        assert!(largest > 0.0, "{criterion}: no estimate");
+        assert!(p99 <= 1e-3 * largest, "{criterion}: p99 difference {p99:e}");
+        assert!(
+            (mean_cpu - mean_gpu).abs() <= 5e-3 * mean_cpu,
+            "{criterion}: means {mean_cpu:e} and {mean_gpu:e}"
+        );
+        drop(renderer);
+    }
+    finish(ctx);
 }

@@ -56,9 +56,9 @@ struct TableBlock {
     float longest_world;
     uint resolution;
     uint lengths;
+    float peak;
     uint _pad0;
     uint _pad1;
-    uint _pad2;
 };
 
 struct RenderParams {

@@ -64,9 +64,9 @@ void main() {
     render_params.tables.longest_world = 38.0;
     render_params.tables.resolution = 39u;
     render_params.tables.lengths = 40u;
-    render_params.tables._pad0 = 41u;
-    render_params.tables._pad1 = 42u;
-    render_params.tables._pad2 = 43u;
+    render_params.tables.peak = 41.0;
+    render_params.tables._pad0 = 42u;
+    render_params.tables._pad1 = 43u;
     render_params.lighting = v(44.0);
 
     iso_surface.color_opacity = v(1.0);

@@ -14,6 +14,13 @@
 // criterion), both carried between chunks. Each loop body has few MLS call sites: GLSL inlines
 // every call, and lavapipe's compile time and code size grow with the copies.
 
+// Stage `count_error` (twin of Ray::count_error): adds an accepted interval of `len` whose
+// criterion estimated `error` per sample spacing, capped by the most that length can add.
+void count_error(float error, float len, float transmittance) {
+    float h = params.integrator.spacing_world;
+    ray_error += min(error, transmittance * params.tables.peak * h) * (len / h);
+}
+
 #if ADAPTIVE_CRITERION == 1
 float hull_sensitivity(vec3 h) {
     return transfer_sensitivity(h.x, h.y, h.z, params.integrator.tf_count);
@@ -157,6 +164,7 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
                 break;
             }
             predicted = depth > 0u && 0.81 * epsilon >= 4.0 * error ? depth - 1u : depth;
+            count_error(error, len, transmittance);
             // Accepted: the halves through the predicted midpoint when the hull holds no
             // isosurface value, else the whole interval split at the surfaces it crosses. One
             // emit_interval call site: GLSL inlines every call, and lavapipe's compile time
@@ -226,6 +234,8 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
         float len = t1 - a.x;
         if (len > 0.0) {
             vec4 e = knot(o, d, t1, evaluations);
+            vec4 unused;
+            count_error(hermite_error(a, e, transmittance, unused), len, transmittance);
             emit_interval(o, d, a, e, len, knot_segment(a, e, len, false, 0u), color,
                           transmittance, evaluations);
         }
@@ -277,7 +287,17 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
                 cr = knot_segment(m, e, 0.5 * len, full, depth + 1u);
                 vec3 c2 = cl.rgb + (1.0 - cl.a) * cr.rgb;
                 bool sign_change = a.z * e.z < 0.0;
-                if (sign_change || transmittance * length(c.rgb - c2) > epsilon * length(c.rgb)) {
+                float diff = length(c.rgb - c2);
+                // The halves' error, were they composited: a third of their difference from
+                // the whole (module documentation of the twin).
+                float halves_error = transmittance
+                    * max(diff, abs(c.a - (1.0 - (1.0 - cl.a) * (1.0 - cr.a)))) / 3.0;
+                if (sign_change || transmittance * diff > epsilon * length(c.rgb)) {
+                    // Halves that cannot be split again are composited whole, untested: the
+                    // rejected test's estimate stands for them.
+                    if (int(depth) + 2 >= ADAPTIVE_LEVELS || !(full || 0.25 * len >= l_min)) {
+                        ray_error += halves_error;
+                    }
                     // Both halves are one level deeper; the left one is processed first.
                     float level = float(depth + 2u);
                     stack[sp - 1].w = packed.w > 0.0 ? level : -level;
@@ -285,6 +305,7 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
                     sp += 1;
                     continue;
                 }
+                ray_error += halves_error;
                 halves = true;
             }
             // Accepted: the two halves (or the whole interval at the deepest level), each split

@@ -40,9 +40,20 @@ layout(push_constant) uniform Push { RayPush band; };
 
 #include "raycast/interval.glsl"
 
+#if SKIP == 1 || RAY_METHOD == 2
+// The ray report: skipping's lengths and counts (xyz), the adaptive error estimate (w).
+#define RAY_STATS 1
+layout(std430, binding = BINDING_RAY_STATS) buffer RayStatsBuf { vec4 ray_stats[]; };
+#endif
+
+#if RAY_METHOD == 2
+// The adaptive criterion's error estimate of this ray so far, carried between chunks (twin of
+// Ray::error_estimate).
+float ray_error = 0.0;
+#endif
+
 #if SKIP == 1
 #include "field/skip.glsl"
-layout(std430, binding = BINDING_SKIP_STATS) buffer SkipStatsBuf { vec4 skip_stats[]; };
 // This ray's skipping so far (carried between chunks): x = ray length skipped, y = evaluations
 // saved (twin of Ray::skipped and Ray::saved).
 vec2 skipped = vec2(0.0);
@@ -333,7 +344,10 @@ void main() {
         evaluations = count & RAY_EVALUATIONS;
         state = ray_state[index];
 #if SKIP == 1
-        skipped = skip_stats[index].xy;
+        skipped = ray_stats[index].xy;
+#endif
+#if RAY_METHOD == 2
+        ray_error = ray_stats[index].w;
 #endif
     }
     vec3 o, d;
@@ -379,13 +393,20 @@ void main() {
     if (g_loop_cut) {
         outcome = CHUNK_TRUNCATED;
     }
+#ifdef RAY_STATS
+    vec4 report = vec4(0.0);
 #if SKIP == 1
     // z: the ray's length inside the domain, the denominator of the skipped fraction.
     float inside = 0.0;
     for (int s = 0; s < segments; ++s) {
         inside += segs[s].y - segs[s].x;
     }
-    skip_stats[index] = vec4(skipped, inside, 0.0);
+    report.xyz = vec3(skipped, inside);
+#endif
+#if RAY_METHOD == 2
+    report.w = ray_error;
+#endif
+    ray_stats[index] = report;
 #endif
     if (outcome == CHUNK_FINISHED) {
         image[index] = vec4(color + transmittance * params.integrator.background.rgb, 1.0 - transmittance);

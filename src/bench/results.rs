@@ -67,6 +67,10 @@ pub struct Row {
     pub tolerance_estimate: Option<f64>,
     #[serde(default)]
     pub tolerance_met: Option<bool>,
+    /// The adaptive integrator's own estimate of the frame's error, in the measure of `p99`
+    /// (`crate::renderer::tolerance::pixel_estimates`, 99th percentile), beside it.
+    #[serde(default)]
+    pub error_estimate: Option<f64>,
     /// Share of the device's ceilings the frame's ray-casting kernel reached, by the cost model
     /// of [`super::ceiling`] against `probe_fma` and the gather ceiling of its loads
     /// (`probe_memory:coherent-texel-gather`, or `march-texel-gather` for the fast path),
@@ -210,6 +214,7 @@ mod tests {
             tolerance: None,
             tolerance_estimate: None,
             tolerance_met: None,
+            error_estimate: None,
             fma_share: Some(0.1),
             memory_share: None,
             bound_by: "fma".into(),

@@ -35,6 +35,23 @@
 //!   coarser level. A rejected interval costs one evaluation (its midpoint; its end stays
 //!   pending). Splitting at dyadic midpoints rather than at the Hermite's extremum keeps every
 //!   length a table length.
+//!
+//! **The ray's error estimate** (stage `count_error`, reported per pixel): the local estimates
+//! of the intervals the ray composites, each weighted by the transmittance before it, summed.
+//! - Hermite: an accepted interval of length l adds T·S·l (its error per spacing × l/h), the
+//!   bound on the change of τ and τ·c over it, capped at T·peak·l (`peak` the transfer
+//!   function's largest τ or τ·c_k: nothing on l can add more), which an interval with one end
+//!   outside the domain meets. The clipped tail is estimated the same way, without a test.
+//! - `mls2008`: the halves composited err by about a third of their difference from the whole
+//!   (the error of a linear-in-s segment is O(l³), so halving cuts it to a quarter: |C1 − C2|
+//!   ≈ ¾ of C1's error, 3× C2's), so an accepted interval adds T·max(|C1 − C2|, |α1 − α2|)/3;
+//!   halves that can no longer be split are composited whole without a test, and the test that
+//!   rejected their parent counts for them.
+//!
+//! Both bound the error of the linear-in-s assumption against the field between the knots as
+//! the criterion models it (the Hermite through them), not features between knots that no
+//! evaluation sees; the tables' resolution and early termination are not in it (the pixel's
+//! estimate in `renderer::tolerance` adds the transmittance a terminated ray left).
 
 use super::interval::{Knot, bezier_hull, emit_interval, hermite_midpoint, knot, knot_segment};
 use super::ray::Ray;
@@ -171,11 +188,19 @@ fn integrate_mls2008(
                 let right = knot_segment(tables, &m, &e, 0.5 * len, half);
                 let c2 = [0, 1, 2].map(|k| left.0[k] + (1.0 - left.1) * right.0[k]);
                 let diff = norm([0, 1, 2].map(|k| c1[k] - c2[k]));
+                let alpha2 = 1.0 - (1.0 - left.1) * (1.0 - right.1);
+                let halves_error = ray.transmittance * diff.max((whole.1 - alpha2).abs()) / 3.0;
                 let sign_change = a.slope(ray) * e.slope(ray) < 0.0;
                 if sign_change || ray.transmittance * diff > setup.epsilon * norm(c1) {
+                    // Halves that cannot be split again are composited whole, untested: the
+                    // rejected test's estimate stands for them.
+                    if depth + 2 >= levels || !(full || 0.25 * len >= setup.l_min_world) {
+                        ray.error_estimate += halves_error;
+                    }
                     push_half(&mut stack, m, depth);
                     continue;
                 }
+                ray.error_estimate += halves_error;
                 // Accepted: the two halves, each split at any isosurface it crosses.
                 emit_interval(ray, setup, tables, &a, &m, 0.5 * len, left);
                 emit_interval(ray, setup, tables, &m, &e, 0.5 * len, right);
@@ -212,6 +237,7 @@ fn integrate_hermite(
 ) {
     let levels = stack_size(setup.l_max_world, setup.l_min_world);
     let units = 1u64 << (levels - 1);
+    let peak = tf.peak();
     let mut stack: Vec<(Knot, usize)> = Vec::with_capacity(levels);
     let tops = ((t1 - t0) / setup.l_max_world).ceil() as u64;
     let mut a = knot(ray, t0);
@@ -261,6 +287,7 @@ fn integrate_hermite(
                 break (0.5 * (a.t + e.t), depth, Next::Split);
             }
             predicted = predict_depth(depth, error, setup.epsilon);
+            ray.count_error(error, len, setup.spacing_world, peak);
             // Accepted: the halves through the predicted midpoint when the hull holds no
             // isosurface value, else the whole interval split at the surfaces it crosses.
             match mid {
@@ -298,6 +325,8 @@ fn integrate_hermite(
     let len = t1 - a.t;
     if k + 1 == tops && len > 0.0 {
         let e = knot(ray, t1);
+        let (error, _) = hermite_error(ray, setup, tf, &a, &e);
+        ray.count_error(error, len, setup.spacing_world, peak);
         let whole = knot_segment(tables, &a, &e, len, None);
         emit_interval(ray, setup, tables, &a, &e, len, whole);
     }

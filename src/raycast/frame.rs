@@ -80,6 +80,12 @@ pub(crate) fn band_groups(width: u32, rows: u32) -> [u32; 3] {
     [width.div_ceil(8), rows.div_ceil(8), 1]
 }
 
+/// Whether the frame writes the per-pixel ray report (`binding::RAY_STATS`): skipping's
+/// lengths and counts, and the adaptive integrator's error estimate.
+pub(crate) fn ray_stats(setup: &RaySetup, skip: bool) -> bool {
+    skip || setup.method == Method::Adaptive
+}
+
 /// Binding numbers of the ray caster for a field and setup.
 pub(crate) fn frame_bindings(
     gpu_field: &GpuField,
@@ -89,11 +95,10 @@ pub(crate) fn frame_bindings(
 ) -> Vec<u32> {
     let mut ids: Vec<u32> = gpu_field.bindings().iter().map(|(b, _)| *b).collect();
     if skip {
-        ids.extend([
-            binding::SKIP_BLOCKS,
-            binding::SKIP_TABLE,
-            binding::SKIP_STATS,
-        ]);
+        ids.extend([binding::SKIP_BLOCKS, binding::SKIP_TABLE]);
+    }
+    if ray_stats(setup, skip) {
+        ids.push(binding::RAY_STATS);
     }
     ids.extend(gpu_field.hull_bindings().iter().map(|(b, _)| *b));
     ids.extend([
@@ -178,7 +183,7 @@ pub(crate) fn constant_data(
     });
     let mut params = render_params(field, setup, gpu_tf.len() as u32);
     if let Some(t) = tables {
-        table_params(&mut params, t);
+        table_params(&mut params, t, tf);
     }
     ConstantData {
         params: bytemuck::cast_slice(&params_copies(params)).to_vec(),
@@ -214,7 +219,8 @@ pub(crate) struct FrameTargets {
     pub(crate) image: Buffer,
     pub(crate) counts: Buffer,
     pub(crate) ray_state: Buffer,
-    pub(crate) skip_stats: Buffer,
+    /// The per-pixel ray report (`binding::RAY_STATS`).
+    pub(crate) ray_stats: Buffer,
     /// One band's indirect dispatch arguments (`raycast_next`), for [`run_bands`], which
     /// submits a band at a time.
     pub(crate) args: Buffer,
@@ -226,7 +232,7 @@ pub(crate) fn frame_targets(ctx: &Context, pixels: u64) -> Result<FrameTargets, 
         image: Buffer::new(ctx, "image", pixels * 16, BufferUsage::Storage)?,
         counts: Buffer::new(ctx, "evaluation counts", pixels * 4, BufferUsage::Storage)?,
         ray_state: Buffer::new(ctx, "ray state", pixels * 16, BufferUsage::Storage)?,
-        skip_stats: Buffer::new(ctx, "skip report", pixels * 16, BufferUsage::Storage)?,
+        ray_stats: Buffer::new(ctx, "ray report", pixels * 16, BufferUsage::Storage)?,
         args: Buffer::new(ctx, "band dispatch arguments", 16, BufferUsage::Storage)?,
     })
 }
@@ -367,7 +373,9 @@ pub(crate) fn frame_buffers<'a>(
     if let Some(t) = &constants.skip {
         all.extend(gpu_field.skip_bindings());
         all.push((binding::SKIP_TABLE, t));
-        all.push((binding::SKIP_STATS, &targets.skip_stats));
+    }
+    if ray_stats(setup, constants.skip.is_some()) {
+        all.push((binding::RAY_STATS, &targets.ray_stats));
     }
     all
 }
@@ -485,25 +493,38 @@ pub(crate) struct Readback {
     /// Evaluations per pixel, flags removed.
     pub(crate) counts: Vec<u32>,
     pub(crate) skip: Option<SkipReport>,
+    /// The adaptive integrator's error estimate per pixel.
+    pub(crate) error_estimate: Option<Vec<f32>>,
 }
 
-/// Pixels and evaluation counts, and the skipping report when the frame skipped.
+/// The skipping report of a frame's per-pixel ray report.
+pub(crate) fn skip_report(rays: &[[f32; 4]]) -> SkipReport {
+    let mut r = SkipReport::default();
+    for p in rays {
+        r.add(f64::from(p[0]), p[1] as u64, f64::from(p[2]));
+    }
+    r
+}
+
+/// Pixels and evaluation counts, the skipping report when the frame skipped and the error
+/// estimates when it integrated adaptively.
 pub(crate) fn read_image(
     ctx: &Context,
     targets: &FrameTargets,
+    setup: &RaySetup,
     skip: bool,
 ) -> Result<Readback, VkError> {
     let n = targets.pixels as usize;
-    let report = if skip {
-        let rays: Vec<[f32; 4]> = targets.skip_stats.read(ctx)?;
-        let mut r = SkipReport::default();
-        for p in rays.iter().take(n) {
-            r.add(f64::from(p[0]), p[1] as u64, f64::from(p[2]));
-        }
-        Some(r)
+    let rays: Vec<[f32; 4]> = if ray_stats(setup, skip) {
+        let mut rays: Vec<[f32; 4]> = targets.ray_stats.read(ctx)?;
+        rays.truncate(n);
+        rays
     } else {
-        None
+        Vec::new()
     };
+    let report = skip.then(|| skip_report(&rays));
+    let error_estimate =
+        (setup.method == Method::Adaptive).then(|| rays.iter().map(|p| p[3]).collect());
     let mut pixels: Vec<[f32; 4]> = targets.image.read(ctx)?;
     pixels.truncate(n);
     let mut counts: Vec<u32> = targets.counts.read(ctx)?;
@@ -515,5 +536,6 @@ pub(crate) fn read_image(
         pixels,
         counts,
         skip: report,
+        error_estimate,
     })
 }

@@ -50,6 +50,8 @@ pub(super) struct Ray<'a> {
     /// Ray length skipped and evaluations saved so far.
     pub(super) skipped: f64,
     pub(super) saved: u32,
+    /// The adaptive integrator's error estimate so far.
+    pub(super) error_estimate: f64,
 }
 
 impl Ray<'_> {
@@ -58,6 +60,13 @@ impl Ray<'_> {
     pub(super) fn count_skip(&mut self, len: f64, steps: u64, restart: u64) {
         self.skipped += len;
         self.saved += (steps - restart) as u32;
+    }
+
+    /// Stage `count_error`: adds an accepted interval of `len` whose criterion estimated
+    /// `error` per sample spacing `h`, capped by the most that length can add (`peak`, the
+    /// transfer function's largest τ or τ·c_k; twin of count_error).
+    pub(super) fn count_error(&mut self, error: f64, len: f64, h: f64, peak: f64) {
+        self.error_estimate += error.min(self.transmittance * peak * h) * (len / h);
     }
 
     /// Composites a premultiplied segment (C, α) behind what is accumulated.

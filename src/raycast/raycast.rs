@@ -38,6 +38,9 @@ pub struct PixelResult {
     pub skipped_length: f64,
     pub evaluations_saved: u32,
     pub inside_length: f64,
+    /// The adaptive integrator's error estimate of the ray (0 for the other methods; see
+    /// [`crate::renderer::GpuImage::error_estimate`]).
+    pub error_estimate: f64,
     /// The ray crossed the hull more often than `bvh::MAX_HITS`: nothing was integrated (the
     /// GPU renderer fails with an error for such a ray).
     pub hull_overflow: bool,
@@ -182,6 +185,7 @@ pub fn raycast(
         evaluations: 0,
         skipped: 0.0,
         saved: 0,
+        error_estimate: 0.0,
     };
     let (segments, hull_overflow) = match &field.hull {
         None => (
@@ -224,6 +228,7 @@ pub fn raycast(
         skipped_length: ray.skipped,
         evaluations_saved: ray.saved,
         inside_length,
+        error_estimate: ray.error_estimate,
         hull_overflow,
     }
 }
@@ -281,6 +286,7 @@ pub fn raycast_image(
             skipped_length: 0.0,
             evaluations_saved: 0,
             inside_length: 0.0,
+            error_estimate: 0.0,
             hull_overflow: false,
         };
         w * h

@@ -61,6 +61,11 @@ pub struct GpuImage {
     pub splat: Option<SplatReport>,
     /// What empty-space skipping did (ray casting with `render.skip` in effect only).
     pub skip: Option<SkipReport>,
+    /// The adaptive integrator only: per pixel, the ray's error estimate, the sum of its
+    /// accepted intervals' local estimates weighted by the transmittance before them
+    /// (DESIGN.md §4; [`crate::renderer::tolerance::pixel_estimates`] adds what early
+    /// termination left).
+    pub error_estimate: Option<Vec<f32>>,
 }
 
 impl GpuImage {
@@ -75,6 +80,7 @@ impl GpuImage {
             shaders: vec![("raycast/raycast.comp", variant.defines())],
             splat: None,
             skip: readback.skip,
+            error_estimate: readback.error_estimate,
         }
     }
 }
@@ -165,7 +171,7 @@ pub fn render(
             }
         }
     };
-    let readback = read_image(ctx, &targets, variant.skip)?;
+    let readback = read_image(ctx, &targets, &resolved, variant.skip)?;
     Ok(GpuImage::ray_cast(readback, &variant, gpu_ms, bands))
 }
 
@@ -391,7 +397,7 @@ impl Renderer {
         let Some(targets) = self.targets.as_ref() else {
             return Err(VkError::Usage("frame buffers missing".into()).into());
         };
-        let readback = read_image(&self.ctx, targets, variant.skip)?;
+        let readback = read_image(&self.ctx, targets, &setup, variant.skip)?;
         Ok((
             GpuImage::ray_cast(readback, &variant, gpu_ms, bands),
             FrameStats {

@@ -60,7 +60,7 @@ use crate::raycast::RaySetup;
 use crate::raycast::frame::{
     BandCommands, FrameConstants, FrameTargets, band_groups, band_rows, constant_data,
     default_chunk, frame_bindings, frame_buffers, frame_targets, next_group, next_pipeline,
-    outer_steps,
+    outer_steps, skip_report,
 };
 use crate::raycast::gpu::variant_for_render;
 use crate::view::View;
@@ -521,12 +521,8 @@ impl Renderer {
         let counts: Vec<u32> = targets.counts.read(&ctx)?;
         let counts = &counts[..(targets.pixels as usize).min(counts.len())];
         let skip = if variant.skip {
-            let rays: Vec<[f32; 4]> = targets.skip_stats.read(&ctx)?;
-            let mut r = SkipReport::default();
-            for p in rays.iter().take(counts.len()) {
-                r.add(f64::from(p[0]), p[1] as u64, f64::from(p[2]));
-            }
-            Some(r)
+            let rays: Vec<[f32; 4]> = targets.ray_stats.read(&ctx)?;
+            Some(skip_report(&rays[..counts.len().min(rays.len())]))
         } else {
             None
         };

@@ -176,6 +176,7 @@ impl Renderer {
                     quadrature: variant.quadrature,
                 }),
                 skip: None,
+                error_estimate: None,
             },
             FrameStats {
                 gpu_ms,

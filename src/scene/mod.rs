@@ -196,6 +196,7 @@ fn given_keys(table: &Table) -> GivenKeys {
         step: has("render", "step"),
         reference_step: has("render", "reference_step"),
         epsilon: has("render", "epsilon"),
+        adaptive: has("render", "adaptive"),
         l_min: has("render", "l_min"),
         l_max: has("render", "l_max"),
         early_termination: has("render", "early_termination"),

@@ -144,6 +144,8 @@ pub struct GivenKeys {
     pub step: bool,
     pub reference_step: bool,
     pub epsilon: bool,
+    /// `render.adaptive`: a tolerance takes the Hermite criterion unless the scene names one.
+    pub adaptive: bool,
     pub l_min: bool,
     pub l_max: bool,
     pub early_termination: bool,

@@ -149,6 +149,16 @@ impl TransferFunction {
         m
     }
 
+    /// The largest τ or τ·c_k anywhere: the most a unit length of ray can add to the optical
+    /// depth or to one channel's emission, so that no interval's error exceeds it per unit
+    /// length (it caps the adaptive integrator's error estimate, DESIGN.md §4).
+    pub fn peak(&self) -> f64 {
+        self.points
+            .iter()
+            .map(|p| (1..4).map(|k| p[k] * p[4]).fold(p[4], f64::max))
+            .fold(0.0, f64::max)
+    }
+
     /// GPU layout.
     pub fn to_gpu(&self) -> Vec<TfPoint> {
         self.points
