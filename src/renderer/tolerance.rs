@@ -30,7 +30,7 @@
 //!   exceeds E/4 the finer tables are taken (up to 4096).
 //!
 //! - **The adaptive criterion**: Hermite's (`render.adaptive = "hermite"`) unless the scene
-//!   names one or gives ε: it met E with 4-7× fewer evaluations than [MLS]'s.
+//!   names one or gives ε: it met E with 4-9× fewer evaluations than [MLS]'s.
 //!
 //! The adaptive integrator also estimates each frame's error itself, per ray, from its
 //! criterion's local estimates ([`pixel_estimates`]; `--stats` "error_estimate", `vmls bench`
@@ -298,8 +298,8 @@ impl Renderer {
             base.min_transmittance = e / 4.0;
         }
         // The adaptive criterion: Hermite's, one evaluation per accepted interval, met E with
-        // 4-7× fewer evaluations and 5-9× less GPU time than [MLS]'s on Marschner–Lobb
-        // (BENCHMARKS.md, "Rendering to a tolerance").
+        // 4-9× fewer evaluations and 4-13× less GPU time than [MLS]'s on Marschner–Lobb
+        // (BENCHMARKS.md, "The adaptive integrator's own error estimate").
         if base.method == Method::Adaptive && base.adaptive != AdaptiveCriterion::Hermite {
             if given.adaptive || given.epsilon {
                 notes.push(format!(
