@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""tools/tolerance_report.py CASES.csv: the tables of issue 29 §3 from tools/tolerance-check.
+"""tools/tolerance_report.py CASES.csv...: the tables of issue 29 §3 from tools/tolerance-check
+(several files are read as one: a sweep from one run, tolerance cases from another).
 
 1. Per method: cases that met E, misses reported (`met` false) or silent, cases not
    over-accurate (measured >= E/10), and the adaptive integrator's own estimate against the
@@ -42,8 +43,8 @@ def interp(points, target):
     return None, None
 
 
-def main(path):
-    rows = list(csv.DictReader(open(path)))
+def main(paths):
+    rows = [r for p in paths for r in csv.DictReader(open(p))]
     cases = [r for r in rows if r["method"] in ("fixed", "adaptive")]
     print("## Tolerance kept")
     for method in ("fixed", "adaptive"):
@@ -152,4 +153,4 @@ def main(path):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1])
+    main(sys.argv[1:])
