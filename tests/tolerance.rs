@@ -6,7 +6,7 @@ mod common;
 use common::*;
 use vmls::field::Field;
 use vmls::renderer::Renderer;
-use vmls::renderer::tolerance::{p99_error, p99_of, pixel_errors, pixel_estimates};
+use vmls::renderer::tolerance::{p99_error, p99_of, pixel_errors};
 use vmls::scene::Scene;
 
 /// Marschner–Lobb 17³ on the fast path's fine grid (as a scene's default chooses it), 48², with
@@ -118,6 +118,17 @@ fn explicit_keys_win_over_the_tolerance_and_are_reported() {
     finish(ctx);
 }
 
+/// Runs `vmls` (which must succeed) and reads the `--stats` file it wrote.
+fn render_stats(args: &[&str], stats: &std::path::Path) -> serde_json::Value {
+    let out = common::cli::vmls(args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&std::fs::read(stats).expect("stats")).expect("json")
+}
+
 /// `vmls render --tolerance E` writes what it chose into `--stats`; `--cpu` refuses it (its
 /// pilots run on the GPU) and leaves no image.
 #[test]
@@ -143,14 +154,7 @@ fn the_command_line_takes_a_tolerance() {
         "0.01",
     ];
     args.extend(small);
-    let out = vmls(&args);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let json: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(&stats).expect("stats")).expect("json");
+    let json = render_stats(&args, &stats);
     let t = &json["tolerance"];
     assert_eq!(t["requested"], 0.01);
     assert_eq!(t["chosen"]["key"], "render.step");
@@ -175,14 +179,7 @@ fn the_command_line_takes_a_tolerance() {
         }
         args.extend(small);
         args.extend(["--set", "render.method=\"adaptive\""]);
-        let out = vmls(&args);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let json: serde_json::Value =
-            serde_json::from_slice(&std::fs::read(&stats).expect("stats")).expect("json");
+        let json = render_stats(&args, &stats);
         let e = &json["error_estimate"];
         let (p99, max) = (e["p99"].as_f64(), e["max"].as_f64());
         assert!(
@@ -253,7 +250,7 @@ fn the_adaptive_error_estimate_covers_the_measured_error() {
         .error_estimate
         .as_ref()
         .expect("adaptive frames estimate their error");
-    let estimated = pixel_estimates(&image.pixels, ray, report.early_termination);
+    let estimated: Vec<f64> = ray.iter().map(|&e| f64::from(e)).collect();
     let tables = report.table_moves.last().map_or(0.0, |m| m.1);
     let measured = pixel_errors(&image.pixels, &truth);
     let covered = measured

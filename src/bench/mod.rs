@@ -510,12 +510,8 @@ pub fn run(
             tolerance: tolerance.map(|t| t.tolerance),
             tolerance_estimate: tolerance.and_then(|t| t.chosen).map(|c| c.2),
             tolerance_met: tolerance.map(|t| t.met),
-            error_estimate: image.error_estimate.as_ref().map(|ray| {
-                let termination =
-                    tolerance.map_or(scene.render.early_termination, |t| t.early_termination);
-                let pixels =
-                    crate::renderer::tolerance::pixel_estimates(&image.pixels, ray, termination);
-                crate::renderer::tolerance::p99_of(pixels)
+            error_estimate: image.error_estimate.as_ref().map(|e| {
+                crate::renderer::tolerance::p99_of(e.iter().map(|&x| f64::from(x)).collect())
             }),
             reference: reference.description.clone(),
             variant: image.variant.clone(),

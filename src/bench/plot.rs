@@ -44,6 +44,24 @@ fn log_log<'a, DB: DrawingBackend>(
     Ok(chart)
 }
 
+/// The series legend in the project's style at `position`, then the drawing presented.
+fn legend_and_present<'a, DB: DrawingBackend + 'a>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<LogCoord<f64>, LogCoord<f64>>>,
+    root: &DrawingArea<DB, Shift>,
+    position: SeriesLabelPosition,
+) -> Result<(), String> {
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 13))
+        .position(position)
+        .draw()
+        .map_err(err)?;
+    root.present().map_err(err)
+}
+
 /// The (time, error) a row is drawn at, if it has both.
 fn point(r: &Row) -> Option<(f64, f64)> {
     let t = r.gpu_ms.unwrap_or(r.wall_ms);
@@ -147,15 +165,7 @@ fn draw<DB: DrawingBackend>(
             )))
             .map_err(err)?;
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 13))
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()
-        .map_err(err)?;
-    root.present().map_err(err)
+    legend_and_present(&mut chart, &root, SeriesLabelPosition::UpperRight)
 }
 
 /// The plot as SVG text and as a 1100×750 PNG (`speed_error.svg`, `speed_error.png`).
@@ -272,15 +282,7 @@ fn draw_tolerance<DB: DrawingBackend>(
             )
             .map_err(err)?;
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 13))
-        .position(SeriesLabelPosition::UpperLeft)
-        .draw()
-        .map_err(err)?;
-    root.present().map_err(err)
+    legend_and_present(&mut chart, &root, SeriesLabelPosition::UpperLeft)
 }
 
 /// `plot` as SVG text and as a 1100×750 PNG (`{stem}.svg`, `{stem}.png`).

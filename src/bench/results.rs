@@ -68,7 +68,7 @@ pub struct Row {
     #[serde(default)]
     pub tolerance_met: Option<bool>,
     /// The adaptive integrator's own estimate of the frame's error, in the measure of `p99`
-    /// (`crate::renderer::tolerance::pixel_estimates`, 99th percentile), beside it.
+    /// (`crate::renderer::GpuImage::error_estimate`, 99th percentile), beside it.
     #[serde(default)]
     pub error_estimate: Option<f64>,
     /// Share of the device's ceilings the frame's ray-casting kernel reached, by the cost model

@@ -51,7 +51,7 @@
 //! Both bound the error of the linear-in-s assumption against the field between the knots as
 //! the criterion models it (the Hermite through them), not features between knots that no
 //! evaluation sees; the tables' resolution and early termination are not in it (the pixel's
-//! estimate in `renderer::tolerance` adds the transmittance a terminated ray left).
+//! estimate, [`pixel_estimate`], adds the transmittance a terminated ray left).
 
 use super::interval::{Knot, bezier_hull, emit_interval, hermite_midpoint, knot, knot_segment};
 use super::ray::Ray;
@@ -60,6 +60,19 @@ use crate::raycast::RaySetup;
 use crate::raycast::preintegration::PreintegrationTables;
 use crate::view::AdaptiveCriterion;
 use crate::view::transfer::TransferFunction;
+
+/// A pixel's error estimate from its ray's (`ray`, the sum `count_error` kept): plus, where
+/// the ray stopped at opacity `early_termination`, the transmittance it left, the most the
+/// rest of the ray could have changed any channel. Twin of nothing on the GPU: the readback
+/// applies it to the kernel's sums, the CPU twin to its own.
+pub fn pixel_estimate(ray: f64, opacity: f64, early_termination: f64) -> f64 {
+    let left = if opacity > early_termination {
+        1.0 - opacity
+    } else {
+        0.0
+    };
+    ray + left
+}
 
 /// Stack entries needed for l_max/l_min (the shader's `ADAPTIVE_STACK`).
 pub fn stack_size(l_max: f64, l_min: f64) -> usize {

@@ -9,6 +9,7 @@
 //!   fallback (LAVAPIPE.md: llvmpipe ends loops after 65 535 iterations);
 //! - `read_image`: pixels, evaluation counts and the skipping report back to the host.
 
+use super::adaptive::pixel_estimate;
 use super::gpu::{render_params, table_params};
 use super::preintegration::PreintegrationTables;
 use super::setup::RaySetup;
@@ -493,7 +494,7 @@ pub(crate) struct Readback {
     /// Evaluations per pixel, flags removed.
     pub(crate) counts: Vec<u32>,
     pub(crate) skip: Option<SkipReport>,
-    /// The adaptive integrator's error estimate per pixel.
+    /// The adaptive integrator's error estimate per pixel ([`pixel_estimate`]).
     pub(crate) error_estimate: Option<Vec<f32>>,
 }
 
@@ -523,10 +524,17 @@ pub(crate) fn read_image(
         Vec::new()
     };
     let report = skip.then(|| skip_report(&rays));
-    let error_estimate =
-        (setup.method == Method::Adaptive).then(|| rays.iter().map(|p| p[3]).collect());
     let mut pixels: Vec<[f32; 4]> = targets.image.read(ctx)?;
     pixels.truncate(n);
+    let error_estimate = (setup.method == Method::Adaptive).then(|| {
+        rays.iter()
+            .zip(&pixels)
+            .map(|(r, p)| {
+                let (ray, opacity) = (f64::from(r[3]), f64::from(p[3]));
+                pixel_estimate(ray, opacity, setup.early_termination) as f32
+            })
+            .collect()
+    });
     let mut counts: Vec<u32> = targets.counts.read(ctx)?;
     counts.truncate(n);
     for c in &mut counts {

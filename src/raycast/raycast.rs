@@ -38,7 +38,7 @@ pub struct PixelResult {
     pub skipped_length: f64,
     pub evaluations_saved: u32,
     pub inside_length: f64,
-    /// The adaptive integrator's error estimate of the ray (0 for the other methods; see
+    /// The adaptive integrator's error estimate of the pixel (0 for the other methods; see
     /// [`crate::renderer::GpuImage::error_estimate`]).
     pub error_estimate: f64,
     /// The ray crossed the hull more often than `bvh::MAX_HITS`: nothing was integrated (the
@@ -228,7 +228,11 @@ pub fn raycast(
         skipped_length: ray.skipped,
         evaluations_saved: ray.saved,
         inside_length,
-        error_estimate: ray.error_estimate,
+        error_estimate: if setup.method == Method::Adaptive {
+            adaptive::pixel_estimate(ray.error_estimate, 1.0 - tr, setup.early_termination)
+        } else {
+            0.0
+        },
         hull_overflow,
     }
 }

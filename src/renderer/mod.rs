@@ -63,8 +63,9 @@ pub struct GpuImage {
     pub skip: Option<SkipReport>,
     /// The adaptive integrator only: per pixel, the ray's error estimate, the sum of its
     /// accepted intervals' local estimates weighted by the transmittance before them
-    /// (DESIGN.md §4; [`crate::renderer::tolerance::pixel_estimates`] adds what early
-    /// termination left).
+    /// (DESIGN.md §4), plus what early termination left
+    /// ([`crate::raycast::adaptive::pixel_estimate`]); in the measure of
+    /// [`tolerance::pixel_errors`], the tables' error not included.
     pub error_estimate: Option<Vec<f32>>,
 }
 

@@ -34,7 +34,7 @@
 //!   names one or gives ε: it met E with 4-9× fewer evaluations than [MLS]'s.
 //!
 //! The adaptive integrator also estimates each frame's error itself, per ray, from its
-//! criterion's local estimates ([`pixel_estimates`]; `--stats` "error_estimate", `vmls bench`
+//! criterion's local estimates ([`super::GpuImage::error_estimate`]; `--stats` "error_estimate", `vmls bench`
 //! `error_estimate`). That estimate is reported beside the measured error but does not choose
 //! ε: the Hermite criterion's is a bound, which sums the largest departure of every interval
 //! as if none cancelled, and measured 10-25× the frame's actual 99th percentile on
@@ -89,27 +89,6 @@ pub fn pixel_errors(image: &[[f32; 4]], reference: &[[f32; 4]]) -> Vec<f64> {
 /// 0 for empty images.
 pub fn p99_error(image: &[[f32; 4]], reference: &[[f32; 4]]) -> f64 {
     p99_of(pixel_errors(image, reference))
-}
-
-/// The adaptive integrator's estimate of each pixel's error, in the measure of
-/// [`pixel_errors`]: the ray's estimate ([`crate::renderer::GpuImage::error_estimate`], its
-/// discretization) plus, where the ray stopped at opacity `early_termination`, the
-/// transmittance it left (the most the rest of the ray could have changed any channel). The
-/// preintegration tables' error is not in it.
-pub fn pixel_estimates(image: &[[f32; 4]], ray: &[f32], early_termination: f64) -> Vec<f64> {
-    image
-        .iter()
-        .zip(ray)
-        .map(|(p, e)| {
-            let opacity = f64::from(p[3]);
-            let left = if opacity > early_termination {
-                1.0 - opacity
-            } else {
-                0.0
-            };
-            f64::from(*e) + left
-        })
-        .collect()
 }
 
 /// The 99th percentile of per-pixel errors (as [`p99_error`] ranks them).

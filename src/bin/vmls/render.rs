@@ -12,7 +12,7 @@ use vmls::field::skip::SkipReport;
 use vmls::output::evalmap::{check_path, eval_map_image};
 use vmls::output::{check_finite, encode_image, format_of};
 use vmls::renderer::Renderer;
-use vmls::renderer::tolerance::{p99_of, pixel_estimates};
+use vmls::renderer::tolerance::p99_of;
 use vmls::scene::Scene;
 
 /// What `vmls render` was asked for.
@@ -190,13 +190,7 @@ pub fn run_render(
                 },
             })),
             "skip": image.skip.as_ref().map(skip_json),
-            "error_estimate": image.error_estimate.as_ref().map(|ray| {
-                let termination = first
-                    .tolerance
-                    .as_ref()
-                    .map_or(scene.render.early_termination, |t| t.early_termination);
-                estimate_json(&pixel_estimates(&image.pixels, ray, termination))
-            }),
+            "error_estimate": image.error_estimate.as_deref().map(estimate_json),
             "upload_ms": upload_ms,
             "frames": frames.iter().map(|f| serde_json::json!({
                 "gpu_ms": f.gpu_ms,
@@ -239,10 +233,11 @@ pub fn run_render(
 }
 
 /// `--stats` "error_estimate": the adaptive integrator's own estimate of the frame's error.
-fn estimate_json(pixels: &[f64]) -> serde_json::Value {
+fn estimate_json(pixels: &[f32]) -> serde_json::Value {
+    let pixels: Vec<f64> = pixels.iter().map(|&e| f64::from(e)).collect();
     serde_json::json!({
         "measure": "per pixel, the transmittance-weighted sum of the adaptive criterion's local error estimates along the ray, plus the transmittance left where the ray terminated early; the tables' error is not included",
-        "p99": p99_of(pixels.to_vec()),
+        "p99": p99_of(pixels.clone()),
         "max": pixels.iter().copied().fold(0.0, f64::max),
         "mean": pixels.iter().sum::<f64>() / pixels.len().max(1) as f64,
     })
@@ -326,7 +321,12 @@ pub fn run_render_cpu(
             .map_err(RenderError::from)?;
             let skip = setup.skip.then(|| vmls::raycast::skip_report(&image));
             if scene.render.method == vmls::view::Method::Adaptive {
-                estimates = Some(image.iter().map(|p| p.error_estimate as f32).collect());
+                estimates = Some(
+                    image
+                        .iter()
+                        .map(|p| p.error_estimate as f32)
+                        .collect::<Vec<_>>(),
+                );
             }
             (image.iter().map(|p| p.rgba).collect(), None, skip)
         }
@@ -352,9 +352,7 @@ pub fn run_render_cpu(
                 "footprints_accumulated": c.accumulated,
             })),
             "skip": skip.as_ref().map(skip_json),
-            "error_estimate": estimates.map(|ray: Vec<f32>| estimate_json(
-                &pixel_estimates(&rgba, &ray, scene.render.early_termination)
-            )),
+            "error_estimate": estimates.as_deref().map(estimate_json),
         });
         outputs.write(stats, json_to(&value))?;
     }
