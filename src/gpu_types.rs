@@ -315,8 +315,11 @@ pub struct IntegratorBlock {
     /// Transfer-function points and isosurfaces.
     pub tf_count: u32,
     pub iso_count: u32,
+    /// A brick's box (the kernel's `CLIP` variant; w unused).
+    pub clip_min: [f32; 4],
+    pub clip_max: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<IntegratorBlock>() == 80);
+const _: () = assert!(std::mem::size_of::<IntegratorBlock>() == 112);
 
 /// The preintegration tables. GLSL twin: `TableBlock`.
 #[repr(C)]
@@ -354,7 +357,7 @@ pub struct RenderParams {
     /// Blinn–Phong ambient, diffuse, specular, shininess.
     pub lighting: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<RenderParams>() == 320);
+const _: () = assert!(std::mem::size_of::<RenderParams>() == 352);
 
 /// One isosurface. GLSL twin: `IsoSurface`.
 #[repr(C)]

@@ -15,6 +15,8 @@
 //!   rasterizer (CPU twins and the GPU driver). `raycast` and `splat` are peers: each imports
 //!   `field` and `view`, never the other.
 //! - [`renderer`]: the persistent [`renderer::Renderer`], the one place that knows both methods.
+//! - [`bricks`]: the field divided into kd bricks with exact ghosts, each rendered alone and
+//!   composited in visibility order (sort-last rendering, issue 30).
 //! - [`scene`]: the TOML scene contract.
 //!
 //! With the `cli` feature (on by default) also the command-line program's modules: image files
@@ -28,6 +30,7 @@
 
 #[cfg(feature = "cli")]
 pub mod bench;
+pub mod bricks;
 #[cfg(feature = "cli")]
 pub mod check;
 pub mod data;

@@ -27,6 +27,10 @@ const LAYERS: &[(&str, &str)] = &[
         "data field files gpu_types raycast recon samples splat view vk",
     ),
     (
+        "bricks",
+        "data field files gpu_types raycast recon renderer samples splat view vk",
+    ),
+    (
         "scene",
         "data field files gpu_types raycast recon renderer samples splat view vk",
     ),

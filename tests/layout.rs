@@ -76,6 +76,8 @@ fn glsl_and_rust_layouts_agree() {
             l_min_world: 33.0,
             tf_count: 34,
             iso_count: 35,
+            clip_min: v(101.0),
+            clip_max: v(102.0),
         },
         tables: TableBlock {
             s_min: 36.0,

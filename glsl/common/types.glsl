@@ -47,6 +47,8 @@ struct IntegratorBlock {
     float l_min_world;
     uint tf_count;
     uint iso_count;
+    vec4 clip_min;
+    vec4 clip_max;
 };
 
 // The preintegration tables (twin: TableBlock).

@@ -59,6 +59,8 @@ void main() {
     render_params.integrator.l_min_world = 33.0;
     render_params.integrator.tf_count = 34u;
     render_params.integrator.iso_count = 35u;
+    render_params.integrator.clip_min = v(101.0);
+    render_params.integrator.clip_max = v(102.0);
     render_params.tables.s_min = 36.0;
     render_params.tables.s_max = 37.0;
     render_params.tables.longest_world = 38.0;

@@ -83,6 +83,15 @@ bool terminated(float transmittance) {
 #endif
 }
 
+#if CLIP == 1
+// Where the current segment's part inside a brick starts (main()): the integrators start there
+// instead of at their first anchored step.
+float g_head = 0.0;
+#define CLIP_START(t) max((t), g_head)
+#else
+#define CLIP_START(t) (t)
+#endif
+
 #if RAY_METHOD == 0
 // Midpoint rule (riemann, reference): steps first .. last_step of n = ⌈L/δ⌉; isosurfaces
 // crossed between consecutive samples are composited before the later sample's step. `prev`
@@ -109,7 +118,7 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
     // a runtime condition anyway.
     bool isos = MAX_ISO > 0 && params.integrator.iso_count > 0u;
     if (first == 0u && isos) {
-        prev = knot(o, d, t0, evaluations);
+        prev = knot(o, d, CLIP_START(t0), evaluations);
     }
     uint last = min(last_step, steps);
     uint i = first;
@@ -135,8 +144,14 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
             i += 1u;
         }
         for (; i < last; ++i) {
+#if CLIP == 1
+            // A brick's first step starts at its face (anchored steps, main()).
+            float ta = max(t0 + float(i) * params.integrator.step_world, g_head);
+            float dt = min(t0 + float(i + 1u) * params.integrator.step_world, t1) - ta;
+#else
             float ta = t0 + float(i) * params.integrator.step_world;
             float dt = min(params.integrator.step_world, t1 - ta);
+#endif
             if (dt <= 0.0) {
                 exited = true;
                 break;
@@ -201,11 +216,26 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
     float l = params.integrator.step_world;
     uint steps = uint(ceil((t1 - t0) / l));
     if (first == 0u) {
-        prev = knot(o, d, t0, evaluations);
+        prev = knot(o, d, CLIP_START(t0), evaluations);
     }
     uint last = min(last_step, steps);
     uint full_end = min(last, steps - 1u);
     uint i = first;
+#if CLIP == 1
+    // A brick's first interval, from its face to the first anchored step, clipped (the last
+    // interval's code below takes it when it is also the last).
+    if (first == 0u && g_head > t0 && steps > 1u) {
+        float tb = t0 + l;
+        vec4 e = knot(o, d, tb, evaluations);
+        emit_interval(o, d, prev, e, tb - g_head, knot_segment(prev, e, tb - g_head, false, 0u),
+                      color, transmittance, evaluations);
+        prev = e;
+        if (terminated(transmittance)) {
+            return CHUNK_FINISHED;
+        }
+        i = 1u;
+    }
+#endif
     // Interval i awaits emit_interval, `next` its end knot.
     bool pending = false;
     vec4 next = prev;
@@ -277,7 +307,7 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
     }
     // The ray's last interval, clipped at t1, with everything it may need.
     if (i + 1u == steps && i < last) {
-        float ta = t0 + float(i) * l;
+        float ta = CLIP_START(t0 + float(i) * l);
         float tb = min(ta + l, t1);
         if (tb <= ta) {
             return CHUNK_FINISHED;
@@ -369,14 +399,34 @@ void main() {
         segments = 1;
     }
 #endif
+#if CLIP == 1
+    // A brick: each segment's part inside the brick's box, its steps where the undivided
+    // field's would be (from the segment's start), the first one starting at the face.
+    float c0, c1;
+    bool in_brick = clip_box(o, d, params.integrator.clip_min.xyz, params.integrator.clip_max.xyz,
+                             c0, c1);
+#endif
     // Outer steps are numbered across segments: segment s owns [base, base + its steps).
     uint outcome = CHUNK_FINISHED;
     uint base = 0u;
     for (int s = 0; s < segments; ++s) {
-        uint n = segment_steps(segs[s].x, segs[s].y);
+#if CLIP == 1
+        float w0 = max(segs[s].x, c0);
+        float w1 = min(segs[s].y, c1);
+        if (!in_brick || w1 <= w0) {
+            continue;
+        }
+        float t_start = segs[s].x + floor((w0 - segs[s].x) / params.integrator.step_world)
+                                    * params.integrator.step_world;
+        g_head = w0;
+        vec2 seg = vec2(t_start, w1);
+#else
+        vec2 seg = segs[s];
+#endif
+        uint n = segment_steps(seg.x, seg.y);
         if (band.first < base + n && band.last > base) {
             uint first = band.first > base ? band.first - base : 0u;
-            outcome = integrate(o, d, segs[s].x, segs[s].y, first, min(band.last - base, n),
+            outcome = integrate(o, d, seg.x, seg.y, first, min(band.last - base, n),
                                 state, color, transmittance, evaluations);
             if (outcome != CHUNK_FINISHED || terminated(transmittance)) {
                 break;

@@ -181,6 +181,17 @@ impl Values {
         }
     }
 
+    /// The values at `indices`, in that order, stored as these are.
+    pub fn select(&self, indices: &[usize]) -> Values {
+        match self {
+            Values::F32(v) => Values::F32(indices.iter().map(|&i| v[i]).collect()),
+            Values::U8(v) => Values::U8(indices.iter().map(|&i| v[i]).collect()),
+            Values::I8(v) => Values::I8(indices.iter().map(|&i| v[i]).collect()),
+            Values::U16(v) => Values::U16(indices.iter().map(|&i| v[i]).collect()),
+            Values::I16(v) => Values::I16(indices.iter().map(|&i| v[i]).collect()),
+        }
+    }
+
     /// Appends `more`: kept as stored when both are stored alike, else both become f32.
     pub fn append(&mut self, more: Values) {
         match (&mut *self, more) {

@@ -71,6 +71,9 @@ pub struct Field {
     blocks: std::sync::OnceLock<skip::Blocks>,
     /// Why `reconstruction.resample = "auto"` chose the general path, where it did.
     fast_path_declined: Option<String>,
+    /// A piece of a decomposed field ([`Field::piece`]): the box rays integrate in
+    /// (frame-relative).
+    clip: Option<(DVec3, DVec3)>,
 }
 
 impl Field {
@@ -160,6 +163,7 @@ impl Field {
             resampled: std::sync::OnceLock::new(),
             blocks: std::sync::OnceLock::new(),
             fast_path_declined: None,
+            clip: None,
         };
         if let Domain::Hull(h) = &field.samples.domain {
             field.hull = Some(HullBvh::build(h));
@@ -169,6 +173,56 @@ impl Field {
             field.check_resample()?;
         }
         Ok(field)
+    }
+
+    /// A piece of this field for a brick of a decomposition (issue 30): `samples` (the brick's
+    /// own and ghost samples, frame-relative, with this field's domain), rendered only inside
+    /// `bounds`. It keeps this field's frame origin, value range (so tables and variants are
+    /// the whole field's), hull and reconstruction, solved directly: the fast path's fine grid
+    /// would need the neighbours' fine points too. (The analytic field reads no samples: the
+    /// caller refuses it.)
+    pub fn piece(
+        &self,
+        samples: SampleSet,
+        bounds: (DVec3, DVec3),
+        progress: impl FnMut(f64),
+    ) -> Result<Self, ReconError> {
+        let mut reconstruction = self.reconstruction;
+        reconstruction.resample = 0;
+        reconstruction.resample_auto = false;
+        let grid = matches!(samples.positions, Positions::Grid { .. })
+            && matches!(samples.supports, Supports::Uniform(_));
+        let full_metric = samples.has_full_metric();
+        let (slo, shi) = samples.support_box();
+        let field = Self {
+            frame_origin: self.frame_origin,
+            samples,
+            reconstruction,
+            octree: std::sync::OnceLock::new(),
+            octree_settings: self.octree_settings,
+            octree_wanted: !grid || reconstruction.neighbours == NeighbourMode::Octree,
+            hull: self.hull.clone(),
+            range: self.range,
+            full_metric,
+            volumes: std::sync::OnceLock::new(),
+            support_box: (DVec3::from(slo), DVec3::from(shi)),
+            thinnest: std::sync::OnceLock::new(),
+            radii: std::sync::OnceLock::new(),
+            resampled: std::sync::OnceLock::new(),
+            blocks: std::sync::OnceLock::new(),
+            fast_path_declined: Some("a brick of a decomposed field is solved directly".into()),
+            clip: Some(bounds),
+        };
+        if field.octree_wanted {
+            let built = Octree::from_samples(&field.samples, &field.octree_settings, progress)?;
+            let _ = field.octree.set(Ok(Some(built)));
+        }
+        Ok(field)
+    }
+
+    /// The box a piece of a decomposed field is rendered in ([`Field::piece`]).
+    pub fn clip(&self) -> Option<(DVec3, DVec3)> {
+        self.clip
     }
 
     /// Implicit grid neighbours, for a regular grid with one support.

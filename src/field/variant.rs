@@ -53,6 +53,8 @@ pub struct Variant {
     pub resampled: bool,
     /// Empty-space skipping in the ray caster ([`super::skip`]).
     pub skip: bool,
+    /// Rays clipped to a brick's box ([`Field::piece`]), steps anchored to the undivided ray.
+    pub clip: bool,
     /// How the grid's values are stored on the device (`GRID_BITS`, `GRID_SIGNED`): 8- and
     /// 16-bit samples stay at their size and the kernel converts them. F32 off the grid path.
     pub grid: Storage,
@@ -80,6 +82,7 @@ impl Variant {
             resample: r.resample,
             resampled: r.resample > 0,
             skip: false,
+            clip: false,
             method: None,
             adaptive_levels: 1,
             adaptive: AdaptiveCriterion::Mls2008,
@@ -144,6 +147,7 @@ impl Variant {
         ));
         d.push(("RESAMPLE_FACTOR".into(), self.resample.max(1).to_string()));
         d.push(("SKIP".into(), flag(self.skip)));
+        d.push(("CLIP".into(), flag(self.clip)));
         d.push(("SKIP_BLOCK".into(), super::skip::SKIP_BLOCK.to_string()));
         d.push(("SKIP_RUN".into(), super::skip::SKIP_RUN.to_string()));
         d.push(("RUN_NUDGE".into(), format!("{:e}", super::skip::RUN_NUDGE)));
@@ -220,6 +224,7 @@ impl Variant {
         } else {
             String::new()
         } + if self.skip { "-skip" } else { "" }
+            + if self.clip { "-clip" } else { "" }
             + &if self.grid == Storage::F32 {
                 String::new()
             } else {

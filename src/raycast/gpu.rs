@@ -20,6 +20,7 @@ pub fn variant_for_render(field: &Field, setup: &RaySetup) -> Variant {
         hull: field.hull.is_some(),
         hull_hits: setup.hull_hits,
         skip: setup.skip,
+        clip: setup.clip.is_some(),
         ..Variant::of(field)
     }
 }
@@ -44,6 +45,8 @@ pub fn render_params(field: &Field, setup: &RaySetup, tf_count: u32) -> RenderPa
             l_min_world: r.l_min_world as f32,
             tf_count,
             iso_count: r.isosurfaces.len() as u32,
+            clip_min: v4(r.clip.map_or(r.box_lo, |c| c.0), 0.0),
+            clip_max: v4(r.clip.map_or(r.box_hi, |c| c.1), 0.0),
         },
         lighting: [
             l.ambient as f32,

@@ -49,16 +49,22 @@ pub struct PixelResult {
 /// Midpoint rule (`riemann`, `reference`): n = ⌈L/δ⌉ steps, the last one shortened; isosurfaces
 /// crossed between consecutive samples are composited before the later sample's step. With
 /// isosurfaces, f is also evaluated at the entry and the exit, so that a surface in the half
-/// step before the first sample or after the last is not missed.
-fn integrate_riemann(ray: &mut Ray<'_>, setup: &RaySetup, tf: &TransferFunction, t0: f64, t1: f64) {
+/// step before the first sample or after the last is not missed. Steps are counted from t0;
+/// the first starts at `head` ≥ t0 (a brick's face, [`anchored`]; t0 otherwise).
+fn integrate_riemann(
+    ray: &mut Ray<'_>,
+    setup: &RaySetup,
+    tf: &TransferFunction,
+    (t0, head, t1): (f64, f64, f64),
+) {
     let steps = ((t1 - t0) / setup.step_world).ceil() as u64;
     let isos = !setup.isosurfaces.is_empty();
-    let mut prev: Option<Knot> = isos.then(|| knot(ray, t0));
+    let mut prev: Option<Knot> = isos.then(|| knot(ray, head));
     let mut occupied_until = f64::NEG_INFINITY;
     let mut i = 0;
     while i < steps {
-        let ta = t0 + i as f64 * setup.step_world;
-        let dt = setup.step_world.min(t1 - ta);
+        let ta = (t0 + i as f64 * setup.step_world).max(head);
+        let dt = (t0 + (i + 1) as f64 * setup.step_world).min(t1) - ta;
         if dt <= 0.0 {
             break;
         }
@@ -104,22 +110,22 @@ fn integrate_riemann(ray: &mut Ray<'_>, setup: &RaySetup, tf: &TransferFunction,
 }
 
 /// Preintegration with a constant step l (`fixed`): s at interval ends, one lookup of the
-/// l-table per interval; the last, shorter interval uses the clipped composite.
+/// l-table per interval; the last, shorter interval uses the clipped composite, and so does the
+/// first where it starts at `head` > t0 (a brick's face, [`anchored`]).
 fn integrate_fixed(
     ray: &mut Ray<'_>,
     setup: &RaySetup,
     tables: &PreintegrationTables,
-    t0: f64,
-    t1: f64,
+    (t0, head, t1): (f64, f64, f64),
 ) {
     let l = setup.step_world;
     let steps = ((t1 - t0) / l).ceil() as u64;
-    let mut prev = knot(ray, t0);
+    let mut prev = knot(ray, head);
     let mut occupied_until = f64::NEG_INFINITY;
     let mut i = 0;
     while i < steps {
-        let ta = t0 + i as f64 * l;
-        let tb = (ta + l).min(t1);
+        let ta = (t0 + i as f64 * l).max(head);
+        let tb = (t0 + (i + 1) as f64 * l).min(t1);
         if tb <= ta {
             break;
         }
@@ -144,7 +150,7 @@ fn integrate_fixed(
             }
         }
         let next = knot(ray, tb);
-        let full = i + 1 < steps;
+        let full = i + 1 < steps && !(i == 0 && head > t0);
         let hermite = (full && setup.interval == IntervalModel::Hermite)
             .then(|| hermite_segment(ray, setup, tables, &prev, &next, 0))
             .flatten();
@@ -156,6 +162,27 @@ fn integrate_fixed(
             break;
         }
         i += 1;
+    }
+}
+
+/// The part of an inside segment (t0, t1) that a ray integrates: all of it, or for a brick of a
+/// decomposed field (`brick`, the ray's parameters inside the brick's box, `None` if it misses
+/// the box) the part inside the box, as (start, head, end): steps of length `step` counted
+/// from the segment's start t0 as the undivided field's are (so that the bricks' samples are
+/// the one-device frame's), `start` the last step position at or before the face, `head` the
+/// face. Twin of the window in raycast.comp's main().
+pub fn anchored(
+    (t0, t1): (f64, f64),
+    brick: Option<Option<(f64, f64)>>,
+    step: f64,
+) -> Option<(f64, f64, f64)> {
+    match brick {
+        None => Some((t0, t0, t1)),
+        Some(None) => None,
+        Some(Some((c0, c1))) => {
+            let (w0, w1) = (t0.max(c0), t1.min(c1));
+            (w1 > w0).then(|| (t0 + ((w0 - t0) / step).floor() * step, w0, w1))
+        }
     }
 }
 
@@ -200,13 +227,18 @@ pub fn raycast(
         },
     };
     let inside_length = segments.iter().map(|(t0, t1)| t1 - t0).sum();
+    let brick = setup.clip.map(|(lo, hi)| clip_box(o, d, lo, hi));
     // Each inside segment is integrated on its own, with clipped intervals at its ends
     // ([MLS] §4); the ray stops at the method's termination.
-    for (t0, t1) in segments {
+    for segment in segments {
+        let Some(window) = anchored(segment, brick, setup.step_world) else {
+            continue;
+        };
+        let (t0, _, t1) = window;
         match (setup.method, tables) {
-            (Method::Fixed, Some(t)) => integrate_fixed(&mut ray, setup, t, t0, t1),
+            (Method::Fixed, Some(t)) => integrate_fixed(&mut ray, setup, t, window),
             (Method::Adaptive, Some(t)) => adaptive::integrate(&mut ray, setup, tf, t, t0, t1),
-            _ => integrate_riemann(&mut ray, setup, tf, t0, t1),
+            _ => integrate_riemann(&mut ray, setup, tf, window),
         }
         let done = match setup.method {
             Method::Fixed | Method::Adaptive => 1.0 - ray.transmittance > setup.early_termination,

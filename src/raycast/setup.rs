@@ -82,6 +82,9 @@ pub struct RaySetup {
     /// The fraction of ray length "auto" found in empty blocks when it decided.
     pub skip_estimate: Option<f64>,
     pub background: [f64; 3],
+    /// A brick of a decomposed field ([`Field::piece`]): rays integrate only inside this box
+    /// (frame-relative), their steps anchored where the undivided field's segments start.
+    pub clip: Option<(DVec3, DVec3)>,
     /// Riemann and reference methods stop below this transmittance.
     pub min_transmittance: f64,
     pub isosurfaces: Vec<shading::Isosurface>,
@@ -132,6 +135,16 @@ impl RaySetup {
                 ),
             });
         }
+        if field.clip().is_some() && render.method == Method::Adaptive {
+            return Err(RenderError::Setting {
+                key: "render.method",
+                message: "\"adaptive\" does not render a brick of a decomposed field (its \
+                          intervals are not anchored to the undivided ray, so bricks would not \
+                          add up to the one-device image); use \"fixed\", \"riemann\" or \
+                          \"reference\""
+                    .into(),
+            });
+        }
         if skip_on && mls2008 {
             return Err(RenderError::Setting {
                 key: "render.skip",
@@ -162,6 +175,7 @@ impl RaySetup {
             skip_estimate: None,
             hull_hits: FIRST_HULL_HITS,
             background: render.background,
+            clip: field.clip(),
             min_transmittance: render.min_transmittance,
             isosurfaces: isosurfaces.to_vec(),
             lighting: *lighting,

@@ -7,6 +7,7 @@
 #![deny(clippy::unwrap_used, clippy::expect_used)]
 
 mod bench;
+mod bricks;
 mod check;
 mod compare;
 mod probe;
@@ -81,6 +82,12 @@ enum Command {
         /// "Rendering to a tolerance").
         #[arg(long, value_name = "E")]
         tolerance: Option<f64>,
+        /// Divide the field into N kd bricks with ghosts, ray cast each alone (rays clipped
+        /// to its box, steps where the undivided frame's are) and composite them front to
+        /// back in f64 on this device: the reference of a distributed render (README,
+        /// "Bricks").
+        #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=4096))]
+        bricks: Option<u32>,
         #[command(flatten)]
         device: DeviceArgs,
     },
@@ -299,6 +306,7 @@ fn main() {
             cpu,
             force,
             tolerance,
+            bricks,
             device,
         } => {
             // --tolerance E is `--set render.tolerance=E`, after the other overrides.
@@ -307,10 +315,15 @@ fn main() {
                 .cloned()
                 .chain(tolerance.map(|e| format!("render.tolerance={e:e}")))
                 .collect();
-            if *cpu {
+            if *cpu && bricks.is_some() {
+                Err(CliError::Usage(
+                    "--bricks renders on the GPU; drop --cpu or --bricks".into(),
+                ))
+            } else if *cpu {
                 if tolerance.is_some() {
                     Err(CliError::Usage(
-                        "--cpu renders with the scene's parameters: --tolerance chooses them                          with pilot frames on the GPU"
+                        "--cpu renders with the scene's parameters: --tolerance chooses them \
+                         with pilot frames on the GPU"
                             .into(),
                     ))
                 } else if eval_map.is_some() || *frames != 1 {
@@ -339,7 +352,10 @@ fn main() {
                     frames: *frames,
                     force: *force,
                 };
-                render::run_render(&request, device, &stop)
+                match bricks {
+                    Some(n) => bricks::run_render_bricks(&request, *n, device, &stop),
+                    None => render::run_render(&request, device, &stop),
+                }
             }
         }
         Command::Bench(args) => bench::bench(args),

@@ -1,0 +1,213 @@
+//! Sort-last rendering of a field divided into bricks (issue 30): a kd decomposition with one
+//! box per rank ([`kd`]), each brick's samples with exact ghosts ([`ghosts`]), each brick ray
+//! cast alone (rays clipped to its box, steps anchored to the undivided ray,
+//! [`crate::raycast::RaySetup::clip`]), and the bricks' premultiplied images composited front
+//! to back in the kd tree's visibility order.
+//!
+//! [`VirtualBricks`] renders the whole decomposition on one device and composites in f64: the
+//! reference for a distributed run (which renders the same pieces on several devices and
+//! composites them in the same order).
+//!
+//! What a brick's image equals: inside its box the field is the undivided one (the ghosts),
+//! and its ray samples lie where the undivided frame's do; only the interval that a box face
+//! splits differs, composited as two clipped intervals with a knot evaluated on the face
+//! instead of one interval. Early ray termination acts within a brick and never across, so a
+//! ray the undivided frame stopped at opacity o_et can still gather up to 1 − o_et behind it.
+//! Not yet here: the adaptive integrator (its intervals are not anchored to the undivided ray),
+//! splatting, the fast path and skipping (a brick solves directly), render.tolerance.
+
+pub mod ghosts;
+pub mod kd;
+
+use crate::field::{Field, RenderError};
+use crate::recon::{ReconError, ReconMethod};
+use crate::renderer::Renderer;
+use crate::view::View;
+use crate::vk::Context;
+use ghosts::{GhostCount, brick_samples};
+use glam::DVec3;
+use kd::KdTree;
+use std::time::Instant;
+
+/// An axis-aligned box: lower and upper corner.
+pub type Aabb = ([f64; 3], [f64; 3]);
+
+/// Errors of the decomposition and of rendering its bricks.
+#[derive(Debug, thiserror::Error)]
+pub enum BrickError {
+    #[error("bricks: {0}")]
+    Ranks(String),
+    #[error("bricks: {key}: {message}")]
+    Setting { key: &'static str, message: String },
+    #[error("bricks: {0}")]
+    Recon(#[from] ReconError),
+    #[error(transparent)]
+    Render(#[from] RenderError),
+}
+
+/// The pieces of `field` for `ranks` ranks: the kd tree and, per rank, the piece of the field
+/// its brick renders (with `ghosts`, or its own samples alone) and its sample counts.
+pub fn divide(
+    field: &Field,
+    ranks: usize,
+    ghosts: bool,
+) -> Result<(KdTree, Vec<(Field, GhostCount)>), BrickError> {
+    if field.reconstruction.method == ReconMethod::Exact {
+        return Err(BrickError::Setting {
+            key: "reconstruction.method",
+            message: "\"exact\" is the generator's analytic field, which has no samples to \
+                      divide between bricks; use \"mls\" or \"gaussian\""
+                .into(),
+        });
+    }
+    let tree = KdTree::decompose(&field.samples, ranks)?;
+    let pieces = (0..ranks)
+        .map(|rank| {
+            let bounds = tree.boxes[rank];
+            let (samples, count) =
+                brick_samples(&field.samples, bounds, |x| tree.owner(x) == rank, ghosts)?;
+            if samples.is_empty() {
+                return Err(BrickError::Ranks(format!(
+                    "rank {rank}'s brick holds no samples; use fewer ranks"
+                )));
+            }
+            let piece = field.piece(
+                samples,
+                (DVec3::from(bounds.0), DVec3::from(bounds.1)),
+                |_| {},
+            )?;
+            Ok((piece, count))
+        })
+        .collect::<Result<Vec<_>, BrickError>>()?;
+    Ok((tree, pieces))
+}
+
+/// Composites the bricks' images front to back, in f64: each image is (C, 1 − T) with C
+/// premultiplied over a black background (a brick frame's pixels), `order` lists them front to
+/// back; the result is (C + T·background, 1 − T), the one-device frame's pixel.
+pub fn composite(images: &[&[[f32; 4]]], order: &[usize], background: [f64; 3]) -> Vec<[f64; 4]> {
+    let n = images.first().map_or(0, |i| i.len());
+    (0..n)
+        .map(|p| {
+            let mut c = [0.0f64; 3];
+            let mut t = 1.0f64;
+            for &b in order {
+                let px = images[b][p];
+                for k in 0..3 {
+                    c[k] += t * f64::from(px[k]);
+                }
+                t *= 1.0 - f64::from(px[3]);
+            }
+            [
+                c[0] + t * background[0],
+                c[1] + t * background[1],
+                c[2] + t * background[2],
+                1.0 - t,
+            ]
+        })
+        .collect()
+}
+
+/// What one brick's frame cost.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BrickStats {
+    pub rank: usize,
+    pub bounds: Aabb,
+    pub samples: GhostCount,
+    pub gpu_ms: f64,
+    pub evaluations: u64,
+}
+
+/// A composited frame of the bricks.
+#[derive(Debug, Clone)]
+pub struct BrickFrame {
+    pub pixels: Vec<[f64; 4]>,
+    /// The ranks front to back.
+    pub order: Vec<usize>,
+    pub bricks: Vec<BrickStats>,
+    /// Host milliseconds of the f64 composite.
+    pub composite_ms: f64,
+}
+
+/// The whole decomposition rendered on one device ("virtual bricks"): one renderer per brick.
+pub struct VirtualBricks {
+    tree: KdTree,
+    renderers: Vec<Renderer>,
+    counts: Vec<GhostCount>,
+}
+
+impl VirtualBricks {
+    /// Divides `field` for `ranks` bricks and prepares a renderer for each.
+    pub fn new(ctx: &Context, field: &Field, ranks: usize) -> Result<Self, BrickError> {
+        let (tree, pieces) = divide(field, ranks, true)?;
+        let mut renderers = Vec::with_capacity(ranks);
+        let mut counts = Vec::with_capacity(ranks);
+        for (piece, count) in pieces {
+            renderers.push(Renderer::new(ctx, piece)?);
+            counts.push(count);
+        }
+        Ok(Self {
+            tree,
+            renderers,
+            counts,
+        })
+    }
+
+    /// The decomposition.
+    pub fn tree(&self) -> &KdTree {
+        &self.tree
+    }
+
+    /// Renders every brick of `view` (over a black background) and composites them in the
+    /// visibility order from the view's eye over the view's background.
+    pub fn render(&mut self, view: &View<'_>) -> Result<BrickFrame, BrickError> {
+        if view.settings.tolerance.is_some() {
+            return Err(BrickError::Setting {
+                key: "render.tolerance",
+                message: "bricks render with the scene's step: a tolerance's pilot frames \
+                          would choose it per brick; give render.step instead"
+                    .into(),
+            });
+        }
+        if view.settings.method.splat_shading().is_some() {
+            return Err(BrickError::Setting {
+                key: "render.method",
+                message: format!(
+                    "\"{}\" splats; bricks are ray cast (\"fixed\", \"riemann\", \"reference\")",
+                    view.settings.method.name()
+                ),
+            });
+        }
+        let mut settings = view.settings.clone();
+        settings.background = [0.0; 3];
+        let brick_view = View {
+            settings: &settings,
+            ..*view
+        };
+        let mut images = Vec::with_capacity(self.renderers.len());
+        let mut bricks = Vec::with_capacity(self.renderers.len());
+        for (rank, renderer) in self.renderers.iter_mut().enumerate() {
+            let (image, stats) = renderer.render(&brick_view, |_| {})?;
+            bricks.push(BrickStats {
+                rank,
+                bounds: self.tree.boxes[rank],
+                samples: self.counts[rank],
+                gpu_ms: stats.gpu_ms,
+                evaluations: image.counts.iter().map(|&c| u64::from(c)).sum(),
+            });
+            images.push(image.pixels);
+        }
+        let start = Instant::now();
+        let eye =
+            (DVec3::from(view.camera.eye) - self.renderers[0].field().frame_origin).to_array();
+        let order = self.tree.visibility_order(eye);
+        let refs: Vec<&[[f32; 4]]> = images.iter().map(|i| i.as_slice()).collect();
+        let pixels = composite(&refs, &order, view.settings.background);
+        Ok(BrickFrame {
+            pixels,
+            order,
+            bricks,
+            composite_ms: start.elapsed().as_secs_f64() * 1e3,
+        })
+    }
+}
