@@ -17,6 +17,8 @@
 //! - [`renderer`]: the persistent [`renderer::Renderer`], the one place that knows both methods.
 //! - [`bricks`]: the field divided into kd bricks with exact ghosts, each rendered alone and
 //!   composited in visibility order (sort-last rendering, issue 30).
+//! - `distributed` (feature `mpi`): the bricks on MPI ranks, composited by IceT; its IceT calls
+//!   are the one other place with `unsafe` (C FFI, `distributed/icet.rs`).
 //! - [`scene`]: the TOML scene contract.
 //!
 //! With the `cli` feature (on by default) also the command-line program's modules: image files
@@ -34,6 +36,8 @@ pub mod bricks;
 #[cfg(feature = "cli")]
 pub mod check;
 pub mod data;
+#[cfg(feature = "mpi")]
+pub mod distributed;
 pub mod field;
 pub mod files;
 pub mod gpu_types;

@@ -15,7 +15,8 @@ use vmls::renderer::Renderer;
 use vmls::scene::NeighbourMode;
 
 /// A grid (support 2.4 spacings: two ghost planes), a tetrahedral mesh (per-point supports
-/// from the one-ring) and scattered points with rotated ellipsoidal supports.
+/// from the one-ring), scattered points with rotated ellipsoidal supports, and the Gaussian sum
+/// over the same points.
 fn fields() -> Vec<(&'static str, Field)> {
     let grid = ml_field(
         17,
@@ -37,7 +38,15 @@ fn fields() -> Vec<(&'static str, Field)> {
         0.5 + 0.3 * (4.0 * p[0]).sin() * p[1] + 0.2 * p[2] * p[2]
     });
     let cloud = splat::field_of(splat::point_samples(&d, Some(true)), &scene);
-    vec![("grid", grid), ("mesh", mesh), ("points", cloud)]
+    // The Gaussian sum, whose SPH volumes a brick keeps from the whole field.
+    let gaussian = general_scene(&["reconstruction.method=\"gaussian\"".into()]);
+    let sum = splat::field_of(splat::point_samples(&d, Some(true)), &gaussian);
+    vec![
+        ("grid", grid),
+        ("mesh", mesh),
+        ("points", cloud),
+        ("gaussian points", sum),
+    ]
 }
 
 /// The largest |difference| between a piece and the whole at random points of the piece's box

@@ -31,6 +31,10 @@ const LAYERS: &[(&str, &str)] = &[
         "data field files gpu_types raycast recon renderer samples splat view vk",
     ),
     (
+        "distributed",
+        "bricks data field files gpu_types raycast recon renderer samples splat view vk",
+    ),
+    (
         "scene",
         "data field files gpu_types raycast recon renderer samples splat view vk",
     ),

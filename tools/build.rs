@@ -33,4 +33,37 @@ fn main() {
         }
     }
     println!("cargo:rustc-link-lib=dylib=stdc++");
+    if std::env::var_os("CARGO_FEATURE_MPI").is_some() {
+        link_icet(&dir);
+    }
+}
+
+/// The `mpi` feature's IceT: Debian ships it inside ParaView as `libvtkIceTCore-pvX.Y.so` and
+/// `libvtkIceTMPI-pvX.Y.so` (package paraview-dev; `tools/setup --mpi`), linked against the
+/// OpenMPI that the `mpi` crate links. `ICET_LIB_DIR` points elsewhere.
+fn link_icet(default_dir: &str) {
+    println!("cargo:rerun-if-env-changed=ICET_LIB_DIR");
+    let dir = std::env::var("ICET_LIB_DIR").unwrap_or_else(|_| default_dir.to_string());
+    let core = std::fs::read_dir(&dir).ok().and_then(|entries| {
+        entries
+            .filter_map(|e| e.ok()?.file_name().into_string().ok())
+            .filter_map(|n| {
+                Some(
+                    n.strip_prefix("libvtkIceTCore")?
+                        .strip_suffix(".so")?
+                        .to_string(),
+                )
+            })
+            .next()
+    });
+    let Some(suffix) = core else {
+        println!(
+            "cargo:warning=feature mpi: no libvtkIceTCore*.so in {dir} (run tools/setup --mpi, \
+             or set ICET_LIB_DIR)"
+        );
+        return;
+    };
+    println!("cargo:rustc-link-search=native={dir}");
+    println!("cargo:rustc-link-lib=dylib=vtkIceTMPI{suffix}");
+    println!("cargo:rustc-link-lib=dylib=vtkIceTCore{suffix}");
 }

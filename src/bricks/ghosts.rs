@@ -26,6 +26,13 @@ pub struct GhostCount {
     pub ghosts: usize,
 }
 
+/// A brick's samples, their counts, and which samples of the whole set they are (in order).
+pub struct BrickSamples {
+    pub samples: SampleSet,
+    pub count: GhostCount,
+    pub indices: Vec<usize>,
+}
+
 /// The samples of the brick `bounds` of `samples` (with `ghosts`, or its own alone: the
 /// comparison that shows why ghosts are needed). `owner(x)` says whether a sample at x belongs
 /// to this brick (the kd tree's rule, so that every sample is own in exactly one brick).
@@ -34,7 +41,7 @@ pub fn brick_samples(
     bounds: Aabb,
     owner: impl Fn([f64; 3]) -> bool,
     ghosts: bool,
-) -> Result<(SampleSet, GhostCount), BrickError> {
+) -> Result<BrickSamples, BrickError> {
     match (&samples.positions, &samples.supports) {
         (
             Positions::Grid {
@@ -59,7 +66,7 @@ fn grid_brick(
     h: [f64; 3],
     (lo, hi): Aabb,
     ghosts: bool,
-) -> (SampleSet, GhostCount) {
+) -> BrickSamples {
     let mut first = [0usize; 3];
     let mut count = [0usize; 3];
     let mut own = 1usize;
@@ -86,7 +93,7 @@ fn grid_brick(
         }
     }
     let total = indices.len();
-    let brick = SampleSet {
+    let samples = SampleSet {
         positions: Positions::Grid {
             dims: count,
             origin: [0, 1, 2].map(|a| origin[a] + first[a] as f64 * spacing[a]),
@@ -98,13 +105,14 @@ fn grid_brick(
         spacing: samples.spacing,
         provenance: samples.provenance.clone(),
     };
-    (
-        brick,
-        GhostCount {
+    BrickSamples {
+        samples,
+        count: GhostCount {
             own,
             ghosts: total - own,
         },
-    )
+        indices,
+    }
 }
 
 /// Own samples first, then every other sample whose support reaches the box.
@@ -113,7 +121,7 @@ fn scattered_brick(
     bounds: Aabb,
     owner: impl Fn([f64; 3]) -> bool,
     ghosts: bool,
-) -> (SampleSet, GhostCount) {
+) -> BrickSamples {
     let (mut own, mut extra) = (Vec::new(), Vec::new());
     for i in 0..samples.len() {
         let x = samples.position(i);
@@ -141,7 +149,11 @@ fn scattered_brick(
         spacing: samples.spacing,
         provenance: samples.provenance.clone(),
     };
-    (brick, count)
+    BrickSamples {
+        samples: brick,
+        count,
+        indices: own,
+    }
 }
 
 /// Whether sample i's support reaches the box: its bounding box first (cheap, and exact for

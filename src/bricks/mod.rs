@@ -20,9 +20,10 @@ pub mod ghosts;
 pub mod kd;
 
 use crate::field::{Field, RenderError};
+use crate::recon::gaussian::KernelVolumes;
 use crate::recon::{ReconError, ReconMethod};
 use crate::renderer::Renderer;
-use crate::view::View;
+use crate::view::{RenderSettings, View};
 use crate::vk::Context;
 use ghosts::{GhostCount, brick_samples};
 use glam::DVec3;
@@ -52,6 +53,16 @@ pub fn divide(
     ranks: usize,
     ghosts: bool,
 ) -> Result<(KdTree, Vec<(Field, GhostCount)>), BrickError> {
+    let tree = decompose(field, ranks)?;
+    let pieces = (0..ranks)
+        .map(|rank| piece_of(field, &tree, rank, ghosts))
+        .collect::<Result<Vec<_>, BrickError>>()?;
+    Ok((tree, pieces))
+}
+
+/// The kd tree of `field` for `ranks` ranks (the analytic field, which reads no samples, is
+/// refused).
+pub fn decompose(field: &Field, ranks: usize) -> Result<KdTree, BrickError> {
     if field.reconstruction.method == ReconMethod::Exact {
         return Err(BrickError::Setting {
             key: "reconstruction.method",
@@ -60,26 +71,40 @@ pub fn divide(
                 .into(),
         });
     }
-    let tree = KdTree::decompose(&field.samples, ranks)?;
-    let pieces = (0..ranks)
-        .map(|rank| {
-            let bounds = tree.boxes[rank];
-            let (samples, count) =
-                brick_samples(&field.samples, bounds, |x| tree.owner(x) == rank, ghosts)?;
-            if samples.is_empty() {
-                return Err(BrickError::Ranks(format!(
-                    "rank {rank}'s brick holds no samples; use fewer ranks"
-                )));
+    KdTree::decompose(&field.samples, ranks)
+}
+
+/// The piece of `field` that `rank`'s brick of `tree` renders, and its sample counts.
+pub fn piece_of(
+    field: &Field,
+    tree: &KdTree,
+    rank: usize,
+    ghosts: bool,
+) -> Result<(Field, GhostCount), BrickError> {
+    let bounds = tree.boxes[rank];
+    let brick = brick_samples(&field.samples, bounds, |x| tree.owner(x) == rank, ghosts)?;
+    if brick.samples.is_empty() {
+        return Err(BrickError::Ranks(format!(
+            "rank {rank}'s brick holds no samples; use fewer ranks"
+        )));
+    }
+    // The Gaussian sum's SPH volumes depend on each sample's neighbours, which a brick's
+    // outermost ghosts lack: the whole field's are kept.
+    let volumes = (field.reconstruction.method == ReconMethod::Gaussian).then(|| {
+        match field.kernel_volumes() {
+            KernelVolumes::Uniform(v) => KernelVolumes::Uniform(*v),
+            KernelVolumes::PerSample(v) => {
+                KernelVolumes::PerSample(brick.indices.iter().map(|&i| v[i]).collect())
             }
-            let piece = field.piece(
-                samples,
-                (DVec3::from(bounds.0), DVec3::from(bounds.1)),
-                |_| {},
-            )?;
-            Ok((piece, count))
-        })
-        .collect::<Result<Vec<_>, BrickError>>()?;
-    Ok((tree, pieces))
+        }
+    });
+    let piece = field.piece(
+        brick.samples,
+        (DVec3::from(bounds.0), DVec3::from(bounds.1)),
+        volumes,
+        |_| {},
+    )?;
+    Ok((piece, brick.count))
 }
 
 /// Composites the bricks' images front to back, in f64: each image is (C, 1 − T) with C
@@ -106,6 +131,43 @@ pub fn composite(images: &[&[[f32; 4]]], order: &[usize], background: [f64; 3]) 
             ]
         })
         .collect()
+}
+
+/// The settings a brick renders `view` with (over a black background, composited over the
+/// view's afterwards), or the refusal of what bricks cannot render.
+pub fn brick_settings(view: &View<'_>) -> Result<RenderSettings, BrickError> {
+    if view.settings.tolerance.is_some() {
+        return Err(BrickError::Setting {
+            key: "render.tolerance",
+            message: "bricks render with the scene's step: a tolerance's pilot frames would \
+                      choose it per brick; give render.step instead"
+                .into(),
+        });
+    }
+    if view.settings.method.splat_shading().is_some() {
+        return Err(BrickError::Setting {
+            key: "render.method",
+            message: format!(
+                "\"{}\" splats; bricks are ray cast (\"fixed\", \"riemann\", \"reference\")",
+                view.settings.method.name()
+            ),
+        });
+    }
+    let mut settings = view.settings.clone();
+    settings.background = [0.0; 3];
+    Ok(settings)
+}
+
+/// A composited pixel over `background`: (C, α) premultiplied over black becomes
+/// (C + (1 − α)·background, α), in f64.
+pub fn over_background(p: [f32; 4], background: [f64; 3]) -> [f64; 4] {
+    let t = 1.0 - f64::from(p[3]);
+    [
+        f64::from(p[0]) + t * background[0],
+        f64::from(p[1]) + t * background[1],
+        f64::from(p[2]) + t * background[2],
+        f64::from(p[3]),
+    ]
 }
 
 /// What one brick's frame cost.
@@ -161,25 +223,7 @@ impl VirtualBricks {
     /// Renders every brick of `view` (over a black background) and composites them in the
     /// visibility order from the view's eye over the view's background.
     pub fn render(&mut self, view: &View<'_>) -> Result<BrickFrame, BrickError> {
-        if view.settings.tolerance.is_some() {
-            return Err(BrickError::Setting {
-                key: "render.tolerance",
-                message: "bricks render with the scene's step: a tolerance's pilot frames \
-                          would choose it per brick; give render.step instead"
-                    .into(),
-            });
-        }
-        if view.settings.method.splat_shading().is_some() {
-            return Err(BrickError::Setting {
-                key: "render.method",
-                message: format!(
-                    "\"{}\" splats; bricks are ray cast (\"fixed\", \"riemann\", \"reference\")",
-                    view.settings.method.name()
-                ),
-            });
-        }
-        let mut settings = view.settings.clone();
-        settings.background = [0.0; 3];
+        let settings = brick_settings(view)?;
         let brick_view = View {
             settings: &settings,
             ..*view

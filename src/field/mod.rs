@@ -177,7 +177,9 @@ impl Field {
 
     /// A piece of this field for a brick of a decomposition (issue 30): `samples` (the brick's
     /// own and ghost samples, frame-relative, with this field's domain), rendered only inside
-    /// `bounds`. It keeps this field's frame origin, value range (so tables and variants are
+    /// `bounds`, with `volumes` as its Gaussian kernels' (the whole field's, selected: a
+    /// brick's outermost ghosts lack the neighbours their SPH volumes were estimated from).
+    /// It keeps this field's frame origin, value range (so tables and variants are
     /// the whole field's), hull and reconstruction, solved directly: the fast path's fine grid
     /// would need the neighbours' fine points too. (The analytic field reads no samples: the
     /// caller refuses it.)
@@ -185,6 +187,7 @@ impl Field {
         &self,
         samples: SampleSet,
         bounds: (DVec3, DVec3),
+        volumes: Option<KernelVolumes>,
         progress: impl FnMut(f64),
     ) -> Result<Self, ReconError> {
         let mut reconstruction = self.reconstruction;
@@ -216,6 +219,9 @@ impl Field {
         if field.octree_wanted {
             let built = Octree::from_samples(&field.samples, &field.octree_settings, progress)?;
             let _ = field.octree.set(Ok(Some(built)));
+        }
+        if let Some(v) = volumes {
+            let _ = field.volumes.set(v);
         }
         Ok(field)
     }

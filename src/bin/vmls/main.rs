@@ -10,6 +10,8 @@ mod bench;
 mod bricks;
 mod check;
 mod compare;
+#[cfg(feature = "mpi")]
+mod distributed;
 mod probe;
 mod render;
 mod signals;
@@ -88,6 +90,14 @@ enum Command {
         /// "Bricks").
         #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=4096))]
         bricks: Option<u32>,
+        /// Render across MPI ranks (`mpirun -np N vmls render … --mpi`; a build with the `mpi`
+        /// feature): each rank ray casts its kd brick, IceT composites them in visibility
+        /// order, rank 0 writes the image (README, "Bricks").
+        #[arg(long)]
+        mpi: bool,
+        /// With --mpi: IceT's single-image compositing strategy (radixk, bswap, tree).
+        #[arg(long, value_name = "NAME", default_value = "radixk")]
+        icet_strategy: String,
         #[command(flatten)]
         device: DeviceArgs,
     },
@@ -160,6 +170,10 @@ enum CliError {
     Bench(#[from] vmls::bench::BenchError),
     #[error("{0}")]
     Usage(String),
+    /// Failed where another process reports why (an MPI rank other than 0): exit 1 silently.
+    #[cfg(feature = "mpi")]
+    #[error("failed; another rank reports why")]
+    Quiet,
 }
 
 impl From<vmls::files::FileError> for CliError {
@@ -260,6 +274,32 @@ const MAX_REPORT_CHARS: usize = 2000;
 /// The error and its causes on one line. Every quote of input is already a short escaped
 /// excerpt; as a last guard the line is escaped again (no control character reaches the
 /// terminal) and cut to [`MAX_REPORT_CHARS`], whatever a lower layer or crate put in it.
+/// `vmls render --mpi` in a build with the `mpi` feature.
+#[cfg(feature = "mpi")]
+fn run_render_mpi(
+    request: &render::Request<'_>,
+    strategy: &str,
+    device: &DeviceArgs,
+    stop: &AtomicBool,
+) -> Result<(), CliError> {
+    distributed::run_render_mpi(request, strategy, device, stop)
+}
+
+/// `vmls render --mpi` in a build without it: refused.
+#[cfg(not(feature = "mpi"))]
+fn run_render_mpi(
+    _: &render::Request<'_>,
+    _: &str,
+    _: &DeviceArgs,
+    _: &AtomicBool,
+) -> Result<(), CliError> {
+    Err(CliError::Usage(
+        "--mpi: this vmls was built without the mpi feature; build it with `cargo build \
+         --release --features mpi` (tools/setup --mpi installs OpenMPI, IceT and libclang)"
+            .into(),
+    ))
+}
+
 fn report(error: &dyn std::error::Error) -> String {
     vmls::files::printable(&chain(error), MAX_REPORT_CHARS)
 }
@@ -307,6 +347,8 @@ fn main() {
             force,
             tolerance,
             bricks,
+            mpi,
+            icet_strategy,
             device,
         } => {
             // --tolerance E is `--set render.tolerance=E`, after the other overrides.
@@ -315,9 +357,13 @@ fn main() {
                 .cloned()
                 .chain(tolerance.map(|e| format!("render.tolerance={e:e}")))
                 .collect();
-            if *cpu && bricks.is_some() {
+            if *cpu && (bricks.is_some() || *mpi) {
                 Err(CliError::Usage(
-                    "--bricks renders on the GPU; drop --cpu or --bricks".into(),
+                    "--bricks and --mpi render on the GPU; drop --cpu".into(),
+                ))
+            } else if *mpi && bricks.is_some() {
+                Err(CliError::Usage(
+                    "--mpi divides the field into one brick per rank: drop --bricks".into(),
                 ))
             } else if *cpu {
                 if tolerance.is_some() {
@@ -353,6 +399,7 @@ fn main() {
                     force: *force,
                 };
                 match bricks {
+                    _ if *mpi => run_render_mpi(&request, icet_strategy, device, &stop),
                     Some(n) => bricks::run_render_bricks(&request, *n, device, &stop),
                     None => render::run_render(&request, device, &stop),
                 }
@@ -402,6 +449,10 @@ fn main() {
         },
     };
     if let Err(e) = result {
+        #[cfg(feature = "mpi")]
+        if matches!(e, CliError::Quiet) {
+            std::process::exit(1);
+        }
         eprintln!("vmls: error: {}", report(&e));
         let interrupted = matches!(e, CliError::Render(RenderError::Interrupted));
         std::process::exit(if interrupted {

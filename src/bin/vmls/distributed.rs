@@ -1,0 +1,148 @@
+//! `vmls render --mpi`: one scene across MPI ranks (run under `mpirun`), each rank ray casting
+//! its kd brick, IceT compositing them in visibility order, rank 0 writing the image and the
+//! statistics (issue 30). Built with the cargo feature `mpi`.
+
+use crate::render::Request;
+use crate::{CliError, DeviceArgs, check_stop, context, json_to, plan_outputs, report};
+use mpi::Threading;
+use mpi::topology::SimpleCommunicator;
+use mpi::traits::Communicator;
+use std::sync::atomic::AtomicBool;
+use std::time::Instant;
+use vmls::distributed::{DistributedError, RankBrick, Strategy, agree};
+use vmls::field::RenderError;
+use vmls::output::{check_finite, encode_image, format_of};
+use vmls::scene::Scene;
+
+impl From<DistributedError> for CliError {
+    fn from(e: DistributedError) -> Self {
+        match e {
+            // Rank 0 says what failed; the other ranks exit non-zero without a word.
+            DistributedError::Elsewhere { .. } => CliError::Quiet,
+            other => CliError::Usage(other.to_string()),
+        }
+    }
+}
+
+/// Renders `request`'s scene across the ranks of MPI_COMM_WORLD.
+pub fn run_render_mpi(
+    request: &Request<'_>,
+    strategy: &str,
+    device: &DeviceArgs,
+    stop: &AtomicBool,
+) -> Result<(), CliError> {
+    let strategy = Strategy::ALL
+        .iter()
+        .find(|(n, _)| *n == strategy)
+        .map(|&(_, s)| s)
+        .ok_or_else(|| {
+            CliError::Usage(format!(
+                "--icet-strategy {strategy}: expected radixk, bswap or tree"
+            ))
+        })?;
+    // Only the main thread calls MPI (rayon's and the signal thread never do).
+    let Some((universe, _)) = mpi::initialize_with_threading(Threading::Funneled) else {
+        return Err(CliError::Usage("MPI was initialised twice".into()));
+    };
+    let world = universe.world();
+    run(&world, request, strategy, device, stop)
+}
+
+fn run(
+    world: &SimpleCommunicator,
+    request: &Request<'_>,
+    strategy: Strategy,
+    device: &DeviceArgs,
+    stop: &AtomicBool,
+) -> Result<(), CliError> {
+    let start = Instant::now();
+    let root = world.rank() == 0;
+    let loaded = (|| -> Result<_, CliError> {
+        if request.eval_map.is_some() || request.frames != 1 {
+            return Err(CliError::Usage(
+                "--mpi renders one frame without evaluation maps: drop --eval-map and --frames"
+                    .into(),
+            ));
+        }
+        format_of(request.output)?;
+        let scene = Scene::load(request.scene_path, request.set)?;
+        // Rank 0 writes; its outputs are checked before any rank renders.
+        let outputs = if root {
+            Some(plan_outputs(
+                request.scene_path,
+                Some(&scene),
+                &[("-o", Some(request.output)), ("--stats", request.stats)],
+            )?)
+        } else {
+            None
+        };
+        let ctx = context(device)?;
+        let field = scene.field_on(Some(ctx.info()), |_| {})?;
+        if !request.force {
+            scene
+                .ray_setup(&field)?
+                .check_budget(vmls::view::WORK_BUDGET)?;
+        }
+        check_stop(stop)?;
+        Ok((scene, outputs, ctx, field))
+    })();
+    let (scene, outputs, ctx, field) = agree(world, loaded.map_err(|e| report(&e)))?;
+    let mut brick = RankBrick::new(world, &ctx, &field)?;
+    drop(field);
+    let frame = brick.render(world, &scene.view(), strategy)?;
+    drop(brick);
+    let (Some(frame), Some(mut outputs)) = (frame, outputs) else {
+        return Ok(());
+    };
+    let errors = ctx.validation_errors();
+    if errors > 0 {
+        return Err(RenderError::Output {
+            path: request.output.display().to_string(),
+            message: format!(
+                "{errors} Vulkan validation error(s) during the render; no image written"
+            ),
+        }
+        .into());
+    }
+    let rgba: Vec<[f32; 4]> = frame.pixels.iter().map(|p| p.map(|c| c as f32)).collect();
+    check_finite(&rgba)?;
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    outputs.write(request.output, |out| {
+        encode_image(out, request.output, w, h, &rgba)
+    })?;
+    if let Some(path) = request.stats {
+        let ranks = &frame.ranks;
+        let mean = |f: fn(&vmls::distributed::RankReport) -> f64| {
+            ranks.iter().map(f).sum::<f64>() / ranks.len().max(1) as f64
+        };
+        let max =
+            |f: fn(&vmls::distributed::RankReport) -> f64| ranks.iter().map(f).fold(0.0, f64::max);
+        let value = serde_json::json!({
+            "device": ctx.info().name,
+            "method": scene.render.method.name(),
+            "width": w,
+            "height": h,
+            "ranks": world.size(),
+            "icet_strategy": format!("{strategy:?}"),
+            "order": frame.order,
+            "render_gpu_ms": { "max": max(|r| r.render_gpu_ms), "mean": mean(|r| r.render_gpu_ms) },
+            "render_wall_ms": { "max": max(|r| r.render_wall_ms), "mean": mean(|r| r.render_wall_ms) },
+            "composite_ms": { "max": max(|r| r.composite_ms), "mean": mean(|r| r.composite_ms) },
+            "composite_wall_ms_rank0": frame.composite_wall_ms,
+            "bytes_sent": { "max": max(|r| r.bytes_sent), "mean": mean(|r| r.bytes_sent) },
+            "wall_ms": start.elapsed().as_secs_f64() * 1e3,
+            "per_rank": ranks.iter().map(|r| serde_json::json!({
+                "rank": r.rank,
+                "samples_inside": r.samples,
+                "ghosts": r.ghosts,
+                "divide_ms": r.divide_ms,
+                "render_gpu_ms": r.render_gpu_ms,
+                "render_wall_ms": r.render_wall_ms,
+                "composite_ms": r.composite_ms,
+                "bytes_sent": r.bytes_sent,
+            })).collect::<Vec<_>>(),
+        });
+        outputs.write(path, json_to(&value))?;
+    }
+    Ok(outputs.commit()?)
+}
