@@ -55,11 +55,12 @@ float hermite_error(vec4 a, vec4 e, float transmittance, out vec4 mid) {
     float sm = hermite_midpoint(a.y, e.y, m0, m1);
     float mm = 1.5 * (e.y - a.y) - 0.25 * (m0 + m1);
     mid = vec4(0.5 * (a.x + e.x), sm, mm / l, 1.0);
-    // One pass over the transfer function for both halves: their hulls' union and the larger
-    // departure.
+    // One pass over the transfer function for both halves: their hulls' union, widened by the
+    // whole interval's departure (the margin of the twin), and the larger departure.
     vec3 h0 = bezier_hull(a.y, sm, 0.5 * m0, 0.5 * mm);
     vec3 h1 = bezier_hull(sm, e.y, 0.5 * mm, 0.5 * m1);
-    return scale * hull_sensitivity(vec3(min(h0.x, h1.x), max(h0.y, h1.y), max(h0.z, h1.z)));
+    return scale * hull_sensitivity(vec3(min(h0.x, h1.x) - whole.z, max(h0.y, h1.y) + whole.z,
+                                         max(h0.z, h1.z)));
 }
 #endif
 
@@ -163,7 +164,8 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
                 split = true;
                 break;
             }
-            predicted = depth > 0u && 0.81 * epsilon >= 4.0 * error ? depth - 1u : depth;
+            predicted = error == 0.0 ? 0u
+                : (depth > 0u && 0.81 * epsilon >= 4.0 * error ? depth - 1u : depth);
             count_error(error, len, transmittance);
             // Accepted: the halves through the predicted midpoint when the hull holds no
             // isosurface value, else the whole interval split at the surfaces it crosses. One

@@ -26,13 +26,19 @@
 //!   interval's error per unit length is then at most T·S, T the transmittance so far and S the
 //!   transfer function's [`TransferFunction::sensitivity`] to a deviation D over that hull (a
 //!   band or a breakpoint the Hermite overshoots into counts, which catches thin features
-//!   between monotone-looking knots). Accepted when T·S·h ≤ ε, h the sample spacing: ε bounds the
+//!   between monotone-looking knots). The hull is widened by D on both sides (the margin): the
+//!   field itself may depart from the Hermite by as much as the Hermite departs from the chord,
+//!   and a feature just outside the cubic's hull is then still split for. Without the margin a
+//!   long l_max missed features whatever ε (Marschner–Lobb at l_max = 2.6 spacings stopped at
+//!   3.1e-3 while ε fell 60-fold; with it, 4.4e-4; BENCHMARKS.md, "A margin on the Hermite
+//!   hull"). Accepted when T·S·h ≤ ε, h the sample spacing: ε bounds the
 //!   error of optical depth and colour per spacing, so a ray's total is at most ε per spacing
 //!   crossed. An interval with exactly one undefined end is split (the domain's edge is inside).
 //!   A step controller picks the next interval when the stack is empty: S ∝ D = O(l²) for smooth
 //!   f, so the step that just meets ε is l·(ε/E)^½; one level coarser when 0.9 of that is at
-//!   least 2l, the same level otherwise, and deeper wherever the position is not aligned to the
-//!   coarser level. A rejected interval costs one evaluation (its midpoint; its end stays
+//!   least 2l, the same level otherwise, back to the top level after an interval whose error is
+//!   zero (its hull met no change of the transfer function), and deeper wherever the position
+//!   is not aligned to the coarser level. A rejected interval costs one evaluation (its midpoint; its end stays
 //!   pending). Splitting at dyadic midpoints rather than at the Hermite's extremum keeps every
 //!   length a table length.
 //!
@@ -127,9 +133,14 @@ fn hermite_error(
     let mm = 1.5 * (f1 - f0) - 0.25 * (m0 + m1);
     let (lo0, hi0, d0) = bezier_hull(f0, sm, 0.5 * m0, 0.5 * mm);
     let (lo1, hi1, d1) = bezier_hull(sm, f1, 0.5 * mm, 0.5 * m1);
-    // One pass over the transfer function for both halves: their hulls' union and the larger
-    // departure.
-    let error = scale * tf.sensitivity(lo0.min(lo1), hi0.max(hi1), d0.max(d1));
+    // One pass over the transfer function for both halves: their hulls' union, widened by the
+    // whole interval's departure (the margin, module documentation), and the larger departure.
+    let error = scale
+        * tf.sensitivity(
+            lo0.min(lo1) - deviation,
+            hi0.max(hi1) + deviation,
+            d0.max(d1),
+        );
     let mid = Knot {
         t: 0.5 * (a.t + e.t),
         s: Some(sm),
@@ -140,9 +151,13 @@ fn hermite_error(
 }
 
 /// The Hermite controller's next depth after accepting an interval at `depth` with error
-/// `error`: one level coarser when 0.9·(ε/E)^½ ≥ 2, i.e. 0.81·ε ≥ 4·E.
+/// `error`: one level coarser when 0.9·(ε/E)^½ ≥ 2, i.e. 0.81·ε ≥ 4·E; the top level after an
+/// interval whose hull met no change of the transfer function at all (the position's alignment
+/// then decides how coarse the next interval can be).
 fn predict_depth(depth: usize, error: f64, epsilon: f64) -> usize {
-    if depth > 0 && 0.81 * epsilon >= 4.0 * error {
+    if error == 0.0 {
+        0
+    } else if depth > 0 && 0.81 * epsilon >= 4.0 * error {
         depth - 1
     } else {
         depth
@@ -430,7 +445,9 @@ mod tests {
 
     #[test]
     fn controller_grows_one_level_only_with_a_fourfold_margin() {
-        assert_eq!(predict_depth(3, 0.0, 0.01), 2);
+        // An interval without any error returns to the top level.
+        assert_eq!(predict_depth(3, 0.0, 0.01), 0);
+        assert_eq!(predict_depth(3, 1e-30, 0.01), 2);
         assert_eq!(predict_depth(3, 0.01 * 0.81 / 4.0, 0.01), 2);
         assert_eq!(predict_depth(3, 0.01 * 0.81 / 4.0 * 1.01, 0.01), 3);
         assert_eq!(predict_depth(0, 0.0, 0.01), 0);

@@ -190,12 +190,16 @@ fn at_level(base: &RenderSettings, k: f64) -> (RenderSettings, f64) {
         }
         Method::Adaptive => {
             s.epsilon = base.adaptive.default_epsilon() * START_EPSILON * halve * halve;
-            // The longest interval shrinks too: a feature between an interval's knots that
-            // none of its evaluations sees is never subdivided, whatever ε (DESIGN.md §4), so
-            // with l_max fixed the ladder converges to a biased limit (measured: 1.2e-3 on
-            // ml-emission at 128² while consecutive levels differed by 1.7e-4).
+            // The longest interval shrinks too, by √2 a level: a feature between an
+            // interval's knots that none of its evaluations sees is never subdivided, whatever
+            // ε (DESIGN.md §4), so with l_max fixed the ladder converged to a biased limit
+            // (before the hull's margin: 1.2e-3 on ml-emission at 128² while consecutive levels
+            // differed by 1.7e-4; with the margin, the graded torus at l_max = 2.6 spacings
+            // still stopped at 6e-4). Halving it every level, as before the margin, cost the
+            // torus and the thin peaks 20-40% more evaluations at equal error (BENCHMARKS.md,
+            // "A margin on the Hermite hull").
             if !base.given.l_max {
-                s.l_max_spacings = base.l_max_spacings * halve;
+                s.l_max_spacings = base.l_max_spacings * halve.sqrt();
             }
             if !base.given.l_min {
                 s.l_min_spacings = base.l_min_spacings * halve;
