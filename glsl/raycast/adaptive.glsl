@@ -107,7 +107,7 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
     uint units = 1u << uint(ADAPTIVE_LEVELS - 1);
     uint tops = uint(ceil((t1 - t0) / l_max));
     if (first == 0u) {
-        a = knot(o, d, t0, evaluations);
+        a = knot(o, d, CLIP_START(t0), evaluations);
         predicted = 0u;
     }
     vec4 stack[ADAPTIVE_LEVELS];
@@ -116,6 +116,28 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
     uint position = 0u;
     int sp = 0;
     bool tail = false;
+#if CLIP == 1
+    // A brick's face inside the first top: one clipped interval to the first unit of the
+    // deepest level past it, from where intervals are the undivided ray's dyadic ones (twin of
+    // the head in integrate_hermite). Past the last covered unit the tail takes it all.
+    if (first == 0u && g_head > t0) {
+        float u = l_max / float(units);
+        position = min(uint(ceil((g_head - t0) / u)), top_limit(t0, t1, l_max, units));
+        float tb = t0 + float(position) * u;
+        if (tb > g_head) {
+            vec4 e = knot(o, d, tb, evaluations);
+            vec4 unused;
+            float len = tb - g_head;
+            count_error(hermite_error(a, e, transmittance, unused), len, transmittance);
+            emit_interval(o, d, a, e, len, knot_segment(a, e, len, false, 0u), color,
+                          transmittance, evaluations);
+            a = e;
+            if (1.0 - transmittance > termination) {
+                return CHUNK_FINISHED;
+            }
+        }
+    }
+#endif
     while (k < last) {
         // Composite what passes, until an interval or a new end needs an evaluation.
         float t_eval = 0.0;

@@ -416,8 +416,12 @@ void main() {
         if (!in_brick || w1 <= w0) {
             continue;
         }
-        float t_start = segs[s].x + floor((w0 - segs[s].x) / params.integrator.step_world)
-                                    * params.integrator.step_world;
+#if RAY_METHOD == 2
+        float anchor_step = params.tables.longest_world;
+#else
+        float anchor_step = params.integrator.step_world;
+#endif
+        float t_start = segs[s].x + floor((w0 - segs[s].x) / anchor_step) * anchor_step;
         g_head = w0;
         vec2 seg = vec2(t_start, w1);
 #else

@@ -13,13 +13,19 @@
 //! splits differs, composited as two clipped intervals with a knot evaluated on the face
 //! instead of one interval. Early ray termination acts within a brick and never across, so a
 //! ray the undivided frame stopped at opacity o_et can still gather up to 1 − o_et behind it.
-//! Not yet here: the adaptive integrator (its intervals are not anchored to the undivided ray),
-//! splatting, the fast path and skipping (a brick solves directly), render.tolerance.
+//! The adaptive integrator's Hermite criterion keeps the undivided ray's top intervals and
+//! their dyadic units (a clipped interval reaches the first unit past the face); its choices
+//! inside depend on the knots, so a brick's can differ after the face. Not yet here: [MLS]'s
+//! criterion, splatting, the fast path and skipping (a brick solves directly),
+//! render.tolerance.
 
 pub mod ghosts;
 pub mod kd;
+pub mod wire;
 
-use crate::field::{Field, RenderError};
+pub use wire::BrickMessage;
+
+use crate::field::{Field, PieceFrame, RenderError};
 use crate::recon::gaussian::KernelVolumes;
 use crate::recon::{ReconError, ReconMethod};
 use crate::renderer::Renderer;
@@ -40,6 +46,8 @@ pub enum BrickError {
     Ranks(String),
     #[error("bricks: {key}: {message}")]
     Setting { key: &'static str, message: String },
+    #[error("bricks: a brick message: {0}")]
+    Message(String),
     #[error("bricks: {0}")]
     Recon(#[from] ReconError),
     #[error(transparent)]
@@ -81,6 +89,25 @@ pub fn piece_of(
     rank: usize,
     ghosts: bool,
 ) -> Result<(Field, GhostCount), BrickError> {
+    let m = message_for(field, tree, rank, ghosts)?;
+    let bounds = tree.boxes[rank];
+    let piece = field.piece(
+        m.samples,
+        (DVec3::from(bounds.0), DVec3::from(bounds.1)),
+        m.volumes,
+        |_| {},
+    )?;
+    Ok((piece, m.count))
+}
+
+/// What `rank` needs to build its piece of `field` without it ([`piece_from_message`]): the
+/// tree, the whole field's frame, its brick's samples (with `ghosts`) and kernel volumes.
+pub fn message_for(
+    field: &Field,
+    tree: &KdTree,
+    rank: usize,
+    ghosts: bool,
+) -> Result<BrickMessage, BrickError> {
     let bounds = tree.boxes[rank];
     let brick = brick_samples(&field.samples, bounds, |x| tree.owner(x) == rank, ghosts)?;
     if brick.samples.is_empty() {
@@ -98,13 +125,40 @@ pub fn piece_of(
             }
         }
     });
-    let piece = field.piece(
-        brick.samples,
-        (DVec3::from(bounds.0), DVec3::from(bounds.1)),
+    let frame = field.piece_frame();
+    Ok(BrickMessage {
+        tree: tree.clone(),
+        rank,
+        frame_origin: frame.frame_origin.to_array(),
+        range: frame.range,
+        samples: brick.samples,
+        count: brick.count,
         volumes,
+    })
+}
+
+/// The piece a [`BrickMessage`] describes, with the scene's `reconstruction` and `octree`
+/// settings (every rank reads the scene; only one reads the data).
+pub fn piece_from_message(
+    m: BrickMessage,
+    reconstruction: crate::recon::Reconstruction,
+    octree: crate::recon::OctreeSettings,
+) -> Result<(Field, KdTree, GhostCount), BrickError> {
+    let bounds = m.tree.boxes[m.rank];
+    let frame = PieceFrame {
+        frame_origin: DVec3::from(m.frame_origin),
+        range: m.range,
+        reconstruction,
+        octree,
+    };
+    let piece = Field::from_piece(
+        m.samples,
+        frame,
+        (DVec3::from(bounds.0), DVec3::from(bounds.1)),
+        m.volumes,
         |_| {},
     )?;
-    Ok((piece, brick.count))
+    Ok((piece, m.tree, m.count))
 }
 
 /// Composites the bricks' images front to back, in f64: each image is (C, 1 − T) with C

@@ -1,8 +1,9 @@
 //! Sort-last rendering across MPI ranks with IceT compositing (issue 30; cargo feature `mpi`).
 //!
-//! Every rank holds the scene's field, takes its brick of the kd decomposition
-//! ([`crate::bricks`]: the same on every rank, computed from the same samples), renders it
-//! alone (premultiplied RGBA32F over black, rays clipped to the brick), and IceT blends the
+//! Rank 0 reads the input, divides the field by the kd decomposition ([`crate::bricks`]) and
+//! sends each rank its piece (samples and ghosts, the tree, the whole field's frame); every
+//! rank renders its brick alone (premultiplied RGBA32F over black, rays clipped to the brick),
+//! and IceT blends the
 //! ranks' images in the kd tree's visibility order from the eye (`icetCompositeOrder`, the
 //! near child first) onto rank 0, which puts the background under it. The result is the
 //! virtual bricks' image ([`crate::bricks::VirtualBricks`], the same pieces on one device
@@ -12,16 +13,19 @@
 //! did, every rank returns [`DistributedError`] and rank 0's names the first failing rank and
 //! its message, so that no rank waits in a collective call for one that has gone.
 //!
-//! Not yet here: each rank reads the whole input and builds the whole sample set before it
-//! takes its piece (no scatter, no parallel VTK XML), and renders the whole image (its box's
-//! screen footprint would do).
+//! Not yet here: parallel VTK XML read piece by piece on the ranks (rank 0 reads everything,
+//! so its memory bounds the data), and each rank renders the whole image (its box's screen
+//! footprint would do).
 
 #[allow(unsafe_code)]
 mod icet;
 
 pub use icet::{CompositeStats, IcetError, Strategy};
 
-use crate::bricks::{BrickError, brick_settings, decompose, over_background, piece_of};
+use crate::bricks::wire::{decode, encode};
+use crate::bricks::{
+    BrickError, brick_settings, decompose, message_for, over_background, piece_from_message,
+};
 use crate::field::Field;
 use crate::renderer::Renderer;
 use crate::view::View;
@@ -30,7 +34,7 @@ use glam::DVec3;
 use icet::Icet;
 use mpi::collective::SystemOperation;
 use mpi::topology::SimpleCommunicator;
-use mpi::traits::{Communicator, CommunicatorCollectives, Root};
+use mpi::traits::{Communicator, CommunicatorCollectives, Destination, Root, Source};
 use std::time::Instant;
 
 /// Longest message a failing rank sends to rank 0, in bytes.
@@ -127,6 +131,32 @@ pub struct DistributedFrame {
     pub composite_wall_ms: f64,
 }
 
+/// Bytes per message part: MPI counts are 32-bit.
+const PART: usize = 1 << 30;
+
+/// Sends `bytes` to rank `to`: their length, then parts of at most [`PART`] bytes.
+fn send(world: &SimpleCommunicator, to: i32, bytes: &[u8]) {
+    let p = world.process_at_rank(to);
+    p.send(&(bytes.len() as u64));
+    for part in bytes.chunks(PART) {
+        p.send(part);
+    }
+}
+
+/// What [`send`] sent, from `from`.
+fn receive(from: &mpi::topology::Process<'_>) -> Vec<u8> {
+    let (len, _) = from.receive::<u64>();
+    let mut bytes = Vec::with_capacity(len as usize);
+    while bytes.len() < len as usize {
+        let (part, _) = from.receive_vec::<u8>();
+        if part.is_empty() {
+            break;
+        }
+        bytes.extend_from_slice(&part);
+    }
+    bytes
+}
+
 /// This rank's brick of `field`: the rank's piece, rendered by a renderer of its own.
 pub struct RankBrick {
     renderer: Renderer,
@@ -138,23 +168,58 @@ pub struct RankBrick {
 }
 
 impl RankBrick {
-    /// Divides `field` for the world's ranks and prepares this rank's piece (collective: the
-    /// phases are agreed on).
-    pub fn new(
+    /// Rank 0 divides `field` (which only it holds) for the world's ranks and sends each
+    /// rank its piece ([`crate::bricks::wire`]); every rank builds its piece with the scene's
+    /// `reconstruction` and `octree` settings and prepares its renderer and IceT. Collective;
+    /// every phase is agreed on.
+    pub fn scatter(
         world: &SimpleCommunicator,
         ctx: &Context,
-        field: &Field,
+        field: Option<&Field>,
+        reconstruction: crate::recon::Reconstruction,
+        octree: crate::recon::OctreeSettings,
     ) -> Result<Self, DistributedError> {
-        let rank = world.rank() as usize;
         let start = Instant::now();
+        let size = world.size() as usize;
+        let root = world.process_at_rank(0);
+        let mine: Result<Vec<u8>, String> = if world.rank() == 0 {
+            // Rank 0: every rank's message, its own kept.
+            let messages = field
+                .ok_or_else(|| "rank 0 holds no field".to_string())
+                .and_then(|field| {
+                    let tree = decompose(field, size).map_err(|e| e.to_string())?;
+                    (0..size)
+                        .map(|r| {
+                            message_for(field, &tree, r, true)
+                                .map(|m| encode(&m))
+                                .map_err(|e| e.to_string())
+                        })
+                        .collect::<Result<Vec<_>, String>>()
+                });
+            let messages = agree(world, messages)?;
+            let mut own = Vec::new();
+            for (r, bytes) in messages.into_iter().enumerate() {
+                if r == 0 {
+                    own = bytes;
+                } else {
+                    send(world, r as i32, &bytes);
+                }
+            }
+            Ok(own)
+        } else {
+            agree(world, Ok(()))?;
+            Ok(receive(&root))
+        };
         let piece = agree(
             world,
-            decompose(field, world.size() as usize)
-                .and_then(|tree| piece_of(field, &tree, rank, true).map(|p| (tree, p)))
-                .map_err(|e| e.to_string()),
+            mine.and_then(|bytes| {
+                decode(&bytes)
+                    .and_then(|m| piece_from_message(m, reconstruction, octree))
+                    .map_err(|e| e.to_string())
+            }),
         )?;
         let divide_ms = start.elapsed().as_secs_f64() * 1e3;
-        let (tree, (piece, count)) = piece;
+        let (piece, tree, count) = piece;
         let renderer = agree(
             world,
             Renderer::new(ctx, piece).map_err(|e| BrickError::from(e).to_string()),

@@ -33,6 +33,16 @@ use crate::samples::bvh::HullBvh;
 use crate::samples::{Domain, Positions, Provenance, SampleSet, Supports};
 use glam::DVec3;
 
+/// What a piece of a decomposed field keeps of the whole field ([`Field::piece`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PieceFrame {
+    /// The whole field's frame origin (world) and value range.
+    pub frame_origin: DVec3,
+    pub range: (f64, f64),
+    pub reconstruction: Reconstruction,
+    pub octree: OctreeSettings,
+}
+
 /// The scalar field of a scene: its sample set in frame-relative coordinates, its MLS settings,
 /// and the redundant octree over its samples (irregular data always; regular grids with
 /// `neighbours = "octree"`).
@@ -175,14 +185,21 @@ impl Field {
         Ok(field)
     }
 
+    /// What a piece of this field keeps of it ([`Field::piece`]).
+    pub fn piece_frame(&self) -> PieceFrame {
+        PieceFrame {
+            frame_origin: self.frame_origin,
+            range: self.range,
+            reconstruction: self.reconstruction,
+            octree: self.octree_settings,
+        }
+    }
+
     /// A piece of this field for a brick of a decomposition (issue 30): `samples` (the brick's
     /// own and ghost samples, frame-relative, with this field's domain), rendered only inside
     /// `bounds`, with `volumes` as its Gaussian kernels' (the whole field's, selected: a
     /// brick's outermost ghosts lack the neighbours their SPH volumes were estimated from).
-    /// It keeps this field's frame origin, value range (so tables and variants are
-    /// the whole field's), hull and reconstruction, solved directly: the fast path's fine grid
-    /// would need the neighbours' fine points too. (The analytic field reads no samples: the
-    /// caller refuses it.)
+    /// See [`Field::from_piece`].
     pub fn piece(
         &self,
         samples: SampleSet,
@@ -190,22 +207,41 @@ impl Field {
         volumes: Option<KernelVolumes>,
         progress: impl FnMut(f64),
     ) -> Result<Self, ReconError> {
-        let mut reconstruction = self.reconstruction;
+        Self::from_piece(samples, self.piece_frame(), bounds, volumes, progress)
+    }
+
+    /// A piece of a field that `frame` describes (the whole field may live in another process):
+    /// it keeps the whole field's frame origin, value range (so tables and variants are the
+    /// whole field's) and reconstruction, solved directly (the fast path's fine grid would need
+    /// the neighbours' fine points too); its hull is rebuilt from the samples' domain. (The
+    /// analytic field reads no samples: the caller refuses it.)
+    pub fn from_piece(
+        samples: SampleSet,
+        frame: PieceFrame,
+        bounds: (DVec3, DVec3),
+        volumes: Option<KernelVolumes>,
+        progress: impl FnMut(f64),
+    ) -> Result<Self, ReconError> {
+        let mut reconstruction = frame.reconstruction;
         reconstruction.resample = 0;
         reconstruction.resample_auto = false;
         let grid = matches!(samples.positions, Positions::Grid { .. })
             && matches!(samples.supports, Supports::Uniform(_));
         let full_metric = samples.has_full_metric();
         let (slo, shi) = samples.support_box();
+        let hull = match &samples.domain {
+            Domain::Hull(h) => Some(HullBvh::build(h)),
+            Domain::Box { .. } => None,
+        };
         let field = Self {
-            frame_origin: self.frame_origin,
+            frame_origin: frame.frame_origin,
             samples,
             reconstruction,
             octree: std::sync::OnceLock::new(),
-            octree_settings: self.octree_settings,
+            octree_settings: frame.octree,
             octree_wanted: !grid || reconstruction.neighbours == NeighbourMode::Octree,
-            hull: self.hull.clone(),
-            range: self.range,
+            hull,
+            range: frame.range,
             full_metric,
             volumes: std::sync::OnceLock::new(),
             support_box: (DVec3::from(slo), DVec3::from(shi)),

@@ -164,18 +164,19 @@ fn predict_depth(depth: usize, error: f64, epsilon: f64) -> usize {
     }
 }
 
-/// Integrates [t0, t1] adaptively into `ray` with the setup's criterion.
+/// Integrates [t0, t1] adaptively into `ray` with the setup's criterion, from `head` ≥ t0 (a
+/// brick's face, [`super::raycast::anchored`]; only the Hermite criterion renders bricks).
 pub(super) fn integrate(
     ray: &mut Ray<'_>,
     setup: &RaySetup,
     tf: &TransferFunction,
     tables: &PreintegrationTables,
-    t0: f64,
-    t1: f64,
+    window: (f64, f64, f64),
 ) {
+    let (t0, _, t1) = window;
     match setup.adaptive {
         AdaptiveCriterion::Mls2008 => integrate_mls2008(ray, setup, tables, t0, t1),
-        AdaptiveCriterion::Hermite => integrate_hermite(ray, setup, tf, tables, t0, t1),
+        AdaptiveCriterion::Hermite => integrate_hermite(ray, setup, tf, tables, window),
     }
 }
 
@@ -260,17 +261,37 @@ fn integrate_hermite(
     setup: &RaySetup,
     tf: &TransferFunction,
     tables: &PreintegrationTables,
-    t0: f64,
-    t1: f64,
+    (t0, head, t1): (f64, f64, f64),
 ) {
     let levels = stack_size(setup.l_max_world, setup.l_min_world);
     let units = 1u64 << (levels - 1);
     let peak = tf.peak();
     let mut stack: Vec<(Knot, usize)> = Vec::with_capacity(levels);
     let tops = ((t1 - t0) / setup.l_max_world).ceil() as u64;
-    let mut a = knot(ray, t0);
+    let mut a = knot(ray, head);
     let mut predicted = 0;
     let (mut k, mut position) = (0u64, 0u64);
+    if head > t0 {
+        // A brick's face inside the first top: one clipped interval to the first unit of the
+        // deepest level past it, from where intervals are the undivided ray's dyadic ones.
+        // Past the last covered unit, the tail takes it all.
+        let u = setup.l_max_world / units as f64;
+        position =
+            (((head - t0) / u).ceil() as u64).min(top_limit(t0, t1, setup.l_max_world, units));
+        let tb = t0 + position as f64 * u;
+        if tb > head {
+            let e = knot(ray, tb);
+            let len = tb - head;
+            let (error, _) = hermite_error(ray, setup, tf, &a, &e);
+            ray.count_error(error, len, setup.spacing_world, peak);
+            let whole = knot_segment(tables, &a, &e, len, None);
+            emit_interval(ray, setup, tables, &a, &e, len, whole);
+            a = e;
+            if 1.0 - ray.transmittance > setup.early_termination {
+                return;
+            }
+        }
+    }
     'tops: while k < tops {
         let (t, depth, next) = loop {
             let start = t0 + k as f64 * setup.l_max_world;

@@ -231,13 +231,17 @@ pub fn raycast(
     // Each inside segment is integrated on its own, with clipped intervals at its ends
     // ([MLS] §4); the ray stops at the method's termination.
     for segment in segments {
-        let Some(window) = anchored(segment, brick, setup.step_world) else {
+        // Steps (the adaptive integrator's top intervals) counted from the segment's start.
+        let step = match setup.method {
+            Method::Adaptive => setup.l_max_world,
+            _ => setup.step_world,
+        };
+        let Some(window) = anchored(segment, brick, step) else {
             continue;
         };
-        let (t0, _, t1) = window;
         match (setup.method, tables) {
             (Method::Fixed, Some(t)) => integrate_fixed(&mut ray, setup, t, window),
-            (Method::Adaptive, Some(t)) => adaptive::integrate(&mut ray, setup, tf, t, t0, t1),
+            (Method::Adaptive, Some(t)) => adaptive::integrate(&mut ray, setup, tf, t, window),
             _ => integrate_riemann(&mut ray, setup, tf, window),
         }
         let done = match setup.method {

@@ -135,13 +135,13 @@ impl RaySetup {
                 ),
             });
         }
-        if field.clip().is_some() && render.method == Method::Adaptive {
+        if field.clip().is_some() && mls2008 {
             return Err(RenderError::Setting {
-                key: "render.method",
-                message: "\"adaptive\" does not render a brick of a decomposed field (its \
-                          intervals are not anchored to the undivided ray, so bricks would not \
-                          add up to the one-device image); use \"fixed\", \"riemann\" or \
-                          \"reference\""
+                key: "render.adaptive",
+                message: "\"mls2008\" does not render a brick of a decomposed field (its top \
+                          intervals start at the brick's face, so bricks would not add up to the \
+                          one-device image); use \"hermite\", whose intervals keep the \
+                          undivided ray's"
                     .into(),
             });
         }

@@ -77,17 +77,29 @@ fn run(
             None
         };
         let ctx = context(device)?;
-        let field = scene.field_on(Some(ctx.info()), |_| {})?;
-        if !request.force {
-            scene
-                .ray_setup(&field)?
-                .check_budget(vmls::view::WORK_BUDGET)?;
-        }
+        // Rank 0 reads the data and sends each rank its piece.
+        let field = if root {
+            let field = scene.field_on(Some(ctx.info()), |_| {})?;
+            if !request.force {
+                scene
+                    .ray_setup(&field)?
+                    .check_budget(vmls::view::WORK_BUDGET)?;
+            }
+            Some(field)
+        } else {
+            None
+        };
         check_stop(stop)?;
         Ok((scene, outputs, ctx, field))
     })();
     let (scene, outputs, ctx, field) = agree(world, loaded.map_err(|e| report(&e)))?;
-    let mut brick = RankBrick::new(world, &ctx, &field)?;
+    let mut brick = RankBrick::scatter(
+        world,
+        &ctx,
+        field.as_ref(),
+        scene.reconstruction,
+        scene.octree,
+    )?;
     drop(field);
     let frame = brick.render(world, &scene.view(), strategy)?;
     drop(brick);
