@@ -120,7 +120,21 @@ pub fn encode(m: &BrickMessage) -> Vec<u8> {
         Storage::I16 => 4,
     });
     w.u64(s.values.len() as u64);
-    w.0.extend_from_slice(s.values.bytes());
+    match &s.values {
+        Values::F32(v) => v
+            .iter()
+            .for_each(|x| w.0.extend_from_slice(&x.to_le_bytes())),
+        Values::U8(v) => w.0.extend_from_slice(v),
+        Values::I8(v) => v
+            .iter()
+            .for_each(|x| w.0.extend_from_slice(&x.to_le_bytes())),
+        Values::U16(v) => v
+            .iter()
+            .for_each(|x| w.0.extend_from_slice(&x.to_le_bytes())),
+        Values::I16(v) => v
+            .iter()
+            .for_each(|x| w.0.extend_from_slice(&x.to_le_bytes())),
+    }
     match &s.supports {
         Supports::Uniform(h) => {
             w.u64(0);
@@ -298,11 +312,31 @@ pub fn decode(bytes: &[u8]) -> Result<BrickMessage, BrickError> {
     let storage = r.u64("value storage")?;
     let n = r.count(1, "values")?;
     let values = match storage {
-        0 => Values::F32(bytemuck::pod_collect_to_vec(r.take(n * 4, "f32 values")?)),
+        0 => Values::F32(
+            r.take(n * 4, "f32 values")?
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                .collect(),
+        ),
         1 => Values::U8(r.take(n, "u8 values")?.to_vec()),
-        2 => Values::I8(bytemuck::pod_collect_to_vec(r.take(n, "i8 values")?)),
-        3 => Values::U16(bytemuck::pod_collect_to_vec(r.take(n * 2, "u16 values")?)),
-        4 => Values::I16(bytemuck::pod_collect_to_vec(r.take(n * 2, "i16 values")?)),
+        2 => Values::I8(
+            r.take(n, "i8 values")?
+                .iter()
+                .map(|&b| i8::from_le_bytes([b]))
+                .collect(),
+        ),
+        3 => Values::U16(
+            r.take(n * 2, "u16 values")?
+                .chunks_exact(2)
+                .map(|b| u16::from_le_bytes([b[0], b[1]]))
+                .collect(),
+        ),
+        4 => Values::I16(
+            r.take(n * 2, "i16 values")?
+                .chunks_exact(2)
+                .map(|b| i16::from_le_bytes([b[0], b[1]]))
+                .collect(),
+        ),
         t => return Err(BrickError::Message(format!("value storage {t}"))),
     };
     let count_of = match &positions {

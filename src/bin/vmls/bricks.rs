@@ -20,6 +20,31 @@ impl From<BrickError> for CliError {
     }
 }
 
+/// Writes a composited frame (f64 pixels) to `output`, one of `outputs`, unless the context saw
+/// a validation error; shared by `--bricks` and `--mpi`.
+pub fn write_composite(
+    ctx: &vmls::vk::Context,
+    outputs: &mut vmls::files::Outputs,
+    output: &std::path::Path,
+    (w, h): (u32, u32),
+    pixels: &[[f64; 4]],
+) -> Result<(), CliError> {
+    let errors = ctx.validation_errors();
+    if errors > 0 {
+        return Err(RenderError::Output {
+            path: output.display().to_string(),
+            message: format!(
+                "{errors} Vulkan validation error(s) during the render; no image written"
+            ),
+        }
+        .into());
+    }
+    let rgba: Vec<[f32; 4]> = pixels.iter().map(|p| p.map(|c| c as f32)).collect();
+    check_finite(&rgba)?;
+    outputs.write(output, |out| encode_image(out, output, w, h, &rgba))?;
+    Ok(())
+}
+
 /// Renders `request`'s scene as `ranks` virtual bricks.
 pub fn run_render_bricks(
     request: &Request<'_>,
@@ -55,22 +80,8 @@ pub fn run_render_bricks(
     check_stop(stop)?;
     let frame = bricks.render(&scene.view())?;
     drop(bricks);
-    let errors = ctx.validation_errors();
-    if errors > 0 {
-        return Err(RenderError::Output {
-            path: request.output.display().to_string(),
-            message: format!(
-                "{errors} Vulkan validation error(s) during the render; no image written"
-            ),
-        }
-        .into());
-    }
-    let rgba: Vec<[f32; 4]> = frame.pixels.iter().map(|p| p.map(|c| c as f32)).collect();
-    check_finite(&rgba)?;
     let (w, h) = (scene.camera.width, scene.camera.height);
-    outputs.write(request.output, |out| {
-        encode_image(out, request.output, w, h, &rgba)
-    })?;
+    write_composite(&ctx, &mut outputs, request.output, (w, h), &frame.pixels)?;
     if let Some(path) = request.stats {
         let total = field.samples.len();
         let value = serde_json::json!({

@@ -2,6 +2,7 @@
 //! its kd brick, IceT compositing them in visibility order, rank 0 writing the image and the
 //! statistics (issue 30). Built with the cargo feature `mpi`.
 
+use crate::bricks::write_composite;
 use crate::render::Request;
 use crate::{CliError, DeviceArgs, check_stop, context, json_to, plan_outputs, report};
 use mpi::Threading;
@@ -10,8 +11,7 @@ use mpi::traits::Communicator;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 use vmls::distributed::{DistributedError, RankBrick, Strategy, agree};
-use vmls::field::RenderError;
-use vmls::output::{check_finite, encode_image, format_of};
+use vmls::output::format_of;
 use vmls::scene::Scene;
 
 impl From<DistributedError> for CliError {
@@ -106,22 +106,8 @@ fn run(
     let (Some(frame), Some(mut outputs)) = (frame, outputs) else {
         return Ok(());
     };
-    let errors = ctx.validation_errors();
-    if errors > 0 {
-        return Err(RenderError::Output {
-            path: request.output.display().to_string(),
-            message: format!(
-                "{errors} Vulkan validation error(s) during the render; no image written"
-            ),
-        }
-        .into());
-    }
-    let rgba: Vec<[f32; 4]> = frame.pixels.iter().map(|p| p.map(|c| c as f32)).collect();
-    check_finite(&rgba)?;
     let (w, h) = (scene.camera.width, scene.camera.height);
-    outputs.write(request.output, |out| {
-        encode_image(out, request.output, w, h, &rgba)
-    })?;
+    write_composite(&ctx, &mut outputs, request.output, (w, h), &frame.pixels)?;
     if let Some(path) = request.stats {
         let ranks = &frame.ranks;
         let mean = |f: fn(&vmls::distributed::RankReport) -> f64| {
