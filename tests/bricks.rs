@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{finish, general_scene, gpu, gpu_and_cpu_frames, ml_field, point_data, recon, splat};
+use common::{finish, general_scene, gpu, ml_field, point_data, recon, splat};
 use vmls::bricks::{VirtualBricks, divide};
 use vmls::data::dataset::Geometry;
 use vmls::data::random::Lcg;
@@ -225,7 +225,7 @@ fn bricks_composite_to_the_one_device_frame() {
 
 #[test]
 fn a_bricks_kernel_equals_its_cpu_twin() {
-    for method in ["fixed", "adaptive"] {
+    for method in ["fixed", "riemann", "adaptive"] {
         let scene = general_scene(&[
             "camera.width=24".into(),
             "camera.height=24".into(),
@@ -236,30 +236,115 @@ fn a_bricks_kernel_equals_its_cpu_twin() {
         let field = scene.field(|_| {}).expect("field");
         let (_, pieces) = divide(&field, 3, true).expect("divide");
         for (piece, _) in &pieces {
-            let (gpu_image, cpu) = gpu_and_cpu_frames(piece, &scene);
-            let pixel = |i: usize| {
-                (0..4)
-                    .map(|k| (f64::from(gpu_image.pixels[i][k]) - cpu[i].rgba[k]).abs())
-                    .fold(0.0, f64::max)
-            };
-            let worst = (0..cpu.len()).map(pixel).fold(0.0, f64::max);
-            // As every ray-cast frame's bound (3e-5), with room for the clipped first interval
-            // at the face in f32 (measured 4.2e-5); adaptive rays whose f32 and f64 choices
-            // differ, as in the other adaptive GPU-vs-CPU tests, on at most 1% of the pixels and
-            // within 2e-3.
-            let apart = (0..cpu.len()).filter(|&i| pixel(i) >= 1e-4).count();
-            match method {
-                "fixed" => assert!(worst < 1e-4, "GPU vs CPU on a brick: {worst:.3e}"),
-                _ => assert!(
-                    apart * 100 <= cpu.len() && worst < 2e-3,
-                    "adaptive GPU vs CPU on a brick: {apart} pixels apart, {worst:.3e}"
-                ),
+            let mut setup = scene.ray_setup(piece).expect("setup");
+            let tables = vmls::raycast::build_tables(&setup, piece, &scene.transfer, 128, |_| {});
+            let cpu = vmls::raycast::raycast_image(&setup, piece, &scene.transfer, tables.as_ref())
+                .expect("CPU twin");
+            let (ctx, compiler) = gpu();
+            let gf = vmls::field::gpu::GpuField::upload(&ctx, piece).expect("upload");
+            // Whole frames, and frames of two steps a chunk (the face's interval is only the
+            // first chunk's).
+            let mut frames = Vec::new();
+            for chunk in [None, Some(2)] {
+                setup.chunk = chunk;
+                let image = vmls::renderer::render(
+                    &ctx,
+                    &compiler,
+                    piece,
+                    &gf,
+                    &scene.transfer,
+                    tables.as_ref(),
+                    &setup,
+                    |_| {},
+                )
+                .expect("render");
+                frames.push(image.pixels);
+            }
+            drop(gf);
+            finish(ctx);
+            for pixels in &frames {
+                let pixel = |i: usize| {
+                    (0..4)
+                        .map(|k| (f64::from(pixels[i][k]) - cpu[i].rgba[k]).abs())
+                        .fold(0.0, f64::max)
+                };
+                let worst = (0..cpu.len()).map(pixel).fold(0.0, f64::max);
+                // As every ray-cast frame's bound (3e-5), with room for the clipped first
+                // interval at the face in f32 (measured 4.2e-5); adaptive rays whose f32 and
+                // f64 choices differ, as in the other adaptive GPU-vs-CPU tests, on at most 1%
+                // of the pixels and within 2e-3.
+                let apart = (0..cpu.len()).filter(|&i| pixel(i) >= 1e-4).count();
+                match method {
+                    "adaptive" => assert!(
+                        apart * 100 <= cpu.len() && worst < 2e-3,
+                        "adaptive GPU vs CPU on a brick: {apart} pixels apart, {worst:.3e}"
+                    ),
+                    _ => assert!(worst < 1e-4, "{method} GPU vs CPU on a brick: {worst:.3e}"),
+                }
             }
             assert!(
                 cpu.iter().any(|p| p.rgba[3] > 0.05),
                 "the brick rendered nothing"
             );
         }
+    }
+}
+
+#[test]
+fn axis_aligned_orthographic_views_composite_like_one_device() {
+    // Rays along an axis: a whole row lies in the plane between two bricks (odd image size,
+    // eye on the plane), and faces fall on step positions; parallel rays also need the
+    // visibility order of their direction, not of the eye. Tilted too, so that rays cross the
+    // planes from the side away from the eye.
+    for (eye, up) in [
+        ("[-3.0,0.0,0.0]", "[0.0,0.0,1.0]"),
+        ("[0.0,0.0,3.0]", "[0.0,1.0,0.0]"),
+        ("[0.3,0.2,-3.0]", "[1.0,0.0,0.0]"),
+        // The eye above the x and y planes while the rays travel towards +x and +y: a rule
+        // from the eye's side would composite the rays that start below them backwards.
+        ("[0.5,0.4,3.0]|[1.2,0.9,0.0]", "[0.0,1.0,0.0]"),
+    ] {
+        let (eye, target) = eye.split_once('|').unwrap_or((eye, "[0.0,0.0,0.0]"));
+        let scene = general_scene(&[
+            "camera.width=41".into(),
+            "camera.height=41".into(),
+            "camera.projection=\"orthographic\"".into(),
+            "camera.view_height=2.4".into(),
+            format!("camera.eye={eye}"),
+            format!("camera.target={target}"),
+            format!("camera.up={up}"),
+            "render.method=\"fixed\"".into(),
+            "render.step=0.25".into(),
+            "render.early_termination=1".into(),
+        ]);
+        let field = scene.field(|_| {}).expect("field");
+        let (ctx, _) = gpu();
+        let whole = {
+            let mut r = Renderer::new(&ctx, field.clone()).expect("renderer");
+            r.render(&scene.view(), |_| {}).expect("frame").0.pixels
+        };
+        let mut fine_settings = scene.render.clone();
+        fine_settings.step_spacings *= 0.25;
+        let fine = {
+            let mut r = Renderer::new(&ctx, field.clone()).expect("renderer");
+            let view = vmls::view::View {
+                settings: &fine_settings,
+                ..scene.view()
+            };
+            r.render(&view, |_| {}).expect("frame").0.pixels
+        };
+        let own = largest(&whole, |i| fine[i].map(f64::from));
+        for ranks in [2, 4, 8] {
+            let mut b = VirtualBricks::new(&ctx, &field, ranks).expect("bricks");
+            let bricked = b.render(&scene.view()).expect("bricked frame").pixels;
+            let split = largest(&whole, |i| bricked[i]);
+            eprintln!("orthographic from {eye}, {ranks} bricks: {split:.3e} (own {own:.3e})");
+            assert!(
+                split <= own,
+                "from {eye}, {ranks} bricks: {split:.3e} vs {own:.3e}"
+            );
+        }
+        finish(ctx);
     }
 }
 

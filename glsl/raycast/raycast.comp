@@ -87,6 +87,20 @@ bool terminated(float transmittance) {
 // Where the current segment's part inside a brick starts (main()): the integrators start there
 // instead of at their first anchored step.
 float g_head = 0.0;
+
+// clip_box for a brick (twin of clip_brick): a ray parallel to a face that lies exactly on a
+// face shared with the next brick up belongs to that brick only (as a sample on a plane does),
+// so that no ray is integrated by two bricks.
+bool clip_brick(vec3 o, vec3 d, out float t0, out float t1) {
+    vec3 lo = params.integrator.clip_min.xyz;
+    vec3 hi = params.integrator.clip_max.xyz;
+    for (int a = 0; a < 3; ++a) {
+        if (abs(d[a]) < 1e-30 && o[a] == hi[a] && hi[a] < params.integrator.box_max[a]) {
+            return false;
+        }
+    }
+    return clip_box(o, d, lo, hi, t0, t1);
+}
 #define CLIP_START(t) max((t), g_head)
 #else
 #define CLIP_START(t) (t)
@@ -403,8 +417,7 @@ void main() {
     // A brick: each segment's part inside the brick's box, its steps where the undivided
     // field's would be (from the segment's start), the first one starting at the face.
     float c0, c1;
-    bool in_brick = clip_box(o, d, params.integrator.clip_min.xyz, params.integrator.clip_max.xyz,
-                             c0, c1);
+    bool in_brick = clip_brick(o, d, c0, c1);
 #endif
     // Outer steps are numbered across segments: segment s owns [base, base + its steps).
     uint outcome = CHUNK_FINISHED;
@@ -422,6 +435,10 @@ void main() {
         float anchor_step = params.integrator.step_world;
 #endif
         float t_start = segs[s].x + floor((w0 - segs[s].x) / anchor_step) * anchor_step;
+        // The floor may land a step short when the face is on a step (twin of anchored).
+        if (t_start + anchor_step <= w0) {
+            t_start += anchor_step;
+        }
         g_head = w0;
         vec2 seg = vec2(t_start, w1);
 #else

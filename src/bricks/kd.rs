@@ -37,6 +37,13 @@ pub struct KdTree {
     pub boxes: Vec<Aabb>,
 }
 
+/// Where rays come from: a perspective eye, or (orthographic) the direction every ray travels.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Viewpoint {
+    Eye([f64; 3]),
+    Direction([f64; 3]),
+}
+
 /// A grid's planes, where a grid is cut.
 #[derive(Debug, Clone, Copy)]
 struct Planes {
@@ -181,10 +188,11 @@ impl KdTree {
         }
     }
 
-    /// The ranks front to back as seen from `eye`: at every plane the side holding the eye
-    /// first. Any ray from the eye meets the boxes in this order (the boxes are the cells of
+    /// The ranks front to back as seen from `view`: at every plane the side a ray crosses it
+    /// from first (the side holding a perspective eye; for parallel rays, the side their
+    /// direction leaves). Every ray meets the boxes in this order (the boxes are the cells of
     /// a binary space partition), which is the order their images composite in.
-    pub fn visibility_order(&self, eye: [f64; 3]) -> Vec<usize> {
+    pub fn visibility_order(&self, view: Viewpoint) -> Vec<usize> {
         let mut order = Vec::with_capacity(self.boxes.len());
         let mut stack = vec![0usize];
         while let Some(node) = stack.pop() {
@@ -196,7 +204,12 @@ impl KdTree {
                     below,
                     above,
                 } => {
-                    let (near, far) = if eye[axis] < plane {
+                    let below_first = match view {
+                        Viewpoint::Eye(eye) => eye[axis] < plane,
+                        // Rays parallel to the plane never cross it: either order.
+                        Viewpoint::Direction(forward) => forward[axis] > 0.0,
+                    };
+                    let (near, far) = if below_first {
                         (below, above)
                     } else {
                         (above, below)
@@ -263,7 +276,7 @@ mod tests {
                     assert!(hi[a] > lo[a]);
                 }
             }
-            // Sample counts per rank within one plane of the even share along the cut.
+            // Every rank owns samples.
             let mut counts = vec![0usize; ranks];
             for i in 0..set.len() {
                 counts[tree.owner(set.position(i))] += 1;
@@ -276,11 +289,20 @@ mod tests {
     fn visibility_order_puts_the_eyes_side_first() {
         let tree = KdTree::decompose(&grid([41, 5, 5]), 4).unwrap();
         // Cuts along x only (the longest axis twice over): from x < 0 the order is by x.
-        let order = tree.visibility_order([-5.0, 0.2, 0.2]);
+        let order = tree.visibility_order(Viewpoint::Eye([-5.0, 0.2, 0.2]));
         let xs: Vec<f64> = order.iter().map(|&r| tree.boxes[r].0[0]).collect();
         assert!(xs.windows(2).all(|w| w[0] < w[1]), "{xs:?}");
-        let back = tree.visibility_order([9.0, 0.2, 0.2]);
+        let back = tree.visibility_order(Viewpoint::Eye([9.0, 0.2, 0.2]));
         assert_eq!(back, order.iter().rev().copied().collect::<Vec<_>>());
+        // Parallel rays along +x meet the boxes by increasing x wherever the camera stands.
+        assert_eq!(
+            tree.visibility_order(Viewpoint::Direction([1.0, 0.0, 0.0])),
+            order
+        );
+        assert_eq!(
+            tree.visibility_order(Viewpoint::Direction([-0.6, 0.8, 0.0])),
+            back
+        );
     }
 
     #[test]

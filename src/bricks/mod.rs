@@ -29,11 +29,12 @@ use crate::field::{Field, PieceFrame, RenderError};
 use crate::recon::gaussian::KernelVolumes;
 use crate::recon::{ReconError, ReconMethod};
 use crate::renderer::Renderer;
+use crate::view::camera::{Camera, Projection};
 use crate::view::{RenderSettings, View};
 use crate::vk::Context;
 use ghosts::{GhostCount, brick_samples};
 use glam::DVec3;
-use kd::KdTree;
+use kd::{KdTree, Viewpoint};
 use std::time::Instant;
 
 /// An axis-aligned box: lower and upper corner.
@@ -224,6 +225,18 @@ pub fn over_background(p: [f32; 4], background: [f64; 3]) -> [f64; 4] {
     ]
 }
 
+/// Where `camera`'s rays come from, frame-relative, for the visibility order: its eye, or for an
+/// orthographic camera the direction all its rays travel (they start on the image plane, not at
+/// the eye).
+pub fn viewpoint(camera: &Camera, frame_origin: DVec3) -> Viewpoint {
+    match (camera.projection, camera.basis()) {
+        (Projection::Orthographic { .. }, Ok(basis)) => {
+            Viewpoint::Direction(basis.forward.to_array())
+        }
+        _ => Viewpoint::Eye((DVec3::from(camera.eye) - frame_origin).to_array()),
+    }
+}
+
 /// What one brick's frame cost.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BrickStats {
@@ -296,9 +309,10 @@ impl VirtualBricks {
             images.push(image.pixels);
         }
         let start = Instant::now();
-        let eye =
-            (DVec3::from(view.camera.eye) - self.renderers[0].field().frame_origin).to_array();
-        let order = self.tree.visibility_order(eye);
+        let order = self.tree.visibility_order(viewpoint(
+            view.camera,
+            self.renderers[0].field().frame_origin,
+        ));
         let refs: Vec<&[[f32; 4]]> = images.iter().map(|i| i.as_slice()).collect();
         let pixels = composite(&refs, &order, view.settings.background);
         Ok(BrickFrame {

@@ -250,6 +250,32 @@ impl<'a> Reader<'a> {
     }
 }
 
+/// A tree the decoder can walk: the root first, every split's children after it (so no walk
+/// loops), its leaves each rank of `0..ranks` once, and `rank` one of them.
+fn check_tree(nodes: &[KdNode], ranks: usize, rank: usize) -> Result<(), BrickError> {
+    let bad = |what: &str| Err(BrickError::Message(format!("kd tree: {what}")));
+    if nodes.is_empty() {
+        return bad("no nodes");
+    }
+    let mut seen = vec![false; ranks];
+    for (i, n) in nodes.iter().enumerate() {
+        match *n {
+            KdNode::Split { below, above, .. } if below <= i || above <= i => {
+                return bad("a split whose child comes before it");
+            }
+            KdNode::Leaf { rank } if rank >= ranks || seen[rank] => {
+                return bad("a rank twice, or beyond the boxes");
+            }
+            KdNode::Leaf { rank } => seen[rank] = true,
+            KdNode::Split { .. } => {}
+        }
+    }
+    if rank >= ranks || seen.iter().any(|s| !s) {
+        return bad("not every rank has a leaf");
+    }
+    Ok(())
+}
+
 /// The message of `bytes`, checked.
 pub fn decode(bytes: &[u8]) -> Result<BrickMessage, BrickError> {
     let mut r = Reader { bytes, at: 0 };
@@ -278,15 +304,7 @@ pub fn decode(bytes: &[u8]) -> Result<BrickMessage, BrickError> {
     for _ in 0..ranks {
         boxes.push((r.f3("box")?, r.f3("box")?));
     }
-    if rank >= ranks
-        || nodes
-            .iter()
-            .any(|n| matches!(n, KdNode::Leaf { rank } if *rank >= ranks))
-    {
-        return Err(BrickError::Message(format!(
-            "a rank beyond the {ranks} boxes"
-        )));
-    }
+    check_tree(&nodes, ranks, rank)?;
     let frame_origin = r.f3("frame origin")?;
     let range = (r.f64("range")?, r.f64("range")?);
     let count = GhostCount {
@@ -340,7 +358,10 @@ pub fn decode(bytes: &[u8]) -> Result<BrickMessage, BrickError> {
         t => return Err(BrickError::Message(format!("value storage {t}"))),
     };
     let count_of = match &positions {
-        Positions::Grid { dims, .. } => dims.iter().product::<usize>(),
+        Positions::Grid { dims, .. } => dims
+            .iter()
+            .try_fold(1usize, |n, &d| n.checked_mul(d).filter(|_| d > 0))
+            .ok_or_else(|| BrickError::Message(format!("grid dimensions {dims:?}")))?,
         Positions::Scattered(p) => p.len(),
     };
     if values.len() != count_of {
@@ -410,6 +431,11 @@ pub fn decode(bytes: &[u8]) -> Result<BrickMessage, BrickError> {
         1 => Some(KernelVolumes::Uniform(r.f64("volume")?)),
         2 => {
             let n = r.count(8, "volumes")?;
+            if n != count_of {
+                return Err(BrickError::Message(format!(
+                    "{n} kernel volumes for {count_of} samples"
+                )));
+            }
             Some(KernelVolumes::PerSample(
                 (0..n).map(|_| r.f64("volume")).collect::<Result<_, _>>()?,
             ))
@@ -520,5 +546,38 @@ mod tests {
             bad[16] = 9;
             assert!(decode(&bad).is_err());
         }
+        // A split that points at itself (a walk would never end), and a grid of no points.
+        let mut looped = message(
+            Positions::Scattered(vec![[0.0; 3]]),
+            Supports::Uniform([1.0; 3]),
+            Domain::Box {
+                lo: [0.0; 3],
+                hi: [1.0; 3],
+            },
+            1,
+        );
+        looped.tree.nodes[0] = KdNode::Split {
+            axis: 0,
+            plane: 0.5,
+            below: 0,
+            above: 2,
+        };
+        assert!(decode(&encode(&looped)).is_err());
+        let mut empty = looped.clone();
+        empty.tree.nodes[0] = KdNode::Split {
+            axis: 0,
+            plane: 0.5,
+            below: 1,
+            above: 2,
+        };
+        assert!(decode(&encode(&empty)).is_ok());
+        empty.samples.positions = Positions::Grid {
+            dims: [0, 1, 1],
+            origin: [0.0; 3],
+            spacing: [1.0; 3],
+        };
+        empty.samples.values = Values::U16(Vec::new());
+        empty.volumes = None;
+        assert!(decode(&encode(&empty)).is_err());
     }
 }

@@ -170,7 +170,9 @@ impl Icet {
 
     /// Composites every rank's `pixels` (width × height RGBA32F, premultiplied colour over a
     /// black background, the same layout on every rank) blended front to back in `order`
-    /// (ranks), with `strategy`. Collective. Returns the image on rank 0, `None` elsewhere.
+    /// (ranks), with `strategy`. Collective: every rank must call it with a buffer of the
+    /// same size (the caller agrees on that first: a rank that returned here on a wrong size
+    /// would leave the others waiting). Returns the image on rank 0, `None` elsewhere.
     pub fn composite(
         &self,
         pixels: &[[f32; 4]],
@@ -211,22 +213,10 @@ impl Icet {
                 background.as_ptr(),
             )
         };
-        check("icetCompositeImage")?;
-        let mut seconds = 0.0f64;
-        let mut bytes: c_int = 0;
-        // SAFETY: both state variables are scalars of the current context.
-        unsafe {
-            icetGetDoublev(ICET_COMPOSITE_TIME, &mut seconds);
-            icetGetIntegerv(ICET_BYTES_SENT, &mut bytes);
-        }
-        let stats = CompositeStats {
-            seconds,
-            bytes_sent: i64::from(bytes),
-        };
-        // SAFETY: `image` was returned by icetCompositeImage of this context and is valid
-        // until the next IceT call; a non-null image on the display rank holds width × height
-        // RGBA floats, copied out here before any other IceT call.
-        let out = unsafe {
+        // SAFETY: `image` was returned by icetCompositeImage of this context and stays valid
+        // until the next compositing call; a non-null image on the display rank holds width ×
+        // height RGBA floats, copied out here before any other IceT call.
+        let out: Option<Vec<[f32; 4]>> = unsafe {
             if icetImageIsNull(image) != 0 {
                 None
             } else {
@@ -239,6 +229,18 @@ impl Icet {
                         .collect()
                 })
             }
+        };
+        check("icetCompositeImage")?;
+        let mut seconds = 0.0f64;
+        let mut bytes: c_int = 0;
+        // SAFETY: both state variables are scalars of the current context.
+        unsafe {
+            icetGetDoublev(ICET_COMPOSITE_TIME, &mut seconds);
+            icetGetIntegerv(ICET_BYTES_SENT, &mut bytes);
+        }
+        let stats = CompositeStats {
+            seconds,
+            bytes_sent: i64::from(bytes),
         };
         Ok(Composited { image: out, stats })
     }

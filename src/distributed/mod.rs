@@ -25,12 +25,12 @@ pub use icet::{CompositeStats, IcetError, Strategy};
 use crate::bricks::wire::{decode, encode};
 use crate::bricks::{
     BrickError, brick_settings, decompose, message_for, over_background, piece_from_message,
+    viewpoint,
 };
 use crate::field::Field;
 use crate::renderer::Renderer;
 use crate::view::View;
 use crate::vk::Context;
-use glam::DVec3;
 use icet::Icet;
 use mpi::collective::SystemOperation;
 use mpi::topology::SimpleCommunicator;
@@ -210,12 +210,19 @@ impl RankBrick {
             agree(world, Ok(()))?;
             Ok(receive(&root))
         };
+        let (rank, ranks) = (world.rank() as usize, size);
         let piece = agree(
             world,
             mine.and_then(|bytes| {
-                decode(&bytes)
-                    .and_then(|m| piece_from_message(m, reconstruction, octree))
-                    .map_err(|e| e.to_string())
+                let m = decode(&bytes).map_err(|e| e.to_string())?;
+                if m.rank != rank || m.tree.boxes.len() != ranks {
+                    return Err(format!(
+                        "a brick message for rank {} of {} reached rank {rank} of {ranks}",
+                        m.rank,
+                        m.tree.boxes.len()
+                    ));
+                }
+                piece_from_message(m, reconstruction, octree).map_err(|e| e.to_string())
             }),
         )?;
         let divide_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -253,11 +260,25 @@ impl RankBrick {
                 Ok(self.renderer.render(&v, |_| {})?)
             })
             .map_err(|e| e.to_string());
+        // The composite is collective: a wrong-sized image is refused by every rank before it.
+        let size = (view.camera.width, view.camera.height);
+        let rendered = rendered.and_then(|(image, stats)| {
+            if image.pixels.len() == size.0 as usize * size.1 as usize {
+                Ok((image, stats))
+            } else {
+                Err(format!(
+                    "a frame of {} pixels for a {}x{} image",
+                    image.pixels.len(),
+                    size.0,
+                    size.1
+                ))
+            }
+        });
         let (image, stats) = agree(world, rendered)?;
         let render_wall_ms = start.elapsed().as_secs_f64() * 1e3;
-        let eye = (DVec3::from(view.camera.eye) - self.renderer.field().frame_origin).to_array();
-        let order = self.order_tree.visibility_order(eye);
-        let size = (view.camera.width, view.camera.height);
+        let order = self
+            .order_tree
+            .visibility_order(viewpoint(view.camera, self.renderer.field().frame_origin));
         let start = Instant::now();
         let composited = self
             .icet

@@ -25,6 +25,7 @@ use crate::samples::bvh::Segments;
 use crate::view::camera::clip_box;
 use crate::view::transfer::TransferFunction;
 use crate::view::{IntervalModel, Method};
+use glam::DVec3;
 use rayon::prelude::*;
 
 /// One pixel of the reference integrator.
@@ -181,9 +182,32 @@ pub fn anchored(
         Some(None) => None,
         Some(Some((c0, c1))) => {
             let (w0, w1) = (t0.max(c0), t1.min(c1));
-            (w1 > w0).then(|| (t0 + ((w0 - t0) / step).floor() * step, w0, w1))
+            (w1 > w0).then(|| {
+                let mut start = t0 + ((w0 - t0) / step).floor() * step;
+                // The floor may land a step short when the face is on a step.
+                if start + step <= w0 {
+                    start += step;
+                }
+                (start, w0, w1)
+            })
         }
     }
+}
+
+/// [`clip_box`] for a brick `(lo, hi)` of a domain whose box ends at `domain_hi` (twin of
+/// clip_brick in raycast.comp): a ray parallel to a face that lies exactly on a face shared with
+/// the next brick up belongs to that brick only (as a sample on a plane does), so that no ray
+/// is integrated by two bricks.
+pub fn clip_brick(
+    o: DVec3,
+    d: DVec3,
+    (lo, hi): (DVec3, DVec3),
+    domain_hi: DVec3,
+) -> Option<(f64, f64)> {
+    if (0..3).any(|a| d[a].abs() < 1e-30 && o[a] == hi[a] && hi[a] < domain_hi[a]) {
+        return None;
+    }
+    clip_box(o, d, lo, hi)
 }
 
 /// Integrates the ray through pixel (px, py) with the setup's method. `tables` must be the
@@ -227,7 +251,7 @@ pub fn raycast(
         },
     };
     let inside_length = segments.iter().map(|(t0, t1)| t1 - t0).sum();
-    let brick = setup.clip.map(|(lo, hi)| clip_box(o, d, lo, hi));
+    let brick = setup.clip.map(|c| clip_brick(o, d, c, setup.box_hi));
     // Each inside segment is integrated on its own, with clipped intervals at its ends
     // ([MLS] §4); the ray stops at the method's termination.
     for segment in segments {
