@@ -104,6 +104,31 @@ fn every_brick_reconstructs_the_undivided_field_and_only_with_its_ghosts() {
     }
 }
 
+/// The one-device frame of `scene`'s view of `field` and the same at a quarter of the step (ε
+/// a sixteenth, l_min and l_max a quarter): the frame and its own discretisation error's
+/// reference.
+fn one_device(
+    ctx: &vmls::vk::Context,
+    field: &Field,
+    scene: &vmls::scene::Scene,
+) -> (Vec<[f32; 4]>, Vec<[f32; 4]>) {
+    let mut fine_settings = scene.render.clone();
+    fine_settings.step_spacings *= 0.25;
+    fine_settings.reference_step_spacings *= 0.25;
+    fine_settings.epsilon /= 16.0;
+    fine_settings.l_min_spacings *= 0.25;
+    fine_settings.l_max_spacings *= 0.25;
+    let frame = |settings: &vmls::view::RenderSettings| {
+        let mut r = Renderer::new(ctx, field.clone()).expect("renderer");
+        let view = vmls::view::View {
+            settings,
+            ..scene.view()
+        };
+        r.render(&view, |_| {}).expect("frame").0.pixels
+    };
+    (frame(&scene.render), frame(&fine_settings))
+}
+
 /// The one-device frame, the bricks' composite of the same view (and their order) and the
 /// one-device frame at a quarter of the step (its own discretisation error, the scale the face
 /// splits are measured against).
@@ -130,24 +155,7 @@ fn frames(extra: &[&str], ranks: usize) -> Frames {
     let scene = general_scene(&o);
     let field = scene.field(|_| {}).expect("field");
     let (ctx, _) = gpu();
-    let whole = {
-        let mut r = Renderer::new(&ctx, field.clone()).expect("renderer");
-        r.render(&scene.view(), |_| {}).expect("frame").0.pixels
-    };
-    let mut fine_settings = scene.render.clone();
-    fine_settings.step_spacings *= 0.25;
-    fine_settings.reference_step_spacings *= 0.25;
-    fine_settings.epsilon /= 16.0;
-    fine_settings.l_min_spacings *= 0.25;
-    fine_settings.l_max_spacings *= 0.25;
-    let fine = {
-        let mut r = Renderer::new(&ctx, field.clone()).expect("renderer");
-        let view = vmls::view::View {
-            settings: &fine_settings,
-            ..scene.view()
-        };
-        r.render(&view, |_| {}).expect("frame").0.pixels
-    };
+    let (whole, fine) = one_device(&ctx, &field, &scene);
     let (bricked, order) = {
         let mut b = VirtualBricks::new(&ctx, &field, ranks).expect("bricks");
         let frame = b.render(&scene.view()).expect("bricked frame");
@@ -319,20 +327,7 @@ fn axis_aligned_orthographic_views_composite_like_one_device() {
         ]);
         let field = scene.field(|_| {}).expect("field");
         let (ctx, _) = gpu();
-        let whole = {
-            let mut r = Renderer::new(&ctx, field.clone()).expect("renderer");
-            r.render(&scene.view(), |_| {}).expect("frame").0.pixels
-        };
-        let mut fine_settings = scene.render.clone();
-        fine_settings.step_spacings *= 0.25;
-        let fine = {
-            let mut r = Renderer::new(&ctx, field.clone()).expect("renderer");
-            let view = vmls::view::View {
-                settings: &fine_settings,
-                ..scene.view()
-            };
-            r.render(&view, |_| {}).expect("frame").0.pixels
-        };
+        let (whole, fine) = one_device(&ctx, &field, &scene);
         let own = largest(&whole, |i| fine[i].map(f64::from));
         for ranks in [2, 4, 8] {
             let mut b = VirtualBricks::new(&ctx, &field, ranks).expect("bricks");

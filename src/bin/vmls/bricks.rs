@@ -2,12 +2,11 @@
 //! this device and composited front to back in f64 (the reference of a distributed render,
 //! issue 30), with each brick's cost in the statistics.
 
-use crate::render::Request;
+use crate::render::{Request, check_validation};
 use crate::{CliError, DeviceArgs, check_stop, context, json_to, plan_outputs};
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 use vmls::bricks::{BrickError, VirtualBricks};
-use vmls::field::RenderError;
 use vmls::output::{check_finite, encode_image, format_of};
 use vmls::scene::Scene;
 
@@ -29,16 +28,7 @@ pub fn write_composite(
     (w, h): (u32, u32),
     pixels: &[[f64; 4]],
 ) -> Result<(), CliError> {
-    let errors = ctx.validation_errors();
-    if errors > 0 {
-        return Err(RenderError::Output {
-            path: output.display().to_string(),
-            message: format!(
-                "{errors} Vulkan validation error(s) during the render; no image written"
-            ),
-        }
-        .into());
-    }
+    check_validation(ctx, output)?;
     let rgba: Vec<[f32; 4]> = pixels.iter().map(|p| p.map(|c| c as f32)).collect();
     check_finite(&rgba)?;
     outputs.write(output, |out| encode_image(out, output, w, h, &rgba))?;

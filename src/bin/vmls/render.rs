@@ -106,16 +106,7 @@ pub fn run_render(
     let field = renderer.field();
     let tables = renderer.tables();
     let table_ms = first.table_ms;
-    let errors = ctx.validation_errors();
-    if errors > 0 {
-        return Err(RenderError::Output {
-            path: output.display().to_string(),
-            message: format!(
-                "{errors} Vulkan validation error(s) during the render; no image written"
-            ),
-        }
-        .into());
-    }
+    check_validation(&ctx, output)?;
     check_stop(stop)?;
     let (width, height) = (scene.camera.width, scene.camera.height);
     check_finite(&image.pixels)?;
@@ -230,6 +221,21 @@ pub fn run_render(
         outputs.write(stats, json_to(&value))?;
     }
     Ok(outputs.commit()?)
+}
+
+/// Refuses to write `output` after a validation error: the frame may be garbage.
+pub fn check_validation(ctx: &vmls::vk::Context, output: &Path) -> Result<(), CliError> {
+    let errors = ctx.validation_errors();
+    if errors > 0 {
+        return Err(RenderError::Output {
+            path: output.display().to_string(),
+            message: format!(
+                "{errors} Vulkan validation error(s) during the render; no image written"
+            ),
+        }
+        .into());
+    }
+    Ok(())
 }
 
 /// `--stats` "error_estimate": the adaptive integrator's own estimate of the frame's error.
