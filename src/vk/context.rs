@@ -349,6 +349,20 @@ fn choose(list: &[Candidate], wanted: Option<&str>) -> Result<usize, VkError> {
     })
 }
 
+/// The `local`-th process's device among the usable ones of the preferred type (round robin),
+/// or `None` with at most one of them.
+fn spread(list: &[Candidate], local: usize) -> Option<usize> {
+    let usable: Vec<usize> = (0..list.len())
+        .filter(|&i| list[i].compute_family.is_some())
+        .collect();
+    let best = usable.iter().map(|&i| type_rank(list[i].kind)).min()?;
+    let same: Vec<usize> = usable
+        .into_iter()
+        .filter(|&i| type_rank(list[i].kind) == best)
+        .collect();
+    (same.len() > 1).then(|| same[local % same.len()])
+}
+
 fn device_info(
     instance: &ash::Instance,
     physical: vk::PhysicalDevice,
@@ -612,6 +626,19 @@ impl Context {
         })
     }
 
+    /// The device index the `local`-th process on a node takes when each process drives a
+    /// device of its own (MPI ranks): the devices of the type vmls prefers, in the loader's
+    /// order, taken round robin ([`spread`]); `None` where the node has at most one of them (the
+    /// default choice then serves).
+    pub fn device_for_process(local: usize) -> Result<Option<usize>, VkError> {
+        let entry = load_entry()?;
+        let (instance, _, _) = create_instance(&entry, false, false)?;
+        let result = candidates(&instance).map(|list| spread(&list, local));
+        // SAFETY: no child of this instance exists.
+        unsafe { instance.destroy_instance(None) };
+        result
+    }
+
     /// Lists the devices the loader reports, one line each, marking the one vmls would choose.
     pub fn list_devices() -> Result<Vec<String>, VkError> {
         let entry = load_entry()?;
@@ -770,5 +797,39 @@ impl Drop for Shared {
                 self.instance.destroy_instance(None);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{Candidate, spread};
+    use ash::vk;
+
+    fn candidate(kind: vk::PhysicalDeviceType, compute: bool) -> Candidate {
+        Candidate {
+            handle: vk::PhysicalDevice::null(),
+            name: String::new(),
+            kind,
+            compute_family: compute.then_some(0),
+        }
+    }
+
+    #[test]
+    fn processes_take_the_preferred_devices_round_robin() {
+        use vk::PhysicalDeviceType as T;
+        // A CPU device, two discrete GPUs, one discrete without compute, an integrated one.
+        let node = [
+            candidate(T::CPU, true),
+            candidate(T::DISCRETE_GPU, true),
+            candidate(T::DISCRETE_GPU, false),
+            candidate(T::INTEGRATED_GPU, true),
+            candidate(T::DISCRETE_GPU, true),
+        ];
+        let taken: Vec<Option<usize>> = (0..5).map(|local| spread(&node, local)).collect();
+        assert_eq!(taken, [Some(1), Some(4), Some(1), Some(4), Some(1)]);
+        // One device of the preferred kind: the default choice serves.
+        let lavapipe = [candidate(T::CPU, true)];
+        assert_eq!(spread(&lavapipe, 3), None);
+        assert_eq!(spread(&[], 0), None);
     }
 }

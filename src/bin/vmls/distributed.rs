@@ -11,6 +11,7 @@ use mpi::traits::Communicator;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 use vmls::distributed::{DistributedError, RankBrick, Strategy, agree};
+use vmls::field::RenderError;
 use vmls::output::format_of;
 use vmls::scene::Scene;
 
@@ -48,6 +49,26 @@ pub fn run_render_mpi(
     run(&world, request, strategy, device, stop)
 }
 
+/// The device this rank opens: the one named (`--device`, `VMLS_DEVICE`), else, where the node
+/// has several of the preferred kind, the one its local rank takes round robin (one process per
+/// device; OpenMPI's, MPICH's and Slurm's local-rank variables).
+fn rank_device(device: &DeviceArgs) -> Result<DeviceArgs, CliError> {
+    let named = device.device.is_some() || std::env::var_os("VMLS_DEVICE").is_some();
+    let local = [
+        "OMPI_COMM_WORLD_LOCAL_RANK",
+        "MPI_LOCALRANKID",
+        "SLURM_LOCALID",
+    ]
+    .iter()
+    .find_map(|v| std::env::var(v).ok()?.parse::<usize>().ok());
+    let mut chosen = device.clone();
+    if let (false, Some(local)) = (named, local) {
+        let index = vmls::vk::Context::device_for_process(local).map_err(RenderError::from)?;
+        chosen.device = index.map(|i| i.to_string());
+    }
+    Ok(chosen)
+}
+
 fn run(
     world: &SimpleCommunicator,
     request: &Request<'_>,
@@ -76,7 +97,7 @@ fn run(
         } else {
             None
         };
-        let ctx = context(device)?;
+        let ctx = context(&rank_device(device)?)?;
         // Rank 0 reads the data and sends each rank its piece.
         let field = if root {
             let field = scene.field_on(Some(ctx.info()), |_| {})?;

@@ -37,7 +37,7 @@ struct Cli {
     command: Command,
 }
 
-#[derive(clap::Args)]
+#[derive(clap::Args, Clone)]
 struct DeviceArgs {
     /// Device index or name substring (default: $VMLS_DEVICE, else discrete > integrated > CPU).
     #[arg(long)]
