@@ -350,14 +350,19 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
 #include "raycast/adaptive.glsl"
 #endif
 
+// The length of an outer step: the adaptive integrator's top interval, else the step.
+float outer_step() {
+#if RAY_METHOD == 2
+    return params.tables.longest_world;
+#else
+    return params.integrator.step_world;
+#endif
+}
+
 // Outer steps of a segment [t0, t1]: midpoint steps, fixed intervals or adaptive top intervals,
 // exactly as integrate() counts them.
 uint segment_steps(float t0, float t1) {
-#if RAY_METHOD == 2
-    return uint(ceil((t1 - t0) / params.tables.longest_world));
-#else
-    return uint(ceil((t1 - t0) / params.integrator.step_world));
-#endif
+    return uint(ceil((t1 - t0) / outer_step()));
 }
 
 void main() {
@@ -429,11 +434,7 @@ void main() {
         if (!in_brick || w1 <= w0) {
             continue;
         }
-#if RAY_METHOD == 2
-        float anchor_step = params.tables.longest_world;
-#else
-        float anchor_step = params.integrator.step_world;
-#endif
+        float anchor_step = outer_step();
         float t_start = segs[s].x + floor((w0 - segs[s].x) / anchor_step) * anchor_step;
         // The floor may land a step short when the face is on a step (twin of anchored).
         if (t_start + anchor_step <= w0) {

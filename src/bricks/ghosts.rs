@@ -14,7 +14,7 @@
 //! A brick keeps the whole field's domain (its hull or box: the rays' segments, and so their
 //! step positions, are the undivided field's) and is clipped to its box when rendered.
 
-use super::{Aabb, BrickError};
+use super::Aabb;
 use crate::samples::supports::is_rotated;
 use crate::samples::{Metric, Positions, SampleSet, Supports, metric_rho2};
 
@@ -41,7 +41,7 @@ pub fn brick_samples(
     bounds: Aabb,
     owner: impl Fn([f64; 3]) -> bool,
     ghosts: bool,
-) -> Result<BrickSamples, BrickError> {
+) -> BrickSamples {
     match (&samples.positions, &samples.supports) {
         (
             Positions::Grid {
@@ -50,10 +50,8 @@ pub fn brick_samples(
                 spacing,
             },
             Supports::Uniform(h),
-        ) => Ok(grid_brick(
-            samples, *dims, *origin, *spacing, *h, bounds, ghosts,
-        )),
-        _ => Ok(scattered_brick(samples, bounds, owner, ghosts)),
+        ) => grid_brick(samples, *dims, *origin, *spacing, *h, bounds, ghosts),
+        _ => scattered_brick(samples, bounds, owner, ghosts),
     }
 }
 

@@ -110,7 +110,7 @@ pub fn message_for(
     ghosts: bool,
 ) -> Result<BrickMessage, BrickError> {
     let bounds = tree.boxes[rank];
-    let brick = brick_samples(&field.samples, bounds, |x| tree.owner(x) == rank, ghosts)?;
+    let brick = brick_samples(&field.samples, bounds, |x| tree.owner(x) == rank, ghosts);
     if brick.samples.is_empty() {
         return Err(BrickError::Ranks(format!(
             "rank {rank}'s brick holds no samples; use fewer ranks"

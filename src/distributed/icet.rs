@@ -31,6 +31,10 @@ const ICET_COMPOSITE_TIME: IceTEnum = 0x00C0 | 0x0007;
 const ICET_BYTES_SENT: IceTEnum = 0x00C0 | 0x000A;
 const ICET_NO_ERROR: IceTEnum = 0;
 
+// SAFETY: these declarations match IceT.h and IceTMPI.h of Debian's ParaView 5.11 build
+// (IceTEnum = u32, IceTInt = IceTSizeType = int, IceTBoolean = u8, IceTImage one pointer by
+// value, MPI_Comm as the mpi crate's binding of the same OpenMPI); each call states its own
+// contract where it is made.
 unsafe extern "C" {
     fn icetCreateMPICommunicator(comm: mpi::ffi::MPI_Comm) -> *mut c_void;
     fn icetDestroyMPICommunicator(comm: *mut c_void);

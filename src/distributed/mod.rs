@@ -131,6 +131,9 @@ pub struct DistributedFrame {
     pub composite_wall_ms: f64,
 }
 
+/// What rank 0 sends in place of a piece it could not build, before the error's text.
+const FAILED: &[u8] = b"VMLSFAIL";
+
 /// Bytes per message part: MPI counts are 32-bit.
 const PART: usize = 1 << 30;
 
@@ -183,32 +186,31 @@ impl RankBrick {
         let size = world.size() as usize;
         let root = world.process_at_rank(0);
         let mine: Result<Vec<u8>, String> = if world.rank() == 0 {
-            // Rank 0: every rank's message, its own kept.
-            let messages = field
+            // The tree is agreed on first; then each rank's piece is built, sent and dropped in
+            // turn, so that rank 0 holds one encoded piece at a time beside the field. A piece
+            // that cannot be built is sent as its error, which its rank reports in the next
+            // agreement.
+            let divided = field
                 .ok_or_else(|| "rank 0 holds no field".to_string())
-                .and_then(|field| {
-                    let tree = decompose(field, size).map_err(|e| e.to_string())?;
-                    (0..size)
-                        .map(|r| {
-                            message_for(field, &tree, r, true)
-                                .map(|m| encode(&m))
-                                .map_err(|e| e.to_string())
-                        })
-                        .collect::<Result<Vec<_>, String>>()
-                });
-            let messages = agree(world, messages)?;
-            let mut own = Vec::new();
-            for (r, bytes) in messages.into_iter().enumerate() {
-                if r == 0 {
-                    own = bytes;
-                } else {
-                    send(world, r as i32, &bytes);
-                }
+                .and_then(|f| Ok((f, decompose(f, size).map_err(|e| e.to_string())?)));
+            let (field, tree) = agree(world, divided)?;
+            let encoded = |r: usize| {
+                message_for(field, &tree, r, true)
+                    .map(|m| encode(&m))
+                    .map_err(|e| e.to_string())
+            };
+            for r in 1..size {
+                let bytes = encoded(r).unwrap_or_else(|e| [FAILED, e.as_bytes()].concat());
+                send(world, r as i32, &bytes);
             }
-            Ok(own)
+            encoded(0)
         } else {
             agree(world, Ok(()))?;
-            Ok(receive(&root))
+            let bytes = receive(&root);
+            match bytes.strip_prefix(FAILED) {
+                Some(error) => Err(String::from_utf8_lossy(error).into_owned()),
+                None => Ok(bytes),
+            }
         };
         let (rank, ranks) = (world.rank() as usize, size);
         let piece = agree(

@@ -145,8 +145,6 @@ impl Field {
         let (lo, hi) = samples.domain_box();
         let centre = (DVec3::from(lo) + DVec3::from(hi)) * 0.5;
         samples.translate(centre.to_array());
-        let grid = matches!(samples.positions, Positions::Grid { .. })
-            && matches!(samples.supports, Supports::Uniform(_));
         // Derived once here: every frame's table key and shader variant read them.
         let range = samples
             .values
@@ -154,17 +152,41 @@ impl Field {
             .fold((f64::MAX, f64::MIN), |(l, h), v| {
                 (l.min(f64::from(v)), h.max(f64::from(v)))
             });
+        let frame = PieceFrame {
+            frame_origin: centre,
+            range,
+            reconstruction,
+            octree: *octree,
+        };
+        let mut field = Self::assemble(samples, frame, None);
+        field.resolve_auto_resample();
+        if field.reconstruction.resample > 0 {
+            field.check_resample()?;
+        }
+        Ok(field)
+    }
+
+    /// A field of frame-relative `samples` in `frame`, clipped to `clip` when it is a piece:
+    /// what it derives from the samples (the neighbour structure it wants, metrics, the
+    /// supports' box, the hull), nothing built yet.
+    fn assemble(samples: SampleSet, frame: PieceFrame, clip: Option<(DVec3, DVec3)>) -> Self {
+        let grid = matches!(samples.positions, Positions::Grid { .. })
+            && matches!(samples.supports, Supports::Uniform(_));
         let full_metric = samples.has_full_metric();
         let (slo, shi) = samples.support_box();
-        let mut field = Self {
-            frame_origin: centre,
+        let hull = match &samples.domain {
+            Domain::Hull(h) => Some(HullBvh::build(h)),
+            Domain::Box { .. } => None,
+        };
+        Self {
+            frame_origin: frame.frame_origin,
             samples,
-            reconstruction,
+            reconstruction: frame.reconstruction,
             octree: std::sync::OnceLock::new(),
-            octree_settings: *octree,
-            octree_wanted: !grid || reconstruction.neighbours == NeighbourMode::Octree,
-            hull: None,
-            range,
+            octree_settings: frame.octree,
+            octree_wanted: !grid || frame.reconstruction.neighbours == NeighbourMode::Octree,
+            hull,
+            range: frame.range,
             full_metric,
             volumes: std::sync::OnceLock::new(),
             support_box: (DVec3::from(slo), DVec3::from(shi)),
@@ -173,16 +195,8 @@ impl Field {
             resampled: std::sync::OnceLock::new(),
             blocks: std::sync::OnceLock::new(),
             fast_path_declined: None,
-            clip: None,
-        };
-        if let Domain::Hull(h) = &field.samples.domain {
-            field.hull = Some(HullBvh::build(h));
+            clip,
         }
-        field.resolve_auto_resample();
-        if field.reconstruction.resample > 0 {
-            field.check_resample()?;
-        }
-        Ok(field)
     }
 
     /// What a piece of this field keeps of it ([`Field::piece`]).
@@ -225,33 +239,15 @@ impl Field {
         let mut reconstruction = frame.reconstruction;
         reconstruction.resample = 0;
         reconstruction.resample_auto = false;
-        let grid = matches!(samples.positions, Positions::Grid { .. })
-            && matches!(samples.supports, Supports::Uniform(_));
-        let full_metric = samples.has_full_metric();
-        let (slo, shi) = samples.support_box();
-        let hull = match &samples.domain {
-            Domain::Hull(h) => Some(HullBvh::build(h)),
-            Domain::Box { .. } => None,
-        };
-        let field = Self {
-            frame_origin: frame.frame_origin,
+        let mut field = Self::assemble(
             samples,
-            reconstruction,
-            octree: std::sync::OnceLock::new(),
-            octree_settings: frame.octree,
-            octree_wanted: !grid || reconstruction.neighbours == NeighbourMode::Octree,
-            hull,
-            range: frame.range,
-            full_metric,
-            volumes: std::sync::OnceLock::new(),
-            support_box: (DVec3::from(slo), DVec3::from(shi)),
-            thinnest: std::sync::OnceLock::new(),
-            radii: std::sync::OnceLock::new(),
-            resampled: std::sync::OnceLock::new(),
-            blocks: std::sync::OnceLock::new(),
-            fast_path_declined: Some("a brick of a decomposed field is solved directly".into()),
-            clip: Some(bounds),
-        };
+            PieceFrame {
+                reconstruction,
+                ..frame
+            },
+            Some(bounds),
+        );
+        field.fast_path_declined = Some("a brick of a decomposed field is solved directly".into());
         if field.octree_wanted {
             let built = Octree::from_samples(&field.samples, &field.octree_settings, progress)?;
             let _ = field.octree.set(Ok(Some(built)));

@@ -252,14 +252,14 @@ pub fn raycast(
     };
     let inside_length = segments.iter().map(|(t0, t1)| t1 - t0).sum();
     let brick = setup.clip.map(|c| clip_brick(o, d, c, setup.box_hi));
+    // Steps (the adaptive integrator's top intervals) are counted from each segment's start.
+    let step = match setup.method {
+        Method::Adaptive => setup.l_max_world,
+        _ => setup.step_world,
+    };
     // Each inside segment is integrated on its own, with clipped intervals at its ends
     // ([MLS] §4); the ray stops at the method's termination.
     for segment in segments {
-        // Steps (the adaptive integrator's top intervals) counted from the segment's start.
-        let step = match setup.method {
-            Method::Adaptive => setup.l_max_world,
-            _ => setup.step_world,
-        };
         let Some(window) = anchored(segment, brick, step) else {
             continue;
         };

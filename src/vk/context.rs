@@ -112,6 +112,8 @@ pub struct Context {
     pub(crate) shared: Arc<Shared>,
 }
 
+// SAFETY: the loader calls this with the arguments of PFN_vkDebugUtilsMessengerCallbackEXT;
+// the body states what it reads of them.
 unsafe extern "system" fn debug_callback(
     severity: vk::DebugUtilsMessageSeverityFlagsEXT,
     _types: vk::DebugUtilsMessageTypeFlagsEXT,
