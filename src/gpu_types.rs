@@ -534,8 +534,12 @@ pub struct SplatParams {
     /// Kernels to project.
     pub kernel_count: u32,
     pub _pad: [u32; 2],
+    /// A brick's frame: its kd cell (w unused; faces on the domain's boundary infinite), where
+    /// a sheet's midpoint must lie for the frame to composite it.
+    pub cell_min: [f32; 4],
+    pub cell_max: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<SplatParams>() == 240);
+const _: () = assert!(std::mem::size_of::<SplatParams>() == 272);
 
 /// One projected kernel (splat_project's output). GLSL twin: `Splat`. The footprint words
 /// depend on the projection (`splat::project::Splat` names them):

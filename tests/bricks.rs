@@ -6,7 +6,7 @@
 mod common;
 
 use common::{finish, general_scene, gpu, ml_field, point_data, recon, splat};
-use vmls::bricks::{VirtualBricks, divide};
+use vmls::bricks::{Ghosts, VirtualBricks, divide};
 use vmls::data::dataset::Geometry;
 use vmls::data::random::Lcg;
 use vmls::field::Field;
@@ -76,8 +76,8 @@ fn every_brick_reconstructs_the_undivided_field_and_only_with_its_ghosts() {
     let mut rng = Lcg::new(17);
     for (name, field) in fields() {
         for ranks in [2, 3, 5] {
-            let (_, pieces) = divide(&field, ranks, true).expect("divide");
-            let (_, bare) = divide(&field, ranks, false).expect("divide without ghosts");
+            let (_, pieces) = divide(&field, ranks, Ghosts::Mls).expect("divide");
+            let (_, bare) = divide(&field, ranks, Ghosts::Off).expect("divide without ghosts");
             let (mut exact, mut without) = (0.0f64, 0.0f64);
             for ((piece, count), (alone, alone_count)) in pieces.iter().zip(&bare) {
                 assert!(
@@ -157,7 +157,7 @@ fn frames(extra: &[&str], ranks: usize) -> Frames {
     let (ctx, _) = gpu();
     let (whole, fine) = one_device(&ctx, &field, &scene);
     let (bricked, order) = {
-        let mut b = VirtualBricks::new(&ctx, &field, ranks).expect("bricks");
+        let mut b = VirtualBricks::new(&ctx, &field, ranks, &scene.view()).expect("bricks");
         let frame = b.render(&scene.view()).expect("bricked frame");
         assert_eq!(frame.bricks.len(), ranks);
         (frame.pixels, frame.order)
@@ -242,7 +242,7 @@ fn a_bricks_kernel_equals_its_cpu_twin() {
             "render.step=0.5".into(),
         ]);
         let field = scene.field(|_| {}).expect("field");
-        let (_, pieces) = divide(&field, 3, true).expect("divide");
+        let (_, pieces) = divide(&field, 3, Ghosts::Mls).expect("divide");
         for (piece, _) in &pieces {
             let mut setup = scene.ray_setup(piece).expect("setup");
             let tables = vmls::raycast::build_tables(&setup, piece, &scene.transfer, 128, |_| {});
@@ -330,7 +330,7 @@ fn axis_aligned_orthographic_views_composite_like_one_device() {
         let (whole, fine) = one_device(&ctx, &field, &scene);
         let own = largest(&whole, |i| fine[i].map(f64::from));
         for ranks in [2, 4, 8] {
-            let mut b = VirtualBricks::new(&ctx, &field, ranks).expect("bricks");
+            let mut b = VirtualBricks::new(&ctx, &field, ranks, &scene.view()).expect("bricks");
             let bricked = b.render(&scene.view()).expect("bricked frame").pixels;
             let split = largest(&whole, |i| bricked[i]);
             eprintln!("orthographic from {eye}, {ranks} bricks: {split:.3e} (own {own:.3e})");
@@ -354,7 +354,7 @@ fn what_bricks_cannot_render_is_refused_by_name() {
     let field = scene.field(|_| {}).expect("field");
     let (ctx, _) = gpu();
     {
-        let mut b = VirtualBricks::new(&ctx, &field, 2).expect("bricks");
+        let mut b = VirtualBricks::new(&ctx, &field, 2, &scene.view()).expect("bricks");
         let e = b.render(&scene.view()).expect_err("mls2008").to_string();
         assert!(
             e.contains("render.adaptive") && e.contains("mls2008"),
@@ -373,7 +373,7 @@ fn what_bricks_cannot_render_is_refused_by_name() {
     finish(ctx);
     let exact = general_scene(&["reconstruction.method=\"exact\"".into()]);
     let field = exact.field(|_| {}).expect("field");
-    let e = divide(&field, 2, true)
+    let e = divide(&field, 2, Ghosts::Mls)
         .expect_err("exact refused")
         .to_string();
     assert!(e.contains("reconstruction.method"), "{e}");
@@ -383,33 +383,37 @@ fn what_bricks_cannot_render_is_refused_by_name() {
 fn the_command_line_renders_bricks_and_reports_each() {
     use common::cli::{assert_fails, dir, s, small_render, vmls};
     let d = dir("bricks");
-    let png = d.join("b.png");
-    let stats = d.join("b.json");
-    let out = vmls(&small_render(
-        &png,
-        &[
-            "--bricks",
-            "3",
-            "--stats",
-            s(&stats),
-            "--set",
-            "render.method=\"fixed\"",
-        ],
-    ));
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert!(png.exists());
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats")).expect("json");
-    let bricks = v["bricks"].as_array().expect("bricks");
-    assert_eq!(bricks.len(), 3);
-    assert_eq!(v["order"].as_array().map(|o| o.len()), Some(3));
-    for b in bricks {
-        assert!(b["ghosts"].as_u64() > Some(0) && b["samples_inside"].as_u64() > Some(0));
-        assert!(b["gpu_ms"].as_f64() > Some(0.0));
+    // Splatting at 32² with thick sheets (at 8² one tile's walk would pass llvmpipe's loop
+    // limit, bricks or not).
+    let splat = ["camera.width=32", "camera.height=32", "splat.slab=4.0"];
+    for (method, extra) in [
+        ("fixed", &[][..]),
+        ("splat", &splat),
+        ("splat-post", &splat),
+    ] {
+        let png = d.join(format!("{method}.png"));
+        let stats = d.join(format!("{method}.json"));
+        let set = format!("render.method=\"{method}\"");
+        let mut args = vec!["--bricks", "3", "--stats", s(&stats), "--set", &set];
+        for e in extra {
+            args.extend(["--set", e]);
+        }
+        let out = vmls(&small_render(&png, &args));
+        assert!(
+            out.status.success(),
+            "{method}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(png.exists());
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats")).expect("json");
+        let bricks = v["bricks"].as_array().expect("bricks");
+        assert_eq!(bricks.len(), 3);
+        assert_eq!(v["order"].as_array().map(|o| o.len()), Some(3));
+        for b in bricks {
+            assert!(b["ghosts"].as_u64() > Some(0) && b["samples_inside"].as_u64() > Some(0));
+            assert!(b["gpu_ms"].as_f64() > Some(0.0), "{method}");
+        }
     }
     let refused = d.join("r.png");
     let out = vmls(&small_render(

@@ -268,7 +268,7 @@ fn compare_reports_rmse_and_rejects_size_mismatch() {
     let same = vmls(&["compare", s(&a), s(&a)]);
     assert_eq!(
         String::from_utf8_lossy(&same.stdout).trim(),
-        "rmse 0.000000 max 0.000000 at (0, 0) psnr inf dB p99-rgba 0.000000"
+        "rmse 0.0000e0 max 0.0000e0 at (0, 0) psnr inf dB p99-rgba 0.0000e0"
     );
     // The red background shows through transmittance T in the red channel only.
     let heat = d.join("diff.png");

@@ -184,6 +184,8 @@ fn glsl_and_rust_layouts_agree() {
             tiles_x: 33,
             kernel_count: 34,
             _pad: [35, 36],
+            cell_min: v(37.0),
+            cell_max: v(38.0),
         },
         "SplatParams"
     );

@@ -171,6 +171,8 @@ struct SplatParams {
     uint kernel_count;
     uint _pad0;
     uint _pad1;
+    vec4 cell_min;
+    vec4 cell_max;
 };
 
 

@@ -135,6 +135,8 @@ void main() {
     splat_params.kernel_count = 34u;
     splat_params._pad0 = 35u;
     splat_params._pad1 = 36u;
+    splat_params.cell_min = v(37.0);
+    splat_params.cell_max = v(38.0);
 
     splat.footprint0 = v(1.0);
     splat.footprint1 = v(2.0);

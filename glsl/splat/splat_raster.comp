@@ -20,7 +20,9 @@
 // sheet buffers; each pixel is written once. Variant macros: SPLAT_POST, SPLAT_ORTHO,
 // SPLAT_EXACT, SPLAT_RING (0, or post-shaded: one entry per SPLAT_RING sheets, the sheets ahead
 // in ring registers), SPLAT_QUADRATURE (its sheet shares by the quadrature, else the erfc),
-// SPLAT_OCCLUSION, SPLAT_ISOSURFACES, SPLAT_SURFACES, SPLAT_HULL, SPLAT_TILE,
+// SPLAT_OCCLUSION, SPLAT_ISOSURFACES, SPLAT_SURFACES, SPLAT_HULL, SPLAT_BRICK (a brick's frame:
+// a pixel composites only the sheets whose midpoint on its ray lies in the brick's kd cell,
+// twin SplatSetup::owns), SPLAT_TILE,
 // SPLAT_APRON, SPLAT_GROUP (invocations: EDGE² rounded up to whole subgroups),
 // SPLAT_SUBGROUP_OPS (subgroup votes and sums: each subgroup stops by itself, without
 // barriers, which cost lavapipe a coroutine switch per subgroup).
@@ -60,6 +62,8 @@ layout(std430, binding = BINDING_PIXEL_SEGMENTS) readonly buffer SegBuf { vec2 p
 #if SPLAT_ISOSURFACES == 1
 #include "common/shading.glsl"
 #endif
+#elif SPLAT_BRICK == 1
+#include "common/camera.glsl"
 #endif
 
 // SplatCounts slots (64-bit counters keep their high word in the slot named second).
@@ -212,6 +216,11 @@ struct Pixel {
     vec4 s23;
 #endif
 #endif
+#if SPLAT_BRICK == 1
+    // The pixel's ray, whose sheet midpoints say which sheets the brick owns.
+    vec3 ray_o;
+    vec3 ray_d;
+#endif
     // Footprints evaluated and contributing.
     uint evaluated;
     uint contributions;
@@ -265,9 +274,28 @@ Pixel pixel_at(int x, int y, bool valid, bool own_tile) {
     }
 #endif
 #endif
+#if SPLAT_BRICK == 1
+    px.ray_o = vec3(0.0);
+    px.ray_d = vec3(0.0);
+    if (px.own) {
+        camera_ray(uvec2(x, y), px.ray_o, px.ray_d);
+    }
+#endif
     px.evaluated = 0u;
     px.contributions = 0u;
     return px;
+}
+
+// Whether the frame composites sheet k of the pixel: always, except in a brick's frame, which
+// owns the sheets whose midpoint on the ray lies in its cell (lo <= x < hi).
+bool sheet_owned(Pixel px, uint k) {
+#if SPLAT_BRICK == 1
+    float m = params.slab0_world + (float(k) + 0.5) * params.slab_world;
+    vec3 x = px.ray_o + m * px.ray_d;
+    return all(greaterThanEqual(x, params.cell_min.xyz)) && all(lessThan(x, params.cell_max.xyz));
+#else
+    return true;
+#endif
 }
 
 // A pixel that still composites.
@@ -410,10 +438,10 @@ void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) 
 }
 
 #if SPLAT_POST == 0
-// Composites the pixel's sheet and clears it.
-void finish_pre(inout Pixel px) {
+// Composites the pixel's sheet k (where the frame owns it) and clears it.
+void finish_pre(inout Pixel px, uint k) {
     float done = params.early_termination;
-    if (px.own && !(px.acc.w > done)) {
+    if (px.own && !(px.acc.w > done) && sheet_owned(px, k)) {
 #if SPLAT_SURFACES == 1
         // Surface splats first: coverage min(W, 1), normalised opacity and colour.
         if (px.sw > 0.0) {
@@ -456,7 +484,7 @@ float take_sheet(inout Pixel px, uint live) {
 void composite_post(inout Pixel px, uint k, float v1, vec2 lat) {
     float slab = params.slab_world;
     int j = int(k) - 1;
-    if (pixel_open(px) && px.in_domain && j >= 0) {
+    if (pixel_open(px) && px.in_domain && j >= 0 && sheet_owned(px, uint(j))) {
         float len = slab_overlap(j, px.t_in, px.t_out, SEGMENTS(px));
 #if SPLAT_ISOSURFACES == 1
         if (j >= 1 && len > 0.0 && slab_overlap(j - 1, px.t_in, px.t_out, SEGMENTS(px)) > 0.0) {
@@ -648,7 +676,7 @@ void main() {
             entry = next_entry(at, at_end, steps);
         }
 #if SPLAT_POST == 0
-#define FINISH(px) finish_pre(px);
+#define FINISH(px) finish_pre(px, k);
         EACH(FINISH)
 #undef FINISH
         k = entry.y;

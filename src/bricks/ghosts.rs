@@ -13,10 +13,15 @@
 //!
 //! A brick keeps the whole field's domain (its hull or box: the rays' segments, and so their
 //! step positions, are the undivided field's) and is clipped to its box when rendered.
+//!
+//! A splatting brick needs other samples: the kernels that add to a sheet it owns in the view
+//! it renders ([`super::splat`]); a grid brick takes the sub-grid that holds them all.
 
 use super::Aabb;
+use super::splat::SplatReach;
 use crate::samples::supports::is_rotated;
 use crate::samples::{Metric, Positions, SampleSet, Supports, metric_rho2};
+use glam::DVec3;
 
 /// How many of a brick's samples lie in its box (a grid's face planes in both bricks that share
 /// them; an irregular brick's own samples come first) and how many are ghosts.
@@ -33,14 +38,37 @@ pub struct BrickSamples {
     pub indices: Vec<usize>,
 }
 
-/// The samples of the brick `bounds` of `samples` (with `ghosts`, or its own alone: the
-/// comparison that shows why ghosts are needed). `owner(x)` says whether a sample at x belongs
-/// to this brick (the kd tree's rule, so that every sample is own in exactly one brick).
+/// Which samples besides its own a brick takes.
+#[derive(Debug, Clone, Copy)]
+pub enum Ghosts<'a> {
+    /// None: the comparison that shows why ghosts are needed.
+    Off,
+    /// Every sample whose support reaches the box: MLS anywhere in it is the undivided value.
+    Mls,
+    /// Every kernel that adds to a sheet the brick's kd cell owns in the view the reach was
+    /// made for.
+    Splat(&'a SplatReach),
+}
+
+/// The kd cell of the brick `bounds` of `samples`: its faces on the domain's box at infinity
+/// ([`crate::splat::brick_cell`]).
+pub fn cell_of(samples: &SampleSet, bounds: Aabb) -> Aabb {
+    let (lo, hi) = samples.domain_box();
+    let (a, b) = crate::splat::brick_cell(
+        (DVec3::from(bounds.0), DVec3::from(bounds.1)),
+        (DVec3::from(lo), DVec3::from(hi)),
+    );
+    (a.to_array(), b.to_array())
+}
+
+/// The samples of the brick `bounds` of `samples` with `ghosts`. `owner(x)` says whether a
+/// sample at x belongs to this brick (the kd tree's rule, so that every sample is own in
+/// exactly one brick).
 pub fn brick_samples(
     samples: &SampleSet,
     bounds: Aabb,
     owner: impl Fn([f64; 3]) -> bool,
-    ghosts: bool,
+    ghosts: Ghosts<'_>,
 ) -> BrickSamples {
     match (&samples.positions, &samples.supports) {
         (
@@ -55,7 +83,8 @@ pub fn brick_samples(
     }
 }
 
-/// A sub-grid: the planes of the box, plus ⌈h/Δ⌉ − 1 on each side where the grid has them.
+/// A sub-grid: the planes of the box, plus ⌈h/Δ⌉ − 1 on each side where the grid has them
+/// (MLS ghosts), or as many as hold every kernel the brick's sheets need (splatting's).
 fn grid_brick(
     samples: &SampleSet,
     dims: [usize; 3],
@@ -63,22 +92,43 @@ fn grid_brick(
     spacing: [f64; 3],
     h: [f64; 3],
     (lo, hi): Aabb,
-    ghosts: bool,
+    ghosts: Ghosts<'_>,
 ) -> BrickSamples {
     let mut first = [0usize; 3];
     let mut count = [0usize; 3];
     let mut own = 1usize;
+    // A splatting brick's kernels: the index box of those it needs.
+    let needed = match ghosts {
+        Ghosts::Splat(reach) => {
+            let cell = cell_of(samples, (lo, hi));
+            let (mut a, mut b) = ([i64::MAX; 3], [i64::MIN; 3]);
+            for i in (0..dims.iter().product()).filter(|&i| reach.meets(i, cell)) {
+                let ijk = [
+                    i % dims[0],
+                    (i / dims[0]) % dims[1],
+                    i / (dims[0] * dims[1]),
+                ];
+                for k in 0..3 {
+                    a[k] = a[k].min(ijk[k] as i64);
+                    b[k] = b[k].max(ijk[k] as i64);
+                }
+            }
+            Some((a, b))
+        }
+        _ => None,
+    };
     for a in 0..3 {
         let last = dims[a] as i64 - 1;
         let i0 = (((lo[a] - origin[a]) / spacing[a]).round() as i64).clamp(0, last);
         let i1 = (((hi[a] - origin[a]) / spacing[a]).round() as i64).clamp(0, last);
-        let layers = if ghosts {
-            ((h[a] / spacing[a]).ceil() as i64 - 1).max(0)
-        } else {
-            0
+        let layers = match ghosts {
+            Ghosts::Mls => ((h[a] / spacing[a]).ceil() as i64 - 1).max(0),
+            _ => 0,
         };
-        let g0 = (i0 - layers).max(0);
-        let g1 = (i1 + layers).min(last);
+        let (mut g0, mut g1) = ((i0 - layers).max(0), (i1 + layers).min(last));
+        if let Some((n0, n1)) = needed {
+            (g0, g1) = (g0.min(n0[a]), g1.max(n1[a]));
+        }
         first[a] = g0 as usize;
         count[a] = (g1 - g0 + 1) as usize;
         own *= (i1 - i0 + 1) as usize;
@@ -118,14 +168,20 @@ fn scattered_brick(
     samples: &SampleSet,
     bounds: Aabb,
     owner: impl Fn([f64; 3]) -> bool,
-    ghosts: bool,
+    ghosts: Ghosts<'_>,
 ) -> BrickSamples {
     let (mut own, mut extra) = (Vec::new(), Vec::new());
+    let cell = cell_of(samples, bounds);
     for i in 0..samples.len() {
         let x = samples.position(i);
+        let ghost = || match ghosts {
+            Ghosts::Off => false,
+            Ghosts::Mls => reaches(samples, i, x, bounds),
+            Ghosts::Splat(reach) => reach.meets(i, cell),
+        };
         if owner(x) {
             own.push(i);
-        } else if ghosts && reaches(samples, i, x, bounds) {
+        } else if ghost() {
             extra.push(i);
         }
     }

@@ -1,8 +1,9 @@
 //! Sort-last rendering of a field divided into bricks (issue 30): a kd decomposition with one
-//! box per rank ([`kd`]), each brick's samples with exact ghosts ([`ghosts`]), each brick ray
-//! cast alone (rays clipped to its box, steps anchored to the undivided ray,
-//! [`crate::raycast::RaySetup::clip`]), and the bricks' premultiplied images composited front
-//! to back in the kd tree's visibility order.
+//! box per rank ([`kd`]), each brick's samples with exact ghosts ([`ghosts`]), each brick
+//! rendered alone — ray cast with its rays clipped to its box and steps anchored to the
+//! undivided ray ([`crate::raycast::RaySetup::clip`]), or splatted compositing the sheets its
+//! cell owns ([`splat`]) — and the bricks' premultiplied images composited front to back in the
+//! kd tree's visibility order.
 //!
 //! [`VirtualBricks`] renders the whole decomposition on one device and composites in f64: the
 //! reference for a distributed run (which renders the same pieces on several devices and
@@ -15,12 +16,15 @@
 //! ray the undivided frame stopped at opacity o_et can still gather up to 1 − o_et behind it.
 //! The adaptive integrator's Hermite criterion keeps the undivided ray's top intervals and
 //! their dyadic units (a clipped interval reaches the first unit past the face); its choices
-//! inside depend on the knots, so a brick's can differ after the face. Not yet here: [MLS]'s
-//! criterion, splatting, the fast path and skipping (a brick solves directly),
-//! render.tolerance.
+//! inside depend on the knots, so a brick's can differ after the face. A splatting brick's image
+//! is the undivided frame's sheets it owns, whole ([`splat`]): the composite equals the
+//! undivided frame to rounding, but its bricks hold the kernels of one view. Not yet here:
+//! [MLS]'s criterion, the fast path and skipping (a brick solves directly), render.tolerance,
+//! surface splats.
 
 pub mod ghosts;
 pub mod kd;
+pub mod splat;
 pub mod wire;
 
 pub use wire::BrickMessage;
@@ -29,12 +33,15 @@ use crate::field::{Field, PieceFrame, RenderError};
 use crate::recon::gaussian::KernelVolumes;
 use crate::recon::{ReconError, ReconMethod};
 use crate::renderer::Renderer;
+use crate::view::ViewKey;
 use crate::view::camera::{Camera, Projection};
 use crate::view::{RenderSettings, View};
 use crate::vk::Context;
+pub use ghosts::Ghosts;
 use ghosts::{GhostCount, brick_samples};
 use glam::DVec3;
 use kd::{KdTree, Viewpoint};
+use splat::SplatReach;
 use std::time::Instant;
 
 /// An axis-aligned box: lower and upper corner.
@@ -56,11 +63,11 @@ pub enum BrickError {
 }
 
 /// The pieces of `field` for `ranks` ranks: the kd tree and, per rank, the piece of the field
-/// its brick renders (with `ghosts`, or its own samples alone) and its sample counts.
+/// its brick renders (with `ghosts`) and its sample counts.
 pub fn divide(
     field: &Field,
     ranks: usize,
-    ghosts: bool,
+    ghosts: Ghosts<'_>,
 ) -> Result<(KdTree, Vec<(Field, GhostCount)>), BrickError> {
     let tree = decompose(field, ranks)?;
     let pieces = (0..ranks)
@@ -88,7 +95,7 @@ pub fn piece_of(
     field: &Field,
     tree: &KdTree,
     rank: usize,
-    ghosts: bool,
+    ghosts: Ghosts<'_>,
 ) -> Result<(Field, GhostCount), BrickError> {
     let m = message_for(field, tree, rank, ghosts)?;
     let bounds = tree.boxes[rank];
@@ -107,7 +114,7 @@ pub fn message_for(
     field: &Field,
     tree: &KdTree,
     rank: usize,
-    ghosts: bool,
+    ghosts: Ghosts<'_>,
 ) -> Result<BrickMessage, BrickError> {
     let bounds = tree.boxes[rank];
     let brick = brick_samples(&field.samples, bounds, |x| tree.owner(x) == rank, ghosts);
@@ -116,9 +123,10 @@ pub fn message_for(
             "rank {rank}'s brick holds no samples; use fewer ranks"
         )));
     }
-    // The Gaussian sum's SPH volumes depend on each sample's neighbours, which a brick's
-    // outermost ghosts lack: the whole field's are kept.
-    let volumes = (field.reconstruction.method == ReconMethod::Gaussian).then(|| {
+    // The Gaussian sum's and the splats' SPH volumes depend on each sample's neighbours, which
+    // a brick's outermost ghosts lack: the whole field's are kept.
+    let splats = matches!(ghosts, Ghosts::Splat(_));
+    let volumes = (splats || field.reconstruction.method == ReconMethod::Gaussian).then(|| {
         match field.kernel_volumes() {
             KernelVolumes::Uniform(v) => KernelVolumes::Uniform(*v),
             KernelVolumes::PerSample(v) => {
@@ -127,11 +135,17 @@ pub fn message_for(
         }
     });
     let frame = field.piece_frame();
+    let Some(extent) = frame.extent else {
+        return Err(BrickError::Message(
+            "a piece frame without its supports".into(),
+        ));
+    };
     Ok(BrickMessage {
         tree: tree.clone(),
         rank,
         frame_origin: frame.frame_origin.to_array(),
         range: frame.range,
+        extent,
         samples: brick.samples,
         count: brick.count,
         volumes,
@@ -151,6 +165,7 @@ pub fn piece_from_message(
         range: m.range,
         reconstruction,
         octree,
+        extent: Some(m.extent),
     };
     let piece = Field::from_piece(
         m.samples,
@@ -189,8 +204,12 @@ pub fn composite(images: &[&[[f32; 4]]], order: &[usize], background: [f64; 3]) 
 }
 
 /// The settings a brick renders `view` with (over a black background, composited over the
-/// view's afterwards), or the refusal of what bricks cannot render.
-pub fn brick_settings(view: &View<'_>) -> Result<RenderSettings, BrickError> {
+/// view's afterwards), or the refusal of what bricks cannot render. `splat_view` is the view
+/// the bricks' splatting ghosts were chosen for (none: MLS ghosts, for ray casting).
+pub fn brick_settings(
+    view: &View<'_>,
+    splat_view: Option<&ViewKey>,
+) -> Result<RenderSettings, BrickError> {
     if view.settings.tolerance.is_some() {
         return Err(BrickError::Setting {
             key: "render.tolerance",
@@ -199,18 +218,42 @@ pub fn brick_settings(view: &View<'_>) -> Result<RenderSettings, BrickError> {
                 .into(),
         });
     }
-    if view.settings.method.splat_shading().is_some() {
-        return Err(BrickError::Setting {
-            key: "render.method",
-            message: format!(
-                "\"{}\" splats; bricks are ray cast (\"fixed\", \"riemann\", \"reference\")",
-                view.settings.method.name()
-            ),
-        });
+    let splats = view.settings.method.splat_shading().is_some();
+    match splat_view {
+        Some(key) if *key != ViewKey::of(view) => {
+            return Err(BrickError::Setting {
+                key: "camera",
+                message: "splatting bricks hold the kernels of the view they were divided for \
+                          (which kernels reach a brick's sheets depends on the camera, the \
+                          transfer function and the splat settings): divide again for this view"
+                    .into(),
+            });
+        }
+        None if splats => {
+            return Err(BrickError::Setting {
+                key: "render.method",
+                message: format!(
+                    "\"{}\" splats, but these bricks were divided for ray casting (MLS ghosts); \
+                     divide them for the splatting view",
+                    view.settings.method.name()
+                ),
+            });
+        }
+        _ => {}
     }
     let mut settings = view.settings.clone();
     settings.background = [0.0; 3];
     Ok(settings)
+}
+
+/// What a decomposition's bricks need to render `view`: for ray casting nothing (MLS ghosts,
+/// good for any view), for splatting the reach of every kernel in this view (projected here),
+/// which chooses their ghosts ([`Ghosts::Splat`]).
+pub fn reach_for(field: &Field, view: &View<'_>) -> Result<Option<SplatReach>, BrickError> {
+    if view.settings.method.splat_shading().is_none() {
+        return Ok(None);
+    }
+    Ok(Some(SplatReach::new(field, view)?))
 }
 
 /// A composited pixel over `background`: (C, α) premultiplied over black becomes
@@ -263,12 +306,22 @@ pub struct VirtualBricks {
     tree: KdTree,
     renderers: Vec<Renderer>,
     counts: Vec<GhostCount>,
+    /// Splatting bricks: the view their kernels were chosen for.
+    splat_view: Option<ViewKey>,
 }
 
 impl VirtualBricks {
-    /// Divides `field` for `ranks` bricks and prepares a renderer for each.
-    pub fn new(ctx: &Context, field: &Field, ranks: usize) -> Result<Self, BrickError> {
-        let (tree, pieces) = divide(field, ranks, true)?;
+    /// Divides `field` for `ranks` bricks that render `view` (ray casting: any view of the
+    /// field; splatting: this one) and prepares a renderer for each.
+    pub fn new(
+        ctx: &Context,
+        field: &Field,
+        ranks: usize,
+        view: &View<'_>,
+    ) -> Result<Self, BrickError> {
+        let reach = reach_for(field, view)?;
+        let ghosts = reach.as_ref().map_or(Ghosts::Mls, Ghosts::Splat);
+        let (tree, pieces) = divide(field, ranks, ghosts)?;
         let mut renderers = Vec::with_capacity(ranks);
         let mut counts = Vec::with_capacity(ranks);
         for (piece, count) in pieces {
@@ -279,6 +332,7 @@ impl VirtualBricks {
             tree,
             renderers,
             counts,
+            splat_view: reach.map(|r| r.key().clone()),
         })
     }
 
@@ -290,7 +344,7 @@ impl VirtualBricks {
     /// Renders every brick of `view` (over a black background) and composites them in the
     /// visibility order from the view's eye over the view's background.
     pub fn render(&mut self, view: &View<'_>) -> Result<BrickFrame, BrickError> {
-        let settings = brick_settings(view)?;
+        let settings = brick_settings(view, self.splat_view.as_ref())?;
         let brick_view = View {
             settings: &settings,
             ..*view

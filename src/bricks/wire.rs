@@ -8,11 +8,13 @@ use super::kd::{KdNode, KdTree};
 use super::{Aabb, BrickError, GhostCount};
 use crate::data::dataset::Location;
 use crate::data::{Storage, Values};
+use crate::field::SupportExtent;
 use crate::recon::gaussian::KernelVolumes;
 use crate::samples::mesh::Hull;
 use crate::samples::{Domain, Positions, Provenance, SampleSet, Supports};
+use glam::DVec3;
 
-const MAGIC: &[u8; 8] = b"VMLSBRK1";
+const MAGIC: &[u8; 8] = b"VMLSBRK2";
 
 /// What one rank needs of the decomposition to render its brick.
 #[derive(Debug, Clone, PartialEq)]
@@ -22,6 +24,8 @@ pub struct BrickMessage {
     /// The whole field's frame origin (world) and value range.
     pub frame_origin: [f64; 3],
     pub range: (f64, f64),
+    /// The whole field's supports (splatting's sheets and ring are the undivided frame's).
+    pub extent: SupportExtent,
     pub samples: SampleSet,
     pub count: GhostCount,
     pub volumes: Option<KernelVolumes>,
@@ -92,6 +96,12 @@ pub fn encode(m: &BrickMessage) -> Vec<u8> {
     }
     w.f64s(&m.frame_origin);
     w.f64s(&[m.range.0, m.range.1]);
+    let e = &m.extent;
+    w.f64s(&e.support_box.0.to_array());
+    w.f64s(&e.support_box.1.to_array());
+    w.f64(e.thinnest);
+    w.u64(e.radii.len() as u64);
+    w.f64s(&e.radii);
     w.u64(m.count.own as u64);
     w.u64(m.count.ghosts as u64);
     let s = &m.samples;
@@ -307,6 +317,19 @@ pub fn decode(bytes: &[u8]) -> Result<BrickMessage, BrickError> {
     check_tree(&nodes, ranks, rank)?;
     let frame_origin = r.f3("frame origin")?;
     let range = (r.f64("range")?, r.f64("range")?);
+    let support_box = (
+        DVec3::from(r.f3("support box")?),
+        DVec3::from(r.f3("support box")?),
+    );
+    let thinnest = r.f64("thinnest support")?;
+    let radii = (0..r.count(8, "support radii")?)
+        .map(|_| r.f64("support radius"))
+        .collect::<Result<_, _>>()?;
+    let extent = SupportExtent {
+        support_box,
+        thinnest,
+        radii,
+    };
     let count = GhostCount {
         own: r.u64("own samples")? as usize,
         ghosts: r.u64("ghosts")? as usize,
@@ -453,6 +476,7 @@ pub fn decode(bytes: &[u8]) -> Result<BrickMessage, BrickError> {
         rank,
         frame_origin,
         range,
+        extent,
         samples: SampleSet {
             positions,
             values,
@@ -488,6 +512,11 @@ mod tests {
             rank: 1,
             frame_origin: [0.5, -2.0, 3.0],
             range: (-1.0, 4.5),
+            extent: SupportExtent {
+                support_box: (DVec3::new(-0.1, -0.2, -0.3), DVec3::new(1.1, 1.2, 1.3)),
+                thinnest: 0.05,
+                radii: vec![0.07, 0.08, 0.11],
+            },
             samples: SampleSet {
                 positions,
                 values: Values::U16((0..n as u16).collect()),

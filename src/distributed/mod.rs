@@ -1,8 +1,10 @@
 //! Sort-last rendering across MPI ranks with IceT compositing (issue 30; cargo feature `mpi`).
 //!
 //! Rank 0 reads the input, divides the field by the kd decomposition ([`crate::bricks`]) and
-//! sends each rank its piece (samples and ghosts, the tree, the whole field's frame); every
-//! rank renders its brick alone (premultiplied RGBA32F over black, rays clipped to the brick),
+//! sends each rank its piece (samples and ghosts — for splatting, the kernels of the scene's
+//! view that reach the rank's sheets —, the tree, the whole field's frame); every rank renders
+//! its brick alone (premultiplied RGBA32F over black, rays clipped to the brick, or the sheets
+//! its cell owns),
 //! and IceT blends the
 //! ranks' images in the kd tree's visibility order from the eye (`icetCompositeOrder`, the
 //! near child first) onto rank 0, which puts the background under it. The result is the
@@ -24,12 +26,13 @@ pub use icet::{CompositeStats, IcetError, Strategy};
 
 use crate::bricks::wire::{decode, encode};
 use crate::bricks::{
-    BrickError, brick_settings, decompose, message_for, over_background, piece_from_message,
-    viewpoint,
+    BrickError, Ghosts, brick_settings, decompose, message_for, over_background,
+    piece_from_message, reach_for, viewpoint,
 };
 use crate::field::Field;
 use crate::renderer::Renderer;
 use crate::view::View;
+use crate::view::ViewKey;
 use crate::vk::Context;
 use icet::Icet;
 use mpi::collective::SystemOperation;
@@ -168,17 +171,22 @@ pub struct RankBrick {
     ghosts: u64,
     divide_ms: f64,
     icet: Icet,
+    /// Splatting bricks: the view their kernels were chosen for.
+    splat_view: Option<ViewKey>,
 }
 
 impl RankBrick {
     /// Rank 0 divides `field` (which only it holds) for the world's ranks and sends each
     /// rank its piece ([`crate::bricks::wire`]); every rank builds its piece with the scene's
-    /// `reconstruction` and `octree` settings and prepares its renderer and IceT. Collective;
-    /// every phase is agreed on.
+    /// `reconstruction` and `octree` settings and prepares its renderer and IceT. The bricks
+    /// render `view` (every rank reads the scene): ray casting any view of the field,
+    /// splatting this one, whose kernels rank 0 chooses for each brick. Collective; every
+    /// phase is agreed on.
     pub fn scatter(
         world: &SimpleCommunicator,
         ctx: &Context,
         field: Option<&Field>,
+        view: &View<'_>,
         reconstruction: crate::recon::Reconstruction,
         octree: crate::recon::OctreeSettings,
     ) -> Result<Self, DistributedError> {
@@ -192,10 +200,15 @@ impl RankBrick {
             // agreement.
             let divided = field
                 .ok_or_else(|| "rank 0 holds no field".to_string())
-                .and_then(|f| Ok((f, decompose(f, size).map_err(|e| e.to_string())?)));
-            let (field, tree) = agree(world, divided)?;
+                .and_then(|f| {
+                    let tree = decompose(f, size).map_err(|e| e.to_string())?;
+                    let reach = reach_for(f, view).map_err(|e| e.to_string())?;
+                    Ok((f, tree, reach))
+                });
+            let (field, tree, reach) = agree(world, divided)?;
+            let ghosts = reach.as_ref().map_or(Ghosts::Mls, Ghosts::Splat);
             let encoded = |r: usize| {
-                message_for(field, &tree, r, true)
+                message_for(field, &tree, r, ghosts)
                     .map(|m| encode(&m))
                     .map_err(|e| e.to_string())
             };
@@ -241,6 +254,11 @@ impl RankBrick {
             ghosts: count.ghosts as u64,
             divide_ms,
             icet,
+            splat_view: view
+                .settings
+                .method
+                .splat_shading()
+                .map(|_| ViewKey::of(view)),
         })
     }
 
@@ -253,7 +271,7 @@ impl RankBrick {
         strategy: Strategy,
     ) -> Result<Option<DistributedFrame>, DistributedError> {
         let start = Instant::now();
-        let rendered = brick_settings(view)
+        let rendered = brick_settings(view, self.splat_view.as_ref())
             .and_then(|settings| {
                 let v = View {
                     settings: &settings,

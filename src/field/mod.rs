@@ -34,13 +34,25 @@ use crate::samples::{Domain, Positions, Provenance, SampleSet, Supports};
 use glam::DVec3;
 
 /// What a piece of a decomposed field keeps of the whole field ([`Field::piece`]).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct PieceFrame {
     /// The whole field's frame origin (world) and value range.
     pub frame_origin: DVec3,
     pub range: (f64, f64),
     pub reconstruction: Reconstruction,
     pub octree: OctreeSettings,
+    /// The whole field's supports (none for a whole field, which reads its own).
+    pub extent: Option<SupportExtent>,
+}
+
+/// What splatting reads of a whole field's supports: their box (the sheets' depth range), the
+/// thinnest (the sheet share's rule) and the radius quantiles (the ring). A piece keeps the
+/// whole field's, so that its sheets are the undivided frame's.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SupportExtent {
+    pub support_box: (DVec3, DVec3),
+    pub thinnest: f64,
+    pub radii: Vec<f64>,
 }
 
 /// The scalar field of a scene: its sample set in frame-relative coordinates, its MLS settings,
@@ -157,6 +169,7 @@ impl Field {
             range,
             reconstruction,
             octree: *octree,
+            extent: None,
         };
         let mut field = Self::assemble(samples, frame, None);
         field.resolve_auto_resample();
@@ -173,11 +186,22 @@ impl Field {
         let grid = matches!(samples.positions, Positions::Grid { .. })
             && matches!(samples.supports, Supports::Uniform(_));
         let full_metric = samples.has_full_metric();
-        let (slo, shi) = samples.support_box();
+        let support_box = match &frame.extent {
+            Some(e) => e.support_box,
+            None => {
+                let (lo, hi) = samples.support_box();
+                (DVec3::from(lo), DVec3::from(hi))
+            }
+        };
         let hull = match &samples.domain {
             Domain::Hull(h) => Some(HullBvh::build(h)),
             Domain::Box { .. } => None,
         };
+        let (thinnest, radii) = (std::sync::OnceLock::new(), std::sync::OnceLock::new());
+        if let Some(e) = frame.extent {
+            let _ = thinnest.set(e.thinnest);
+            let _ = radii.set(e.radii);
+        }
         Self {
             frame_origin: frame.frame_origin,
             samples,
@@ -189,9 +213,9 @@ impl Field {
             range: frame.range,
             full_metric,
             volumes: std::sync::OnceLock::new(),
-            support_box: (DVec3::from(slo), DVec3::from(shi)),
-            thinnest: std::sync::OnceLock::new(),
-            radii: std::sync::OnceLock::new(),
+            support_box,
+            thinnest,
+            radii,
             resampled: std::sync::OnceLock::new(),
             blocks: std::sync::OnceLock::new(),
             fast_path_declined: None,
@@ -206,6 +230,11 @@ impl Field {
             range: self.range,
             reconstruction: self.reconstruction,
             octree: self.octree_settings,
+            extent: Some(SupportExtent {
+                support_box: self.support_box,
+                thinnest: self.thinnest_support(),
+                radii: self.radius_quantiles().to_vec(),
+            }),
         }
     }
 

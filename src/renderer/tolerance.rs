@@ -53,7 +53,7 @@
 
 use super::Renderer;
 use crate::field::RenderError;
-use crate::view::{AdaptiveCriterion, Method, RenderSettings, View};
+use crate::view::{AdaptiveCriterion, Method, RenderSettings, View, ViewKey};
 use std::time::Instant;
 
 /// Pixels on the longer side of a pilot frame.
@@ -135,28 +135,6 @@ pub(super) struct Resolved {
     key: ViewKey,
     settings: RenderSettings,
     report: ToleranceReport,
-}
-
-/// What a resolution depends on.
-#[derive(Clone, PartialEq)]
-struct ViewKey {
-    camera: crate::view::camera::Camera,
-    settings: RenderSettings,
-    transfer: crate::view::transfer::TransferFunction,
-    isosurfaces: Vec<crate::view::shading::Isosurface>,
-    lighting: crate::view::shading::Lighting,
-}
-
-impl ViewKey {
-    fn of(view: &View<'_>) -> Self {
-        Self {
-            camera: *view.camera,
-            settings: view.settings.clone(),
-            transfer: view.transfer.clone(),
-            isosurfaces: view.isosurfaces.to_vec(),
-            lighting: *view.lighting,
-        }
-    }
 }
 
 /// The order in the level assumed until two differences measure one: every ladder's

@@ -98,6 +98,8 @@ pub(super) fn params(
         tiles_x: setup.tiles().0,
         kernel_count: kernels.count,
         _pad: [0; 2],
+        cell_min: v(setup.cell.map_or(glam::DVec3::NEG_INFINITY, |c| c.0)),
+        cell_max: v(setup.cell.map_or(glam::DVec3::INFINITY, |c| c.1)),
     }
 }
 

@@ -109,6 +109,8 @@ pub struct SplatVariant {
     pub surfaces: bool,
     /// Post-shaded over a hull: per-pixel inside segments bound the domain.
     pub hull: bool,
+    /// A brick's frame: composites only the sheets its cell owns (`SplatSetup::owns`).
+    pub brick: bool,
     /// Image tile edge and apron in pixels.
     pub tile: u32,
     pub apron: u32,
@@ -141,6 +143,7 @@ impl SplatVariant {
             isosurfaces: !setup.isosurfaces.is_empty(),
             surfaces: setup.settings.surface && !setup.isosurfaces.is_empty(),
             hull: setup.hull && setup.shading == Shading::Post,
+            brick: setup.cell.is_some(),
             tile: setup.tile,
             apron: setup.apron(),
             pixels,
@@ -178,6 +181,7 @@ impl SplatVariant {
             ("SPLAT_ISOSURFACES".into(), flag(self.isosurfaces)),
             ("SPLAT_SURFACES".into(), flag(self.surfaces)),
             ("SPLAT_HULL".into(), flag(self.hull)),
+            ("SPLAT_BRICK".into(), flag(self.brick)),
             ("SPLAT_TILE".into(), self.tile.to_string()),
             ("SPLAT_APRON".into(), self.apron.to_string()),
             ("SPLAT_GROUP".into(), self.group.to_string()),
@@ -216,7 +220,7 @@ impl SplatVariant {
     /// Human-readable name for `--stats`.
     pub fn name(&self) -> String {
         format!(
-            "splat {} {} {}{}{}{}{} tile {}{}",
+            "splat {} {} {}{}{}{}{} tile {}{}{}",
             match self.shading {
                 Shading::Pre => "pre-shaded",
                 Shading::Post => "post-shaded",
@@ -252,6 +256,7 @@ impl SplatVariant {
             } else {
                 ""
             },
+            if self.brick { " brick" } else { "" },
         )
     }
 }

@@ -160,6 +160,10 @@ pub struct SplatSetup {
     /// sheet uses).
     pub sheet_share: SheetShare,
     pub lighting: Lighting,
+    /// A brick's frame (issue 30, the field a piece): its kd cell, frame-relative, the faces on
+    /// the domain's boundary moved to infinity so that the cells of a decomposition tile all
+    /// space. The frame composites only the sheets it owns ([`SplatSetup::owns`]).
+    pub cell: Option<(DVec3, DVec3)>,
 }
 
 impl SplatSetup {
@@ -216,6 +220,15 @@ impl SplatSetup {
                 key: "splat.surface",
                 message: "surface splats belong to pre-shaded splatting (render.method = \
                           \"splat\"); post-shaded splatting finds isosurfaces in its sheets"
+                    .into(),
+            });
+        }
+        if settings.surface && field.clip().is_some() {
+            return Err(RenderError::Setting {
+                key: "splat.surface",
+                message: "surface splats are found on the whole field's isosurfaces, which a \
+                          brick of a decomposition does not hold: draw isosurfaces with \
+                          render.method = \"splat-post\" or ray casting"
                     .into(),
             });
         }
@@ -386,8 +399,24 @@ impl SplatSetup {
             ring,
             sheet_share,
             lighting: *lighting,
+            cell: field.clip().map(|clip| brick_cell(clip, (box_lo, box_hi))),
         };
         Ok(setup)
+    }
+
+    /// Whether sheet k of the pixel ray (o, d) belongs to this frame: always, except in a
+    /// brick's frame, which owns the sheet when the sheet's midpoint on the ray lies in its cell
+    /// (lo ≤ x < hi on every axis, the kd tree's rule for a point on a plane). Every sheet of
+    /// every pixel then belongs to exactly one brick, composited whole there: a kernel's share
+    /// of a sheet is counted once, and the bricks composited in visibility order are the
+    /// undivided frame's sheets in the undivided frame's order.
+    pub fn owns(&self, (o, d): (DVec3, DVec3), k: u32) -> bool {
+        let Some((lo, hi)) = self.cell else {
+            return true;
+        };
+        let m = self.slab0 + (f64::from(k) + 0.5) * self.slab_world;
+        let x = o + m * d;
+        x.cmpge(lo).all() && x.cmplt(hi).all()
     }
 
     /// Whether the camera is orthographic.
@@ -489,6 +518,16 @@ impl SplatSetup {
             (((bbox[3] + a) / t) as u32).min(ty - 1),
         ]
     }
+}
+
+/// A brick's kd cell from its box `clip` and the domain's box `domain`: a face on the domain's
+/// boundary is at infinity (the kd tree's root box is the domain's, so a brick's outer faces
+/// equal the domain's exactly).
+pub fn brick_cell(clip: (DVec3, DVec3), domain: (DVec3, DVec3)) -> (DVec3, DVec3) {
+    let (lo, hi) = clip;
+    let lo = DVec3::select(lo.cmple(domain.0), DVec3::NEG_INFINITY, lo);
+    let hi = DVec3::select(hi.cmpge(domain.1), DVec3::INFINITY, hi);
+    (lo, hi)
 }
 
 /// What a frame did with its kernels (`--stats`).

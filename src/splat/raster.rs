@@ -41,15 +41,19 @@ pub const SHEET: usize = 9;
 
 /// The kernels of a field, frame-relative.
 pub fn kernels(field: &Field) -> impl Iterator<Item = Kernel> + '_ {
-    let volumes = field.kernel_volumes();
+    (0..field.samples.len()).map(|i| kernel(field, i))
+}
+
+/// Sample i's kernel, frame-relative.
+pub fn kernel(field: &Field, i: usize) -> Kernel {
     let s = &field.samples;
-    (0..s.len()).map(move |i| Kernel {
+    Kernel {
         position: s.position(i),
         value: f64::from(s.values.get(i)),
         metric: s.metric(i),
-        volume: volumes.get(i),
+        volume: field.kernel_volumes().get(i),
         kind: KernelKind::Volume,
-    })
+    }
 }
 
 /// A rendered splatting frame.
@@ -121,7 +125,7 @@ struct Lane {
     values: [f64; 4],
     /// Post-shaded isosurfaces: the lateral gradients (right, up) of sheets j − 1, j and k.
     lateral: [[f64; 2]; 3],
-    /// Post-shaded: the pixel's ray and its inside segments.
+    /// Post-shaded, and in a brick's frame: the pixel's ray. Post-shaded: its inside segments.
     ray: (DVec3, DVec3),
     inside_segments: Vec<(f64, f64)>,
 }
@@ -151,7 +155,7 @@ pub fn splat_raster(
             let inside = x >= 0 && y >= 0 && x < w && y < h;
             let own =
                 inside && (a..a + t).contains(&(l % edge)) && (a..a + t).contains(&(l / edge));
-            let ray = if post && own {
+            let ray = if (post || setup.cell.is_some()) && own {
                 setup
                     .camera
                     .ray(&setup.basis, setup.frame_origin, x as u32, y as u32)
@@ -272,7 +276,8 @@ pub fn splat_raster(
             composite_post(setup, tf, &mut lanes, edge, k);
         } else {
             for l in lanes.iter_mut() {
-                composite_pre(l, setup.early_termination);
+                let owned = setup.owns(l.ray, k);
+                composite_pre(l, setup.early_termination, owned);
             }
         }
     }
@@ -281,11 +286,12 @@ pub fn splat_raster(
     }
 }
 
-/// Pre-shaded: composites the sheet's channels into the pixel and clears them.
-fn composite_pre(l: &mut Lane, early_termination: f64) {
+/// Pre-shaded: composites the sheet's channels into the pixel (where the frame `owned` the
+/// sheet) and clears them.
+fn composite_pre(l: &mut Lane, early_termination: f64, owned: bool) {
     let e = std::mem::take(&mut l.sheet);
     let done = |l: &Lane| 1.0 - l.transmittance > early_termination;
-    if !l.own || done(l) {
+    if !l.own || !owned || done(l) {
         return;
     }
     if e[4] > 0.0 {
@@ -359,7 +365,8 @@ fn composite_post(
     let j = i64::from(k) - 1;
     for l in lanes.iter_mut() {
         let done = 1.0 - l.transmittance > setup.early_termination;
-        if l.own && j >= 0 && !done && !l.inside_segments.is_empty() {
+        let owned = j >= 0 && setup.owns(l.ray, j as u32);
+        if l.own && owned && !done && !l.inside_segments.is_empty() {
             composite_sheet(setup, tf, l, j);
         }
         l.values = [l.values[1], l.values[2], l.values[3], 0.0];

@@ -34,3 +34,26 @@ pub struct View<'a> {
     pub isosurfaces: &'a [Isosurface],
     pub lighting: &'a Lighting,
 }
+
+/// An owned copy of everything a [`View`] holds: the key of what was computed for one view (a
+/// tolerance's resolution, the kernels of a splatting decomposition).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ViewKey {
+    camera: Camera,
+    settings: RenderSettings,
+    transfer: TransferFunction,
+    isosurfaces: Vec<Isosurface>,
+    lighting: Lighting,
+}
+
+impl ViewKey {
+    pub fn of(view: &View<'_>) -> Self {
+        Self {
+            camera: *view.camera,
+            settings: view.settings.clone(),
+            transfer: view.transfer.clone(),
+            isosurfaces: view.isosurfaces.to_vec(),
+            lighting: *view.lighting,
+        }
+    }
+}

@@ -35,6 +35,20 @@ pub fn write_composite(
     Ok(())
 }
 
+/// Refuses a scene whose undivided frame passes the work budget (each brick does at most its
+/// work): ray casting's evaluations, or the sheets of a splatting frame.
+pub fn check_frame_budget(scene: &Scene, field: &vmls::field::Field) -> Result<(), CliError> {
+    match scene.render.method.splat_shading() {
+        None => scene
+            .ray_setup(field)?
+            .check_budget(vmls::view::WORK_BUDGET)?,
+        Some(shading) => scene
+            .splat_setup(shading, field)?
+            .check_budget(0, vmls::view::WORK_BUDGET)?,
+    }
+    Ok(())
+}
+
 /// Renders `request`'s scene as `ranks` virtual bricks.
 pub fn run_render_bricks(
     request: &Request<'_>,
@@ -59,13 +73,11 @@ pub fn run_render_bricks(
     let ctx = context(device)?;
     let field = scene.field_on(Some(ctx.info()), |_| {})?;
     if !request.force {
-        scene
-            .ray_setup(&field)?
-            .check_budget(vmls::view::WORK_BUDGET)?;
+        check_frame_budget(&scene, &field)?;
     }
     check_stop(stop)?;
     let divide_start = Instant::now();
-    let mut bricks = VirtualBricks::new(&ctx, &field, ranks as usize)?;
+    let mut bricks = VirtualBricks::new(&ctx, &field, ranks as usize, &scene.view())?;
     let divide_ms = divide_start.elapsed().as_secs_f64() * 1e3;
     check_stop(stop)?;
     let frame = bricks.render(&scene.view())?;

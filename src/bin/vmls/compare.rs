@@ -28,7 +28,8 @@ pub fn compare(image: &Path, reference: &Path, diff: Option<&Path>) -> Result<()
         .into());
     };
     println!(
-        "rmse {:.6} max {:.6} at ({}, {}) psnr {:.2} dB p99-rgba {:.6}",
+        // Scientific notation: the bounds the scripts check these against reach 1e-6 and below.
+        "rmse {:.4e} max {:.4e} at ({}, {}) psnr {:.2} dB p99-rgba {:.4e}",
         e.rmse, e.max_abs, e.max_x, e.max_y, e.psnr, e.p99
     );
     if e.non_finite > 0 {

@@ -2,7 +2,7 @@
 //! its kd brick, IceT compositing them in visibility order, rank 0 writing the image and the
 //! statistics (issue 30). Built with the cargo feature `mpi`.
 
-use crate::bricks::write_composite;
+use crate::bricks::{check_frame_budget, write_composite};
 use crate::render::Request;
 use crate::{CliError, DeviceArgs, check_stop, context, json_to, plan_outputs, report};
 use mpi::Threading;
@@ -102,9 +102,7 @@ fn run(
         let field = if root {
             let field = scene.field_on(Some(ctx.info()), |_| {})?;
             if !request.force {
-                scene
-                    .ray_setup(&field)?
-                    .check_budget(vmls::view::WORK_BUDGET)?;
+                check_frame_budget(&scene, &field)?;
             }
             Some(field)
         } else {
@@ -118,6 +116,7 @@ fn run(
         world,
         &ctx,
         field.as_ref(),
+        &scene.view(),
         scene.reconstruction,
         scene.octree,
     )?;

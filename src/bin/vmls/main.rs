@@ -84,14 +84,14 @@ enum Command {
         /// "Rendering to a tolerance").
         #[arg(long, value_name = "E")]
         tolerance: Option<f64>,
-        /// Divide the field into N kd bricks with ghosts, ray cast each alone (rays clipped
-        /// to its box, steps where the undivided frame's are) and composite them front to
-        /// back in f64 on this device: the reference of a distributed render (README,
-        /// "Bricks").
+        /// Divide the field into N kd bricks with ghosts, render each alone (ray casting: rays
+        /// clipped to its box, steps where the undivided frame's are; splatting: the sheets
+        /// whose midpoints lie in its cell) and composite them front to back in f64 on this
+        /// device: the reference of a distributed render (README, "Bricks").
         #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=4096))]
         bricks: Option<u32>,
         /// Render across MPI ranks (`mpirun -np N vmls render … --mpi`; a build with the `mpi`
-        /// feature): each rank ray casts its kd brick, IceT composites them in visibility
+        /// feature): each rank renders its kd brick, IceT composites them in visibility
         /// order, rank 0 writes the image (README, "Bricks").
         #[arg(long)]
         mpi: bool,
