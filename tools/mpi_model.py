@@ -49,7 +49,10 @@ def main():
         t_blend = float(two[0]["composite_ms_max"]) * 1e-3 / (pixels * 2 ** (-2 / 3))
         counts = sorted(v)
         t = {n: float(v[n]["brick_gpu_ms_max"]) * 1e-3 for n in counts}
+        # The slope from 8 bricks on, or from the last two counts measured.
         fit = [n for n in counts if n >= 8]
+        if len(fit) < 2:
+            fit = counts[-2:]
         xs = [math.log(n) for n in fit]
         ys = [math.log(t[n]) for n in fit]
         mx, my = sum(xs) / len(xs), sum(ys) / len(ys)

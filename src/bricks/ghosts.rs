@@ -94,9 +94,6 @@ fn grid_brick(
     (lo, hi): Aabb,
     ghosts: Ghosts<'_>,
 ) -> BrickSamples {
-    let mut first = [0usize; 3];
-    let mut count = [0usize; 3];
-    let mut own = 1usize;
     // A splatting brick's kernels: the index box of those it needs.
     let needed = match ghosts {
         Ghosts::Splat(reach) => {
@@ -117,22 +114,11 @@ fn grid_brick(
         }
         _ => None,
     };
-    for a in 0..3 {
-        let last = dims[a] as i64 - 1;
-        let i0 = (((lo[a] - origin[a]) / spacing[a]).round() as i64).clamp(0, last);
-        let i1 = (((hi[a] - origin[a]) / spacing[a]).round() as i64).clamp(0, last);
-        let layers = match ghosts {
-            Ghosts::Mls => ((h[a] / spacing[a]).ceil() as i64 - 1).max(0),
-            _ => 0,
-        };
-        let (mut g0, mut g1) = ((i0 - layers).max(0), (i1 + layers).min(last));
-        if let Some((n0, n1)) = needed {
-            (g0, g1) = (g0.min(n0[a]), g1.max(n1[a]));
-        }
-        first[a] = g0 as usize;
-        count[a] = (g1 - g0 + 1) as usize;
-        own *= (i1 - i0 + 1) as usize;
-    }
+    let layers = match ghosts {
+        Ghosts::Mls => mls_layers(h, spacing),
+        _ => [0; 3],
+    };
+    let (first, count, own) = grid_window(dims, origin, spacing, (lo, hi), layers, needed);
     let mut indices = Vec::with_capacity(count.iter().product());
     for k in 0..count[2] {
         for j in 0..count[1] {
@@ -161,6 +147,40 @@ fn grid_brick(
         },
         indices,
     }
+}
+
+/// MLS's ghost planes on each side of a grid brick: ⌈h/Δ⌉ − 1 along each axis.
+pub fn mls_layers(h: [f64; 3], spacing: [f64; 3]) -> [i64; 3] {
+    [0, 1, 2].map(|a| ((h[a] / spacing[a]).ceil() as i64 - 1).max(0))
+}
+
+/// A grid brick's window: the first sample index and the sample count along each axis, and
+/// how many of its samples lie in the box `(lo, hi)`: the planes of the box, `layers` more on
+/// each side where the grid has them, widened to hold the index box `needed`.
+pub fn grid_window(
+    dims: [usize; 3],
+    origin: [f64; 3],
+    spacing: [f64; 3],
+    (lo, hi): Aabb,
+    layers: [i64; 3],
+    needed: Option<([i64; 3], [i64; 3])>,
+) -> ([usize; 3], [usize; 3], usize) {
+    let mut first = [0usize; 3];
+    let mut count = [0usize; 3];
+    let mut own = 1usize;
+    for a in 0..3 {
+        let last = dims[a] as i64 - 1;
+        let i0 = (((lo[a] - origin[a]) / spacing[a]).round() as i64).clamp(0, last);
+        let i1 = (((hi[a] - origin[a]) / spacing[a]).round() as i64).clamp(0, last);
+        let (mut g0, mut g1) = ((i0 - layers[a]).max(0), (i1 + layers[a]).min(last));
+        if let Some((n0, n1)) = needed {
+            (g0, g1) = (g0.min(n0[a]), g1.max(n1[a]));
+        }
+        first[a] = g0 as usize;
+        count[a] = (g1 - g0 + 1) as usize;
+        own *= (i1 - i0 + 1) as usize;
+    }
+    (first, count, own)
 }
 
 /// Own samples first, then every other sample whose support reaches the box.

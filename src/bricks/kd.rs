@@ -11,6 +11,7 @@
 //! a point on a plane to the box above it ([`KdTree::owner`]).
 
 use super::{Aabb, BrickError};
+use crate::data::dataset::grid_point;
 use crate::samples::{Positions, SampleSet};
 
 /// Samples the quantiles are read from, at most.
@@ -55,11 +56,6 @@ struct Planes {
 impl KdTree {
     /// Cuts the bounding box of `samples`' domain into `ranks` boxes.
     pub fn decompose(samples: &SampleSet, ranks: usize) -> Result<Self, BrickError> {
-        if ranks == 0 {
-            return Err(BrickError::Ranks(
-                "a decomposition needs at least one rank".into(),
-            ));
-        }
         let planes = match &samples.positions {
             Positions::Grid {
                 dims,
@@ -72,6 +68,51 @@ impl KdTree {
             }),
             Positions::Scattered(_) => None,
         };
+        Self::build(
+            samples.len(),
+            |i| samples.position(i),
+            planes,
+            samples.domain_box(),
+            ranks,
+        )
+    }
+
+    /// [`KdTree::decompose`] of a regular grid's samples (`dims` points from `origin`,
+    /// `spacing` apart) in the domain box `domain`, known without its values: the same tree.
+    pub fn decompose_grid(
+        dims: [usize; 3],
+        origin: [f64; 3],
+        spacing: [f64; 3],
+        domain: Aabb,
+        ranks: usize,
+    ) -> Result<Self, BrickError> {
+        let planes = Planes {
+            origin,
+            spacing,
+            dims,
+        };
+        Self::build(
+            dims.iter().product(),
+            |i| grid_point(dims, origin, spacing, i),
+            Some(planes),
+            domain,
+            ranks,
+        )
+    }
+
+    /// The tree of `n` samples at `position(i)` in `domain`, cut at grid `planes` if any.
+    fn build(
+        n: usize,
+        position: impl Fn(usize) -> [f64; 3],
+        planes: Option<Planes>,
+        domain: Aabb,
+        ranks: usize,
+    ) -> Result<Self, BrickError> {
+        if ranks == 0 {
+            return Err(BrickError::Ranks(
+                "a decomposition needs at least one rank".into(),
+            ));
+        }
         if let Some(p) = planes {
             // Every brick needs two sample planes along each axis it is cut on.
             let most: usize = p.dims.iter().map(|d| d.saturating_sub(1)).product();
@@ -83,16 +124,13 @@ impl KdTree {
                 )));
             }
         }
-        let stride = samples.len().div_ceil(SUBSAMPLE).max(1);
-        let points: Vec<[f64; 3]> = (0..samples.len())
-            .step_by(stride)
-            .map(|i| samples.position(i))
-            .collect();
+        let stride = n.div_ceil(SUBSAMPLE).max(1);
+        let points: Vec<[f64; 3]> = (0..n).step_by(stride).map(position).collect();
         let mut tree = KdTree {
             nodes: Vec::new(),
-            boxes: vec![(samples.domain_box().0, samples.domain_box().1); ranks],
+            boxes: vec![domain; ranks],
         };
-        tree.split(points, samples.domain_box(), 0, ranks, planes)?;
+        tree.split(points, domain, 0, ranks, planes)?;
         Ok(tree)
     }
 

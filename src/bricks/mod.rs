@@ -24,6 +24,7 @@
 
 pub mod ghosts;
 pub mod kd;
+pub mod parallel;
 pub mod splat;
 pub mod wire;
 
@@ -58,6 +59,8 @@ pub enum BrickError {
     Message(String),
     #[error("bricks: {0}")]
     Recon(#[from] ReconError),
+    #[error(transparent)]
+    Data(#[from] crate::data::DataError),
     #[error(transparent)]
     Render(#[from] RenderError),
 }

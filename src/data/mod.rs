@@ -23,6 +23,7 @@ pub mod vtk;
 pub mod vtk_legacy;
 pub mod vtk_xml;
 mod vtk_xml_decode;
+pub mod vtk_xml_parallel;
 mod vtk_xml_tree;
 
 use std::path::{Path, PathBuf};
@@ -160,7 +161,7 @@ pub enum DataError {
         reason: String,
     },
     #[error(
-        "{path}: unknown volume format (expected .vtk, .vti, .vtr, .vts, .vtu, .vtp, .csv, .ply, .nrrd, .nii or .nii.gz)"
+        "{path}: unknown volume format (expected .vtk, .vti, .vtr, .vts, .vtu, .vtp, .pvti, .pvtr, .pvts, .pvtu, .pvtp, .csv, .ply, .nrrd, .nii or .nii.gz)"
     )]
     UnknownFormat { path: PathBuf },
     #[error("{path}: point {index} has a non-finite coordinate {point:?}")]
@@ -338,10 +339,15 @@ pub fn load(path: &Path, array: Option<&str>) -> Result<Volume, DataError> {
 }
 
 /// Loads any supported file as a [`dataset::Dataset`] (geometry and every scalar array), validated by
-/// [`dataset::Dataset::validate`]: legacy VTK (every dataset type, arrays named as in the file), CSV
-/// and PLY points. Regular-grid formats (NRRD, NIfTI) give an image with one point array
-/// named "scalars".
+/// [`dataset::Dataset::validate`]: legacy VTK (every dataset type, arrays named as in the file),
+/// VTK XML, serial and parallel (a `.pvti` … summary and the pieces it names, joined:
+/// [`vtk_xml_parallel`]), CSV and PLY points. Regular-grid formats (NRRD, NIfTI) give an image
+/// with one point array named "scalars".
 pub fn load_dataset(path: &Path) -> Result<dataset::Dataset, DataError> {
+    if vtk_xml_parallel::is_parallel(path) {
+        // A summary naming its pieces, each read from disk (vtk_xml_parallel).
+        return vtk_xml_parallel::load(path);
+    }
     if lower_name(path).ends_with(".nrrd") {
         // Streamed: raw data never sits in memory beside its values (nrrd::load).
         let dataset = dataset::Dataset::from_volume(nrrd::load(path)?, "scalars");
@@ -377,6 +383,15 @@ pub fn grid_shape(path: &Path) -> Result<Option<([u64; 3], Storage)>, DataError>
 /// [`load_dataset`] on bytes already read: the reader is chosen by `path`'s extension, and
 /// `path` names the file in errors (the fuzz targets enter here).
 pub fn parse_dataset_bytes(path: &Path, bytes: &[u8]) -> Result<dataset::Dataset, DataError> {
+    if vtk_xml_parallel::is_parallel(path) {
+        return Err(DataError::Unsupported {
+            path: path.to_path_buf(),
+            location: "byte 0".into(),
+            what: "a parallel VTK XML summary from bytes: it names piece files, read from disk \
+                   (load_dataset)"
+                .into(),
+        });
+    }
     let name = lower_name(path);
     let dataset = if name.ends_with(".vtk") {
         vtk_legacy::parse_dataset(path, bytes)?

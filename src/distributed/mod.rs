@@ -15,20 +15,25 @@
 //! did, every rank returns [`DistributedError`] and rank 0's names the first failing rank and
 //! its message, so that no rank waits in a collective call for one that has gone.
 //!
-//! Not yet here: parallel VTK XML read piece by piece on the ranks (rank 0 reads everything,
-//! so its memory bounds the data), and each rank renders the whole image (its box's screen
-//! footprint would do).
+//! A parallel VTK XML image (`.pvti`) is read piece by piece instead: every rank reads the
+//! pieces its brick needs ([`RankBrick::read_parallel`]), so no rank holds the whole grid.
+//!
+//! Not yet here: the other parallel kinds (`.pvtr`, `.pvts`, `.pvtu`) and splatting from a
+//! `.pvti` are read whole by rank 0 (its memory bounds the data), and each rank renders the
+//! whole image (its box's screen footprint would do).
 
 #[allow(unsafe_code)]
 mod icet;
 
 pub use icet::{CompositeStats, IcetError, Strategy};
 
+use crate::bricks::parallel::GridPlan;
 use crate::bricks::wire::{decode, encode};
 use crate::bricks::{
     BrickError, Ghosts, brick_settings, decompose, message_for, over_background,
     piece_from_message, reach_for, viewpoint,
 };
+use crate::data::vtk_xml_parallel::Summary;
 use crate::field::Field;
 use crate::renderer::Renderer;
 use crate::view::View;
@@ -114,6 +119,8 @@ pub struct RankReport {
     pub ghosts: u64,
     /// Its piece's build (ghost selection and octree), host ms.
     pub divide_ms: f64,
+    /// Pieces of a parallel image it read itself (0: rank 0 sent its piece).
+    pub pieces_read: u64,
     /// Its brick's frame: GPU ms and wall ms.
     pub render_gpu_ms: f64,
     pub render_wall_ms: f64,
@@ -170,6 +177,7 @@ pub struct RankBrick {
     samples: u64,
     ghosts: u64,
     divide_ms: f64,
+    pieces_read: usize,
     icet: Icet,
     /// Splatting bricks: the view their kernels were chosen for.
     splat_view: Option<ViewKey>,
@@ -242,6 +250,78 @@ impl RankBrick {
         )?;
         let divide_ms = start.elapsed().as_secs_f64() * 1e3;
         let (piece, tree, count) = piece;
+        let splat_view = view
+            .settings
+            .method
+            .splat_shading()
+            .map(|_| ViewKey::of(view));
+        Self::prepare(world, ctx, piece, tree, count, divide_ms, splat_view)
+    }
+
+    /// Every rank reads the summary of the parallel image at `path` (a `.pvti`) and only the
+    /// pieces that meet its brick and ghosts ([`crate::bricks::parallel`]): no rank holds the
+    /// whole grid. The ranks agree on the value range (a minimum and maximum); the bricks are
+    /// those [`RankBrick::scatter`] would send. Ray casting only (a splatting brick's kernels
+    /// come from a projection of the whole field). Collective; every phase is agreed on.
+    #[allow(clippy::too_many_arguments)]
+    pub fn read_parallel(
+        world: &SimpleCommunicator,
+        ctx: &Context,
+        path: &std::path::Path,
+        array: Option<&str>,
+        samples: &crate::samples::SampleSettings,
+        view: &View<'_>,
+        reconstruction: crate::recon::Reconstruction,
+        octree: crate::recon::OctreeSettings,
+    ) -> Result<Self, DistributedError> {
+        let start = Instant::now();
+        let (rank, ranks) = (world.rank() as usize, world.size() as usize);
+        let plan = agree(
+            world,
+            if view.settings.method.splat_shading().is_some() {
+                Err(format!(
+                    "{}: a splatting brick's kernels are chosen from the whole field: rank 0 \
+                     reads the parallel file",
+                    path.display()
+                ))
+            } else {
+                Summary::read(path)
+                    .map_err(|e| e.to_string())
+                    .and_then(|s| {
+                        GridPlan::new(s, array, samples, ranks).map_err(|e| e.to_string())
+                    })
+            },
+        )?;
+        let brick = agree(
+            world,
+            plan.read_brick(rank, samples).map_err(|e| e.to_string()),
+        )?;
+        // Every sample is some rank's: the extremes over the ranks are the whole field's.
+        let (mut lo, mut hi) = (0.0f64, 0.0f64);
+        world.all_reduce_into(&brick.range.0, &mut lo, SystemOperation::min());
+        world.all_reduce_into(&brick.range.1, &mut hi, SystemOperation::max());
+        let (count, pieces_read) = (brick.count, brick.pieces_read);
+        let piece = agree(
+            world,
+            plan.piece(rank, brick, (lo, hi), reconstruction, octree)
+                .map_err(|e| e.to_string()),
+        )?;
+        let divide_ms = start.elapsed().as_secs_f64() * 1e3;
+        let mut brick = Self::prepare(world, ctx, piece, plan.tree, count, divide_ms, None)?;
+        brick.pieces_read = pieces_read;
+        Ok(brick)
+    }
+
+    /// A rank's renderer for its piece and its IceT context (collective).
+    fn prepare(
+        world: &SimpleCommunicator,
+        ctx: &Context,
+        piece: Field,
+        tree: crate::bricks::kd::KdTree,
+        count: crate::bricks::ghosts::GhostCount,
+        divide_ms: f64,
+        splat_view: Option<ViewKey>,
+    ) -> Result<Self, DistributedError> {
         let renderer = agree(
             world,
             Renderer::new(ctx, piece).map_err(|e| BrickError::from(e).to_string()),
@@ -253,13 +333,15 @@ impl RankBrick {
             samples: count.own as u64,
             ghosts: count.ghosts as u64,
             divide_ms,
+            pieces_read: 0,
             icet,
-            splat_view: view
-                .settings
-                .method
-                .splat_shading()
-                .map(|_| ViewKey::of(view)),
+            splat_view,
         })
+    }
+
+    /// The field of this rank's brick.
+    pub fn field(&self) -> &Field {
+        self.renderer.field()
     }
 
     /// Renders `view` across the ranks and composites it with `strategy` (collective). Rank 0
@@ -311,6 +393,7 @@ impl RankBrick {
             self.samples as f64,
             self.ghosts as f64,
             self.divide_ms,
+            self.pieces_read as f64,
             stats.gpu_ms,
             render_wall_ms,
             composite.seconds * 1e3,
@@ -330,10 +413,11 @@ impl RankBrick {
                 samples: r[1] as u64,
                 ghosts: r[2] as u64,
                 divide_ms: r[3],
-                render_gpu_ms: r[4],
-                render_wall_ms: r[5],
-                composite_ms: r[6],
-                bytes_sent: r[7],
+                pieces_read: r[4] as u64,
+                render_gpu_ms: r[5],
+                render_wall_ms: r[6],
+                composite_ms: r[7],
+                bytes_sent: r[8],
             })
             .collect();
         let background = view.settings.background;

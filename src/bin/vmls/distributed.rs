@@ -25,6 +25,23 @@ impl From<DistributedError> for CliError {
     }
 }
 
+/// The scene's volume file and array where the ranks read their own pieces: a parallel VTK XML
+/// image (`.pvti`) ray cast.
+fn parallel_image(scene: &Scene) -> Option<(&std::path::Path, Option<&str>)> {
+    match &scene.volume {
+        vmls::scene::VolumeSource::File { path, array }
+            if path
+                .to_string_lossy()
+                .to_ascii_lowercase()
+                .ends_with(".pvti")
+                && scene.render.method.splat_shading().is_none() =>
+        {
+            Some((path.as_path(), array.as_deref()))
+        }
+        _ => None,
+    }
+}
+
 /// Renders `request`'s scene across the ranks of MPI_COMM_WORLD.
 pub fn run_render_mpi(
     request: &Request<'_>,
@@ -98,8 +115,9 @@ fn run(
             None
         };
         let ctx = context(&rank_device(device)?)?;
-        // Rank 0 reads the data and sends each rank its piece.
-        let field = if root {
+        // Rank 0 reads the data and sends each rank its piece, unless the ranks read their own
+        // pieces of a parallel image (ray casting).
+        let field = if root && parallel_image(&scene).is_none() {
             let field = scene.field_on(Some(ctx.info()), |_| {})?;
             if !request.force {
                 check_frame_budget(&scene, &field)?;
@@ -112,14 +130,35 @@ fn run(
         Ok((scene, outputs, ctx, field))
     })();
     let (scene, outputs, ctx, field) = agree(world, loaded.map_err(|e| report(&e)))?;
-    let mut brick = RankBrick::scatter(
-        world,
-        &ctx,
-        field.as_ref(),
-        &scene.view(),
-        scene.reconstruction,
-        scene.octree,
-    )?;
+    let mut brick = match parallel_image(&scene) {
+        Some((path, array)) => {
+            let brick = RankBrick::read_parallel(
+                world,
+                &ctx,
+                path,
+                array,
+                &scene.samples,
+                &scene.view(),
+                scene.reconstruction,
+                scene.octree,
+            )?;
+            // The frame's budget, judged on each rank's piece (it keeps the whole domain).
+            let checked = match request.force {
+                true => Ok(()),
+                false => check_frame_budget(&scene, brick.field()).map_err(|e| report(&e)),
+            };
+            agree(world, checked)?;
+            brick
+        }
+        None => RankBrick::scatter(
+            world,
+            &ctx,
+            field.as_ref(),
+            &scene.view(),
+            scene.reconstruction,
+            scene.octree,
+        )?,
+    };
     drop(field);
     let frame = brick.render(world, &scene.view(), strategy)?;
     drop(brick);
@@ -154,6 +193,7 @@ fn run(
                 "samples_inside": r.samples,
                 "ghosts": r.ghosts,
                 "divide_ms": r.divide_ms,
+                "pieces_read": r.pieces_read,
                 "render_gpu_ms": r.render_gpu_ms,
                 "render_wall_ms": r.render_wall_ms,
                 "composite_ms": r.composite_ms,
