@@ -85,6 +85,10 @@ pub struct RaySetup {
     /// A brick of a decomposed field ([`Field::piece`]): rays integrate only inside this box
     /// (frame-relative), their steps anchored where the undivided field's segments start.
     pub clip: Option<(DVec3, DVec3)>,
+    /// A brick's frame over black: the pixels [x0, y0, x1, y1] whose rays can meet its box
+    /// ([`Camera::pixel_box`]); only their rows are dispatched, the others are written as rays
+    /// that miss (transparent, finished) without running.
+    pub window: Option<[u32; 4]>,
     /// Riemann and reference methods stop below this transmittance.
     pub min_transmittance: f64,
     pub isosurfaces: Vec<shading::Isosurface>,
@@ -176,6 +180,10 @@ impl RaySetup {
             hull_hits: FIRST_HULL_HITS,
             background: render.background,
             clip: field.clip(),
+            window: field
+                .clip()
+                .filter(|_| render.background == [0.0; 3])
+                .map(|b| camera.pixel_box(&basis, field.frame_origin, b)),
             min_transmittance: render.min_transmittance,
             isosurfaces: isosurfaces.to_vec(),
             lighting: *lighting,

@@ -109,6 +109,68 @@ impl Camera {
         let basis = *basis;
         (0..n * n).map(move |k| self.ray(&basis, frame_origin, at(k % n, w), at(k / n, h)))
     }
+
+    /// The pixels [x0, y0, x1, y1] (inclusive) whose rays can meet the box `(lo, hi)`
+    /// (frame-relative): the bounding box of its corners' projections, a pixel wider on every
+    /// side; the whole image where a corner lies on or behind a perspective eye's plane (the
+    /// projection of a box in front of the eye is the hull of its corners' projections, and
+    /// rays start at the eye).
+    pub fn pixel_box(
+        &self,
+        basis: &ViewBasis,
+        frame_origin: DVec3,
+        (lo, hi): (DVec3, DVec3),
+    ) -> [u32; 4] {
+        let (w, h) = (f64::from(self.width), f64::from(self.height));
+        let whole = [
+            0,
+            0,
+            self.width.saturating_sub(1),
+            self.height.saturating_sub(1),
+        ];
+        let eye = DVec3::from(self.eye) - frame_origin;
+        let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+        for c in 0..8 {
+            let corner = DVec3::new(
+                if c & 1 == 0 { lo.x } else { hi.x },
+                if c & 2 == 0 { lo.y } else { hi.y },
+                if c & 4 == 0 { lo.z } else { hi.z },
+            );
+            let d = corner - eye;
+            // The screen coordinates sx, sy in [-1, 1] of `ray`'s convention.
+            let (sx, sy) = match self.projection {
+                Projection::Perspective { fov_y_degrees } => {
+                    let depth = d.dot(basis.forward);
+                    if depth <= 0.0 {
+                        return whole;
+                    }
+                    let t = (fov_y_degrees.to_radians() * 0.5).tan();
+                    (
+                        d.dot(basis.right) / depth / (t * w / h),
+                        d.dot(basis.up) / depth / t,
+                    )
+                }
+                Projection::Orthographic { view_height } => {
+                    let hh = 0.5 * view_height;
+                    (d.dot(basis.right) / (hh * w / h), d.dot(basis.up) / hh)
+                }
+            };
+            let (px, py) = ((sx + 1.0) * 0.5 * w - 0.5, (1.0 - sy) * 0.5 * h - 0.5);
+            (x0, y0, x1, y1) = (x0.min(px), y0.min(py), x1.max(px), y1.max(py));
+        }
+        let clamp = |v: f64, n: u32| v.clamp(0.0, f64::from(n.saturating_sub(1))) as u32;
+        let (x0, x1) = ((x0 - 1.0).floor(), (x1 + 1.0).ceil());
+        let (y0, y1) = ((y0 - 1.0).floor(), (y1 + 1.0).ceil());
+        if !(x0.is_finite() && y0.is_finite() && x1.is_finite() && y1.is_finite()) {
+            return whole;
+        }
+        [
+            clamp(x0, self.width),
+            clamp(y0, self.height),
+            clamp(x1, self.width),
+            clamp(y1, self.height),
+        ]
+    }
 }
 
 /// Slab test against [lo, hi] with t0 ≥ 0; `None` when the ray misses. Axis-parallel rays are
@@ -161,6 +223,69 @@ impl Camera {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_boxs_pixel_box_holds_every_pixel_whose_ray_meets_it() {
+        let boxes = [
+            (DVec3::new(-0.3, -0.2, -0.1), DVec3::new(0.1, 0.4, 0.3)),
+            (DVec3::new(0.2, -0.9, -0.9), DVec3::new(0.9, -0.5, 0.0)),
+            (DVec3::new(-1.0, -1.0, -1.0), DVec3::new(-0.6, 1.0, -0.7)),
+        ];
+        let perspective = Projection::Perspective {
+            fov_y_degrees: 40.0,
+        };
+        let orthographic = Projection::Orthographic { view_height: 2.6 };
+        for (projection, eye) in [
+            (perspective, [2.5, 1.5, 2.0]),
+            (orthographic, [2.5, 1.5, 2.0]),
+            (perspective, [0.0, 0.0, 4.0]),
+        ] {
+            let cam = Camera {
+                eye,
+                target: [0.0; 3],
+                up: [0.0, 1.0, 0.0],
+                projection,
+                width: 61,
+                height: 47,
+            };
+            let basis = cam.basis().expect("basis");
+            for b in boxes {
+                let [x0, y0, x1, y1] = cam.pixel_box(&basis, DVec3::ZERO, b);
+                let mut hits = 0;
+                for y in 0..cam.height {
+                    for x in 0..cam.width {
+                        let (o, d) = cam.ray(&basis, DVec3::ZERO, x, y);
+                        if clip_box(o, d, b.0, b.1).is_some() {
+                            hits += 1;
+                            assert!(
+                                (x0..=x1).contains(&x) && (y0..=y1).contains(&y),
+                                "{projection:?}: pixel ({x}, {y}) outside {:?}",
+                                [x0, y0, x1, y1]
+                            );
+                        }
+                    }
+                }
+                assert!(hits > 0, "{b:?} is seen");
+                // Tight: at most the hits' own box and its one-pixel margin, far from all.
+                let area = (x1 - x0 + 1) * (y1 - y0 + 1);
+                assert!(area < cam.width * cam.height / 2, "{b:?}: {area} pixels");
+            }
+        }
+        // A box around the eye: every pixel.
+        let cam = Camera {
+            eye: [0.0, 0.0, 0.0],
+            target: [0.0, 0.0, -1.0],
+            up: [0.0, 1.0, 0.0],
+            projection: Projection::Perspective {
+                fov_y_degrees: 40.0,
+            },
+            width: 10,
+            height: 8,
+        };
+        let basis = cam.basis().expect("basis");
+        let around = (DVec3::splat(-1.0), DVec3::splat(1.0));
+        assert_eq!(cam.pixel_box(&basis, DVec3::ZERO, around), [0, 0, 9, 7]);
+    }
 
     #[test]
     fn centre_pixel_looks_at_target() {
