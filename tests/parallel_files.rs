@@ -368,6 +368,32 @@ fn parallel_meshes_merge_their_shared_points_and_drop_duplicate_ghost_cells() {
 }
 
 #[test]
+fn an_output_onto_a_piece_is_refused_before_any_work() {
+    use common::cli::{assert_fails, s, vmls};
+    let d = dir("outputs");
+    let (parallel, _) = grid_files(&d, "ImageData", [0, 8, 0, 8, 0, 8], 2, &image_at);
+    let piece = d.join("pieces/p3.vti");
+    let before = std::fs::read(&piece).expect("piece");
+    let png = d.join("x.png");
+    let volume = format!("volume.file=\"{}\"", s(&parallel));
+    let out = vmls(&[
+        "render",
+        "-o",
+        s(&png),
+        "--stats",
+        s(&piece),
+        "--set",
+        &volume,
+        "--set",
+        "camera.width=8",
+        "--set",
+        "camera.height=8",
+    ]);
+    assert_fails(&out, &["p3.vti", "a piece of volume.file"], &png);
+    assert_eq!(std::fs::read(&piece).expect("piece"), before);
+}
+
+#[test]
 fn pieces_that_leave_a_hole_disagree_or_are_missing_are_errors_naming_the_file() {
     let d = dir("faults");
     let whole = [0, 8, 0, 8, 0, 8];

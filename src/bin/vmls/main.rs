@@ -233,6 +233,19 @@ fn plan_outputs(
     if let Some(scene) = scene {
         inputs.extend(scene.input_files());
     }
+    // A parallel VTK XML file's pieces are inputs too (an unreadable summary is the load's
+    // error to report).
+    let pieces: Vec<std::path::PathBuf> = inputs
+        .iter()
+        .filter(|(_, p)| vmls::data::vtk_xml_parallel::is_parallel(p))
+        .filter_map(|(_, p)| vmls::data::vtk_xml_parallel::Summary::read(p).ok())
+        .flat_map(|s| s.pieces.into_iter().map(|p| p.source))
+        .collect();
+    inputs.extend(
+        pieces
+            .iter()
+            .map(|p| ("a piece of volume.file", p.as_path())),
+    );
     let outputs: Vec<(&str, &Path)> = outputs
         .iter()
         .filter_map(|&(role, p)| p.map(|p| (role, p)))
