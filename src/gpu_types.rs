@@ -424,8 +424,12 @@ pub struct RayPush {
     pub first: u32,
     /// One past the last outer step of this chunk.
     pub last: u32,
+    /// First image column and columns of the band (a brick's window; else 0 and the width).
+    pub col_offset: u32,
+    pub cols: u32,
+    pub _pad: [u32; 2],
 }
-const _: () = assert!(std::mem::size_of::<RayPush>() == 16);
+const _: () = assert!(std::mem::size_of::<RayPush>() == 32);
 
 /// Push constants of mls_eval.comp, probe_fma.comp and probe_memory.comp. GLSL twin:
 /// `CountPush`.
@@ -448,7 +452,8 @@ pub struct NextPush {
     pub row_offset: u32,
     pub rows: u32,
     pub args_slot: u32,
-    pub _pad: u32,
+    /// Columns the band's next chunk dispatches (its `RayPush::cols`).
+    pub cols: u32,
 }
 const _: () = assert!(std::mem::size_of::<NextPush>() == 16);
 

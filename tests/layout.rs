@@ -132,6 +132,9 @@ fn glsl_and_rust_layouts_agree() {
             rows: 2,
             first: 3,
             last: 4,
+            col_offset: 5,
+            cols: 6,
+            _pad: [7, 8],
         },
         "RayPush"
     );
@@ -229,7 +232,7 @@ fn glsl_and_rust_layouts_agree() {
             row_offset: 1,
             rows: 2,
             args_slot: 3,
-            _pad: 4
+            cols: 4
         },
         "NextPush"
     );

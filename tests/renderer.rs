@@ -257,7 +257,8 @@ fn raycast_next_matches_its_cpu_twin() {
                 row_offset: band * rows,
                 rows,
                 args_slot: band,
-                _pad: 0,
+                // A brick's window: the third band dispatches half the columns.
+                cols: if band == 2 { width / 2 } else { width },
             };
             rec.dispatch(
                 &pipeline,
@@ -273,11 +274,13 @@ fn raycast_next_matches_its_cpu_twin() {
     let got: Vec<[u32; 4]> = args.read(&ctx).expect("read");
     let band_pixels = (width * rows) as usize;
     for (band, (args, counts)) in got.iter().zip(counts.chunks(band_pixels)).enumerate() {
-        let want = next_groups(counts, width, rows);
+        let cols = if band == 2 { width / 2 } else { width };
+        let want = next_groups(counts, cols, rows);
         assert_eq!(args[..3], want, "band {band}");
     }
     assert_eq!(got[0][0], 0, "a finished band dispatches nothing");
     assert_eq!(got[1][..3], [3, 1, 1]);
+    assert_eq!(got[2][..3], [2, 1, 1], "a window's columns only");
     drop(group);
     drop((pipeline, args, counts_buf, params));
     finish(ctx);

@@ -110,13 +110,17 @@ struct RayPush {
     uint rows;
     uint first;
     uint last;
+    uint col_offset;
+    uint cols;
+    uint _pad0;
+    uint _pad1;
 };
 
 struct NextPush {
     uint row_offset;
     uint rows;
     uint args_slot;
-    uint _pad0;
+    uint cols;
 };
 
 struct PackPush {

@@ -96,7 +96,7 @@ void main() {
     mls_out._pad0 = 7u;
     mls_out._pad1 = 8u;
 
-    ray_push = RayPush(1u, 2u, 3u, 4u);
+    ray_push = RayPush(1u, 2u, 3u, 4u, 5u, 6u, 7u, 8u);
     count_push = CountPush(1u, 2u, 3u, 4u);
 
     splat_params.camera.eye = v(1.0);
@@ -152,7 +152,7 @@ void main() {
     next_push.row_offset = 1u;
     next_push.rows = 2u;
     next_push.args_slot = 3u;
-    next_push._pad0 = 4u;
+    next_push.cols = 4u;
 
     pack_push.count = 1u;
     pack_push.composite = 2u;

@@ -370,8 +370,11 @@ void main() {
 #if MAX_ISO > 0
     load_isos();
 #endif
-    uvec2 pixel = uvec2(gl_GlobalInvocationID.x, gl_GlobalInvocationID.y + band.row_offset);
-    if (pixel.x >= params.camera.width || gl_GlobalInvocationID.y >= band.rows || pixel.y >= params.camera.height) {
+    // The band's rows, and its columns: a brick's window, else the whole width.
+    uvec2 pixel = uvec2(gl_GlobalInvocationID.x + band.col_offset,
+                        gl_GlobalInvocationID.y + band.row_offset);
+    if (gl_GlobalInvocationID.x >= band.cols || pixel.x >= params.camera.width
+        || gl_GlobalInvocationID.y >= band.rows || pixel.y >= params.camera.height) {
         return;
     }
     uint index = pixel.y * params.camera.width + pixel.x;

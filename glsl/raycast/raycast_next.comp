@@ -35,7 +35,7 @@ void main() {
     }
     barrier();
     if (gl_LocalInvocationIndex == 0u) {
-        args[push.args_slot] = live != 0u ? uvec4((width + 7u) / 8u, (push.rows + 7u) / 8u, 1u, 0u)
+        args[push.args_slot] = live != 0u ? uvec4((push.cols + 7u) / 8u, (push.rows + 7u) / 8u, 1u, 0u)
                                           : uvec4(0u, 1u, 1u, 0u);
     }
 }

@@ -18,12 +18,12 @@
 //! A parallel VTK XML image (`.pvti`) is read piece by piece instead: every rank reads the
 //! pieces its brick needs ([`RankBrick::read_parallel`]), so no rank holds the whole grid.
 //!
-//! A ray-cast rank dispatches only the rows of its box's screen footprint
+//! A ray-cast rank dispatches only the pixels of its box's screen footprint
 //! ([`crate::raycast::RaySetup::window`]).
 //!
 //! Not yet here: the other parallel kinds (`.pvtr`, `.pvts`, `.pvtu`) and splatting from a
-//! `.pvti` are read whole by rank 0 (its memory bounds the data); the footprint's columns
-//! outside it, and splatting ranks, still run every pixel.
+//! `.pvti` are read whole by rank 0 (its memory bounds the data); splatting ranks still walk
+//! every tile.
 
 #[allow(unsafe_code)]
 mod icet;

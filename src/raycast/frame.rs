@@ -65,20 +65,29 @@ pub(crate) fn band_rows(setup: &RaySetup) -> u32 {
         .next_multiple_of(8)
 }
 
-/// The push constants of the chunk of a band (`rows` rows from `row`) that starts at outer
-/// step `first`: at most `chunk` steps, none past `outer`.
-pub(crate) fn chunk_push(row: u32, rows: u32, first: u32, chunk: u32, outer: u32) -> RayPush {
+/// The push constants of the chunk of a band (`rows` rows from `row`, columns `cols`: first
+/// and count) that starts at outer step `first`: at most `chunk` steps, none past `outer`.
+pub(crate) fn chunk_push(
+    (row, rows): (u32, u32),
+    cols: (u32, u32),
+    first: u32,
+    chunk: u32,
+    outer: u32,
+) -> RayPush {
     RayPush {
         row_offset: row,
         rows,
         first,
         last: first.saturating_add(chunk).min(outer),
+        col_offset: cols.0,
+        cols: cols.1,
+        _pad: [0; 2],
     }
 }
 
-/// The workgroups of a band of `rows` rows of `width` pixels (8 × 8 pixels each).
-pub(crate) fn band_groups(width: u32, rows: u32) -> [u32; 3] {
-    [width.div_ceil(8), rows.div_ceil(8), 1]
+/// The workgroups of a band of `rows` rows of `cols` pixels (8 × 8 pixels each).
+pub(crate) fn band_groups(cols: u32, rows: u32) -> [u32; 3] {
+    [cols.div_ceil(8), rows.div_ceil(8), 1]
 }
 
 /// Whether the frame writes the per-pixel ray report (`binding::RAY_STATS`): skipping's
@@ -280,14 +289,15 @@ pub(crate) fn next_group<'a>(
 
 /// What a band of a ray-cast frame records, for `render()` (a submission per band) and for a
 /// recorded frame (every band): the ray caster and `raycast_next` with their bind groups, the
-/// indirect arguments, the image width and the frame's outer steps.
+/// indirect arguments, the columns it dispatches (first and count: a brick's window, else the
+/// image's) and the frame's outer steps.
 pub(crate) struct BandCommands<'a> {
     pub(crate) pipeline: &'a ComputePipeline,
     pub(crate) group: &'a BindGroup<'a>,
     pub(crate) next: &'a ComputePipeline,
     pub(crate) next_group: &'a BindGroup<'a>,
     pub(crate) args: &'a Buffer,
-    pub(crate) width: u32,
+    pub(crate) cols: (u32, u32),
     pub(crate) outer: u32,
 }
 
@@ -307,13 +317,13 @@ impl BandCommands<'_> {
         let mut dispatches = 0;
         let mut first = 0;
         while first < self.outer {
-            let push = chunk_push(row, rows, first, chunk, self.outer);
+            let push = chunk_push((row, rows), self.cols, first, chunk, self.outer);
             if first == 0 {
                 rec.dispatch(
                     self.pipeline,
                     self.group,
                     bytemuck::bytes_of(&push),
-                    band_groups(self.width, rows),
+                    band_groups(self.cols.1, rows),
                     "raycast",
                 )?;
             } else {
@@ -321,7 +331,7 @@ impl BandCommands<'_> {
                     row_offset: row,
                     rows,
                     args_slot: slot,
-                    _pad: 0,
+                    cols: self.cols.1,
                 };
                 rec.dispatch(
                     self.next,
@@ -426,13 +436,16 @@ pub(crate) fn run_bands(
         next: pipelines.next,
         next_group: &next_group,
         args: &targets.args,
-        width: w,
+        // A brick's window: its columns only (the others were filled as missing rays).
+        cols: setup
+            .window
+            .map_or((0, w), |[x0, _, x1, _]| (x0, (x1 + 1).min(w) - x0)),
         outer,
     };
     let mut chunk = setup.chunk.unwrap_or_else(|| default_chunk(setup));
     let mut gpu_ms = 0.0;
     let mut bands = 0;
-    // A brick's window: the rows outside it are rays that miss its box, written as a missing
+    // A brick's window: the pixels outside it are rays that miss its box, written as a missing
     // ray ends (transparent over black, finished, nothing to report) instead of dispatched:
     // on lavapipe a ray that misses still costs 160 ns (ML 128³ at 512², all rays missing:
     // 43 ms), which every brick would pay for every pixel.

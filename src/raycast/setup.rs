@@ -86,8 +86,8 @@ pub struct RaySetup {
     /// (frame-relative), their steps anchored where the undivided field's segments start.
     pub clip: Option<(DVec3, DVec3)>,
     /// A brick's frame over black: the pixels [x0, y0, x1, y1] whose rays can meet its box
-    /// ([`Camera::pixel_box`]); only their rows are dispatched, the others are written as rays
-    /// that miss (transparent, finished) without running.
+    /// ([`Camera::pixel_box`]); only they are dispatched, the others are written as rays that
+    /// miss (transparent, finished) without running.
     pub window: Option<[u32; 4]>,
     /// Riemann and reference methods stop below this transmittance.
     pub min_transmittance: f64,

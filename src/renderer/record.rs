@@ -449,7 +449,7 @@ impl Renderer {
                 next,
                 next_group: &next_group,
                 args,
-                width: w,
+                cols: (0, w),
                 outer,
             };
             let mut row = 0;
@@ -588,11 +588,11 @@ impl Renderer {
 }
 
 /// Stage `raycast_next`: the workgroup counts of a band's next chunk from its rays' counts
-/// after this one (`width` × `rows` of them): the band's groups while any ray is unfinished,
-/// none (x = 0) once every ray is done.
-pub fn next_groups(counts: &[u32], width: u32, rows: u32) -> [u32; 3] {
+/// after this one (its rows' pixels): the band's groups (`cols` × `rows`) while any ray is
+/// unfinished, none (x = 0) once every ray is done.
+pub fn next_groups(counts: &[u32], cols: u32, rows: u32) -> [u32; 3] {
     if counts.iter().any(|c| c & ray_count::DONE == 0) {
-        band_groups(width, rows)
+        band_groups(cols, rows)
     } else {
         [0, 1, 1]
     }
