@@ -137,18 +137,12 @@ pub fn message_for(
             }
         }
     });
-    let frame = field.piece_frame();
-    let Some(extent) = frame.extent else {
-        return Err(BrickError::Message(
-            "a piece frame without its supports".into(),
-        ));
-    };
     Ok(BrickMessage {
         tree: tree.clone(),
         rank,
-        frame_origin: frame.frame_origin.to_array(),
-        range: frame.range,
-        extent,
+        frame_origin: field.frame_origin.to_array(),
+        range: field.value_range(),
+        extent: field.support_extent(),
         samples: brick.samples,
         count: brick.count,
         volumes,
@@ -249,6 +243,15 @@ pub fn brick_settings(
     Ok(settings)
 }
 
+/// The view splatting bricks divided for `view` serve (they render no other); none for ray
+/// casting, whose MLS ghosts serve every view.
+pub fn splat_view(view: &View<'_>) -> Option<ViewKey> {
+    view.settings
+        .method
+        .splat_shading()
+        .map(|_| ViewKey::of(view))
+}
+
 /// What a decomposition's bricks need to render `view`: for ray casting nothing (MLS ghosts,
 /// good for any view), for splatting the reach of every kernel in this view (projected here),
 /// which chooses their ghosts ([`Ghosts::Splat`]).
@@ -335,7 +338,7 @@ impl VirtualBricks {
             tree,
             renderers,
             counts,
-            splat_view: reach.map(|r| r.key().clone()),
+            splat_view: splat_view(view),
         })
     }
 

@@ -26,8 +26,8 @@ use crate::field::Field;
 use crate::splat::project::splat_project;
 use crate::splat::raster::kernel;
 use crate::splat::{Shading, SplatSetup};
+use crate::view::View;
 use crate::view::camera::{Camera, Projection};
-use crate::view::{View, ViewKey};
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -39,7 +39,6 @@ const BORDER: u32 = 2;
 #[derive(Debug, Clone)]
 pub struct SplatReach {
     boxes: Vec<Option<Aabb>>,
-    key: ViewKey,
 }
 
 impl SplatReach {
@@ -90,20 +89,12 @@ impl SplatReach {
                 )
             })
             .collect();
-        Ok(Self {
-            boxes,
-            key: ViewKey::of(view),
-        })
+        Ok(Self { boxes })
     }
 
     /// Whether kernel i adds to a sheet whose midpoint can lie in `cell` (closed).
     pub fn meets(&self, i: usize, (lo, hi): Aabb) -> bool {
         self.boxes[i].is_some_and(|(a, b)| (0..3).all(|k| b[k] >= lo[k] && a[k] <= hi[k]))
-    }
-
-    /// The view this reach was made for.
-    pub fn key(&self) -> &ViewKey {
-        &self.key
     }
 }
 

@@ -299,16 +299,15 @@ impl Summary {
                 name: a.name.clone(),
                 location: a.location,
                 components: a.components,
-                values: Values::with_capacity(a.values.storage(), 0),
+                values: filled(
+                    a.values.storage(),
+                    match a.location {
+                        Location::Point => n,
+                        Location::Cell => cells,
+                    },
+                ),
             })
             .collect();
-        for a in &mut arrays {
-            let len = match a.location {
-                Location::Point => n,
-                Location::Cell => cells,
-            };
-            a.values = filled(a.values.storage(), len);
-        }
         let mut coords: [Vec<Option<f64>>; 3] = dims.map(|d| vec![None; d]);
         let mut points = vec![[0.0f64; 3]; if self.kind == "StructuredGrid" { n } else { 0 }];
         for ((piece, d), e) in read.iter().zip(&extents) {

@@ -34,7 +34,7 @@ use crate::bricks::parallel::GridPlan;
 use crate::bricks::wire::{decode, encode};
 use crate::bricks::{
     BrickError, Ghosts, brick_settings, decompose, message_for, over_background,
-    piece_from_message, reach_for, viewpoint,
+    piece_from_message, reach_for, splat_view, viewpoint,
 };
 use crate::data::vtk_xml_parallel::Summary;
 use crate::field::Field;
@@ -253,12 +253,8 @@ impl RankBrick {
         )?;
         let divide_ms = start.elapsed().as_secs_f64() * 1e3;
         let (piece, tree, count) = piece;
-        let splat_view = view
-            .settings
-            .method
-            .splat_shading()
-            .map(|_| ViewKey::of(view));
-        Self::prepare(world, ctx, piece, tree, count, divide_ms, splat_view)
+        let cost = (count, divide_ms, 0);
+        Self::prepare(world, ctx, piece, tree, cost, splat_view(view))
     }
 
     /// Every rank reads the summary of the parallel image at `path` (a `.pvti`) and only the
@@ -309,20 +305,18 @@ impl RankBrick {
             plan.piece(rank, brick, (lo, hi), reconstruction, octree)
                 .map_err(|e| e.to_string()),
         )?;
-        let divide_ms = start.elapsed().as_secs_f64() * 1e3;
-        let mut brick = Self::prepare(world, ctx, piece, plan.tree, count, divide_ms, None)?;
-        brick.pieces_read = pieces_read;
-        Ok(brick)
+        let cost = (count, start.elapsed().as_secs_f64() * 1e3, pieces_read);
+        Self::prepare(world, ctx, piece, plan.tree, cost, None)
     }
 
-    /// A rank's renderer for its piece and its IceT context (collective).
+    /// A rank's renderer for its piece and its IceT context (collective); `cost` is the
+    /// piece's sample counts, build ms and pieces of a parallel file read.
     fn prepare(
         world: &SimpleCommunicator,
         ctx: &Context,
         piece: Field,
         tree: crate::bricks::kd::KdTree,
-        count: crate::bricks::ghosts::GhostCount,
-        divide_ms: f64,
+        (count, divide_ms, pieces_read): (crate::bricks::ghosts::GhostCount, f64, usize),
         splat_view: Option<ViewKey>,
     ) -> Result<Self, DistributedError> {
         let renderer = agree(
@@ -336,7 +330,7 @@ impl RankBrick {
             samples: count.own as u64,
             ghosts: count.ghosts as u64,
             divide_ms,
-            pieces_read: 0,
+            pieces_read,
             icet,
             splat_view,
         })

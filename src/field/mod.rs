@@ -230,11 +230,16 @@ impl Field {
             range: self.range,
             reconstruction: self.reconstruction,
             octree: self.octree_settings,
-            extent: Some(SupportExtent {
-                support_box: self.support_box,
-                thinnest: self.thinnest_support(),
-                radii: self.radius_quantiles().to_vec(),
-            }),
+            extent: Some(self.support_extent()),
+        }
+    }
+
+    /// What splatting reads of this field's supports (a piece keeps the whole field's).
+    pub fn support_extent(&self) -> SupportExtent {
+        SupportExtent {
+            support_box: self.support_box,
+            thinnest: self.thinnest_support(),
+            radii: self.radius_quantiles().to_vec(),
         }
     }
 
