@@ -4,10 +4,12 @@
 
 use crate::bricks::{check_frame_budget, write_composite};
 use crate::render::Request;
-use crate::{CliError, DeviceArgs, check_stop, context, json_to, plan_outputs, report};
+use crate::{
+    CliError, DeviceArgs, check_stop, context, json_to, plan_outputs, report, report_failure,
+};
 use mpi::Threading;
 use mpi::topology::SimpleCommunicator;
-use mpi::traits::Communicator;
+use mpi::traits::{Communicator, CommunicatorCollectives};
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 use vmls::distributed::{DistributedError, RankBrick, Strategy, agree};
@@ -63,7 +65,13 @@ pub fn run_render_mpi(
         return Err(CliError::Usage("MPI was initialised twice".into()));
     };
     let world = universe.world();
-    run(&world, request, strategy, device, stop)
+    let result = run(&world, request, strategy, device, stop);
+    // mpirun ends the job as soon as one rank exits non-zero, which could cut off rank 0's
+    // report of a failure: rank 0 prints it before any rank leaves this barrier (every rank
+    // reaches it, since failures are agreed on and only rank 0 works after the last collective).
+    let result = result.map_err(|e| CliError::Reported(report_failure(&e)));
+    world.barrier();
+    result
 }
 
 /// The device this rank opens: the one named (`--device`, `VMLS_DEVICE`), else, where the node

@@ -174,6 +174,10 @@ enum CliError {
     #[cfg(feature = "mpi")]
     #[error("failed; another rank reports why")]
     Quiet,
+    /// Failed and already reported ([`report_failure`]): exit with this status.
+    #[cfg(feature = "mpi")]
+    #[error("failed (reported)")]
+    Reported(i32),
 }
 
 impl From<vmls::files::FileError> for CliError {
@@ -462,16 +466,23 @@ fn main() {
         },
     };
     if let Err(e) = result {
-        #[cfg(feature = "mpi")]
-        if matches!(e, CliError::Quiet) {
-            std::process::exit(1);
-        }
-        eprintln!("vmls: error: {}", report(&e));
-        let interrupted = matches!(e, CliError::Render(RenderError::Interrupted));
-        std::process::exit(if interrupted {
-            signals::exit_status()
-        } else {
-            1
-        });
+        std::process::exit(report_failure(&e));
+    }
+}
+
+/// Prints `e` (unless another process reports it, or it was reported already) and returns the
+/// exit status it ends with.
+fn report_failure(e: &CliError) -> i32 {
+    #[cfg(feature = "mpi")]
+    match e {
+        CliError::Quiet => return 1,
+        CliError::Reported(status) => return *status,
+        _ => {}
+    }
+    eprintln!("vmls: error: {}", report(e));
+    if matches!(e, CliError::Render(RenderError::Interrupted)) {
+        signals::exit_status()
+    } else {
+        1
     }
 }
