@@ -3,14 +3,17 @@
 //! ghost cells counted once; pieces that leave a hole, disagree or are missing are errors
 //! naming the file. And a `.pvti` read brick by brick (`bricks::parallel`): every rank reads
 //! only the pieces that meet its brick and takes exactly the samples the whole field's brick
-//! holds.
+//! holds; a `.pvtu` or `.pvtp` read by the ranks together (`bricks::parallel_scattered`) gives
+//! every rank the whole field's brick.
 
 mod common;
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+use vmls::bricks::exchange::LocalRanks;
 use vmls::bricks::parallel::GridPlan;
-use vmls::bricks::{Ghosts, divide};
+use vmls::bricks::parallel_scattered::read_scattered;
+use vmls::bricks::{Ghosts, divide, piece_of};
 use vmls::data::dataset::{Dataset, Geometry};
 use vmls::data::load_dataset;
 use vmls::data::vtk_xml_parallel::Summary;
@@ -504,5 +507,231 @@ fn each_rank_reads_only_its_pieces_and_holds_the_whole_fields_brick() {
                 );
             }
         }
+    }
+}
+
+/// Scattered points cut into `.vtp` pieces of `per` points, with point array "f".
+fn vtp_files(d: &Path, points: &[[f64; 3]], per: usize) -> PathBuf {
+    let mut list = String::new();
+    for (n, chunk) in points.chunks(per).enumerate() {
+        let name = format!("q{n}.vtp");
+        std::fs::write(
+            d.join(&name),
+            format!(
+                "<?xml version=\"1.0\"?>\n<VTKFile type=\"PolyData\" version=\"1.0\">\
+                 <PolyData><Piece NumberOfPoints=\"{}\"><PointData>\
+                 <DataArray type=\"Float32\" Name=\"f\" format=\"ascii\">{}</DataArray>\
+                 </PointData><Points><DataArray type=\"Float64\" NumberOfComponents=\"3\" \
+                 format=\"ascii\">{}</DataArray></Points></Piece></PolyData></VTKFile>\n",
+                chunk.len(),
+                join(chunk.iter().map(|&p| f(p) as f32)),
+                join(chunk.iter().flatten()),
+            ),
+        )
+        .expect("write");
+        let _ = write!(list, "<Piece Source=\"{name}\"/>");
+    }
+    let path = d.join("points.pvtp");
+    std::fs::write(
+        &path,
+        format!(
+            "<?xml version=\"1.0\"?>\n<VTKFile type=\"PPolyData\" version=\"1.0\">\
+             <PPolyData GhostLevel=\"0\"><PPointData><PDataArray type=\"Float32\" Name=\"f\"/>\
+             </PPointData><PPoints><PDataArray type=\"Float64\" NumberOfComponents=\"3\"/>\
+             </PPoints>{list}</PPolyData></VTKFile>\n"
+        ),
+    )
+    .expect("write");
+    path
+}
+
+/// A brick's own samples and its ghosts as (position, value, metric) bits, in order.
+type Bits = Vec<([u64; 3], u32, [u64; 6])>;
+fn brick_bits(s: &SampleSet, own: usize) -> (Bits, Bits) {
+    let bits = |range: std::ops::Range<usize>| {
+        range
+            .map(|i| {
+                (
+                    s.position(i).map(f64::to_bits),
+                    s.values.get(i).to_bits(),
+                    s.metric(i).map(f64::to_bits),
+                )
+            })
+            .collect::<Bits>()
+    };
+    (bits(0..own), bits(own..s.len()))
+}
+
+/// Kernel volumes of a piece by position.
+fn volumes_by_position(field: &Field) -> Vec<([u64; 3], f64)> {
+    let s = &field.samples;
+    let v = field.kernel_volumes();
+    let mut out: Vec<_> = (0..s.len())
+        .map(|i| (s.position(i).map(f64::to_bits), v.get(i)))
+        .collect();
+    out.sort_by_key(|a| a.0);
+    out
+}
+
+#[test]
+fn ranks_reading_a_mesh_or_points_together_hold_the_whole_fields_bricks() {
+    let d = dir("scattered");
+    let (points, cells) = lattice(4);
+    let mesh = vtu_files(&d, &points, &cells, 37, true);
+    // Scattered points: a Kronecker sequence, every 7th point written twice (a shared point).
+    let mut scattered: Vec<[f64; 3]> = (0..600)
+        .map(|i| {
+            let t = i as f64;
+            [
+                0.618_033_988_749_894_9,
+                0.414_213_562_373_095,
+                0.732_050_807_568_877_2,
+            ]
+            .map(|a| (t * a).fract())
+            .map(|x| 2.0 * x - 1.0)
+        })
+        .collect();
+    let copies: Vec<[f64; 3]> = scattered.iter().step_by(7).copied().collect();
+    scattered.extend(copies);
+    let cloud = vtp_files(&d, &scattered, 90);
+    for (path, method, anisotropic) in [
+        (&mesh, "mls", None),
+        (&cloud, "mls", None),
+        (&cloud, "mls", Some(true)),
+        (&cloud, "gaussian", None),
+        (&mesh, "gaussian", None),
+    ] {
+        let settings = SampleSettings {
+            anisotropic,
+            ..SampleSettings::default()
+        };
+        let scene = common::general_scene(&[format!("reconstruction.method=\"{method}\"")]);
+        let dataset = load_dataset(path).expect("dataset");
+        let whole = SampleSet::from_dataset(&dataset, path, Some("f"), &settings).expect("set");
+        let whole =
+            Field::from_samples(whole, scene.reconstruction, &scene.octree, |_| {}).expect("field");
+        let summary = Summary::read(path).expect("summary");
+        for ranks in [1, 2, 3, 5] {
+            let what = format!(
+                "{}, {method}, anisotropic {anisotropic:?}, {ranks} ranks",
+                path.display()
+            );
+            let bricks = LocalRanks::run(ranks, |ex| {
+                read_scattered(
+                    ex,
+                    &summary,
+                    Some("f"),
+                    &settings,
+                    scene.reconstruction,
+                    scene.octree,
+                )
+            });
+            let bricks: Vec<_> = bricks
+                .into_iter()
+                .map(|b| b.unwrap_or_else(|e| panic!("{what}: {e}")))
+                .collect();
+            let tree = vmls::bricks::decompose(&whole, ranks).expect("tree");
+            let read: usize = bricks.iter().map(|b| b.pieces_read).sum();
+            assert_eq!(read, summary.pieces.len(), "{what}: every piece read once");
+            for (rank, brick) in bricks.into_iter().enumerate() {
+                assert_eq!(brick.tree, tree, "{what}: the tree");
+                if ranks > 1 {
+                    assert!(brick.pieces_read < summary.pieces.len(), "{what}");
+                }
+                let (piece, count) =
+                    piece_of(&whole, &tree, rank, Ghosts::Mls).expect("whole piece");
+                assert_eq!(brick.count, count, "{what}, rank {rank}: counts");
+                let (a, b) = (&brick.samples, &piece.samples);
+                assert_eq!(
+                    brick_bits(a, count.own),
+                    brick_bits(b, count.own),
+                    "{what}, rank {rank}: own samples and ghosts, in order"
+                );
+                assert_eq!(a.domain, b.domain, "{what}: domain");
+                assert_eq!(a.spacing, b.spacing, "{what}: spacing");
+                assert_eq!(a.provenance, b.provenance, "{what}: provenance");
+                let frame = piece.piece_frame();
+                assert_eq!(brick.frame.frame_origin, frame.frame_origin, "{what}");
+                assert_eq!(brick.frame.range, frame.range, "{what}: range");
+                let (e, w) = (brick.frame.extent.as_ref().expect("extent"), frame.extent);
+                let w = w.expect("extent");
+                assert_eq!(e.support_box, w.support_box, "{what}: support box");
+                assert_eq!(e.thinnest, w.thinnest, "{what}: thinnest");
+                assert_eq!(e.radii, w.radii, "{what}: radius quantiles");
+                let (mine, _, _, _) = brick.piece().expect("piece");
+                assert_eq!(mine.clip(), piece.clip(), "{what}: box");
+                if method == "gaussian" {
+                    // The sums run in another order: rounding only.
+                    let (x, y) = (volumes_by_position(&mine), volumes_by_position(&piece));
+                    assert_eq!(x.len(), y.len());
+                    for ((p, u), (q, v)) in x.iter().zip(&y) {
+                        assert_eq!(p, q, "{what}");
+                        assert!(
+                            (u - v).abs() <= 1e-12 * v.abs(),
+                            "{what}: volume {u} vs {v}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// What each of `ranks` ranks reading `summary` together with `settings` failed with.
+fn failures(summary: &Summary, ranks: usize, settings: &SampleSettings) -> Vec<String> {
+    let scene = common::general_scene(&[]);
+    LocalRanks::run(ranks, |ex| {
+        read_scattered(
+            ex,
+            summary,
+            Some("f"),
+            settings,
+            scene.reconstruction,
+            scene.octree,
+        )
+        .err()
+        .map(|e| e.to_string())
+    })
+    .into_iter()
+    .enumerate()
+    .map(|(rank, e)| e.unwrap_or_else(|| panic!("rank {rank} went on")))
+    .collect()
+}
+
+#[test]
+fn a_rank_that_cannot_read_its_piece_stops_every_rank_with_its_message() {
+    let d = dir("scattered-missing");
+    let (points, cells) = lattice(3);
+    let mesh = vtu_files(&d, &points, &cells, 20, false);
+    let summary = Summary::read(&mesh).expect("summary");
+    let last = summary.pieces.len() - 1;
+    std::fs::remove_file(&summary.pieces[last].source).expect("remove");
+    let name = format!("m{last}.vtu");
+    for (rank, e) in failures(&summary, 3, &SampleSettings::default())
+        .iter()
+        .enumerate()
+    {
+        assert!(
+            e.contains("rank 2 of 3") && e.contains(&name),
+            "rank {rank}: {e}"
+        );
+    }
+}
+
+#[test]
+fn one_ring_supports_of_a_split_mesh_are_refused_by_name() {
+    let d = dir("scattered-one-ring");
+    let (points, cells) = lattice(2);
+    let mesh = vtu_files(&d, &points, &cells, 10, false);
+    let summary = Summary::read(&mesh).expect("summary");
+    let settings = SampleSettings {
+        anisotropic: Some(true),
+        ..SampleSettings::default()
+    };
+    for e in failures(&summary, 2, &settings) {
+        assert!(
+            e.contains("reconstruction.anisotropic") && e.contains("rank 0"),
+            "{e}"
+        );
     }
 }

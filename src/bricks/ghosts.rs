@@ -232,12 +232,17 @@ fn scattered_brick(
 
 /// Whether sample i's support reaches the box: its bounding box first (cheap, and exact for
 /// a box that misses it), then the metric distance.
-fn reaches(samples: &SampleSet, i: usize, x: [f64; 3], (lo, hi): Aabb) -> bool {
-    let e = samples.support_extent(i);
+fn reaches(samples: &SampleSet, i: usize, x: [f64; 3], bounds: Aabb) -> bool {
+    support_reaches(&samples.metric(i), samples.support_extent(i), x, bounds)
+}
+
+/// Whether the support of metric `m` and half extents `e` at x reaches the box: the MLS ghost
+/// rule, for a sample held apart from its set.
+pub fn support_reaches(m: &Metric, e: [f64; 3], x: [f64; 3], (lo, hi): Aabb) -> bool {
     if (0..3).any(|a| x[a] + e[a] <= lo[a] || x[a] - e[a] >= hi[a]) {
         return false;
     }
-    metric_distance2(&samples.metric(i), x, lo, hi) < 1.0
+    metric_distance2(m, x, lo, hi) < 1.0
 }
 
 /// min over y ∈ [lo, hi] of (y − x)ᵀM(y − x), M positive definite: the minimiser has each

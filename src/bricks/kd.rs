@@ -53,6 +53,16 @@ struct Planes {
     dims: [usize; 3],
 }
 
+/// Every how many samples of `n` the quantiles read one.
+pub fn subsample_stride(n: usize) -> usize {
+    n.div_ceil(SUBSAMPLE).max(1)
+}
+
+/// The subsample of `n` samples at `position(i)` that the quantiles are read from.
+fn subsample(n: usize, position: impl Fn(usize) -> [f64; 3]) -> Vec<[f64; 3]> {
+    (0..n).step_by(subsample_stride(n)).map(position).collect()
+}
+
 impl KdTree {
     /// Cuts the bounding box of `samples`' domain into `ranks` boxes.
     pub fn decompose(samples: &SampleSet, ranks: usize) -> Result<Self, BrickError> {
@@ -68,13 +78,19 @@ impl KdTree {
             }),
             Positions::Scattered(_) => None,
         };
-        Self::build(
-            samples.len(),
-            |i| samples.position(i),
-            planes,
-            samples.domain_box(),
-            ranks,
-        )
+        let points = subsample(samples.len(), |i| samples.position(i));
+        Self::build(points, planes, samples.domain_box(), ranks)
+    }
+
+    /// The tree of scattered samples in `domain` from `points`, a subsample of them taken by
+    /// the caller (as [`subsample_stride`] takes it): the samples of a parallel file that the
+    /// ranks read in parts.
+    pub fn decompose_points(
+        points: Vec<[f64; 3]>,
+        domain: Aabb,
+        ranks: usize,
+    ) -> Result<Self, BrickError> {
+        Self::build(points, None, domain, ranks)
     }
 
     /// [`KdTree::decompose`] of a regular grid's samples (`dims` points from `origin`,
@@ -91,19 +107,15 @@ impl KdTree {
             spacing,
             dims,
         };
-        Self::build(
-            dims.iter().product(),
-            |i| grid_point(dims, origin, spacing, i),
-            Some(planes),
-            domain,
-            ranks,
-        )
+        let points = subsample(dims.iter().product(), |i| {
+            grid_point(dims, origin, spacing, i)
+        });
+        Self::build(points, Some(planes), domain, ranks)
     }
 
-    /// The tree of `n` samples at `position(i)` in `domain`, cut at grid `planes` if any.
+    /// The tree of the subsample `points` in `domain`, cut at grid `planes` if any.
     fn build(
-        n: usize,
-        position: impl Fn(usize) -> [f64; 3],
+        points: Vec<[f64; 3]>,
         planes: Option<Planes>,
         domain: Aabb,
         ranks: usize,
@@ -124,8 +136,6 @@ impl KdTree {
                 )));
             }
         }
-        let stride = n.div_ceil(SUBSAMPLE).max(1);
-        let points: Vec<[f64; 3]> = (0..n).step_by(stride).map(position).collect();
         let mut tree = KdTree {
             nodes: Vec::new(),
             boxes: vec![domain; ranks],

@@ -22,9 +22,12 @@
 //! [MLS]'s criterion, the fast path and skipping (a brick solves directly), render.tolerance,
 //! surface splats.
 
+mod distribute;
+pub mod exchange;
 pub mod ghosts;
 pub mod kd;
 pub mod parallel;
+pub mod parallel_scattered;
 pub mod splat;
 pub mod wire;
 

@@ -15,22 +15,26 @@
 //! did, every rank returns [`DistributedError`] and rank 0's names the first failing rank and
 //! its message, so that no rank waits in a collective call for one that has gone.
 //!
-//! A parallel VTK XML image (`.pvti`) is read piece by piece instead: every rank reads the
-//! pieces its brick needs ([`RankBrick::read_parallel`]), so no rank holds the whole grid.
+//! A parallel VTK XML image, mesh or point file (`.pvti`, `.pvtu`, `.pvtp`) is read by the
+//! ranks instead ([`RankBrick::read_parallel`]): an image's pieces by the ranks whose bricks
+//! they meet, a mesh's or points' pieces in shares, redistributed to the kd boxes; no rank
+//! holds the whole field.
 //!
 //! A ray-cast rank dispatches only the pixels of its box's screen footprint
 //! ([`crate::raycast::RaySetup::window`]).
 //!
-//! Not yet here: the other parallel kinds (`.pvtr`, `.pvts`, `.pvtu`) and splatting from a
-//! `.pvti` are read whole by rank 0 (its memory bounds the data); splatting ranks still walk
-//! every tile.
+//! Not yet here: the structured parallel kinds (`.pvtr`, `.pvts`), one-ring supports of a mesh
+//! and every splatting scene's parallel file are read whole by rank 0 (its memory bounds the
+//! data); splatting ranks still walk every tile.
 
 #[allow(unsafe_code)]
 mod icet;
 
 pub use icet::{CompositeStats, IcetError, Strategy};
 
+use crate::bricks::exchange::Exchange;
 use crate::bricks::parallel::GridPlan;
+use crate::bricks::parallel_scattered::read_scattered;
 use crate::bricks::wire::{decode, encode};
 use crate::bricks::{
     BrickError, Ghosts, brick_settings, decompose, message_for, over_background,
@@ -43,7 +47,9 @@ use crate::view::View;
 use crate::view::ViewKey;
 use crate::vk::Context;
 use icet::Icet;
+use mpi::Count;
 use mpi::collective::SystemOperation;
+use mpi::datatype::{Partition, PartitionMut};
 use mpi::topology::SimpleCommunicator;
 use mpi::traits::{Communicator, CommunicatorCollectives, Destination, Root, Source};
 use std::time::Instant;
@@ -111,6 +117,102 @@ pub fn agree<T>(
         ranks: world.size(),
         message: text,
     })
+}
+
+/// The world's ranks as a [`crate::bricks::exchange::Exchange`]: MPI's variable-count
+/// collectives, in rounds of at most [`ROUND`] bytes a rank sends, as their counts are 32-bit.
+struct Mpi<'a>(&'a SimpleCommunicator);
+
+/// Bytes a rank sends in one round of an exchange, at most.
+const ROUND: usize = 1 << 30;
+
+/// Displacements of `counts` laid end to end.
+fn displacements(counts: &[Count]) -> Vec<Count> {
+    counts
+        .iter()
+        .scan(0, |at, &c| {
+            let d = *at;
+            *at += c;
+            Some(d)
+        })
+        .collect()
+}
+
+impl Mpi<'_> {
+    /// Whether any rank has `left` bytes still to send.
+    fn any_left(&self, left: usize) -> bool {
+        let mut any = 0u64;
+        self.0
+            .all_reduce_into(&(left as u64), &mut any, SystemOperation::sum());
+        any > 0
+    }
+}
+
+impl Exchange for Mpi<'_> {
+    type Error = DistributedError;
+
+    fn rank(&self) -> usize {
+        self.0.rank() as usize
+    }
+
+    fn size(&self) -> usize {
+        self.0.size() as usize
+    }
+
+    fn all_gather(&self, bytes: Vec<u8>) -> Vec<Vec<u8>> {
+        let n = self.size();
+        let mut got = vec![Vec::new(); n];
+        let mut at = 0;
+        while self.any_left(bytes.len() - at) {
+            let part = &bytes[at..(at + ROUND / n).min(bytes.len())];
+            at += part.len();
+            let mut counts = vec![0 as Count; n];
+            self.0
+                .all_gather_into(&(part.len() as Count), &mut counts[..]);
+            let displs = displacements(&counts);
+            let mut buf = vec![0u8; counts.iter().map(|&c| c as usize).sum()];
+            let mut into = PartitionMut::new(&mut buf[..], &counts[..], &displs[..]);
+            self.0.all_gather_varcount_into(part, &mut into);
+            for r in 0..n {
+                let d = displs[r] as usize;
+                got[r].extend_from_slice(&buf[d..d + counts[r] as usize]);
+            }
+        }
+        got
+    }
+
+    fn all_to_all(&self, out: Vec<Vec<u8>>) -> Vec<Vec<u8>> {
+        let n = self.size();
+        let mut got = vec![Vec::new(); n];
+        let mut at = vec![0usize; n];
+        let left = |at: &[usize]| (0..n).map(|r| out[r].len() - at[r]).sum::<usize>();
+        while self.any_left(left(&at)) {
+            let sizes: Vec<Count> = (0..n)
+                .map(|r| (out[r].len() - at[r]).min(ROUND / n) as Count)
+                .collect();
+            let mut send = Vec::with_capacity(sizes.iter().map(|&c| c as usize).sum());
+            for r in 0..n {
+                send.extend_from_slice(&out[r][at[r]..at[r] + sizes[r] as usize]);
+                at[r] += sizes[r] as usize;
+            }
+            let mut counts = vec![0 as Count; n];
+            self.0.all_to_all_into(&sizes[..], &mut counts[..]);
+            let (sd, rd) = (displacements(&sizes), displacements(&counts));
+            let mut buf = vec![0u8; counts.iter().map(|&c| c as usize).sum()];
+            let from = Partition::new(&send[..], &sizes[..], &sd[..]);
+            let mut into = PartitionMut::new(&mut buf[..], &counts[..], &rd[..]);
+            self.0.all_to_all_varcount_into(&from, &mut into);
+            for r in 0..n {
+                let d = rd[r] as usize;
+                got[r].extend_from_slice(&buf[d..d + counts[r] as usize]);
+            }
+        }
+        got
+    }
+
+    fn agree<T>(&self, local: Result<T, String>) -> Result<T, DistributedError> {
+        agree(self.0, local)
+    }
 }
 
 /// One rank's share of a frame, as rank 0 gathers it.
@@ -257,11 +359,15 @@ impl RankBrick {
         Self::prepare(world, ctx, piece, tree, cost, splat_view(view))
     }
 
-    /// Every rank reads the summary of the parallel image at `path` (a `.pvti`) and only the
-    /// pieces that meet its brick and ghosts ([`crate::bricks::parallel`]): no rank holds the
-    /// whole grid. The ranks agree on the value range (a minimum and maximum); the bricks are
-    /// those [`RankBrick::scatter`] would send. Ray casting only (a splatting brick's kernels
-    /// come from a projection of the whole field). Collective; every phase is agreed on.
+    /// Every rank reads the summary of the parallel file at `path` and a part of its pieces,
+    /// so that no rank holds the whole field ([`crate::bricks::parallel::ranks_read`] says
+    /// which files and settings): of an image (`.pvti`), the pieces that meet its brick and
+    /// its ghost planes ([`GridPlan`]; the ranks agree on the value range); of a mesh or points
+    /// (`.pvtu`, `.pvtp`), a contiguous share, redistributed to the kd boxes with exact
+    /// supports and ghosts ([`read_scattered`]). The bricks are those [`RankBrick::scatter`]
+    /// would send (for meshes and points, under the tree their gathered subsample cuts). Ray
+    /// casting only (a splatting brick's kernels come from a projection of the whole field).
+    /// Collective; every phase is agreed on.
     #[allow(clippy::too_many_arguments)]
     pub fn read_parallel(
         world: &SimpleCommunicator,
@@ -275,7 +381,7 @@ impl RankBrick {
     ) -> Result<Self, DistributedError> {
         let start = Instant::now();
         let (rank, ranks) = (world.rank() as usize, world.size() as usize);
-        let plan = agree(
+        let summary = agree(
             world,
             if view.settings.method.splat_shading().is_some() {
                 Err(format!(
@@ -284,12 +390,26 @@ impl RankBrick {
                     path.display()
                 ))
             } else {
-                Summary::read(path)
-                    .map_err(|e| e.to_string())
-                    .and_then(|s| {
-                        GridPlan::new(s, array, samples, ranks).map_err(|e| e.to_string())
-                    })
+                Summary::read(path).map_err(|e| e.to_string())
             },
+        )?;
+        if summary.kind != "ImageData" {
+            let brick = read_scattered(
+                &Mpi(world),
+                &summary,
+                array,
+                samples,
+                reconstruction,
+                octree,
+            )?;
+            let piece = agree(world, brick.piece().map_err(|e| e.to_string()))?;
+            let (piece, tree, count, pieces_read) = piece;
+            let cost = (count, start.elapsed().as_secs_f64() * 1e3, pieces_read);
+            return Self::prepare(world, ctx, piece, tree, cost, None);
+        }
+        let plan = agree(
+            world,
+            GridPlan::new(summary, array, samples, ranks).map_err(|e| e.to_string()),
         )?;
         let brick = agree(
             world,

@@ -166,12 +166,43 @@ pub fn check_cells(
     Ok(out)
 }
 
+/// A face of a cell: its corners (3 or 4), in the order that faces out of the cell.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Face {
+    pub corners: usize,
+    pub points: [[f64; 3]; 4],
+}
+
+impl Face {
+    /// The corners' coordinates as bits, sorted (unused corners last): two faces with the same
+    /// key are the same face seen from its two cells.
+    fn key(&self) -> [[u64; 3]; 4] {
+        let mut key = [[u64::MAX; 3]; 4];
+        for (k, p) in self.points[..self.corners].iter().enumerate() {
+            key[k] = p.map(f64::to_bits);
+        }
+        key.sort_unstable();
+        key
+    }
+}
+
 /// Boundary faces of an unstructured mesh as triangles (module docs).
 pub fn unstructured_hull(
     points: &[[f64; 3]],
     cells: &Cells,
     source: &str,
 ) -> Result<Hull, SampleError> {
+    hull_of_faces(boundary_faces(points, cells, source)?, source)
+}
+
+/// The faces of `cells` that no other of them shares (module docs), at the coordinates of
+/// their merged points: a mesh's boundary, or, for a piece of a mesh, its boundary and the
+/// faces it shares with other pieces ([`hull_of_faces`] matches those).
+pub fn boundary_faces(
+    points: &[[f64; 3]],
+    cells: &Cells,
+    source: &str,
+) -> Result<Vec<Face>, SampleError> {
     // Coincident points are one point for face matching.
     let merged = merge_duplicates(points.to_vec(), vec![0.0; points.len()]);
     let remap = &merged.remap;
@@ -209,25 +240,56 @@ pub fn unstructured_hull(
             }
         }
     }
-    let mut used: Vec<u32> = vec![u32::MAX; merged.positions.len()];
-    let mut hull = Hull::default();
-    let mut boundary: Vec<([u32; 4], usize)> = faces
+    Ok(faces
         .into_values()
         .filter(|(uses, _, _)| *uses == 1)
-        .map(|(_, f, n)| (f, n))
-        .collect();
-    // HashMap order is random: sort so the hull (and every image) is reproducible.
-    boundary.sort_unstable();
-    let mut vertex = |i: u32, hull: &mut Hull| -> u32 {
-        if used[i as usize] == u32::MAX {
-            used[i as usize] = hull.vertices.len() as u32;
-            hull.vertices.push(merged.positions[i as usize]);
+        .map(|(_, f, n)| {
+            let mut points = [[0.0; 3]; 4];
+            for k in 0..n {
+                points[k] = merged.positions[f[k] as usize];
+            }
+            Face { corners: n, points }
+        })
+        .collect())
+}
+
+/// The hull of faces gathered from a mesh's cells, or from pieces of one
+/// ([`boundary_faces`] of each): a face listed twice (by coordinates) lies between two cells
+/// and is dropped, one listed three or more times is a non-manifold mesh; the rest are sorted
+/// by their corners' coordinates (so the hull, and every image, is the same whichever pieces
+/// they came from and in which order) and fanned into triangles.
+pub fn hull_of_faces(faces: Vec<Face>, source: &str) -> Result<Hull, SampleError> {
+    let mut keyed: Vec<([[u64; 3]; 4], Face)> = faces.into_iter().map(|f| (f.key(), f)).collect();
+    keyed.sort_unstable_by_key(|a| a.0);
+    let mut hull = Hull::default();
+    let mut used: HashMap<[u64; 3], u32> = HashMap::new();
+    let mut i = 0;
+    while i < keyed.len() {
+        let same = keyed[i..].iter().take_while(|f| f.0 == keyed[i].0).count();
+        let face = keyed[i].1;
+        if same > 2 {
+            return Err(SampleError::Invalid {
+                source_name: source.to_string(),
+                message: format!(
+                    "non-manifold mesh: the face with corners {:?} is shared by 3 or more cells",
+                    &face.points[..face.corners]
+                ),
+            });
         }
-        used[i as usize]
-    };
-    for (f, n) in boundary {
-        let v: Vec<u32> = f[..n].iter().map(|&i| vertex(i, &mut hull)).collect();
-        for t in 1..n - 1 {
+        i += same;
+        if same == 2 {
+            continue;
+        }
+        let v: Vec<u32> = face.points[..face.corners]
+            .iter()
+            .map(|p| {
+                *used.entry(p.map(f64::to_bits)).or_insert_with(|| {
+                    hull.vertices.push(*p);
+                    hull.vertices.len() as u32 - 1
+                })
+            })
+            .collect();
+        for t in 1..v.len() - 1 {
             hull.triangles.push([v[0], v[t], v[t + 1]]);
         }
     }

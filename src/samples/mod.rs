@@ -484,7 +484,8 @@ impl SampleSet {
     }
 }
 
-fn check_settings(s: &SampleSettings) -> Result<(), SampleError> {
+/// Rejects sample settings out of range, naming the key.
+pub fn check_settings(s: &SampleSettings) -> Result<(), SampleError> {
     for v in [s.support, s.knn_support] {
         if !(v > 0.0 && v.is_finite()) {
             return Err(SampleError::Setting {
@@ -540,17 +541,33 @@ pub struct Merged {
 /// points that straddle a quantisation cell boundary are found by checking neighbours in sort
 /// order within the tolerance.
 pub fn merge_duplicates(positions: Vec<[f64; 3]>, values: Vec<f32>) -> Merged {
-    let n = positions.len();
+    let tol = duplicate_tolerance(points_box(&positions));
+    merge_duplicates_within(positions, values, tol)
+}
+
+/// The bounding box of `points`.
+pub fn points_box(points: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
-    for p in &positions {
+    for p in points {
         for a in 0..3 {
             lo[a] = lo[a].min(p[a]);
             hi[a] = hi[a].max(p[a]);
         }
     }
+    (lo, hi)
+}
+
+/// The distance within which samples of a set with bounding box `(lo, hi)` merge.
+pub fn duplicate_tolerance((lo, hi): ([f64; 3], [f64; 3])) -> f64 {
     let diag = (0..3).map(|a| (hi[a] - lo[a]).powi(2)).sum::<f64>().sqrt();
-    let tol = DUPLICATE_TOLERANCE * diag.max(f64::MIN_POSITIVE);
+    DUPLICATE_TOLERANCE * diag.max(f64::MIN_POSITIVE)
+}
+
+/// [`merge_duplicates`] with the tolerance given: a part of a sample set merges with the
+/// whole set's.
+pub fn merge_duplicates_within(positions: Vec<[f64; 3]>, values: Vec<f32>, tol: f64) -> Merged {
+    let n = positions.len();
     let mut order: Vec<usize> = (0..n).collect();
     order.sort_by(|&a, &b| positions[a][0].total_cmp(&positions[b][0]));
     let mut rep: Vec<usize> = (0..n).collect();

@@ -162,9 +162,18 @@ pub fn mean_radius(m: &Metric) -> f64 {
 
 /// The k nearest other samples of every sample (fewer when there are fewer samples).
 fn knn(positions: &[[f64; 3]], k: usize) -> Vec<Vec<u32>> {
+    knn_of_first(positions, positions.len(), k)
+}
+
+/// The `k` nearest other samples (indices into `positions`, nearest first) of each of the
+/// first `first` samples: a part of a set whose neighbours come with it.
+pub fn knn_of_first(positions: &[[f64; 3]], first: usize, k: usize) -> Vec<Vec<u32>> {
+    if first == 0 {
+        return Vec::new();
+    }
     let tree = Tree::new_from_slice(positions);
     let want = NonZero::new((k + 1).min(positions.len())).unwrap_or(NonZero::<usize>::MIN);
-    positions
+    positions[..first]
         .par_iter()
         .enumerate()
         .map(|(i, p)| {
@@ -175,6 +184,33 @@ fn knn(positions: &[[f64; 3]], k: usize) -> Vec<Vec<u32>> {
                 .take(k)
                 .collect()
         })
+        .collect()
+}
+
+/// The samples within squared distance r² of any of `balls` (centre, r²; r² = ∞ takes every
+/// sample), each once, in index order: what a part of a set sends another part whose k
+/// nearest neighbours may lie in it.
+pub fn within_any(positions: &[[f64; 3]], balls: &[([f64; 3], f64)]) -> Vec<u32> {
+    if positions.is_empty() || balls.is_empty() {
+        return Vec::new();
+    }
+    if balls.iter().any(|b| !b.1.is_finite()) {
+        return (0..positions.len() as u32).collect();
+    }
+    let tree = Tree::new_from_slice(positions);
+    let found: Vec<Vec<u32>> = balls
+        .par_iter()
+        .map(|(c, r2)| {
+            tree.within_unsorted::<SquaredEuclidean>(c, *r2)
+                .into_iter()
+                .map(|n| n.item)
+                .collect()
+        })
+        .collect();
+    let mut hit = vec![false; positions.len()];
+    found.iter().flatten().for_each(|&i| hit[i as usize] = true);
+    (0..positions.len() as u32)
+        .filter(|&i| hit[i as usize])
         .collect()
 }
 
@@ -219,10 +255,19 @@ fn isotropic(h: f64) -> Metric {
 
 /// h_i = support × distance to the k-th nearest other sample.
 pub fn isotropic_knn(positions: &[[f64; 3]], support: f64, k: usize) -> Vec<Metric> {
-    let neighbours = knn(positions, k);
+    isotropic_neighbourhoods(positions, &knn(positions, k), support)
+}
+
+/// Balls through the farthest of given neighbourhoods (sample indices), scaled by `support`:
+/// one per neighbourhood.
+pub fn isotropic_neighbourhoods(
+    positions: &[[f64; 3]],
+    neighbours: &[Vec<u32>],
+    support: f64,
+) -> Vec<Metric> {
     positions
         .par_iter()
-        .zip(&neighbours)
+        .zip(neighbours)
         .map(|(p, n)| {
             let d = n
                 .iter()

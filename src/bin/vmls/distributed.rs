@@ -27,16 +27,16 @@ impl From<DistributedError> for CliError {
     }
 }
 
-/// The scene's volume file and array where the ranks read their own pieces: a parallel VTK XML
-/// image (`.pvti`) ray cast.
+/// The scene's volume file and array where the ranks read their own pieces
+/// (`vmls::bricks::parallel::ranks_read`).
 fn parallel_image(scene: &Scene) -> Option<(&std::path::Path, Option<&str>)> {
     match &scene.volume {
         vmls::scene::VolumeSource::File { path, array }
-            if path
-                .to_string_lossy()
-                .to_ascii_lowercase()
-                .ends_with(".pvti")
-                && scene.render.method.splat_shading().is_none() =>
+            if vmls::bricks::parallel::ranks_read(
+                path,
+                scene.render.method.splat_shading().is_some(),
+                &scene.samples,
+            ) =>
         {
             Some((path.as_path(), array.as_deref()))
         }
@@ -124,7 +124,7 @@ fn run(
         };
         let ctx = context(&rank_device(device)?)?;
         // Rank 0 reads the data and sends each rank its piece, unless the ranks read their own
-        // pieces of a parallel image (ray casting).
+        // pieces of a parallel file.
         let field = if root && parallel_image(&scene).is_none() {
             let field = scene.field_on(Some(ctx.info()), |_| {})?;
             if !request.force {

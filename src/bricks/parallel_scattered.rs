@@ -1,0 +1,547 @@
+//! Bricks of a parallel mesh or point file (`.pvtu`, `.pvtp`; issue 30 §2) read by the ranks
+//! together and redistributed to the kd boxes, so that no rank holds the whole field: each
+//! rank's brick equals the one [`super::piece_of`] takes from the whole field read by one
+//! process, under the same tree.
+//!
+//! Every rank reads a contiguous share of the pieces, then ([`read_scattered`]):
+//! 1. The ranks gather their counts, bounding boxes and a subsample of their positions (every
+//!    s-th of the whole set, s = [`super::kd::subsample_stride`]); a first tree cut from it
+//!    sends every sample to the rank whose box holds it, where coincident samples merge (with
+//!    the whole set's tolerance: coincident samples fall in one box).
+//! 2. Supports from the k nearest neighbours, exactly: a rank's own k-th neighbour distance
+//!    r_i bounds the true one from above, so the true neighbours lie in the ball of radius r_i;
+//!    each rank asks every other rank whose box that ball meets for its samples inside it, and
+//!    takes the k nearest of its own and the answers. The nearest distances' median (the
+//!    step unit) and the radius quantiles are selected over the ranks exactly
+//!    ([`super::exchange::select`]).
+//! 3. A mesh's hull: each rank's cells' faces that none of its cells shares
+//!    ([`crate::samples::mesh::boundary_faces`]) are gathered, and a face that two ranks list
+//!    lies between their pieces ([`crate::samples::mesh::hull_of_faces`]).
+//! 4. The frame (the domain's centre), the value range and the supports' extent over the ranks;
+//!    the final tree from the subsample in the frame, as the whole field's tree is cut; every
+//!    sample is sent to the rank whose box owns it and, as a ghost, to every rank whose box its
+//!    support reaches ([`super::ghosts::support_reaches`]); the Gaussian sum's kernel volumes
+//!    are computed by each sample's owner (its box holds the sample, so the owner holds every
+//!    kernel that reaches it) and sent on to the ranks that hold it as a ghost.
+//!
+//! What can differ from the whole field read by one process: sums in another order (kernel
+//! volumes, merged values: rounding), and the tree when the whole set exceeds the subsample's
+//! size ([`super::kd::SUBSAMPLE`]) or holds merged samples that are not exact copies (the
+//! subsample then differs; the bricks are still exact for their own tree). Samples closer than
+//! the merge tolerance on two sides of a first-tree plane stay two samples. Supports from
+//! one-rings (`reconstruction.anisotropic` on a mesh's point data) need the cells around a
+//! point, which pieces split: [`ranks_read`] leaves those files to rank 0.
+
+use super::distribute::{distribute, kernel_volumes, route};
+use super::exchange::{Exchange, all_max, all_min, all_sum, gather_f64, pod_bytes, pods, select};
+use super::ghosts::GhostCount;
+use super::kd::{KdTree, subsample_stride};
+use super::{Aabb, BrickError};
+use crate::data::dataset::{Geometry, Location};
+use crate::data::vtk_xml_parallel::Summary;
+use crate::field::{Field, PieceFrame, SupportExtent};
+use crate::recon::gaussian::KernelVolumes;
+use crate::recon::{OctreeSettings, ReconMethod, Reconstruction};
+use crate::samples::mesh::{Face, Hull, boundary_faces, check_cells, hull_of_faces};
+use crate::samples::{
+    Domain, Metric, Positions, Provenance, SampleSet, SampleSettings, Supports, check_settings,
+    duplicate_tolerance, merge_duplicates_within, supports,
+};
+use glam::DVec3;
+
+/// One rank's brick of a parallel mesh or point file: its samples (frame-relative, its own
+/// first, then its ghosts), the whole field's frame and tree, and its kernel volumes.
+pub struct ScatteredBrick {
+    pub samples: SampleSet,
+    pub count: GhostCount,
+    pub frame: PieceFrame,
+    pub tree: KdTree,
+    pub volumes: Option<KernelVolumes>,
+    pub pieces_read: usize,
+    pub rank: usize,
+}
+
+impl ScatteredBrick {
+    /// The piece of the field this brick renders ([`Field::from_piece`]).
+    pub fn piece(self) -> Result<(Field, KdTree, GhostCount, usize), BrickError> {
+        let bounds = self.tree.boxes.get(self.rank).copied().ok_or_else(|| {
+            BrickError::Message(format!("no box for rank {} in the tree", self.rank))
+        })?;
+        let field = Field::from_piece(
+            self.samples,
+            self.frame,
+            (DVec3::from(bounds.0), DVec3::from(bounds.1)),
+            self.volumes,
+            |_| {},
+        )?;
+        Ok((field, self.tree, self.count, self.pieces_read))
+    }
+}
+
+/// What a rank read of its share of the pieces.
+#[derive(Default)]
+struct Part {
+    positions: Vec<[f64; 3]>,
+    values: Vec<f32>,
+    faces: Vec<Face>,
+    /// The array read and where it lives (none: this rank read no piece).
+    array: Option<(String, Location)>,
+    inverted: usize,
+    pieces: usize,
+}
+
+/// The pieces rank `rank` of `ranks` reads: a contiguous share.
+fn share(pieces: usize, rank: usize, ranks: usize) -> std::ops::Range<usize> {
+    pieces * rank / ranks..pieces * (rank + 1) / ranks
+}
+
+fn read_part(
+    summary: &Summary,
+    rank: usize,
+    ranks: usize,
+    array: Option<&str>,
+    settings: &SampleSettings,
+) -> Result<Part, BrickError> {
+    check_settings(settings).map_err(|e| BrickError::Message(e.to_string()))?;
+    let mine: Vec<usize> = share(summary.pieces.len(), rank, ranks).collect();
+    if mine.is_empty() {
+        return Ok(Part::default());
+    }
+    let dataset = summary.assemble(&mine)?;
+    let path = &summary.path;
+    let source = path.display().to_string();
+    let sample = |e: crate::samples::SampleError| BrickError::Message(e.to_string());
+    let data = dataset.array(path, array)?;
+    let cell_data = data.location == Location::Cell;
+    let values = data.values.as_f32().into_owned();
+    let mut part = Part {
+        array: Some((data.name.clone(), data.location)),
+        pieces: mine.len(),
+        ..Part::default()
+    };
+    match &dataset.geometry {
+        Geometry::Unstructured { points, cells } => {
+            let checked = check_cells(points, cells, &source).map_err(sample)?;
+            part.inverted = checked.inverted;
+            if !cell_data && settings.anisotropic == Some(true) {
+                return Err(BrickError::Setting {
+                    key: "reconstruction.anisotropic",
+                    message: format!(
+                        "{source}: one-ring supports need the cells around each point, which \
+                         the pieces split: rank 0 reads such a file"
+                    ),
+                });
+            }
+            part.positions = if cell_data {
+                checked.centroids
+            } else {
+                points.clone()
+            };
+            part.faces = boundary_faces(points, cells, &source).map_err(sample)?;
+        }
+        Geometry::Points { points } => part.positions = points.clone(),
+        _ => {
+            return Err(BrickError::Message(format!(
+                "{source}: the ranks read meshes and points together; a {} is read by rank 0",
+                dataset.geometry.kind()
+            )));
+        }
+    }
+    part.values = values;
+    Ok(part)
+}
+
+/// Squared distance from x to the box.
+fn box_distance2(x: [f64; 3], (lo, hi): Aabb) -> f64 {
+    (0..3)
+        .map(|a| (x[a].clamp(lo[a], hi[a]) - x[a]).powi(2))
+        .sum()
+}
+
+/// Reads the parallel mesh or point file `summary` on every rank of `ex` together and returns
+/// this rank's brick (module docs). Collective; every phase is agreed on.
+pub fn read_scattered<E: Exchange>(
+    ex: &E,
+    summary: &Summary,
+    array: Option<&str>,
+    settings: &SampleSettings,
+    reconstruction: Reconstruction,
+    octree: OctreeSettings,
+) -> Result<ScatteredBrick, E::Error> {
+    let (rank, ranks) = (ex.rank(), ex.size());
+    let path = summary.path.display().to_string();
+    let part =
+        ex.agree(read_part(summary, rank, ranks, array, settings).map_err(|e| e.to_string()))?;
+    let mesh = summary.kind == "UnstructuredGrid";
+
+    // 1. The whole set's size and box, the subsample, the first partition.
+    let whole = gather_heads(ex, &part, &path)?;
+    let mut sub = subsample(ex, &part.positions, whole.offset, whole.total);
+    let first_tree = ex.agree(
+        KdTree::decompose_points(sub.clone(), whole.bbox, ranks).map_err(|e| e.to_string()),
+    )?;
+    let owned = partition(ex, &part, whole.offset, &first_tree, whole.bbox);
+
+    // 2. Supports, and what the whole set's supports and spacing are.
+    let (metrics, nearest) = knn_supports(ex, &owned.positions, &first_tree, settings);
+    let counts = all_sum(ex, &[owned.positions.len() as f64, owned.merged as f64]);
+    let (count, merged) = (counts[0] as u64, counts[1] as usize);
+    ex.agree(if mesh || count >= 2 {
+        Ok(())
+    } else {
+        Err(format!(
+            "{path}: {count} distinct point(s): scattered data needs at least 2"
+        ))
+    })?;
+    let spacing = if count < 2 {
+        1.0
+    } else {
+        select(ex, &nearest, &[count / 2])[0]
+    };
+    let radii: Vec<f64> = metrics.iter().map(supports::mean_radius).collect();
+    let last = count.saturating_sub(1);
+    let quantiles: Vec<u64> = (0..=64u64).map(|q| q * last / 64).collect();
+    let radii = select(ex, &radii, &quantiles);
+    let lambda = metrics
+        .iter()
+        .map(supports::largest_eigenvalue_bound)
+        .fold(0.0, f64::max);
+    let thinnest = 1.0 / all_max(ex, &[lambda])[0].sqrt();
+
+    // 3. The domain: a mesh's hull, the points' supports' box.
+    let domain = if mesh {
+        Domain::Hull(gathered_hull(ex, &part.faces, &path)?)
+    } else {
+        let (lo, hi) = support_box(&owned.positions, &metrics);
+        Domain::Box {
+            lo: all_min(ex, &lo).try_into().unwrap_or(lo),
+            hi: all_max(ex, &hi).try_into().unwrap_or(hi),
+        }
+    };
+    let anisotropic = settings.anisotropic.unwrap_or(false);
+    let provenance = Provenance {
+        kind: if mesh {
+            "unstructured mesh"
+        } else {
+            "scattered points"
+        },
+        array: whole.array.0,
+        location: whole.array.1,
+        merged,
+        inverted_cells: whole.inverted,
+        support_kind: if anisotropic {
+            "anisotropic"
+        } else {
+            "isotropic"
+        },
+    };
+    let mut set = SampleSet {
+        positions: Positions::Scattered(owned.positions),
+        values: owned.values.into(),
+        supports: Supports::PerSample(metrics),
+        domain,
+        spacing,
+        provenance,
+    };
+
+    // 4. The frame, as the whole field's (Field::from_samples_deferred): the domain's centre;
+    // the final tree, cut in the frame as the whole field's is.
+    let (lo, hi) = set.domain_box();
+    let centre = (DVec3::from(lo) + DVec3::from(hi)) * 0.5;
+    let c = centre.to_array();
+    set.translate(c);
+    for p in &mut sub {
+        for a in 0..3 {
+            p[a] -= c[a];
+        }
+    }
+    let tree = ex
+        .agree(KdTree::decompose_points(sub, set.domain_box(), ranks).map_err(|e| e.to_string()))?;
+    let range = {
+        let (l, h) = set.values.iter().fold((f64::MAX, f64::MIN), |(l, h), v| {
+            (l.min(f64::from(v)), h.max(f64::from(v)))
+        });
+        (all_min(ex, &[l])[0], all_max(ex, &[h])[0])
+    };
+    let (slo, shi) = set.support_box();
+    let support_box = (
+        DVec3::from_slice(&all_min(ex, &slo)),
+        DVec3::from_slice(&all_max(ex, &shi)),
+    );
+
+    // Own samples to their owners, ghosts to every box their supports reach.
+    let sent = distribute(ex, &set, &owned.index, &tree);
+    let split = sent.split(&tree, rank);
+    let count = split.count();
+    ex.agree(if count.own == 0 {
+        Err(format!(
+            "rank {rank}'s brick holds no samples; use fewer ranks"
+        ))
+    } else {
+        Ok(())
+    })?;
+    let brick = split.brick(&set);
+    let volumes = (reconstruction.method == ReconMethod::Gaussian)
+        .then(|| kernel_volumes(ex, &brick, &split, &sent, &set, &tree, reconstruction.sigma));
+    let frame = PieceFrame {
+        frame_origin: centre,
+        range,
+        reconstruction,
+        octree,
+        extent: Some(SupportExtent {
+            support_box,
+            thinnest,
+            radii,
+        }),
+    };
+    Ok(ScatteredBrick {
+        samples: brick,
+        count,
+        frame,
+        tree,
+        volumes,
+        pieces_read: part.pieces,
+        rank,
+    })
+}
+
+/// What the ranks learn of each other's parts.
+struct Whole {
+    /// Samples in the whole set (before merging), and the first of this rank's.
+    total: usize,
+    offset: usize,
+    inverted: usize,
+    /// The samples' bounding box.
+    bbox: Aabb,
+    /// The array read and where it lives.
+    array: (String, Location),
+}
+
+fn gather_heads<E: Exchange>(ex: &E, part: &Part, path: &str) -> Result<Whole, E::Error> {
+    let (lo, hi) = crate::samples::points_box(&part.positions);
+    let head = [
+        part.positions.len() as f64,
+        part.inverted as f64,
+        lo[0],
+        lo[1],
+        lo[2],
+        hi[0],
+        hi[1],
+        hi[2],
+    ];
+    let heads = gather_f64(ex, &head);
+    let names = ex.all_gather(match &part.array {
+        Some((name, location)) => {
+            [&[u8::from(*location == Location::Cell)], name.as_bytes()].concat()
+        }
+        None => Vec::new(),
+    });
+    let read: Vec<&Vec<u8>> = names.iter().filter(|n| !n.is_empty()).collect();
+    let array = ex.agree(match read.first() {
+        None => Err(format!("{path}: no rank read a piece")),
+        Some(first) if read.iter().any(|n| n != first) => {
+            Err(format!("{path}: the ranks' pieces hold different arrays"))
+        }
+        Some(first) => Ok((
+            String::from_utf8_lossy(&first[1..]).into_owned(),
+            if first[0] == 1 {
+                Location::Cell
+            } else {
+                Location::Point
+            },
+        )),
+    })?;
+    Ok(Whole {
+        total: heads.iter().map(|h| h[0] as usize).sum(),
+        offset: heads[..ex.rank()].iter().map(|h| h[0] as usize).sum(),
+        inverted: heads.iter().map(|h| h[1] as usize).sum(),
+        bbox: (
+            [2, 3, 4].map(|k| heads.iter().map(|h| h[k]).fold(f64::INFINITY, f64::min)),
+            [5, 6, 7].map(|k| heads.iter().map(|h| h[k]).fold(f64::NEG_INFINITY, f64::max)),
+        ),
+        array,
+    })
+}
+
+/// The subsample the trees are cut from, on every rank: every s-th sample of the whole set
+/// (the ranks' parts in order, this one's from index `offset`), exact copies once (the whole
+/// set merges them before it is subsampled).
+fn subsample<E: Exchange>(
+    ex: &E,
+    positions: &[[f64; 3]],
+    offset: usize,
+    total: usize,
+) -> Vec<[f64; 3]> {
+    let stride = subsample_stride(total);
+    let picked: Vec<[f64; 3]> = (0..positions.len())
+        .filter(|i| (offset + i).is_multiple_of(stride))
+        .map(|i| positions[i])
+        .collect();
+    let mut sub: Vec<[f64; 3]> = ex
+        .all_gather(pod_bytes(&picked))
+        .iter()
+        .flat_map(|b| pods::<[f64; 3]>(b))
+        .collect();
+    sub.sort_unstable_by_key(|p| p.map(f64::to_bits));
+    sub.dedup_by_key(|p| p.map(f64::to_bits));
+    sub
+}
+
+/// The samples a rank holds after the first partition, merged, with their indices in the
+/// whole set.
+struct Owned {
+    positions: Vec<[f64; 3]>,
+    values: Vec<f32>,
+    index: Vec<f64>,
+    merged: usize,
+}
+
+/// Every sample to the rank whose box of `tree` holds it, with its index in the whole set;
+/// coincident samples merge there, within the whole set's tolerance (its box `bbox`).
+fn partition<E: Exchange>(ex: &E, part: &Part, offset: usize, tree: &KdTree, bbox: Aabb) -> Owned {
+    let out = route(
+        part.positions.len(),
+        ex.size(),
+        |i, v| {
+            v.extend(part.positions[i]);
+            v.extend([f64::from(part.values[i]), (offset + i) as f64]);
+        },
+        |i, send| send(tree.owner(part.positions[i])),
+    );
+    let got: Vec<f64> = ex
+        .all_to_all(out)
+        .iter()
+        .flat_map(|b| pods::<f64>(b))
+        .collect();
+    let records: Vec<&[f64]> = got.chunks_exact(5).collect();
+    let merged = merge_duplicates_within(
+        records.iter().map(|r| [r[0], r[1], r[2]]).collect(),
+        records.iter().map(|r| r[3] as f32).collect(),
+        duplicate_tolerance(bbox),
+    );
+    // A merged sample's index is its first copy's, as where the whole set merges (the records
+    // arrive in index order, and a merge keeps the first copy's position).
+    let mut index = vec![f64::INFINITY; merged.positions.len()];
+    for (r, &j) in records.iter().zip(&merged.remap) {
+        index[j as usize] = index[j as usize].min(r[4]);
+    }
+    Owned {
+        positions: merged.positions,
+        values: merged.values,
+        index,
+        merged: merged.merged,
+    }
+}
+
+/// The supports of a rank's samples `own` (partitioned by `tree`) from their k nearest
+/// neighbours among all ranks' (module docs, step 2), and each one's nearest distance.
+fn knn_supports<E: Exchange>(
+    ex: &E,
+    own: &[[f64; 3]],
+    tree: &KdTree,
+    settings: &SampleSettings,
+) -> (Vec<Metric>, Vec<f64>) {
+    let (rank, ranks, k) = (ex.rank(), ex.size(), settings.knn);
+    let local = supports::knn_of_first(own, own.len(), k);
+    let reach: Vec<f64> = own
+        .iter()
+        .zip(&local)
+        .map(|(p, n)| {
+            if n.len() < k {
+                return f64::INFINITY;
+            }
+            let d2 = n
+                .iter()
+                .map(|&j| {
+                    (0..3)
+                        .map(|a| (own[j as usize][a] - p[a]).powi(2))
+                        .sum::<f64>()
+                })
+                .fold(0.0, f64::max);
+            // A little over: the answering rank's squared distances round differently.
+            d2 * (1.0 + 1e-9) + f64::MIN_POSITIVE
+        })
+        .collect();
+    let asks = route(
+        own.len(),
+        ranks,
+        |i, v| v.extend(own[i].iter().copied().chain([reach[i]])),
+        |i, send| {
+            for s in (0..ranks).filter(|&s| s != rank) {
+                if box_distance2(own[i], tree.boxes[s]) <= reach[i] {
+                    send(s);
+                }
+            }
+        },
+    );
+    let answers: Vec<Vec<u8>> = ex
+        .all_to_all(asks)
+        .iter()
+        .map(|b| {
+            let balls: Vec<([f64; 3], f64)> = pods::<f64>(b)
+                .chunks_exact(4)
+                .map(|r| ([r[0], r[1], r[2]], r[3]))
+                .collect();
+            let near = supports::within_any(own, &balls);
+            let points: Vec<[f64; 3]> = near.iter().map(|&j| own[j as usize]).collect();
+            pod_bytes(&points)
+        })
+        .collect();
+    let mut around = own.to_vec();
+    around.extend(
+        ex.all_to_all(answers)
+            .iter()
+            .flat_map(|b| pods::<[f64; 3]>(b)),
+    );
+    let neighbours = supports::knn_of_first(&around, own.len(), k);
+    let metrics = if settings.anisotropic.unwrap_or(false) {
+        supports::anisotropic_neighbourhoods(&around, &neighbours, settings.knn_support)
+    } else {
+        supports::isotropic_neighbourhoods(&around, &neighbours, settings.knn_support)
+    };
+    let nearest = own
+        .iter()
+        .zip(&neighbours)
+        .map(|(p, n)| {
+            n.first().map_or(0.0, |&j| {
+                let q = around[j as usize];
+                let y = [q[0] - p[0], q[1] - p[1], q[2] - p[2]];
+                (y[0] * y[0] + y[1] * y[1] + y[2] * y[2]).sqrt()
+            })
+        })
+        .collect();
+    (metrics, nearest)
+}
+
+/// The hull of a mesh whose ranks found `faces` unshared among their own cells.
+fn gathered_hull<E: Exchange>(ex: &E, faces: &[Face], path: &str) -> Result<Hull, E::Error> {
+    let mine: Vec<f64> = faces
+        .iter()
+        .flat_map(|f| std::iter::once(f.corners as f64).chain(f.points.iter().flatten().copied()))
+        .collect();
+    let faces: Vec<Face> = gather_f64(ex, &mine)
+        .iter()
+        .flat_map(|v| {
+            v.chunks_exact(13)
+                .map(|r| Face {
+                    corners: r[0] as usize,
+                    points: [0, 1, 2, 3].map(|c| [r[1 + 3 * c], r[2 + 3 * c], r[3 + 3 * c]]),
+                })
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    ex.agree(hull_of_faces(faces, path).map_err(|e| e.to_string()))
+}
+
+/// The box of the supports of samples at `positions` with `metrics`.
+fn support_box(positions: &[[f64; 3]], metrics: &[Metric]) -> ([f64; 3], [f64; 3]) {
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for (p, m) in positions.iter().zip(metrics) {
+        let e = supports::extent(m);
+        for a in 0..3 {
+            lo[a] = lo[a].min(p[a] - e[a]);
+            hi[a] = hi[a].max(p[a] + e[a]);
+        }
+    }
+    (lo, hi)
+}
