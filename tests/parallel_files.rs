@@ -574,7 +574,7 @@ fn volumes_by_position(field: &Field) -> Vec<([u64; 3], f64)> {
 }
 
 #[test]
-fn ranks_reading_a_mesh_or_points_together_hold_the_whole_fields_bricks() {
+fn ranks_reading_a_mesh_points_or_grid_together_hold_the_whole_fields_bricks() {
     let d = dir("scattered");
     let (points, cells) = lattice(4);
     let mesh = vtu_files(&d, &points, &cells, 37, true);
@@ -594,12 +594,20 @@ fn ranks_reading_a_mesh_or_points_together_hold_the_whole_fields_bricks() {
     let copies: Vec<[f64; 3]> = scattered.iter().step_by(7).copied().collect();
     scattered.extend(copies);
     let cloud = vtp_files(&d, &scattered, 90);
-    for (path, method, anisotropic) in [
-        (&mesh, "mls", None),
-        (&cloud, "mls", None),
-        (&cloud, "mls", Some(true)),
-        (&cloud, "gaussian", None),
-        (&mesh, "gaussian", None),
+    let whole = [0, 9, 0, 8, 0, 7];
+    let (rectilinear, _) = grid_files(&d, "RectilinearGrid", whole, 3, &rectilinear_at);
+    let (curved, _) = grid_files(&d, "StructuredGrid", whole, 3, &curved_at);
+    for (path, array, method, anisotropic) in [
+        (&mesh, "f", "mls", None),
+        (&cloud, "f", "mls", None),
+        (&cloud, "f", "mls", Some(true)),
+        (&cloud, "f", "gaussian", None),
+        (&mesh, "f", "gaussian", None),
+        (&rectilinear, "f", "mls", None),
+        (&rectilinear, "c", "mls", None),
+        (&rectilinear, "f", "mls", Some(false)),
+        (&curved, "f", "mls", None),
+        (&curved, "c", "gaussian", None),
     ] {
         let settings = SampleSettings {
             anisotropic,
@@ -607,20 +615,20 @@ fn ranks_reading_a_mesh_or_points_together_hold_the_whole_fields_bricks() {
         };
         let scene = common::general_scene(&[format!("reconstruction.method=\"{method}\"")]);
         let dataset = load_dataset(path).expect("dataset");
-        let whole = SampleSet::from_dataset(&dataset, path, Some("f"), &settings).expect("set");
+        let whole = SampleSet::from_dataset(&dataset, path, Some(array), &settings).expect("set");
         let whole =
             Field::from_samples(whole, scene.reconstruction, &scene.octree, |_| {}).expect("field");
         let summary = Summary::read(path).expect("summary");
         for ranks in [1, 2, 3, 5] {
             let what = format!(
-                "{}, {method}, anisotropic {anisotropic:?}, {ranks} ranks",
+                "{}, {array}, {method}, anisotropic {anisotropic:?}, {ranks} ranks",
                 path.display()
             );
             let bricks = LocalRanks::run(ranks, |ex| {
                 read_scattered(
                     ex,
                     &summary,
-                    Some("f"),
+                    Some(array),
                     &settings,
                     scene.reconstruction,
                     scene.octree,

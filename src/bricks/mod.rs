@@ -28,6 +28,7 @@ pub mod ghosts;
 pub mod kd;
 pub mod parallel;
 pub mod parallel_scattered;
+mod part;
 pub mod splat;
 pub mod wire;
 

@@ -7,11 +7,11 @@
 //! alone, the value range, the caller agrees on across the ranks (a minimum and maximum).
 //!
 //! Ray casting only: a splatting brick needs the kernels that reach its sheets in the view,
-//! which only a projection of every kernel finds ([`super::splat`]). Meshes and points
-//! (`.pvtu`, `.pvtp`) are read by the ranks in shares and redistributed
-//! ([`super::parallel_scattered`]); the structured kinds (`.pvtr`, `.pvts`) are read whole by
-//! one rank ([`crate::data::vtk_xml_parallel::load`]) and divided as any field
-//! ([`ranks_read`]).
+//! which only a projection of every kernel finds ([`super::splat`]). The other kinds (`.pvtr`,
+//! `.pvts`, `.pvtu`, `.pvtp`), whose samples vmls holds as scattered positions, are read by
+//! the ranks in shares and redistributed ([`super::parallel_scattered`]); what neither reads
+//! is read whole by one rank ([`crate::data::vtk_xml_parallel::load`]) and divided as any
+//! field ([`ranks_read`]).
 
 use super::ghosts::{GhostCount, grid_window, mls_layers};
 use super::kd::KdTree;
@@ -26,15 +26,17 @@ use glam::DVec3;
 
 /// Whether the ranks read the parallel file at `path` themselves ([`GridPlan`],
 /// [`super::parallel_scattered`]) for a scene that splats (`splat`) or ray casts with sample
-/// `settings`; otherwise rank 0 reads it whole and sends each rank its piece. Ray casting
-/// `.pvti`, `.pvtp`, and `.pvtu` unless its supports are one-rings (anisotropic supports of a
-/// mesh's point data need the cells around each point, which the pieces split).
+/// `settings`; otherwise rank 0 reads it whole and sends each rank its piece. Every ray-cast
+/// parallel kind, but a `.pvtu` or `.pvts` with anisotropic supports (a mesh's point data's
+/// one-rings and a curvilinear grid's edges need neighbours the pieces split).
 pub fn ranks_read(path: &std::path::Path, splat: bool, settings: &SampleSettings) -> bool {
     let name = path.to_string_lossy().to_ascii_lowercase();
+    let split_neighbours = name.ends_with(".pvtu") || name.ends_with(".pvts");
     !splat
-        && (name.ends_with(".pvti")
-            || name.ends_with(".pvtp")
-            || (name.ends_with(".pvtu") && settings.anisotropic != Some(true)))
+        && [".pvti", ".pvtr", ".pvts", ".pvtu", ".pvtp"]
+            .iter()
+            .any(|e| name.ends_with(e))
+        && !(split_neighbours && settings.anisotropic == Some(true))
 }
 
 /// A `.pvti`'s grid as the whole field would hold it, and its decomposition.

@@ -1,55 +1,63 @@
-//! Bricks of a parallel mesh or point file (`.pvtu`, `.pvtp`; issue 30 §2) read by the ranks
-//! together and redistributed to the kd boxes, so that no rank holds the whole field: each
-//! rank's brick equals the one [`super::piece_of`] takes from the whole field read by one
-//! process, under the same tree.
+//! Bricks of a parallel file whose samples are scattered positions — a mesh, points, a
+//! rectilinear or curvilinear grid (`.pvtu`, `.pvtp`, `.pvtr`, `.pvts`; issue 30 §2) — read by
+//! the ranks together and redistributed to the kd boxes, so that no rank holds the whole
+//! field: each rank's brick equals the one [`super::piece_of`] takes from the whole field read
+//! by one process, under the same tree, sample for sample and in the same order.
 //!
-//! Every rank reads a contiguous share of the pieces, then ([`read_scattered`]):
+//! Every rank reads a contiguous share of the pieces ([`super::part`]), then
+//! ([`read_scattered`]):
 //! 1. The ranks gather their counts, bounding boxes and a subsample of their positions (every
-//!    s-th of the whole set, s = [`super::kd::subsample_stride`]); a first tree cut from it
+//!    s-th of the whole set, s = [`super::kd::subsample_stride`], by each sample's index in
+//!    the whole set: a grid's sample index, else the pieces' order); a first tree cut from it
 //!    sends every sample to the rank whose box holds it, where coincident samples merge (with
-//!    the whole set's tolerance: coincident samples fall in one box).
+//!    the whole set's tolerance: coincident samples fall in one box; a grid's shared face
+//!    samples are one).
 //! 2. Supports from the k nearest neighbours, exactly: a rank's own k-th neighbour distance
 //!    r_i bounds the true one from above, so the true neighbours lie in the ball of radius r_i;
 //!    each rank asks every other rank whose box that ball meets for its samples inside it, and
-//!    takes the k nearest of its own and the answers. The nearest distances' median (the
+//!    takes the k nearest of its own and the answers. A rectilinear grid's diagonal supports
+//!    come from its coordinates, which the ranks gather. The nearest distances' median (the
 //!    step unit) and the radius quantiles are selected over the ranks exactly
 //!    ([`super::exchange::select`]).
 //! 3. A mesh's hull: each rank's cells' faces that none of its cells shares
 //!    ([`crate::samples::mesh::boundary_faces`]) are gathered, and a face that two ranks list
-//!    lies between their pieces ([`crate::samples::mesh::hull_of_faces`]).
+//!    lies between their pieces ([`crate::samples::mesh::hull_of_faces`]); a curvilinear
+//!    grid's: the whole grid's sides in each share ([`crate::samples::mesh::structured_sides`]).
 //! 4. The frame (the domain's centre), the value range and the supports' extent over the ranks;
 //!    the final tree from the subsample in the frame, as the whole field's tree is cut; every
 //!    sample is sent to the rank whose box owns it and, as a ghost, to every rank whose box its
-//!    support reaches ([`super::ghosts::support_reaches`]); the Gaussian sum's kernel volumes
-//!    are computed by each sample's owner (its box holds the sample, so the owner holds every
-//!    kernel that reaches it) and sent on to the ranks that hold it as a ghost.
+//!    support reaches ([`super::distribute`]); the Gaussian sum's kernel volumes are computed
+//!    by each sample's owner and sent on to the ranks that hold it as a ghost.
 //!
 //! What can differ from the whole field read by one process: sums in another order (kernel
 //! volumes, merged values: rounding), and the tree when the whole set exceeds the subsample's
-//! size ([`super::kd::SUBSAMPLE`]) or holds merged samples that are not exact copies (the
-//! subsample then differs; the bricks are still exact for their own tree). Samples closer than
-//! the merge tolerance on two sides of a first-tree plane stay two samples. Supports from
-//! one-rings (`reconstruction.anisotropic` on a mesh's point data) need the cells around a
-//! point, which pieces split: [`ranks_read`] leaves those files to rank 0.
+//! size ([`super::kd::SUBSAMPLE`]) and is not a grid, or holds merged samples that are not
+//! exact copies (the subsample then differs; the bricks are still exact for their own tree).
+//! Samples closer than the merge tolerance on two sides of a first-tree plane stay two
+//! samples. Anisotropic supports from a mesh's one-rings or a curvilinear grid's edges need
+//! neighbours that pieces split: [`super::parallel::ranks_read`] leaves those files to rank 0.
 
 use super::distribute::{distribute, kernel_volumes, route};
 use super::exchange::{Exchange, all_max, all_min, all_sum, gather_f64, pod_bytes, pods, select};
 use super::ghosts::GhostCount;
 use super::kd::{KdTree, subsample_stride};
+use super::part::{Part, read_part, sample_dims};
 use super::{Aabb, BrickError};
-use crate::data::dataset::{Geometry, Location};
+use crate::data::dataset::Location;
 use crate::data::vtk_xml_parallel::Summary;
 use crate::field::{Field, PieceFrame, SupportExtent};
 use crate::recon::gaussian::KernelVolumes;
 use crate::recon::{OctreeSettings, ReconMethod, Reconstruction};
-use crate::samples::mesh::{Face, Hull, boundary_faces, check_cells, hull_of_faces};
+use crate::samples::mesh::{
+    Face, Hull, Triangle, hull_of_faces, hull_of_triangles, signed_volume, turn,
+};
 use crate::samples::{
-    Domain, Metric, Positions, Provenance, SampleSet, SampleSettings, Supports, check_settings,
+    Domain, Metric, Positions, Provenance, SampleSet, SampleSettings, Supports, centres,
     duplicate_tolerance, merge_duplicates_within, supports,
 };
 use glam::DVec3;
 
-/// One rank's brick of a parallel mesh or point file: its samples (frame-relative, its own
+/// One rank's brick of a parallel file read by the ranks together: its samples (frame-relative, its own
 /// first, then its ghosts), the whole field's frame and tree, and its kernel volumes.
 pub struct ScatteredBrick {
     pub samples: SampleSet,
@@ -78,79 +86,6 @@ impl ScatteredBrick {
     }
 }
 
-/// What a rank read of its share of the pieces.
-#[derive(Default)]
-struct Part {
-    positions: Vec<[f64; 3]>,
-    values: Vec<f32>,
-    faces: Vec<Face>,
-    /// The array read and where it lives (none: this rank read no piece).
-    array: Option<(String, Location)>,
-    inverted: usize,
-    pieces: usize,
-}
-
-/// The pieces rank `rank` of `ranks` reads: a contiguous share.
-fn share(pieces: usize, rank: usize, ranks: usize) -> std::ops::Range<usize> {
-    pieces * rank / ranks..pieces * (rank + 1) / ranks
-}
-
-fn read_part(
-    summary: &Summary,
-    rank: usize,
-    ranks: usize,
-    array: Option<&str>,
-    settings: &SampleSettings,
-) -> Result<Part, BrickError> {
-    check_settings(settings).map_err(|e| BrickError::Message(e.to_string()))?;
-    let mine: Vec<usize> = share(summary.pieces.len(), rank, ranks).collect();
-    if mine.is_empty() {
-        return Ok(Part::default());
-    }
-    let dataset = summary.assemble(&mine)?;
-    let path = &summary.path;
-    let source = path.display().to_string();
-    let sample = |e: crate::samples::SampleError| BrickError::Message(e.to_string());
-    let data = dataset.array(path, array)?;
-    let cell_data = data.location == Location::Cell;
-    let values = data.values.as_f32().into_owned();
-    let mut part = Part {
-        array: Some((data.name.clone(), data.location)),
-        pieces: mine.len(),
-        ..Part::default()
-    };
-    match &dataset.geometry {
-        Geometry::Unstructured { points, cells } => {
-            let checked = check_cells(points, cells, &source).map_err(sample)?;
-            part.inverted = checked.inverted;
-            if !cell_data && settings.anisotropic == Some(true) {
-                return Err(BrickError::Setting {
-                    key: "reconstruction.anisotropic",
-                    message: format!(
-                        "{source}: one-ring supports need the cells around each point, which \
-                         the pieces split: rank 0 reads such a file"
-                    ),
-                });
-            }
-            part.positions = if cell_data {
-                checked.centroids
-            } else {
-                points.clone()
-            };
-            part.faces = boundary_faces(points, cells, &source).map_err(sample)?;
-        }
-        Geometry::Points { points } => part.positions = points.clone(),
-        _ => {
-            return Err(BrickError::Message(format!(
-                "{source}: the ranks read meshes and points together; a {} is read by rank 0",
-                dataset.geometry.kind()
-            )));
-        }
-    }
-    part.values = values;
-    Ok(part)
-}
-
 /// Squared distance from x to the box.
 fn box_distance2(x: [f64; 3], (lo, hi): Aabb) -> f64 {
     (0..3)
@@ -158,7 +93,7 @@ fn box_distance2(x: [f64; 3], (lo, hi): Aabb) -> f64 {
         .sum()
 }
 
-/// Reads the parallel mesh or point file `summary` on every rank of `ex` together and returns
+/// Reads the parallel file `summary` (not an image) on every rank of `ex` together and returns
 /// this rank's brick (module docs). Collective; every phase is agreed on.
 pub fn read_scattered<E: Exchange>(
     ex: &E,
@@ -170,23 +105,62 @@ pub fn read_scattered<E: Exchange>(
 ) -> Result<ScatteredBrick, E::Error> {
     let (rank, ranks) = (ex.rank(), ex.size());
     let path = summary.path.display().to_string();
-    let part =
+    let mut part =
         ex.agree(read_part(summary, rank, ranks, array, settings).map_err(|e| e.to_string()))?;
-    let mesh = summary.kind == "UnstructuredGrid";
+    let kind = summary.kind;
+    let grid = summary.whole.is_some();
 
     // 1. The whole set's size and box, the subsample, the first partition.
-    let whole = gather_heads(ex, &part, &path)?;
-    let mut sub = subsample(ex, &part.positions, whole.offset, whole.total);
+    let whole = gather_heads(ex, &part, summary)?;
+    if !grid {
+        part.index = (0..part.positions.len())
+            .map(|i| (whole.offset + i) as f64)
+            .collect();
+    }
+    let mut sub = subsample(ex, &part, whole.total);
     let first_tree = ex.agree(
         KdTree::decompose_points(sub.clone(), whole.bbox, ranks).map_err(|e| e.to_string()),
     )?;
-    let owned = partition(ex, &part, whole.offset, &first_tree, whole.bbox);
+    let owned = partition(ex, &part, &first_tree, whole.bbox, grid);
 
-    // 2. Supports, and what the whole set's supports and spacing are.
-    let (metrics, nearest) = knn_supports(ex, &owned.positions, &first_tree, settings);
+    // 2. Supports, and what the whole set's supports and spacing are: a rectilinear grid's
+    // from its coordinates (with the nearest distances, the spacing, from one neighbour),
+    // the others' from their k nearest neighbours.
+    let coords = grid_coords(ex, &part, kind);
+    let diagonal = kind == "RectilinearGrid" && settings.anisotropic.unwrap_or(true);
+    let (metrics, nearest) = match &coords {
+        Some(c) if diagonal => {
+            let one = SampleSettings {
+                knn: 1,
+                ..*settings
+            };
+            let (_, nearest) = knn_supports(ex, &owned.positions, &first_tree, &one);
+            let sampled = if whole.array.1 == Location::Cell {
+                [0, 1, 2].map(|a| centres(&c[a]))
+            } else {
+                c.clone()
+            };
+            let dims = sampled.each_ref().map(Vec::len);
+            let r = supports::RectilinearSupports::new(&sampled, settings.support);
+            let metrics = owned
+                .index
+                .iter()
+                .map(|&g| {
+                    let g = g as usize;
+                    r.at([
+                        g % dims[0],
+                        (g / dims[0]) % dims[1],
+                        g / (dims[0] * dims[1]),
+                    ])
+                })
+                .collect();
+            (metrics, nearest)
+        }
+        _ => knn_supports(ex, &owned.positions, &first_tree, settings),
+    };
     let counts = all_sum(ex, &[owned.positions.len() as f64, owned.merged as f64]);
     let (count, merged) = (counts[0] as u64, counts[1] as usize);
-    ex.agree(if mesh || count >= 2 {
+    ex.agree(if kind != "PolyData" || count >= 2 {
         Ok(())
     } else {
         Err(format!(
@@ -208,31 +182,39 @@ pub fn read_scattered<E: Exchange>(
         .fold(0.0, f64::max);
     let thinnest = 1.0 / all_max(ex, &[lambda])[0].sqrt();
 
-    // 3. The domain: a mesh's hull, the points' supports' box.
-    let domain = if mesh {
-        Domain::Hull(gathered_hull(ex, &part.faces, &path)?)
-    } else {
-        let (lo, hi) = support_box(&owned.positions, &metrics);
-        Domain::Box {
-            lo: all_min(ex, &lo).try_into().unwrap_or(lo),
-            hi: all_max(ex, &hi).try_into().unwrap_or(hi),
+    // 3. The domain: a mesh's hull, a curvilinear grid's sides, a rectilinear grid's box, the
+    // points' supports' box.
+    let domain = match (kind, &coords) {
+        ("UnstructuredGrid", _) => Domain::Hull(gathered_hull(ex, &part.faces, &path)?),
+        ("StructuredGrid", _) => Domain::Hull(gathered_sides(ex, &part.triangles)),
+        (_, Some(c)) => Domain::Box {
+            lo: c.each_ref().map(|c| c.first().copied().unwrap_or(0.0)),
+            hi: c.each_ref().map(|c| c.last().copied().unwrap_or(0.0)),
+        },
+        _ => {
+            let (lo, hi) = support_box(&owned.positions, &metrics);
+            Domain::Box {
+                lo: all_min(ex, &lo).try_into().unwrap_or(lo),
+                hi: all_max(ex, &hi).try_into().unwrap_or(hi),
+            }
         }
     };
     let anisotropic = settings.anisotropic.unwrap_or(false);
     let provenance = Provenance {
-        kind: if mesh {
-            "unstructured mesh"
-        } else {
-            "scattered points"
+        kind: match kind {
+            "UnstructuredGrid" => "unstructured mesh",
+            "StructuredGrid" => "curvilinear grid",
+            "RectilinearGrid" => "rectilinear grid",
+            _ => "scattered points",
         },
         array: whole.array.0,
         location: whole.array.1,
         merged,
         inverted_cells: whole.inverted,
-        support_kind: if anisotropic {
-            "anisotropic"
-        } else {
-            "isotropic"
+        support_kind: match (diagonal, anisotropic) {
+            (true, _) => "diagonal",
+            (false, true) => "anisotropic",
+            (false, false) => "isotropic",
         },
     };
     let mut set = SampleSet {
@@ -317,7 +299,8 @@ struct Whole {
     array: (String, Location),
 }
 
-fn gather_heads<E: Exchange>(ex: &E, part: &Part, path: &str) -> Result<Whole, E::Error> {
+fn gather_heads<E: Exchange>(ex: &E, part: &Part, summary: &Summary) -> Result<Whole, E::Error> {
+    let path = summary.path.display().to_string();
     let (lo, hi) = crate::samples::points_box(&part.positions);
     let head = [
         part.positions.len() as f64,
@@ -351,8 +334,18 @@ fn gather_heads<E: Exchange>(ex: &E, part: &Part, path: &str) -> Result<Whole, E
             },
         )),
     })?;
+    // A grid's samples are its points or cells, each once (pieces share their faces' points).
+    let total = match summary.whole {
+        Some(w) => {
+            let points = [0, 1, 2].map(|a| (w[2 * a + 1] - w[2 * a] + 1) as usize);
+            sample_dims(points, array.1 == Location::Cell)
+                .iter()
+                .product()
+        }
+        None => heads.iter().map(|h| h[0] as usize).sum(),
+    };
     Ok(Whole {
-        total: heads.iter().map(|h| h[0] as usize).sum(),
+        total,
         offset: heads[..ex.rank()].iter().map(|h| h[0] as usize).sum(),
         inverted: heads.iter().map(|h| h[1] as usize).sum(),
         bbox: (
@@ -363,19 +356,14 @@ fn gather_heads<E: Exchange>(ex: &E, part: &Part, path: &str) -> Result<Whole, E
     })
 }
 
-/// The subsample the trees are cut from, on every rank: every s-th sample of the whole set
-/// (the ranks' parts in order, this one's from index `offset`), exact copies once (the whole
-/// set merges them before it is subsampled).
-fn subsample<E: Exchange>(
-    ex: &E,
-    positions: &[[f64; 3]],
-    offset: usize,
-    total: usize,
-) -> Vec<[f64; 3]> {
+/// The subsample the trees are cut from, on every rank: the samples of `part` whose index in
+/// the whole set of `total` is a multiple of the stride, exact copies once (the whole set
+/// merges them before it is subsampled; grid pieces share their faces' samples).
+fn subsample<E: Exchange>(ex: &E, part: &Part, total: usize) -> Vec<[f64; 3]> {
     let stride = subsample_stride(total);
-    let picked: Vec<[f64; 3]> = (0..positions.len())
-        .filter(|i| (offset + i).is_multiple_of(stride))
-        .map(|i| positions[i])
+    let picked: Vec<[f64; 3]> = (0..part.positions.len())
+        .filter(|&i| (part.index[i] as usize).is_multiple_of(stride))
+        .map(|i| part.positions[i])
         .collect();
     let mut sub: Vec<[f64; 3]> = ex
         .all_gather(pod_bytes(&picked))
@@ -385,6 +373,48 @@ fn subsample<E: Exchange>(
     sub.sort_unstable_by_key(|p| p.map(f64::to_bits));
     sub.dedup_by_key(|p| p.map(f64::to_bits));
     sub
+}
+
+/// A rectilinear grid's coordinates along each axis, on every rank (its pieces' runs joined).
+fn grid_coords<E: Exchange>(ex: &E, part: &Part, kind: &str) -> Option<[Vec<f64>; 3]> {
+    if kind != "RectilinearGrid" {
+        return None;
+    }
+    Some([0, 1, 2].map(|a| {
+        let mine: Vec<f64> = part.coords[a]
+            .iter()
+            .flat_map(|&(i, c)| [i as f64, c])
+            .collect();
+        let mut all: Vec<(usize, f64)> = gather_f64(ex, &mine)
+            .iter()
+            .flat_map(|v| {
+                v.chunks_exact(2)
+                    .map(|p| (p[0] as usize, p[1]))
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+        all.sort_by_key(|p| p.0);
+        all.dedup_by_key(|p| p.0);
+        all.into_iter().map(|p| p.1).collect()
+    }))
+}
+
+/// A curvilinear grid's hull from its sides' triangles in the ranks' shares, facing out (a
+/// left-handed index frame turns them all inwards: [`crate::samples::mesh::structured_hull`]).
+fn gathered_sides<E: Exchange>(ex: &E, mine: &[Triangle]) -> Hull {
+    let flat: Vec<f64> = mine.iter().flatten().flatten().copied().collect();
+    let mut triangles: Vec<Triangle> = gather_f64(ex, &flat)
+        .iter()
+        .flat_map(|v| {
+            v.chunks_exact(9)
+                .map(|t| [[t[0], t[1], t[2]], [t[3], t[4], t[5]], [t[6], t[7], t[8]]])
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    if signed_volume(&triangles) < 0.0 {
+        turn(&mut triangles);
+    }
+    hull_of_triangles(triangles)
 }
 
 /// The samples a rank holds after the first partition, merged, with their indices in the
@@ -397,14 +427,16 @@ struct Owned {
 }
 
 /// Every sample to the rank whose box of `tree` holds it, with its index in the whole set;
-/// coincident samples merge there, within the whole set's tolerance (its box `bbox`).
-fn partition<E: Exchange>(ex: &E, part: &Part, offset: usize, tree: &KdTree, bbox: Aabb) -> Owned {
+/// coincident samples merge there, within the whole set's tolerance (its box `bbox`), or, on
+/// a grid, the samples its pieces share are one (the later piece's, as the whole grid reads
+/// them).
+fn partition<E: Exchange>(ex: &E, part: &Part, tree: &KdTree, bbox: Aabb, grid: bool) -> Owned {
     let out = route(
         part.positions.len(),
         ex.size(),
         |i, v| {
             v.extend(part.positions[i]);
-            v.extend([f64::from(part.values[i]), (offset + i) as f64]);
+            v.extend([f64::from(part.values[i]), part.index[i]]);
         },
         |i, send| send(tree.owner(part.positions[i])),
     );
@@ -413,7 +445,24 @@ fn partition<E: Exchange>(ex: &E, part: &Part, offset: usize, tree: &KdTree, bbo
         .iter()
         .flat_map(|b| pods::<f64>(b))
         .collect();
-    let records: Vec<&[f64]> = got.chunks_exact(5).collect();
+    let mut records: Vec<&[f64]> = got.chunks_exact(5).collect();
+    if grid {
+        // Stable: of the copies of one sample, the last piece's comes last.
+        records.sort_by(|a, b| a[4].total_cmp(&b[4]));
+        let mut kept: Vec<&[f64]> = Vec::with_capacity(records.len());
+        for r in records {
+            match kept.last_mut() {
+                Some(last) if last[4] == r[4] => *last = r,
+                _ => kept.push(r),
+            }
+        }
+        return Owned {
+            positions: kept.iter().map(|r| [r[0], r[1], r[2]]).collect(),
+            values: kept.iter().map(|r| r[3] as f32).collect(),
+            index: kept.iter().map(|r| r[4]).collect(),
+            merged: 0,
+        };
+    }
     let merged = merge_duplicates_within(
         records.iter().map(|r| [r[0], r[1], r[2]]).collect(),
         records.iter().map(|r| r[3] as f32).collect(),

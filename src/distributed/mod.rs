@@ -15,17 +15,17 @@
 //! did, every rank returns [`DistributedError`] and rank 0's names the first failing rank and
 //! its message, so that no rank waits in a collective call for one that has gone.
 //!
-//! A parallel VTK XML image, mesh or point file (`.pvti`, `.pvtu`, `.pvtp`) is read by the
-//! ranks instead ([`RankBrick::read_parallel`]): an image's pieces by the ranks whose bricks
-//! they meet, a mesh's or points' pieces in shares, redistributed to the kd boxes; no rank
-//! holds the whole field.
+//! A parallel VTK XML file (`.pvti`, `.pvtr`, `.pvts`, `.pvtu`, `.pvtp`) is read by the ranks
+//! instead ([`RankBrick::read_parallel`]): an image's pieces by the ranks whose bricks they
+//! meet, the other kinds' pieces in shares, redistributed to the kd boxes; no rank holds the
+//! whole field.
 //!
 //! A ray-cast rank dispatches only the pixels of its box's screen footprint
 //! ([`crate::raycast::RaySetup::window`]).
 //!
-//! Not yet here: the structured parallel kinds (`.pvtr`, `.pvts`), one-ring supports of a mesh
-//! and every splatting scene's parallel file are read whole by rank 0 (its memory bounds the
-//! data); splatting ranks still walk every tile.
+//! Not yet here: anisotropic supports of a `.pvtu`'s points or a `.pvts` (one-rings, grid
+//! edges) and every splatting scene's parallel file are read whole by rank 0 (its memory
+//! bounds the data); splatting ranks still walk every tile.
 
 #[allow(unsafe_code)]
 mod icet;
@@ -362,10 +362,10 @@ impl RankBrick {
     /// Every rank reads the summary of the parallel file at `path` and a part of its pieces,
     /// so that no rank holds the whole field ([`crate::bricks::parallel::ranks_read`] says
     /// which files and settings): of an image (`.pvti`), the pieces that meet its brick and
-    /// its ghost planes ([`GridPlan`]; the ranks agree on the value range); of a mesh or points
-    /// (`.pvtu`, `.pvtp`), a contiguous share, redistributed to the kd boxes with exact
-    /// supports and ghosts ([`read_scattered`]). The bricks are those [`RankBrick::scatter`]
-    /// would send (for meshes and points, under the tree their gathered subsample cuts). Ray
+    /// its ghost planes ([`GridPlan`]; the ranks agree on the value range); of the other kinds
+    /// (`.pvtr`, `.pvts`, `.pvtu`, `.pvtp`), a contiguous share, redistributed to the kd boxes
+    /// with exact supports and ghosts ([`read_scattered`]). The bricks are those
+    /// [`RankBrick::scatter`] would send (under the tree their gathered subsample cuts). Ray
     /// casting only (a splatting brick's kernels come from a projection of the whole field).
     /// Collective; every phase is agreed on.
     #[allow(clippy::too_many_arguments)]

@@ -335,6 +335,9 @@ pub fn structured_centroids(dims: [usize; 3], points: &[[f64; 3]]) -> ([usize; 3
     (cd, out)
 }
 
+/// A triangle as its corners' coordinates.
+pub type Triangle = [[f64; 3]; 3];
+
 /// The six sides of a curvilinear grid as triangles. A grid that is flat in some index
 /// direction has no interior and is rejected.
 pub fn structured_hull(
@@ -350,14 +353,34 @@ pub fn structured_hull(
             ),
         });
     }
-    let index = |q: [usize; 3]| (q[0] + dims[0] * (q[1] + dims[1] * q[2])) as u32;
-    let mut hull = Hull {
-        vertices: points.to_vec(),
-        triangles: Vec::new(),
-    };
+    let mut triangles = structured_sides(dims, points, [[true; 2]; 3]);
+    // A left-handed index frame turns every side inwards.
+    if signed_volume(&triangles) < 0.0 {
+        turn(&mut triangles);
+    }
+    Ok(super::Domain::Hull(hull_of_triangles(triangles)))
+}
+
+/// The sides of a curvilinear grid (`dims` points, x fastest) that `sides[axis][low, high]`
+/// chooses, each cell face split along its (0,0)–(1,1) diagonal, opposite sides wound
+/// oppositely (so that all face the same way, out or in). For a piece of a grid, the sides it
+/// shares with the whole grid's boundary: the whole grid's triangles there.
+pub fn structured_sides(
+    dims: [usize; 3],
+    points: &[[f64; 3]],
+    sides: [[bool; 2]; 3],
+) -> Vec<Triangle> {
+    let index = |q: [usize; 3]| q[0] + dims[0] * (q[1] + dims[1] * q[2]);
+    let mut triangles = Vec::new();
+    if dims.iter().any(|&n| n < 2) {
+        return triangles;
+    }
     for a in 0..3 {
         let (b, c) = ((a + 1) % 3, (a + 2) % 3);
-        for side in [0, dims[a] - 1] {
+        for (high, side) in [(false, 0), (true, dims[a] - 1)] {
+            if !sides[a][usize::from(high)] {
+                continue;
+            }
             for v in 0..dims[c] - 1 {
                 for u in 0..dims[b] - 1 {
                     let corner = |du: usize, dv: usize| {
@@ -365,28 +388,55 @@ pub fn structured_hull(
                         q[a] = side;
                         q[b] = u + du;
                         q[c] = v + dv;
-                        index(q)
+                        points[index(q)]
                     };
                     let (p0, p1, p2, p3) = (corner(0, 0), corner(1, 0), corner(1, 1), corner(0, 1));
-                    // Opposite sides wind oppositely, so both face the same way (out or in).
-                    if side == 0 {
-                        hull.triangles.push([p0, p2, p1]);
-                        hull.triangles.push([p0, p3, p2]);
+                    if high {
+                        triangles.push([p0, p1, p2]);
+                        triangles.push([p0, p2, p3]);
                     } else {
-                        hull.triangles.push([p0, p1, p2]);
-                        hull.triangles.push([p0, p2, p3]);
+                        triangles.push([p0, p2, p1]);
+                        triangles.push([p0, p3, p2]);
                     }
                 }
             }
         }
     }
-    // A left-handed index frame turns every side inwards.
-    if enclosed_volume(&hull) < 0.0 {
-        for t in &mut hull.triangles {
-            t.swap(1, 2);
-        }
+    triangles
+}
+
+/// Signed volume enclosed by triangles (positive when they face out of a closed surface).
+pub fn signed_volume(triangles: &[Triangle]) -> f64 {
+    triangles
+        .iter()
+        .map(|[a, b, c]| dot(*a, cross(*b, *c)) / 6.0)
+        .sum()
+}
+
+/// Turns every triangle the other way.
+pub fn turn(triangles: &mut [Triangle]) {
+    for t in triangles {
+        t.swap(1, 2);
     }
-    Ok(super::Domain::Hull(hull))
+}
+
+/// A hull of triangles given by their corners, sorted by them (so that the hull, and every
+/// image, is the same whichever pieces of a grid they came from and in which order), each
+/// vertex once.
+pub fn hull_of_triangles(mut triangles: Vec<Triangle>) -> Hull {
+    triangles.sort_unstable_by_key(|t| t.map(|p| p.map(f64::to_bits)));
+    let mut hull = Hull::default();
+    let mut used: HashMap<[u64; 3], u32> = HashMap::new();
+    for t in &triangles {
+        let v = t.map(|p| {
+            *used.entry(p.map(f64::to_bits)).or_insert_with(|| {
+                hull.vertices.push(p);
+                hull.vertices.len() as u32 - 1
+            })
+        });
+        hull.triangles.push(v);
+    }
+    hull
 }
 
 #[cfg(test)]

@@ -519,7 +519,7 @@ fn derive_scattered(
 }
 
 /// Midpoints of consecutive coordinates (a single coordinate stays).
-fn centres(c: &[f64]) -> Vec<f64> {
+pub fn centres(c: &[f64]) -> Vec<f64> {
     if c.len() < 2 {
         return c.to_vec();
     }

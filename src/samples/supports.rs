@@ -350,39 +350,62 @@ pub fn one_rings(
 /// Diagonal supports of a rectilinear grid (module docs). A single-coordinate axis takes the
 /// largest gap of the other axes.
 pub fn rectilinear(coords: &[Vec<f64>; 3], support: f64) -> Vec<Metric> {
-    let gaps: [Vec<f64>; 3] = coords.clone().map(|c| {
-        (0..c.len())
-            .map(|i| {
-                let left = if i > 0 { c[i] - c[i - 1] } else { 0.0 };
-                let right = if i + 1 < c.len() {
-                    c[i + 1] - c[i]
-                } else {
-                    0.0
-                };
-                left.max(right)
-            })
-            .collect()
-    });
-    let widest = gaps
-        .iter()
-        .flatten()
-        .copied()
-        .fold(f64::MIN_POSITIVE, f64::max);
+    let r = RectilinearSupports::new(coords, support);
     let dims = coords.each_ref().map(Vec::len);
     (0..dims[0] * dims[1] * dims[2])
         .map(|i| {
-            let idx = [
+            r.at([
                 i % dims[0],
                 (i / dims[0]) % dims[1],
                 i / (dims[0] * dims[1]),
-            ];
-            let h = [0, 1, 2].map(|a| {
-                let g = gaps[a][idx[a]];
-                support * if g > 0.0 { g } else { widest }
-            });
-            diagonal(h)
+            ])
         })
         .collect()
+}
+
+/// [`rectilinear`]'s supports, one grid index at a time: for a part of the grid whose whole
+/// coordinates are known.
+pub struct RectilinearSupports {
+    gaps: [Vec<f64>; 3],
+    widest: f64,
+    support: f64,
+}
+
+impl RectilinearSupports {
+    pub fn new(coords: &[Vec<f64>; 3], support: f64) -> Self {
+        let gaps: [Vec<f64>; 3] = coords.clone().map(|c| {
+            (0..c.len())
+                .map(|i| {
+                    let left = if i > 0 { c[i] - c[i - 1] } else { 0.0 };
+                    let right = if i + 1 < c.len() {
+                        c[i + 1] - c[i]
+                    } else {
+                        0.0
+                    };
+                    left.max(right)
+                })
+                .collect()
+        });
+        let widest = gaps
+            .iter()
+            .flatten()
+            .copied()
+            .fold(f64::MIN_POSITIVE, f64::max);
+        Self {
+            gaps,
+            widest,
+            support,
+        }
+    }
+
+    /// The metric at grid index `idx`.
+    pub fn at(&self, idx: [usize; 3]) -> Metric {
+        let h = [0, 1, 2].map(|a| {
+            let g = self.gaps[a][idx[a]];
+            self.support * if g > 0.0 { g } else { self.widest }
+        });
+        diagonal(h)
+    }
 }
 
 /// Ellipsoids spanned by the local index-direction edges of a curvilinear grid.
