@@ -632,6 +632,7 @@ fn ranks_reading_a_mesh_points_or_grid_together_hold_the_whole_fields_bricks() {
                     &settings,
                     scene.reconstruction,
                     scene.octree,
+                    None,
                 )
             });
             let bricks: Vec<_> = bricks
@@ -696,6 +697,7 @@ fn failures(summary: &Summary, ranks: usize, settings: &SampleSettings) -> Vec<S
             settings,
             scene.reconstruction,
             scene.octree,
+            None,
         )
         .err()
         .map(|e| e.to_string())
@@ -741,5 +743,68 @@ fn one_ring_supports_of_a_split_mesh_are_refused_by_name() {
             e.contains("reconstruction.anisotropic") && e.contains("rank 0"),
             "{e}"
         );
+    }
+}
+
+#[test]
+fn ranks_reading_together_for_a_splatting_view_hold_the_kernels_its_sheets_need() {
+    let d = dir("scattered-splat");
+    let (points, cells) = lattice(4);
+    let mesh = vtu_files(&d, &points, &cells, 37, true);
+    let (curved, _) = grid_files(&d, "StructuredGrid", [0, 9, 0, 8, 0, 7], 3, &curved_at);
+    let settings = SampleSettings::default();
+    for (path, method) in [(&mesh, "splat"), (&mesh, "splat-post"), (&curved, "splat")] {
+        let scene = common::general_scene(&[
+            format!("render.method=\"{method}\""),
+            "camera.width=48".into(),
+            "camera.height=40".into(),
+        ]);
+        let view = scene.view();
+        let dataset = load_dataset(path).expect("dataset");
+        let whole = SampleSet::from_dataset(&dataset, path, Some("f"), &settings).expect("set");
+        let whole =
+            Field::from_samples(whole, scene.reconstruction, &scene.octree, |_| {}).expect("field");
+        let reach = vmls::bricks::splat::SplatReach::new(&whole, &view).expect("reach");
+        let summary = Summary::read(path).expect("summary");
+        for ranks in [2, 3] {
+            let what = format!("{}, {method}, {ranks} ranks", path.display());
+            let bricks = LocalRanks::run(ranks, |ex| {
+                read_scattered(
+                    ex,
+                    &summary,
+                    Some("f"),
+                    &settings,
+                    scene.reconstruction,
+                    scene.octree,
+                    Some(&view),
+                )
+            });
+            let tree = vmls::bricks::decompose(&whole, ranks).expect("tree");
+            let mut ghosts = 0;
+            for (rank, brick) in bricks.into_iter().enumerate() {
+                let brick = brick.unwrap_or_else(|e| panic!("{what}: {e}"));
+                let (piece, count) =
+                    piece_of(&whole, &tree, rank, Ghosts::Splat(&reach)).expect("whole piece");
+                assert_eq!(brick.count, count, "{what}, rank {rank}: counts");
+                ghosts += count.ghosts;
+                assert_eq!(
+                    brick_bits(&brick.samples, count.own),
+                    brick_bits(&piece.samples, count.own),
+                    "{what}, rank {rank}: own kernels and the others its sheets need, in order"
+                );
+                let (x, y) = (volumes_by_position(&piece), {
+                    let (mine, _, _, _) = brick.piece().expect("piece");
+                    volumes_by_position(&mine)
+                });
+                for ((p, u), (q, v)) in x.iter().zip(&y) {
+                    assert_eq!(p, q, "{what}");
+                    assert!(
+                        (u - v).abs() <= 1e-12 * u.abs(),
+                        "{what}: volume {v} vs {u}"
+                    );
+                }
+            }
+            assert!(ghosts > 0, "{what}: no brick took another's kernels");
+        }
     }
 }

@@ -2,14 +2,17 @@
 //! ([`super::parallel_scattered`]): every sample to the rank whose kd box owns it and, as a
 //! ghost, to every rank whose box its support reaches ([`super::ghosts::support_reaches`], the
 //! rule [`super::piece_of`] applies to the whole field), each brick's samples in the whole
-//! set's order; and the Gaussian sum's kernel volumes, computed where each sample is owned.
+//! set's order; the Gaussian sum's kernel volumes, computed where each sample is owned; and a
+//! splatting brick's kernels, chosen by each kernel's owner.
 
+use super::Aabb;
 use super::exchange::{Exchange, pod_bytes, pods};
 use super::ghosts::{GhostCount, support_reaches};
 use super::kd::KdTree;
+use super::splat::SplatReach;
 use crate::recon::gaussian::KernelVolumes;
 use crate::recon::support_index::SupportIndex;
-use crate::samples::{Positions, SampleSet, Supports};
+use crate::samples::{Metric, Positions, SampleSet, Supports};
 
 /// Samples as records of `width` f64s, sent to the ranks `to(i)` names.
 pub fn route(
@@ -75,6 +78,11 @@ impl Sent {
 }
 
 impl Split<'_> {
+    /// The own samples' indices in the whole set, in the brick's order.
+    pub fn own_index(&self) -> Vec<f64> {
+        self.mine.iter().map(|r| r.0[10]).collect()
+    }
+
     pub fn count(&self) -> GhostCount {
         GhostCount {
             own: self.mine.len(),
@@ -190,3 +198,67 @@ pub fn kernel_volumes<E: Exchange>(
     );
     KernelVolumes::PerSample(v)
 }
+
+/// A splatting brick ([`super::Ghosts::Splat`]): this rank's own samples (the first `own` of
+/// `brick`, with whole-set `index` and kernel `volumes`) and, from every rank, each kernel
+/// whose reach in the view ([`SplatReach`], projected by the kernel's owner for its own
+/// kernels) meets this rank's kd cell, in the whole set's order. `cells` are every rank's.
+pub fn splat_ghosts<E: Exchange>(
+    ex: &E,
+    brick: &SampleSet,
+    (own, index, volumes): (usize, &[f64], &[f64]),
+    reach: &SplatReach,
+    cells: &[Aabb],
+) -> (SampleSet, Vec<f64>, GhostCount) {
+    let rank = ex.rank();
+    let out = route(
+        own,
+        ex.size(),
+        |i, v| {
+            v.extend(brick.position(i));
+            v.push(f64::from(brick.values.get(i)));
+            v.extend(brick.metric(i));
+            v.extend([index[i], volumes[i]]);
+        },
+        |i, send| {
+            for (s, &cell) in cells.iter().enumerate() {
+                if s != rank && reach.meets(i, cell) {
+                    send(s);
+                }
+            }
+        },
+    );
+    let got: Vec<f64> = ex
+        .all_to_all(out)
+        .iter()
+        .flat_map(|b| pods::<f64>(b))
+        .collect();
+    let mut extra: Vec<&[f64]> = got.chunks_exact(SPLAT_RECORD).collect();
+    extra.sort_by(|a, b| a[10].total_cmp(&b[10]));
+    let mut positions: Vec<[f64; 3]> = (0..own).map(|i| brick.position(i)).collect();
+    let mut values: Vec<f32> = (0..own).map(|i| brick.values.get(i)).collect();
+    let mut metrics: Vec<Metric> = (0..own).map(|i| brick.metric(i)).collect();
+    let mut kernel_volumes = volumes[..own].to_vec();
+    for r in &extra {
+        positions.push([r[0], r[1], r[2]]);
+        values.push(r[3] as f32);
+        metrics.push([r[4], r[5], r[6], r[7], r[8], r[9]]);
+        kernel_volumes.push(r[11]);
+    }
+    let set = SampleSet {
+        positions: Positions::Scattered(positions),
+        values: values.into(),
+        supports: Supports::PerSample(metrics),
+        domain: brick.domain.clone(),
+        spacing: brick.spacing,
+        provenance: brick.provenance.clone(),
+    };
+    let count = GhostCount {
+        own,
+        ghosts: extra.len(),
+    };
+    (set, kernel_volumes, count)
+}
+
+/// A kernel's record: [`RECORD`]'s and its volume.
+const SPLAT_RECORD: usize = RECORD + 1;

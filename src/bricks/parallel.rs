@@ -6,12 +6,12 @@
 //! positions in the same frame (the domain's centre), the same values; what a rank cannot know
 //! alone, the value range, the caller agrees on across the ranks (a minimum and maximum).
 //!
-//! Ray casting only: a splatting brick needs the kernels that reach its sheets in the view,
-//! which only a projection of every kernel finds ([`super::splat`]). The other kinds (`.pvtr`,
-//! `.pvts`, `.pvtu`, `.pvtp`), whose samples vmls holds as scattered positions, are read by
-//! the ranks in shares and redistributed ([`super::parallel_scattered`]); what neither reads
-//! is read whole by one rank ([`crate::data::vtk_xml_parallel::load`]) and divided as any
-//! field ([`ranks_read`]).
+//! Ray casting only: a splatting grid brick is the sub-grid holding every kernel that reaches
+//! its sheets in the view, which a projection of every kernel finds ([`super::splat`]). The
+//! other kinds (`.pvtr`, `.pvts`, `.pvtu`, `.pvtp`), whose samples vmls holds as scattered
+//! positions, are read by the ranks in shares and redistributed, for ray casting and
+//! splatting ([`super::parallel_scattered`]); what neither reads is read whole by one rank
+//! ([`crate::data::vtk_xml_parallel::load`]) and divided as any field ([`ranks_read`]).
 
 use super::ghosts::{GhostCount, grid_window, mls_layers};
 use super::kd::KdTree;
@@ -26,17 +26,18 @@ use glam::DVec3;
 
 /// Whether the ranks read the parallel file at `path` themselves ([`GridPlan`],
 /// [`super::parallel_scattered`]) for a scene that splats (`splat`) or ray casts with sample
-/// `settings`; otherwise rank 0 reads it whole and sends each rank its piece. Every ray-cast
-/// parallel kind, but a `.pvtu` or `.pvts` with anisotropic supports (a mesh's point data's
-/// one-rings and a curvilinear grid's edges need neighbours the pieces split).
+/// `settings`; otherwise rank 0 reads it whole and sends each rank its piece. Every parallel
+/// kind, but a splatted `.pvti` (its bricks are sub-grids holding the kernels they need,
+/// chosen from the whole grid) and a `.pvtu` or `.pvts` with anisotropic supports (a mesh's
+/// point data's one-rings and a curvilinear grid's edges need neighbours the pieces split).
 pub fn ranks_read(path: &std::path::Path, splat: bool, settings: &SampleSettings) -> bool {
     let name = path.to_string_lossy().to_ascii_lowercase();
     let split_neighbours = name.ends_with(".pvtu") || name.ends_with(".pvts");
-    !splat
-        && [".pvti", ".pvtr", ".pvts", ".pvtu", ".pvtp"]
-            .iter()
-            .any(|e| name.ends_with(e))
+    [".pvtr", ".pvts", ".pvtu", ".pvtp"]
+        .iter()
+        .any(|e| name.ends_with(e))
         && !(split_neighbours && settings.anisotropic == Some(true))
+        || (name.ends_with(".pvti") && !splat)
 }
 
 /// A `.pvti`'s grid as the whole field would hold it, and its decomposition.

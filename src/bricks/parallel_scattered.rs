@@ -37,11 +37,13 @@
 //! samples. Anisotropic supports from a mesh's one-rings or a curvilinear grid's edges need
 //! neighbours that pieces split: [`super::parallel::ranks_read`] leaves those files to rank 0.
 
-use super::distribute::{distribute, kernel_volumes, route};
+use super::distribute::{distribute, kernel_volumes, route, splat_ghosts};
 use super::exchange::{Exchange, all_max, all_min, all_sum, gather_f64, pod_bytes, pods, select};
 use super::ghosts::GhostCount;
+use super::ghosts::cell_of;
 use super::kd::{KdTree, subsample_stride};
 use super::part::{Part, read_part, sample_dims};
+use super::splat::SplatReach;
 use super::{Aabb, BrickError};
 use crate::data::dataset::Location;
 use crate::data::vtk_xml_parallel::Summary;
@@ -55,6 +57,7 @@ use crate::samples::{
     Domain, Metric, Positions, Provenance, SampleSet, SampleSettings, Supports, centres,
     duplicate_tolerance, merge_duplicates_within, supports,
 };
+use crate::view::View;
 use glam::DVec3;
 
 /// One rank's brick of a parallel file read by the ranks together: its samples (frame-relative, its own
@@ -94,7 +97,8 @@ fn box_distance2(x: [f64; 3], (lo, hi): Aabb) -> f64 {
 }
 
 /// Reads the parallel file `summary` (not an image) on every rank of `ex` together and returns
-/// this rank's brick (module docs). Collective; every phase is agreed on.
+/// this rank's brick for ray casting, or, with a splatting `view`, for splatting that view
+/// (module docs). Collective; every phase is agreed on.
 pub fn read_scattered<E: Exchange>(
     ex: &E,
     summary: &Summary,
@@ -102,6 +106,7 @@ pub fn read_scattered<E: Exchange>(
     settings: &SampleSettings,
     reconstruction: Reconstruction,
     octree: OctreeSettings,
+    view: Option<&View<'_>>,
 ) -> Result<ScatteredBrick, E::Error> {
     let (rank, ranks) = (ex.rank(), ex.size());
     let path = summary.path.display().to_string();
@@ -263,7 +268,8 @@ pub fn read_scattered<E: Exchange>(
         Ok(())
     })?;
     let brick = split.brick(&set);
-    let volumes = (reconstruction.method == ReconMethod::Gaussian)
+    let splat = view.filter(|v| v.settings.method.splat_shading().is_some());
+    let volumes = (reconstruction.method == ReconMethod::Gaussian || splat.is_some())
         .then(|| kernel_volumes(ex, &brick, &split, &sent, &set, &tree, reconstruction.sigma));
     let frame = PieceFrame {
         frame_origin: centre,
@@ -275,6 +281,39 @@ pub fn read_scattered<E: Exchange>(
             thinnest,
             radii,
         }),
+    };
+    // A splatting brick takes, instead of MLS's ghosts, the kernels that add to the sheets its
+    // cell owns in the view, which each kernel's owner finds by projecting its own kernels.
+    let (brick, count, volumes) = match (splat, volumes) {
+        (Some(view), Some(KernelVolumes::PerSample(v))) => {
+            let bounds = tree.boxes[rank];
+            let piece = Field::piece_deferred(
+                brick,
+                frame.clone(),
+                (DVec3::from(bounds.0), DVec3::from(bounds.1)),
+                Some(KernelVolumes::PerSample(v)),
+            );
+            let reach =
+                ex.agree(SplatReach::of_first(&piece, view, count.own).map_err(|e| e.to_string()))?;
+            let cells: Vec<Aabb> = tree
+                .boxes
+                .iter()
+                .map(|&b| cell_of(&piece.samples, b))
+                .collect();
+            let index = split.own_index();
+            let volumes: Vec<f64> = (0..count.own)
+                .map(|i| piece.kernel_volumes().get(i))
+                .collect();
+            let (set, v, count) = splat_ghosts(
+                ex,
+                &piece.samples,
+                (count.own, &index, &volumes),
+                &reach,
+                &cells,
+            );
+            (set, count, Some(KernelVolumes::PerSample(v)))
+        }
+        (_, volumes) => (brick, count, volumes),
     };
     Ok(ScatteredBrick {
         samples: brick,

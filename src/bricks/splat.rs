@@ -44,6 +44,16 @@ pub struct SplatReach {
 impl SplatReach {
     /// Projects every kernel of `field` for `view` (a splatting view; `field` the whole field).
     pub fn new(field: &Field, view: &View<'_>) -> Result<Self, crate::field::RenderError> {
+        Self::of_first(field, view, field.samples.len())
+    }
+
+    /// Projects the first `n` kernels of `field` for `view`: `field` a piece that keeps the
+    /// whole field's frame (its sheets), and those kernels its own.
+    pub fn of_first(
+        field: &Field,
+        view: &View<'_>,
+        n: usize,
+    ) -> Result<Self, crate::field::RenderError> {
         let Some(shading) = view.settings.method.splat_shading() else {
             return Err(crate::field::RenderError::Setting {
                 key: "render.method",
@@ -68,7 +78,7 @@ impl SplatReach {
         } else {
             (1, [1, 1])
         };
-        let boxes = (0..field.samples.len())
+        let boxes = (0..n.min(field.samples.len()))
             .into_par_iter()
             .map(|i| {
                 let splat = splat_project(&setup, view.transfer, &kernel(field, i)).ok()?;

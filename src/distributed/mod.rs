@@ -24,8 +24,8 @@
 //! ([`crate::raycast::RaySetup::window`]).
 //!
 //! Not yet here: anisotropic supports of a `.pvtu`'s points or a `.pvts` (one-rings, grid
-//! edges) and every splatting scene's parallel file are read whole by rank 0 (its memory
-//! bounds the data); splatting ranks still walk every tile.
+//! edges) and a splatting scene's `.pvti` are read whole by rank 0 (its memory bounds the
+//! data); splatting ranks still walk every tile.
 
 #[allow(unsafe_code)]
 mod icet;
@@ -365,9 +365,9 @@ impl RankBrick {
     /// its ghost planes ([`GridPlan`]; the ranks agree on the value range); of the other kinds
     /// (`.pvtr`, `.pvts`, `.pvtu`, `.pvtp`), a contiguous share, redistributed to the kd boxes
     /// with exact supports and ghosts ([`read_scattered`]). The bricks are those
-    /// [`RankBrick::scatter`] would send (under the tree their gathered subsample cuts). Ray
-    /// casting only (a splatting brick's kernels come from a projection of the whole field).
-    /// Collective; every phase is agreed on.
+    /// [`RankBrick::scatter`] would send (under the tree their gathered subsample cuts), for
+    /// ray casting or, but for an image, splatting `view`. Collective; every phase is agreed
+    /// on.
     #[allow(clippy::too_many_arguments)]
     pub fn read_parallel(
         world: &SimpleCommunicator,
@@ -381,18 +381,7 @@ impl RankBrick {
     ) -> Result<Self, DistributedError> {
         let start = Instant::now();
         let (rank, ranks) = (world.rank() as usize, world.size() as usize);
-        let summary = agree(
-            world,
-            if view.settings.method.splat_shading().is_some() {
-                Err(format!(
-                    "{}: a splatting brick's kernels are chosen from the whole field: rank 0 \
-                     reads the parallel file",
-                    path.display()
-                ))
-            } else {
-                Summary::read(path).map_err(|e| e.to_string())
-            },
-        )?;
+        let summary = agree(world, Summary::read(path).map_err(|e| e.to_string()))?;
         if summary.kind != "ImageData" {
             let brick = read_scattered(
                 &Mpi(world),
@@ -401,12 +390,24 @@ impl RankBrick {
                 samples,
                 reconstruction,
                 octree,
+                Some(view),
             )?;
             let piece = agree(world, brick.piece().map_err(|e| e.to_string()))?;
             let (piece, tree, count, pieces_read) = piece;
             let cost = (count, start.elapsed().as_secs_f64() * 1e3, pieces_read);
-            return Self::prepare(world, ctx, piece, tree, cost, None);
+            return Self::prepare(world, ctx, piece, tree, cost, splat_view(view));
         }
+        agree(
+            world,
+            match view.settings.method.splat_shading() {
+                Some(_) => Err(format!(
+                    "{}: a splatting brick of a parallel image takes the sub-grid its kernels \
+                     need, chosen from the whole grid: rank 0 reads it",
+                    path.display()
+                )),
+                None => Ok(()),
+            },
+        )?;
         let plan = agree(
             world,
             GridPlan::new(summary, array, samples, ranks).map_err(|e| e.to_string()),

@@ -270,6 +270,22 @@ impl Field {
         volumes: Option<KernelVolumes>,
         progress: impl FnMut(f64),
     ) -> Result<Self, ReconError> {
+        let field = Self::piece_deferred(samples, frame, bounds, volumes);
+        if field.octree_wanted {
+            let built = Octree::from_samples(&field.samples, &field.octree_settings, progress)?;
+            let _ = field.octree.set(Ok(Some(built)));
+        }
+        Ok(field)
+    }
+
+    /// [`Field::from_piece`] with its octree built when first asked for: a piece that is only
+    /// projected (a splatting brick's kernels, chosen on the host) never builds it.
+    pub fn piece_deferred(
+        samples: SampleSet,
+        frame: PieceFrame,
+        bounds: (DVec3, DVec3),
+        volumes: Option<KernelVolumes>,
+    ) -> Self {
         let mut reconstruction = frame.reconstruction;
         reconstruction.resample = 0;
         reconstruction.resample_auto = false;
@@ -282,14 +298,10 @@ impl Field {
             Some(bounds),
         );
         field.fast_path_declined = Some("a brick of a decomposed field is solved directly".into());
-        if field.octree_wanted {
-            let built = Octree::from_samples(&field.samples, &field.octree_settings, progress)?;
-            let _ = field.octree.set(Ok(Some(built)));
-        }
         if let Some(v) = volumes {
             let _ = field.volumes.set(v);
         }
-        Ok(field)
+        field
     }
 
     /// The box a piece of a decomposed field is rendered in ([`Field::piece`]).
