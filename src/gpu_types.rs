@@ -538,13 +538,19 @@ pub struct SplatParams {
     pub tiles_x: u32,
     /// Kernels to project.
     pub kernel_count: u32,
-    pub _pad: [u32; 2],
+    /// The sheets a frame's kernels are drawn on, first and last (all but in a brick's frame:
+    /// those it can own, `SplatSetup::window`).
+    pub sheet_first: u32,
+    pub sheet_last: u32,
     /// A brick's frame: its kd cell (w unused; faces on the domain's boundary infinite), where
     /// a sheet's midpoint must lie for the frame to composite it.
     pub cell_min: [f32; 4],
     pub cell_max: [f32; 4],
+    /// The pixels a frame's kernels are drawn on: x0, y0, x1, y1 (inclusive; all but in a
+    /// brick's frame).
+    pub pixel_window: [i32; 4],
 }
-const _: () = assert!(std::mem::size_of::<SplatParams>() == 272);
+const _: () = assert!(std::mem::size_of::<SplatParams>() == 288);
 
 /// One projected kernel (splat_project's output). GLSL twin: `Splat`. The footprint words
 /// depend on the projection (`splat::project::Splat` names them):

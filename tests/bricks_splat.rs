@@ -236,3 +236,34 @@ fn splatting_bricks_render_only_the_view_they_were_divided_for() {
     assert!(e.contains("splat.surface"), "{e}");
     finish(ctx);
 }
+
+/// A brick's frame draws kernels only on the pixels and sheets its cell can own
+/// (`SplatSetup::window`): the same image as drawing them everywhere, with fewer entries.
+#[test]
+fn a_splatting_brick_draws_only_where_it_can_own_sheets() {
+    for (view, s) in views() {
+        let shading = s.render.method.splat_shading().expect("splatting");
+        for (name, field) in fields(&s) {
+            let reach = SplatReach::new(&field, &s.view()).expect("reach");
+            let (_, pieces) = divide(&field, 5, Ghosts::Splat(&reach)).expect("divide");
+            let (mut fewer, mut drawn) = (0, 0);
+            for (k, (piece, _)) in pieces.iter().enumerate() {
+                let windowed = splat::setup(&s, piece, shading);
+                let mut everywhere = windowed.clone();
+                let (w, h) = (s.camera.width as i32, s.camera.height as i32);
+                everywhere.window = ([0, 0, w - 1, h - 1], [0, everywhere.slabs - 1]);
+                let a = splat_image(&windowed, piece, &s.transfer).expect("CPU twin");
+                let b = splat_image(&everywhere, piece, &s.transfer).expect("CPU twin");
+                let d = largest(&a.pixels, &b.pixels);
+                assert!(d <= 1e-12, "{view}, {name}, brick {k}: {d:.3e}");
+                drawn += b.counts.entries;
+                fewer += b.counts.entries - a.counts.entries;
+            }
+            eprintln!("{view}, {name}: {fewer} of {drawn} entries outside the bricks' windows");
+            assert!(
+                fewer > 0,
+                "{view}, {name}: no brick's window culled an entry"
+            );
+        }
+    }
+}

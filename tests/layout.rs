@@ -186,9 +186,11 @@ fn glsl_and_rust_layouts_agree() {
             slabs: 32,
             tiles_x: 33,
             kernel_count: 34,
-            _pad: [35, 36],
+            sheet_first: 35,
+            sheet_last: 36,
             cell_min: v(37.0),
             cell_max: v(38.0),
+            pixel_window: [39, 40, 41, 42],
         },
         "SplatParams"
     );

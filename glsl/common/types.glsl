@@ -173,10 +173,11 @@ struct SplatParams {
     uint slabs;
     uint tiles_x;
     uint kernel_count;
-    uint _pad0;
-    uint _pad1;
+    uint sheet_first;
+    uint sheet_last;
     vec4 cell_min;
     vec4 cell_max;
+    ivec4 pixel_window;
 };
 
 

@@ -133,10 +133,11 @@ void main() {
     splat_params.slabs = 32u;
     splat_params.tiles_x = 33u;
     splat_params.kernel_count = 34u;
-    splat_params._pad0 = 35u;
-    splat_params._pad1 = 36u;
+    splat_params.sheet_first = 35u;
+    splat_params.sheet_last = 36u;
     splat_params.cell_min = v(37.0);
     splat_params.cell_max = v(38.0);
+    splat_params.pixel_window = ivec4(39, 40, 41, 42);
 
     splat.footprint0 = v(1.0);
     splat.footprint1 = v(2.0);

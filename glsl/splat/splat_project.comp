@@ -237,11 +237,12 @@ Splat project(Sample k) {
     }
 #endif
     float w = float(params.camera.width), h = float(params.camera.height);
+    // Within the frame's window (a brick's: the pixels and sheets it can own).
     ivec4 bbox = ivec4(
-        int(min(max(ceil(box.x - box.z), 0.0), w)),
-        int(min(max(ceil(box.y - box.w), 0.0), h)),
-        int(max(min(floor(box.x + box.z), w - 1.0), -1.0)),
-        int(max(min(floor(box.y + box.w), h - 1.0), -1.0)));
+        max(int(min(max(ceil(box.x - box.z), 0.0), w)), params.pixel_window.x),
+        max(int(min(max(ceil(box.y - box.w), 0.0), h)), params.pixel_window.y),
+        min(int(max(min(floor(box.x + box.z), w - 1.0), -1.0)), params.pixel_window.z),
+        min(int(max(min(floor(box.y + box.w), h - 1.0), -1.0)), params.pixel_window.w));
     float spread = slope.x * (vf.x * slope.x + vf.y * slope.y)
                  + slope.y * (vf.y * slope.x + vf.z * slope.y);
     float depth_reach = cutoff * (sqrt(max(spread, 0.0)) + sqrt(cond));
@@ -253,14 +254,15 @@ Splat project(Sample k) {
     depth_reach = max(depth_reach, cutoff * sqrt(gershgorin));
 #endif
     float slab0 = params.slab0_world, slab = params.slab_world;
-    float first = floor((t - depth_reach - slab0) / slab);
-    float last = floor((t + depth_reach - slab0) / slab);
+    float first = max(floor((t - depth_reach - slab0) / slab), float(params.sheet_first));
+    float last = min(floor((t + depth_reach - slab0) / slab), float(params.sheet_last));
     float checks = amplitude + conic.x + conic.y + conic.z + slope.x + slope.y + t + cond
                  + checks_exact;
     if (isnan(checks) || isinf(checks)) {
         return culled(CULL_DEGENERATE);
     }
-    if (bbox.x > bbox.z || bbox.y > bbox.w || last < 0.0 || first >= float(params.slabs)) {
+    if (bbox.x > bbox.z || bbox.y > bbox.w || last < 0.0 || first >= float(params.slabs)
+        || first > last) {
         return culled(CULL_OUTSIDE);
     }
     uvec4 rect = tile_rect(bbox);
@@ -271,6 +273,9 @@ Splat project(Sample k) {
     // Whole kernels go to the sheet of their centre.
     s0 = uint(clamp(floor((t - slab0) / slab), 0.0, float(params.slabs - 1u)));
     s1 = s0;
+    if (s0 < params.sheet_first || s0 > params.sheet_last) {
+        return culled(CULL_OUTSIDE);
+    }
 #endif
 #if SPLAT_RING > 0
     // Ring registers: one entry per tile and per SPLAT_RING sheets.

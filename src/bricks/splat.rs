@@ -20,6 +20,11 @@
 //! points lie in the hull of the corner rays' points at the first and last midpoint, but for
 //! a bulge of at most m·(1 − cos θ) (θ the widest angle between a corner ray and the central
 //! one), which the bound adds.
+//!
+//! A brick's frame draws its kernels only where it can own sheets: on the pixels whose rays
+//! meet its cell and the sheets whose midpoints can lie in it (`SplatSetup::window`, with the
+//! apron post-shaded isosurfaces read): a ghost kernel's entries elsewhere would add only to
+//! sheets other bricks own.
 
 use super::Aabb;
 use crate::field::Field;

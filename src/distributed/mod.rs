@@ -25,7 +25,10 @@
 //!
 //! Not yet here: anisotropic supports of a `.pvtu`'s points or a `.pvts` (one-rings, grid
 //! edges) and a splatting scene's `.pvti` are read whole by rank 0 (its memory bounds the
-//! data); splatting ranks still walk every tile.
+//! data).
+//!
+//! A splatting rank draws its kernels only on the pixels and sheets its cell can own
+//! ([`crate::splat::SplatSetup::window`]); its raster still walks every tile of the image.
 
 #[allow(unsafe_code)]
 mod icet;

@@ -97,9 +97,11 @@ pub(super) fn params(
         slabs: setup.slabs,
         tiles_x: setup.tiles().0,
         kernel_count: kernels.count,
-        _pad: [0; 2],
+        sheet_first: setup.window.1[0],
+        sheet_last: setup.window.1[1],
         cell_min: v(setup.cell.map_or(glam::DVec3::NEG_INFINITY, |c| c.0)),
         cell_max: v(setup.cell.map_or(glam::DVec3::INFINITY, |c| c.1)),
+        pixel_window: setup.window.0,
     }
 }
 

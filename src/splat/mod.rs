@@ -164,6 +164,10 @@ pub struct SplatSetup {
     /// the domain's boundary moved to infinity so that the cells of a decomposition tile all
     /// space. The frame composites only the sheets it owns ([`SplatSetup::owns`]).
     pub cell: Option<(DVec3, DVec3)>,
+    /// The pixels (x0, y0, x1, y1, inclusive) and sheets (first, last) kernels are drawn on:
+    /// the whole image and every sheet, but in a brick's frame only those whose rays and
+    /// midpoints can meet its cell ([`brick_window`]).
+    pub window: ([i32; 4], [u32; 2]),
 }
 
 impl SplatSetup {
@@ -239,32 +243,22 @@ impl SplatSetup {
         let (box_lo, box_hi) = field.bounds();
         // Kernels reach no further than their supports (ρ = 1 ≥ cutoff·σ, checked above).
         let (lo, hi) = field.support_box();
-        let corners = (0..8).map(|c| {
-            DVec3::new(
-                if c & 1 == 0 { lo.x } else { hi.x },
-                if c & 2 == 0 { lo.y } else { hi.y },
-                if c & 4 == 0 { lo.z } else { hi.z },
-            )
-        });
         let diagonal = (hi - lo).length();
         let (focal, lateral, near, t_min, t_max) = match camera.projection {
             Projection::Perspective { fov_y_degrees } => {
                 let tan = (fov_y_degrees.to_radians() * 0.5).tan();
-                let t_max = corners.map(|c| (c - eye).length()).fold(0.0, f64::max);
-                let nearest = eye.clamp(lo, hi);
                 let near = 1e-4 * diagonal;
-                let t_min = (nearest - eye).length().max(near);
+                let (t_min, t_max) = depth_range(camera, &basis, eye, (lo, hi));
                 (
                     h / (2.0 * tan),
                     [LATERAL_CLAMP * tan * w / h, LATERAL_CLAMP * tan],
                     near,
-                    t_min,
+                    t_min.max(near),
                     t_max,
                 )
             }
             Projection::Orthographic { view_height } => {
-                let depths = corners.map(|c| (c - eye).dot(basis.forward));
-                let (a, b) = depths.fold((f64::MAX, f64::MIN), |(a, b), d| (a.min(d), b.max(d)));
+                let (a, b) = depth_range(camera, &basis, eye, (lo, hi));
                 (h / view_height, [f64::MAX; 2], 0.0, a.max(0.0), b)
             }
         };
@@ -400,8 +394,15 @@ impl SplatSetup {
             sheet_share,
             lighting: *lighting,
             cell: field.clip().map(|clip| brick_cell(clip, (box_lo, box_hi))),
+            window: ([0; 4], [0; 2]),
         };
-        Ok(setup)
+        let apron = if post && !setup.isosurfaces.is_empty() {
+            (2, [2, 3])
+        } else {
+            (1, [1, 1])
+        };
+        let window = brick_window(&setup, (lo, hi), apron);
+        Ok(Self { window, ..setup })
     }
 
     /// Whether sheet k of the pixel ray (o, d) belongs to this frame: always, except in a
@@ -528,6 +529,74 @@ pub fn brick_cell(clip: (DVec3, DVec3), domain: (DVec3, DVec3)) -> (DVec3, DVec3
     let lo = DVec3::select(lo.cmple(domain.0), DVec3::NEG_INFINITY, lo);
     let hi = DVec3::select(hi.cmpge(domain.1), DVec3::INFINITY, hi);
     (lo, hi)
+}
+
+/// The range of t, the distance along a ray (perspective: from the eye; orthographic: from the
+/// image plane), at which `camera`'s rays meet the frame-relative box (lo, hi).
+fn depth_range(
+    camera: &Camera,
+    basis: &ViewBasis,
+    eye: DVec3,
+    (lo, hi): (DVec3, DVec3),
+) -> (f64, f64) {
+    let corners = (0..8).map(|c| {
+        DVec3::new(
+            if c & 1 == 0 { lo.x } else { hi.x },
+            if c & 2 == 0 { lo.y } else { hi.y },
+            if c & 4 == 0 { lo.z } else { hi.z },
+        )
+    });
+    match camera.projection {
+        Projection::Perspective { .. } => (
+            (eye.clamp(lo, hi) - eye).length(),
+            corners.map(|c| (c - eye).length()).fold(0.0, f64::max),
+        ),
+        Projection::Orthographic { .. } => corners
+            .map(|c| (c - eye).dot(basis.forward))
+            .fold((f64::MAX, f64::MIN), |(a, b), d| (a.min(d), b.max(d))),
+    }
+}
+
+/// What a frame draws kernels on (`SplatSetup::window`): all of the image and its sheets, but
+/// for a brick only the pixels whose rays meet its cell and the sheets whose midpoints can lie
+/// in it — within the supports' box widened by a sheet, since a sheet whose midpoint lies
+/// outside that box holds no kernel — widened by `apron` (pixels, sheets below and above) for
+/// f32 rounding and for what post-shaded isosurfaces read around a sheet they own. A kernel's
+/// entries outside it could only add to sheets other bricks own: it draws none there.
+fn brick_window(
+    setup: &SplatSetup,
+    (slo, shi): (DVec3, DVec3),
+    (pixels, [below, above]): (i32, [i64; 2]),
+) -> ([i32; 4], [u32; 2]) {
+    let (w, h) = (setup.camera.width as i32, setup.camera.height as i32);
+    let last = setup.slabs.saturating_sub(1);
+    let Some((clo, chi)) = setup.cell else {
+        return ([0, 0, w - 1, h - 1], [0, last]);
+    };
+    let pad = DVec3::splat(setup.slab_world);
+    let (lo, hi) = (clo.max(slo - pad), chi.min(shi + pad));
+    if lo.cmpgt(hi).any() {
+        return ([0, 0, -1, -1], [1, 0]);
+    }
+    let p = setup
+        .camera
+        .pixel_box(&setup.basis, setup.frame_origin, (lo, hi))
+        .map(|v| v as i32);
+    let (t0, t1) = depth_range(&setup.camera, &setup.basis, setup.eye, (lo, hi));
+    let sheet = |t: f64| ((t - setup.slab0) / setup.slab_world).floor() as i64;
+    let (k0, k1) = (sheet(t0) - below, sheet(t1) + above);
+    (
+        [
+            (p[0] - pixels).max(0),
+            (p[1] - pixels).max(0),
+            (p[2] + pixels).min(w - 1),
+            (p[3] + pixels).min(h - 1),
+        ],
+        [
+            k0.clamp(0, i64::from(last)) as u32,
+            k1.clamp(0, i64::from(last)) as u32,
+        ],
+    )
 }
 
 /// What a frame did with its kernels (`--stats`).

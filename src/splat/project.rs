@@ -392,11 +392,13 @@ pub fn splat_project(
         Some(x) => cutoff_conic(setup, &x.precision, &x.adjugate, x.eye_offset, cut)
             .ok_or(Cull::Degenerate)?,
     };
+    // Within the frame's window (a brick's: the pixels and sheets it can own).
+    let ([wx0, wy0, wx1, wy1], [k0, k1]) = setup.window;
     let bbox = [
-        ((bx - rx).ceil().max(0.0).min(f64::from(w))) as i32,
-        ((by - ry).ceil().max(0.0).min(f64::from(h))) as i32,
-        ((bx + rx).floor().min(f64::from(w - 1)).max(-1.0)) as i32,
-        ((by + ry).floor().min(f64::from(h - 1)).max(-1.0)) as i32,
+        (((bx - rx).ceil().max(0.0).min(f64::from(w))) as i32).max(wx0),
+        (((by - ry).ceil().max(0.0).min(f64::from(h))) as i32).max(wy0),
+        (((bx + rx).floor().min(f64::from(w - 1)).max(-1.0)) as i32).min(wx1),
+        (((by + ry).floor().min(f64::from(h - 1)).max(-1.0)) as i32).min(wy1),
     ];
     let spread = slope[0] * (vf[0] * slope[0] + vf[1] * slope[1])
         + slope[1] * (vf[1] * slope[0] + vf[2] * slope[1]);
@@ -406,15 +408,24 @@ pub fn splat_project(
     let depth_reach = exact
         .as_ref()
         .map_or(affine_reach, |x| affine_reach.max(x.reach));
-    let first = ((t - depth_reach - setup.slab0) / setup.slab_world).floor();
-    let last = ((t + depth_reach - setup.slab0) / setup.slab_world).floor();
+    let first = ((t - depth_reach - setup.slab0) / setup.slab_world)
+        .floor()
+        .max(f64::from(k0));
+    let last = ((t + depth_reach - setup.slab0) / setup.slab_world)
+        .floor()
+        .min(f64::from(k1));
     let values = [
         amplitude, conic[0], conic[1], conic[2], slope[0], slope[1], t, cond,
     ];
     if values.iter().any(|x| !x.is_finite()) {
         return Err(Cull::Degenerate);
     }
-    if bbox[0] > bbox[2] || bbox[1] > bbox[3] || last < 0.0 || first >= f64::from(setup.slabs) {
+    if bbox[0] > bbox[2]
+        || bbox[1] > bbox[3]
+        || last < 0.0
+        || first >= f64::from(setup.slabs)
+        || first > last
+    {
         return Err(Cull::Outside);
     }
     let slabs = if setup.split {
@@ -427,6 +438,9 @@ pub fn splat_project(
         let k = ((t - setup.slab0) / setup.slab_world)
             .floor()
             .clamp(0.0, f64::from(setup.slabs - 1)) as u32;
+        if k < k0 || k > k1 {
+            return Err(Cull::Outside);
+        }
         [k, k]
     };
     let r = setup.tile_rect(bbox);
