@@ -808,3 +808,53 @@ fn ranks_reading_together_for_a_splatting_view_hold_the_kernels_its_sheets_need(
         }
     }
 }
+
+#[test]
+fn ranks_splatting_a_parallel_image_read_the_sub_grids_their_sheets_need() {
+    let d = dir("bricks-splat");
+    let (parallel, _) = grid_files(&d, "ImageData", [0, 32, 0, 28, 0, 24], 3, &image_at);
+    for method in ["splat", "splat-post"] {
+        let scene = common::general_scene(&[
+            format!("render.method=\"{method}\""),
+            "camera.width=200".into(),
+            "camera.height=160".into(),
+        ]);
+        let view = scene.view();
+        let field = whole_field(&parallel, "f");
+        let reach = vmls::bricks::splat::SplatReach::new(&field, &view).expect("reach");
+        for ranks in [3, 5, 8] {
+            let (_, pieces) = divide(&field, ranks, Ghosts::Splat(&reach)).expect("divide");
+            let summary = Summary::read(&parallel).expect("summary");
+            let total = summary.pieces.len();
+            let plan =
+                GridPlan::new(summary, Some("f"), &SampleSettings::default(), ranks).expect("plan");
+            let bricks = LocalRanks::run(ranks, |ex| {
+                plan.read_splat_brick(
+                    ex,
+                    &SampleSettings::default(),
+                    &view,
+                    scene.reconstruction,
+                    scene.octree,
+                )
+            });
+            let mut fewest = total;
+            for (rank, (brick, (piece, count))) in bricks.into_iter().zip(&pieces).enumerate() {
+                let what = format!("{method}, rank {rank} of {ranks}");
+                let (mine, mine_count, read) = brick.unwrap_or_else(|e| panic!("{what}: {e}"));
+                fewest = fewest.min(read);
+                assert_eq!(mine_count, *count, "{what}: counts");
+                assert_eq!(mine.samples.positions, piece.samples.positions, "{what}");
+                assert!(
+                    mine.samples.values.iter().eq(piece.samples.values.iter()),
+                    "{what}: values"
+                );
+                assert_eq!(mine.value_range(), piece.value_range(), "{what}: range");
+            }
+            eprintln!("{method}, {ranks} ranks: the fewest pieces a rank read {fewest} of {total}");
+            assert!(
+                fewest < total,
+                "{method}, {ranks} ranks: a rank read every piece"
+            );
+        }
+    }
+}

@@ -6,15 +6,18 @@
 //! positions in the same frame (the domain's centre), the same values; what a rank cannot know
 //! alone, the value range, the caller agrees on across the ranks (a minimum and maximum).
 //!
-//! Ray casting only: a splatting grid brick is the sub-grid holding every kernel that reaches
-//! its sheets in the view, which a projection of every kernel finds ([`super::splat`]). The
-//! other kinds (`.pvtr`, `.pvts`, `.pvtu`, `.pvtp`), whose samples vmls holds as scattered
-//! positions, are read by the ranks in shares and redistributed, for ray casting and
-//! splatting ([`super::parallel_scattered`]); what neither reads is read whole by one rank
+//! For splatting, a grid brick is the sub-grid holding every kernel that reaches its sheets
+//! in the view ([`super::splat`]): each rank projects its own planes' kernels and the ranks
+//! reduce, per brick, the index box of those that reach it ([`GridPlan::read_splat_brick`]).
+//! The other kinds (`.pvtr`, `.pvts`, `.pvtu`, `.pvtp`), whose samples vmls holds as scattered
+//! positions, are read by the ranks in shares and redistributed
+//! ([`super::parallel_scattered`]); what neither reads is read whole by one rank
 //! ([`crate::data::vtk_xml_parallel::load`]) and divided as any field ([`ranks_read`]).
 
+use super::exchange::{Exchange, all_max, all_min};
 use super::ghosts::{GhostCount, grid_window, mls_layers};
 use super::kd::KdTree;
+use super::splat::SplatReach;
 use super::{Aabb, BrickError};
 use crate::data::dataset::Location;
 use crate::data::dataset::grid_point;
@@ -22,22 +25,21 @@ use crate::data::vtk_xml_parallel::Summary;
 use crate::field::{Field, PieceFrame, SupportExtent};
 use crate::recon::{OctreeSettings, Reconstruction};
 use crate::samples::{Domain, Positions, SampleSet, SampleSettings, Supports};
+use crate::view::View;
 use glam::DVec3;
 
 /// Whether the ranks read the parallel file at `path` themselves ([`GridPlan`],
 /// [`super::parallel_scattered`]) for a scene that splats (`splat`) or ray casts with sample
 /// `settings`; otherwise rank 0 reads it whole and sends each rank its piece. Every parallel
-/// kind, but a splatted `.pvti` (its bricks are sub-grids holding the kernels they need,
-/// chosen from the whole grid) and a `.pvtu` or `.pvts` with anisotropic supports (a mesh's
+/// kind, ray cast or splatted, but a `.pvtu` or `.pvts` with anisotropic supports (a mesh's
 /// point data's one-rings and a curvilinear grid's edges need neighbours the pieces split).
-pub fn ranks_read(path: &std::path::Path, splat: bool, settings: &SampleSettings) -> bool {
+pub fn ranks_read(path: &std::path::Path, settings: &SampleSettings) -> bool {
     let name = path.to_string_lossy().to_ascii_lowercase();
     let split_neighbours = name.ends_with(".pvtu") || name.ends_with(".pvts");
-    [".pvtr", ".pvts", ".pvtu", ".pvtp"]
+    [".pvti", ".pvtr", ".pvts", ".pvtu", ".pvtp"]
         .iter()
         .any(|e| name.ends_with(e))
         && !(split_neighbours && settings.anisotropic == Some(true))
-        || (name.ends_with(".pvti") && !splat)
 }
 
 /// A `.pvti`'s grid as the whole field would hold it, and its decomposition.
@@ -66,6 +68,9 @@ pub struct GridBrick {
     pub range: (f64, f64),
     /// Pieces read, of the summary's.
     pub pieces_read: usize,
+    /// Its first sample's grid index along each axis, and its samples along each axis.
+    pub first: [usize; 3],
+    pub dims: [usize; 3],
 }
 
 impl GridPlan {
@@ -154,13 +159,26 @@ impl GridPlan {
         rank: usize,
         settings: &SampleSettings,
     ) -> Result<GridBrick, BrickError> {
+        let layers = mls_layers(self.support, self.spacing);
+        self.read_window(rank, settings, layers, None)
+    }
+
+    /// Reads the sub-grid of `rank`'s brick with `layers` more planes on each side, widened to
+    /// the index box `needed` ([`grid_window`]).
+    fn read_window(
+        &self,
+        rank: usize,
+        settings: &SampleSettings,
+        layers: [i64; 3],
+        needed: Option<([i64; 3], [i64; 3])>,
+    ) -> Result<GridBrick, BrickError> {
         let (first, count, own) = grid_window(
             self.dims,
             self.origin,
             self.spacing,
             self.tree.boxes[rank],
-            mls_layers(self.support, self.spacing),
-            None,
+            layers,
+            needed,
         );
         // The sample index box in the whole extent's point indices (a cell's samples need the
         // point after it).
@@ -236,6 +254,8 @@ impl GridPlan {
             },
             range,
             pieces_read: which.len(),
+            first,
+            dims: count,
         })
     }
 
@@ -279,5 +299,85 @@ impl GridPlan {
             None,
             |_| {},
         )?)
+    }
+
+    /// `rank`'s brick for splatting `view` (collective over `ex`): the sub-grid holding every
+    /// kernel that adds to a sheet its cell owns, as [`super::piece_of`] takes it with
+    /// [`super::Ghosts::Splat`]. Each rank reads its brick's planes, projects those kernels
+    /// for the view ([`SplatReach`], on a piece that keeps the whole field's frame) and marks,
+    /// for every rank whose cell a kernel reaches, the kernel's grid index; the index boxes
+    /// are reduced over the ranks, and each rank reads the pieces its box meets. Returns the
+    /// piece, its counts and the pieces it read.
+    pub fn read_splat_brick<E: Exchange>(
+        &self,
+        ex: &E,
+        settings: &SampleSettings,
+        view: &View<'_>,
+        reconstruction: Reconstruction,
+        octree: OctreeSettings,
+    ) -> Result<(Field, GhostCount, usize), E::Error> {
+        let rank = ex.rank();
+        let planes = ex.agree(
+            self.read_window(rank, settings, [0; 3], None)
+                .map_err(|e| e.to_string()),
+        )?;
+        let range = (
+            all_min(ex, &[planes.range.0])[0],
+            all_max(ex, &[planes.range.1])[0],
+        );
+        let (first, dims, own_pieces) = (planes.first, planes.dims, planes.pieces_read);
+        let piece = ex.agree(
+            self.piece(rank, planes, range, reconstruction, octree)
+                .map_err(|e| e.to_string()),
+        )?;
+        let reach = ex.agree(SplatReach::new(&piece, view).map_err(|e| e.to_string()))?;
+        let domain = (DVec3::from(self.domain.0), DVec3::from(self.domain.1));
+        let cells: Vec<Aabb> = self
+            .tree
+            .boxes
+            .iter()
+            .map(|b| {
+                let (lo, hi) =
+                    crate::splat::brick_cell((DVec3::from(b.0), DVec3::from(b.1)), domain);
+                (lo.to_array(), hi.to_array())
+            })
+            .collect();
+        let ranks = cells.len();
+        let (mut lo, mut hi) = (
+            vec![f64::INFINITY; 3 * ranks],
+            vec![f64::NEG_INFINITY; 3 * ranks],
+        );
+        for j in 0..piece.samples.len() {
+            let local = [
+                j % dims[0],
+                (j / dims[0]) % dims[1],
+                j / (dims[0] * dims[1]),
+            ];
+            for (s, &cell) in cells.iter().enumerate() {
+                if reach.meets(j, cell) {
+                    for a in 0..3 {
+                        let g = (first[a] + local[a]) as f64;
+                        lo[3 * s + a] = lo[3 * s + a].min(g);
+                        hi[3 * s + a] = hi[3 * s + a].max(g);
+                    }
+                }
+            }
+        }
+        let (lo, hi) = (all_min(ex, &lo), all_max(ex, &hi));
+        let bound = |v: f64, empty: i64| if v.is_finite() { v as i64 } else { empty };
+        let needed = (
+            [0, 1, 2].map(|a| bound(lo[3 * rank + a], i64::MAX)),
+            [0, 1, 2].map(|a| bound(hi[3 * rank + a], i64::MIN)),
+        );
+        let brick = ex.agree(
+            self.read_window(rank, settings, [0; 3], Some(needed))
+                .map_err(|e| e.to_string()),
+        )?;
+        let (count, pieces) = (brick.count, own_pieces.max(brick.pieces_read));
+        let piece = ex.agree(
+            self.piece(rank, brick, range, reconstruction, octree)
+                .map_err(|e| e.to_string()),
+        )?;
+        Ok((piece, count, pieces))
     }
 }

@@ -24,8 +24,7 @@
 //! ([`crate::raycast::RaySetup::window`]).
 //!
 //! Not yet here: anisotropic supports of a `.pvtu`'s points or a `.pvts` (one-rings, grid
-//! edges) and a splatting scene's `.pvti` are read whole by rank 0 (its memory bounds the
-//! data).
+//! edges) are read whole by rank 0 (its memory bounds the data).
 //!
 //! A splatting rank draws its kernels only on the pixels and sheets its cell can own
 //! ([`crate::splat::SplatSetup::window`]); its raster still walks every tile of the image.
@@ -369,8 +368,9 @@ impl RankBrick {
     /// (`.pvtr`, `.pvts`, `.pvtu`, `.pvtp`), a contiguous share, redistributed to the kd boxes
     /// with exact supports and ghosts ([`read_scattered`]). The bricks are those
     /// [`RankBrick::scatter`] would send (under the tree their gathered subsample cuts), for
-    /// ray casting or, but for an image, splatting `view`. Collective; every phase is agreed
-    /// on.
+    /// ray casting or splatting `view` (an image's splatting brick: the sub-grid holding the
+    /// kernels its sheets need, [`GridPlan::read_splat_brick`]). Collective; every phase is
+    /// agreed on.
     #[allow(clippy::too_many_arguments)]
     pub fn read_parallel(
         world: &SimpleCommunicator,
@@ -400,21 +400,16 @@ impl RankBrick {
             let cost = (count, start.elapsed().as_secs_f64() * 1e3, pieces_read);
             return Self::prepare(world, ctx, piece, tree, cost, splat_view(view));
         }
-        agree(
-            world,
-            match view.settings.method.splat_shading() {
-                Some(_) => Err(format!(
-                    "{}: a splatting brick of a parallel image takes the sub-grid its kernels \
-                     need, chosen from the whole grid: rank 0 reads it",
-                    path.display()
-                )),
-                None => Ok(()),
-            },
-        )?;
         let plan = agree(
             world,
             GridPlan::new(summary, array, samples, ranks).map_err(|e| e.to_string()),
         )?;
+        if view.settings.method.splat_shading().is_some() {
+            let (piece, count, pieces_read) =
+                plan.read_splat_brick(&Mpi(world), samples, view, reconstruction, octree)?;
+            let cost = (count, start.elapsed().as_secs_f64() * 1e3, pieces_read);
+            return Self::prepare(world, ctx, piece, plan.tree, cost, splat_view(view));
+        }
         let brick = agree(
             world,
             plan.read_brick(rank, samples).map_err(|e| e.to_string()),

@@ -32,11 +32,7 @@ impl From<DistributedError> for CliError {
 fn parallel_image(scene: &Scene) -> Option<(&std::path::Path, Option<&str>)> {
     match &scene.volume {
         vmls::scene::VolumeSource::File { path, array }
-            if vmls::bricks::parallel::ranks_read(
-                path,
-                scene.render.method.splat_shading().is_some(),
-                &scene.samples,
-            ) =>
+            if vmls::bricks::parallel::ranks_read(path, &scene.samples) =>
         {
             Some((path.as_path(), array.as_deref()))
         }
