@@ -858,3 +858,26 @@ fn ranks_splatting_a_parallel_image_read_the_sub_grids_their_sheets_need() {
         }
     }
 }
+
+#[test]
+fn ranks_find_a_hole_that_a_grid_summarys_pieces_leave() {
+    let d = dir("scattered-hole");
+    let rectilinear: &dyn Fn([i64; 3]) -> [f64; 3] = &rectilinear_at;
+    let curved: &dyn Fn([i64; 3]) -> [f64; 3] = &curved_at;
+    for (kind, at) in [("RectilinearGrid", rectilinear), ("StructuredGrid", curved)] {
+        let (parallel, _) = grid_files(&d, kind, [0, 9, 0, 8, 0, 7], 3, at);
+        let text = std::fs::read_to_string(&parallel).expect("summary");
+        // Drop the middle piece from the summary: its samples are no piece's.
+        let at = text.find("p13.").expect("piece 13");
+        let start = text[..at].rfind("<Piece").expect("its element");
+        let end = at + text[at..].find("/>").expect("its end") + 2;
+        std::fs::write(&parallel, format!("{}{}", &text[..start], &text[end..])).expect("write");
+        let summary = Summary::read(&parallel).expect("summary");
+        for e in failures(&summary, 3, &SampleSettings::default()) {
+            assert!(
+                e.contains("leave a hole") && e.contains("whole.pvt"),
+                "{kind}: {e}"
+            );
+        }
+    }
+}

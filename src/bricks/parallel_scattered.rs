@@ -127,6 +127,19 @@ pub fn read_scattered<E: Exchange>(
         KdTree::decompose_points(sub.clone(), whole.bbox, ranks).map_err(|e| e.to_string()),
     )?;
     let owned = partition(ex, &part, &first_tree, whole.bbox, grid);
+    if grid {
+        // A grid's pieces must cover its whole extent, as the whole-file reader requires.
+        let held = all_sum(ex, &[owned.positions.len() as f64])[0] as usize;
+        ex.agree(if held == whole.total {
+            Ok(())
+        } else {
+            Err(format!(
+                "{path}: the pieces hold {held} of the grid's {} samples: they leave a hole in \
+                 its whole extent",
+                whole.total
+            ))
+        })?;
+    }
 
     // 2. Supports, and what the whole set's supports and spacing are: a rectilinear grid's
     // from its coordinates (with the nearest distances, the spacing, from one neighbour),
