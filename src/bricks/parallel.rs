@@ -15,7 +15,7 @@
 //! ([`crate::data::vtk_xml_parallel::load`]) and divided as any field ([`ranks_read`]).
 
 use super::exchange::{Exchange, all_max, all_min};
-use super::ghosts::{GhostCount, grid_window, mls_layers};
+use super::ghosts::{GhostCount, cell_of, grid_window, mls_layers};
 use super::kd::KdTree;
 use super::splat::SplatReach;
 use super::{Aabb, BrickError};
@@ -331,16 +331,11 @@ impl GridPlan {
                 .map_err(|e| e.to_string()),
         )?;
         let reach = ex.agree(SplatReach::new(&piece, view).map_err(|e| e.to_string()))?;
-        let domain = (DVec3::from(self.domain.0), DVec3::from(self.domain.1));
         let cells: Vec<Aabb> = self
             .tree
             .boxes
             .iter()
-            .map(|b| {
-                let (lo, hi) =
-                    crate::splat::brick_cell((DVec3::from(b.0), DVec3::from(b.1)), domain);
-                (lo.to_array(), hi.to_array())
-            })
+            .map(|&b| cell_of(&piece.samples, b))
             .collect();
         let ranks = cells.len();
         let (mut lo, mut hi) = (

@@ -127,19 +127,18 @@ pub fn read_scattered<E: Exchange>(
         KdTree::decompose_points(sub.clone(), whole.bbox, ranks).map_err(|e| e.to_string()),
     )?;
     let owned = partition(ex, &part, &first_tree, whole.bbox, grid);
-    if grid {
-        // A grid's pieces must cover its whole extent, as the whole-file reader requires.
-        let held = all_sum(ex, &[owned.positions.len() as f64])[0] as usize;
-        ex.agree(if held == whole.total {
-            Ok(())
-        } else {
-            Err(format!(
-                "{path}: the pieces hold {held} of the grid's {} samples: they leave a hole in \
-                 its whole extent",
-                whole.total
-            ))
-        })?;
-    }
+    let counts = all_sum(ex, &[owned.positions.len() as f64, owned.merged as f64]);
+    let (count, merged) = (counts[0] as u64, counts[1] as usize);
+    // A grid's pieces must cover its whole extent, as the whole-file reader requires.
+    ex.agree(if !grid || count as usize == whole.total {
+        Ok(())
+    } else {
+        Err(format!(
+            "{path}: the pieces hold {count} of the grid's {} samples: they leave a hole in its \
+             whole extent",
+            whole.total
+        ))
+    })?;
 
     // 2. Supports, and what the whole set's supports and spacing are: a rectilinear grid's
     // from its coordinates (with the nearest distances, the spacing, from one neighbour),
@@ -176,8 +175,6 @@ pub fn read_scattered<E: Exchange>(
         }
         _ => knn_supports(ex, &owned.positions, &first_tree, settings),
     };
-    let counts = all_sum(ex, &[owned.positions.len() as f64, owned.merged as f64]);
-    let (count, merged) = (counts[0] as u64, counts[1] as usize);
     ex.agree(if kind != "PolyData" || count >= 2 {
         Ok(())
     } else {
@@ -200,23 +197,6 @@ pub fn read_scattered<E: Exchange>(
         .fold(0.0, f64::max);
     let thinnest = 1.0 / all_max(ex, &[lambda])[0].sqrt();
 
-    // 3. The domain: a mesh's hull, a curvilinear grid's sides, a rectilinear grid's box, the
-    // points' supports' box.
-    let domain = match (kind, &coords) {
-        ("UnstructuredGrid", _) => Domain::Hull(gathered_hull(ex, &part.faces, &path)?),
-        ("StructuredGrid", _) => Domain::Hull(gathered_sides(ex, &part.triangles)),
-        (_, Some(c)) => Domain::Box {
-            lo: c.each_ref().map(|c| c.first().copied().unwrap_or(0.0)),
-            hi: c.each_ref().map(|c| c.last().copied().unwrap_or(0.0)),
-        },
-        _ => {
-            let (lo, hi) = support_box(&owned.positions, &metrics);
-            Domain::Box {
-                lo: all_min(ex, &lo).try_into().unwrap_or(lo),
-                hi: all_max(ex, &hi).try_into().unwrap_or(hi),
-            }
-        }
-    };
     let anisotropic = settings.anisotropic.unwrap_or(false);
     let provenance = Provenance {
         kind: match kind {
@@ -239,9 +219,30 @@ pub fn read_scattered<E: Exchange>(
         positions: Positions::Scattered(owned.positions),
         values: owned.values.into(),
         supports: Supports::PerSample(metrics),
-        domain,
+        domain: Domain::Box {
+            lo: [0.0; 3],
+            hi: [0.0; 3],
+        },
         spacing,
         provenance,
+    };
+
+    // 3. The domain: a mesh's hull, a curvilinear grid's sides, a rectilinear grid's box, the
+    // points' supports' box (over the ranks).
+    set.domain = match (kind, &coords) {
+        ("UnstructuredGrid", _) => Domain::Hull(gathered_hull(ex, &part.faces, &path)?),
+        ("StructuredGrid", _) => Domain::Hull(gathered_sides(ex, &part.triangles)),
+        (_, Some(c)) => Domain::Box {
+            lo: c.each_ref().map(|c| c.first().copied().unwrap_or(0.0)),
+            hi: c.each_ref().map(|c| c.last().copied().unwrap_or(0.0)),
+        },
+        _ => {
+            let (lo, hi) = set.support_box();
+            Domain::Box {
+                lo: all_min(ex, &lo).try_into().unwrap_or(lo),
+                hi: all_max(ex, &hi).try_into().unwrap_or(hi),
+            }
+        }
     };
 
     // 4. The frame, as the whole field's (Field::from_samples_deferred): the domain's centre;
@@ -632,17 +633,4 @@ fn gathered_hull<E: Exchange>(ex: &E, faces: &[Face], path: &str) -> Result<Hull
         })
         .collect();
     ex.agree(hull_of_faces(faces, path).map_err(|e| e.to_string()))
-}
-
-/// The box of the supports of samples at `positions` with `metrics`.
-fn support_box(positions: &[[f64; 3]], metrics: &[Metric]) -> ([f64; 3], [f64; 3]) {
-    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-    for (p, m) in positions.iter().zip(metrics) {
-        let e = supports::extent(m);
-        for a in 0..3 {
-            lo[a] = lo[a].min(p[a] - e[a]);
-            hi[a] = hi[a].max(p[a] + e[a]);
-        }
-    }
-    (lo, hi)
 }

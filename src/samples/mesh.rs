@@ -255,19 +255,16 @@ pub fn boundary_faces(
 
 /// The hull of faces gathered from a mesh's cells, or from pieces of one
 /// ([`boundary_faces`] of each): a face listed twice (by coordinates) lies between two cells
-/// and is dropped, one listed three or more times is a non-manifold mesh; the rest are sorted
-/// by their corners' coordinates (so the hull, and every image, is the same whichever pieces
-/// they came from and in which order) and fanned into triangles.
+/// and is dropped, one listed three or more times is a non-manifold mesh; the rest are fanned
+/// into triangles ([`hull_of_triangles`], which sorts them, so that the hull, and every image,
+/// is the same whichever pieces they came from and in which order).
 pub fn hull_of_faces(faces: Vec<Face>, source: &str) -> Result<Hull, SampleError> {
     let mut keyed: Vec<([[u64; 3]; 4], Face)> = faces.into_iter().map(|f| (f.key(), f)).collect();
     keyed.sort_unstable_by_key(|a| a.0);
-    let mut hull = Hull::default();
-    let mut used: HashMap<[u64; 3], u32> = HashMap::new();
-    let mut i = 0;
-    while i < keyed.len() {
-        let same = keyed[i..].iter().take_while(|f| f.0 == keyed[i].0).count();
-        let face = keyed[i].1;
-        if same > 2 {
+    let mut triangles = Vec::new();
+    for same in keyed.chunk_by(|a, b| a.0 == b.0) {
+        let face = same[0].1;
+        if same.len() > 2 {
             return Err(SampleError::Invalid {
                 source_name: source.to_string(),
                 message: format!(
@@ -276,24 +273,12 @@ pub fn hull_of_faces(faces: Vec<Face>, source: &str) -> Result<Hull, SampleError
                 ),
             });
         }
-        i += same;
-        if same == 2 {
-            continue;
-        }
-        let v: Vec<u32> = face.points[..face.corners]
-            .iter()
-            .map(|p| {
-                *used.entry(p.map(f64::to_bits)).or_insert_with(|| {
-                    hull.vertices.push(*p);
-                    hull.vertices.len() as u32 - 1
-                })
-            })
-            .collect();
-        for t in 1..v.len() - 1 {
-            hull.triangles.push([v[0], v[t], v[t + 1]]);
+        if same.len() == 1 {
+            let p = &face.points;
+            triangles.extend((1..face.corners - 1).map(|t| [p[0], p[t], p[t + 1]]));
         }
     }
-    Ok(hull)
+    Ok(hull_of_triangles(triangles))
 }
 
 /// Signed volume enclosed by a closed triangle surface (positive when it faces out).
