@@ -99,7 +99,7 @@ pub mod binding {
     /// `u32` words, as many per pixel as `vk::TargetFormat::bytes` / 4.
     pub const TARGET_PACKED: u32 = 36;
     /// A recorded frame's indirect dispatch arguments, `uvec4(x, y, z, 0)` each: one per band
-    /// (`raycast_next`), or splat_bin's and splat_raster's (`splat_plan`).
+    /// (`raycast_next`), or splat_bin's, splat_order's and splat_raster's (`splat_plan`).
     pub const DISPATCH_ARGS: u32 = 37;
 
     /// How kernels read a binding: the grid and the octree's samples, nodes and references
@@ -204,6 +204,12 @@ pub mod splat_stat {
     pub const OVERSIZED: usize = 8;
     /// Tiles whose walk of their entries llvmpipe's loop limit cut short (`splat_raster`).
     pub const RASTER_TRUNCATED: usize = 15;
+    /// Buckets `splat_order` could not put in kernel order within llvmpipe's loop limit:
+    /// correct, but summed in an order that may change between runs.
+    pub const UNORDERED: usize = 16;
+    /// Buckets too large for `splat_order`'s first pass, handed to its second (their indices
+    /// in the bucket cursors, which the scatter no longer needs).
+    pub const LARGE_BUCKETS: usize = 17;
 }
 
 /// `#define BINDING_* n` for every binding (and `GRID_PAD`, the `RAY_*` count flags), to pass
@@ -233,6 +239,8 @@ pub fn binding_defines() -> Vec<(String, String)> {
             "SPLAT_STAT_RASTER_TRUNCATED",
             splat_stat::RASTER_TRUNCATED as u32,
         ),
+        ("SPLAT_STAT_UNORDERED", splat_stat::UNORDERED as u32),
+        ("SPLAT_STAT_LARGE_BUCKETS", splat_stat::LARGE_BUCKETS as u32),
         ("RAY_DONE", ray_count::DONE),
         ("RAY_TRUNCATED", ray_count::TRUNCATED),
         ("RAY_HULL_OVERFLOW", ray_count::HULL_OVERFLOW),
@@ -490,7 +498,7 @@ pub struct PlanPush {
     /// 1 where `splat_segments` ran: a pixel with too many inside segments stops the frame.
     pub segments: u32,
     /// Tile rows per dispatch of `splat_raster`: one set of arguments per band follows
-    /// splat_bin's.
+    /// splat_bin's and splat_order's.
     pub band_rows: u32,
 }
 const _: () = assert!(std::mem::size_of::<PlanPush>() == 32);

@@ -156,9 +156,9 @@ fn splatting_bricks_on_the_gpu_equal_one_device_and_their_cpu_twin() {
             let bricked = b.render(&s.view()).expect("bricked frame").pixels;
             let d = largest(&whole, &bricked);
             eprintln!("{view}, {name}, {ranks} bricks on the GPU: {d:.3e}");
-            // The same f32 footprints summed in another order within a sheet (the order in
-            // which atomics fill the bins: one device's frames differ from each other by up to
-            // 3.3e-6), and the composite through f32 brick images.
+            // The same f32 footprints summed with others beside them within a sheet (a brick's
+            // bins hold only the kernels that reach it), and the composite through f32 brick
+            // images.
             assert!(d <= 2e-5, "{view}, {name}, {ranks}: {d:.3e}");
             // Each brick's kernel against its CPU twin, over black (a perspective view: an
             // orthographic one along the axes can put a sheet's midpoint on a face, where f32

@@ -2,8 +2,9 @@
 // Stage splat_bin (twin: splat_bin in src/splat/raster.rs): the scatter of the counting sort
 // by (tile, sheet) bucket. Each kept splat writes (its index, the sheet) once per tile its box
 // (with the apron) meets and per sheet of its range, at its bucket's atomic cursor (which splat_scan
-// set to the bucket's first entry). The order inside a bucket does not matter: a sheet is a
-// sum.
+// set to the bucket's first entry). The cursors hand out slots in whatever order the workgroups
+// reach them; splat_order then puts each bucket in kernel order, so that a sheet's sum is the
+// same on every run.
 
 layout(local_size_x = 64) in;
 

@@ -2,7 +2,8 @@
 // Stage splat_plan (twin: plan_groups in src/splat/frame.rs): in a recorded frame, the one
 // decision render() makes on the host between the projection and the accumulation. From the
 // scan's total of binned entries and the projection's counters it writes the workgroup counts
-// of splat_bin and of each band of push.band_rows tile rows of splat_raster, which all
+// of splat_bin, of splat_order's first pass (an invocation per bucket, rows of at most 65 535
+// workgroups) and of each band of push.band_rows tile rows of splat_raster, which all
 // dispatch indirectly: the whole frame where its
 // entries fit the list, the work budget allows them and no kernel or pixel overflowed; none
 // (x = 0) otherwise, so that nothing writes past the list, and Renderer::retire reads the same
@@ -23,8 +24,13 @@ void main() {
                && stats[SPLAT_STAT_OVERSIZED] == 0u
                && (push.segments == 0u || stats[SPLAT_STAT_SEGMENT_OVERFLOW] == 0u);
     args[0] = run ? uvec4(push.bin_groups, 1u, 1u, 0u) : uvec4(0u, 1u, 1u, 0u);
+    // One invocation per bucket, workgroups of 64 (splat_order's local size, GROUP in
+    // src/splat/gpu.rs).
+    uint groups = max((push.buckets + 63u) / 64u, 1u);
+    uint x = min(groups, 65535u);
+    args[1] = run ? uvec4(x, (groups + x - 1u) / x, 1u, 0u) : uvec4(0u, 1u, 1u, 0u);
     uint rows = max(push.band_rows, 1u);
-    uint band = 1u;
+    uint band = 2u;
     for (uint row = 0u; row < push.tiles_y; row += rows) {
         uint n = min(rows, push.tiles_y - row);
         args[band] = run ? uvec4(push.tiles_x, n, 1u, 0u) : uvec4(0u, 1u, 1u, 0u);

@@ -91,7 +91,7 @@ impl GpuImage {
 pub struct SplatReport {
     pub counts: SplatCounts,
     /// GPU ms of `crate::splat::frame::STAGES`.
-    pub stage_ms: [f64; 4],
+    pub stage_ms: [f64; 5],
     /// Sheets in the frame and their thickness in world units.
     pub slabs: u32,
     pub slab_world: f64,

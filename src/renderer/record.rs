@@ -91,7 +91,7 @@ pub struct RecordedFrame {
     pub evaluations: u64,
     /// Dispatches recorded: the ray caster's (bands × chunks, later chunks indirect), the
     /// `raycast_next` before each later chunk, and the format conversion; or the splatting
-    /// stages (`splat_plan`, then `splat_bin` and `splat_raster` indirect).
+    /// stages (`splat_plan`, then `splat_bin`, `splat_order` and `splat_raster` indirect).
     pub dispatches: u32,
     /// The kernel variant, as `--stats` names it.
     pub variant: String,
@@ -217,7 +217,8 @@ impl Slot {
 pub(super) struct SplatSlot {
     pub(super) constants: Option<crate::splat::frame::SplatConstants>,
     pub(super) targets: Option<crate::splat::gpu::SplatTargets>,
-    /// `splat_plan`'s indirect arguments: splat_bin's, then each band of splat_raster's.
+    /// `splat_plan`'s indirect arguments: splat_bin's, splat_order's, then each band of
+    /// splat_raster's.
     pub(super) args: Option<Buffer>,
     pub(super) setup: Option<crate::splat::SplatSetup>,
     pub(super) plan: crate::gpu_types::PlanPush,

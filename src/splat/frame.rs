@@ -2,7 +2,8 @@
 //! recorded into an application's command buffer ([`SplatRecording`], `Renderer::record`).
 //!
 //! Both run the same stages on the same buffers: `splat_segments` (post-shaded over a hull),
-//! `splat_project`, the three passes of `splat_scan`, `splat_bin` and `splat_raster`. They
+//! `splat_project`, the three passes of `splat_scan`, `splat_bin`, `splat_order` and
+//! `splat_raster`. They
 //! differ in how the accumulation learns the projection's outcome:
 //! - [`splat_frame`] is a few submissions. The first runs the projection and the scan; the host
 //!   reads the counters and one number, the total of entries, to check the work budget and size
@@ -11,11 +12,15 @@
 //!   stop request ([`FrameControl::stop`]) ends the frame within one band.
 //! - A recorded frame has no host between its commands: its entry list is sized before it is
 //!   recorded (from an earlier count), and `splat_plan` reads the total and the counters on the
-//!   GPU and dispatches `splat_bin` and each band of `splat_raster` indirectly, or none of them
+//!   GPU and dispatches `splat_bin`, `splat_order` and each band of `splat_raster` indirectly,
+//!   or none of them
 //!   where the entries do not fit or a check fails ([`plan_groups`], its twin).
 //!   `Renderer::retire` reads the same numbers and names what stopped the frame.
 
-use super::gpu::{GROUP, GpuKernels, SCAN_BINDINGS, SplatPipelines, SplatTargets};
+use super::gpu::{
+    GROUP, GpuKernels, ORDER_BINDINGS, ORDER_LARGE_GROUPS, SCAN_BINDINGS, SplatPipelines,
+    SplatTargets,
+};
 use super::{Shading, SplatCounts, SplatSetup};
 use crate::field::RenderError;
 use crate::gpu_types::{
@@ -38,17 +43,18 @@ pub struct SplatGpuImage {
     pub pixels: Vec<[f32; 4]>,
     pub counts: SplatCounts,
     /// GPU milliseconds of `STAGES`.
-    pub stage_ms: [f64; 4],
+    pub stage_ms: [f64; 5],
     pub submissions: u32,
     pub variant: String,
 }
 
 /// The names of [`SplatGpuImage::stage_ms`]: `splat_sort` is `splat_scan` and `splat_bin`.
-pub const STAGES: [&str; 4] = [
+pub const STAGES: [&str; 5] = [
     "splat_project",
     "splat_sort",
     "splat_raster",
     "splat_segments",
+    "splat_order",
 ];
 
 impl SplatGpuImage {
@@ -105,12 +111,13 @@ pub(super) fn params(
     }
 }
 
-fn sum_ms(timings: &[crate::vk::DispatchTiming], stage_ms: &mut [f64; 4]) {
+fn sum_ms(timings: &[crate::vk::DispatchTiming], stage_ms: &mut [f64; 5]) {
     for t in timings {
         let i = match t.label.as_str() {
             "splat_project" => 0,
             "splat_scan" | "splat_bin" => 1,
             "splat_raster" => 2,
+            "splat_order" => 4,
             _ => 3,
         };
         stage_ms[i] += t.gpu_ms.unwrap_or(0.0);
@@ -339,9 +346,27 @@ fn kernel_groups(kernels: &GpuKernels) -> u32 {
     kernels.count.div_ceil(GROUP).clamp(1, 65_535)
 }
 
-/// The bind groups of the accumulation: `splat_bin` and `splat_raster`.
+/// Workgroups of `splat_order`, one invocation per bucket: rows of at most 65 535 workgroups
+/// (twin of `splat_plan`'s).
+pub fn order_groups(buckets: u32) -> [u32; 3] {
+    let groups = buckets.div_ceil(GROUP).max(1);
+    let x = groups.min(65_535);
+    [x, groups.div_ceil(x), 1]
+}
+
+/// `splat_order`'s push constants: the buckets.
+fn order_push(setup: &SplatSetup) -> ScanPush {
+    ScanPush {
+        buckets: setup.buckets() as u32,
+        blocks: 0,
+        _pad: [0; 2],
+    }
+}
+
+/// The bind groups of the accumulation: `splat_bin`, `splat_order` and `splat_raster`.
 struct AccumulationGroups<'a> {
     bin: BindGroup<'a>,
+    order: [BindGroup<'a>; 2],
     raster: BindGroup<'a>,
 }
 
@@ -366,6 +391,13 @@ impl<'a> AccumulationGroups<'a> {
                 (binding::SPLAT_LIST, list),
             ],
         )?;
+        let order_buffers = [&t.offsets, list, &t.stats, &t.cursors];
+        let order_bind: Vec<(u32, &Buffer)> =
+            ORDER_BINDINGS.into_iter().zip(order_buffers).collect();
+        let order = [
+            BindGroup::new(ctx, &pipelines.order[0], &order_bind)?,
+            BindGroup::new(ctx, &pipelines.order[1], &order_bind)?,
+        ];
         let mut raster_bind = vec![
             (binding::PARAMS, &constants.params),
             (binding::SPLATS, &t.splats),
@@ -387,6 +419,7 @@ impl<'a> AccumulationGroups<'a> {
         }
         Ok(Self {
             bin,
+            order,
             raster: BindGroup::new(ctx, &pipelines.raster, &raster_bind)?,
         })
     }
@@ -456,7 +489,8 @@ pub fn check_raster(stats: &[u32]) -> Result<(), RenderError> {
 }
 
 /// Stage `splat_plan` (GLSL: `glsl/splat/splat_plan.comp`): the workgroup counts of
-/// `splat_bin`, then of each band of `push.band_rows` tile rows of `splat_raster`, in a recorded
+/// `splat_bin`, `splat_order`, then of each band of `push.band_rows` tile rows of
+/// `splat_raster`, in a recorded
 /// frame, from the scan's `total` and the projection's counters `stats`: the whole frame, or
 /// none (x = 0) where the entries exceed the list or the budget, or a kernel or pixel
 /// overflowed.
@@ -467,11 +501,11 @@ pub fn plan_groups(push: &PlanPush, total: u32, stats: &[u32]) -> Vec<[u32; 3]> 
         && stat(splat_stat::OVERSIZED) == 0
         && (push.segments == 0 || stat(splat_stat::SEGMENT_OVERFLOW) == 0);
     let rows = push.band_rows.max(1);
-    let mut groups = vec![if run {
-        [push.bin_groups, 1, 1]
+    let mut groups = if run {
+        vec![[push.bin_groups, 1, 1], order_groups(push.buckets)]
     } else {
-        [0, 1, 1]
-    }];
+        vec![[0, 1, 1]; 2]
+    };
     let mut row = 0;
     while row < push.tiles_y {
         let n = rows.min(push.tiles_y - row);
@@ -481,9 +515,10 @@ pub fn plan_groups(push: &PlanPush, total: u32, stats: &[u32]) -> Vec<[u32; 3]> 
     groups
 }
 
-/// Bytes of a recorded frame's indirect arguments: `splat_bin`'s, then one per band.
+/// Bytes of a recorded frame's indirect arguments: `splat_bin`'s, `splat_order`'s, then one
+/// per band.
 pub fn plan_args_bytes(setup: &SplatSetup) -> u64 {
-    16 * (1 + u64::from(setup.tiles().1.div_ceil(RASTER_BAND_ROWS)))
+    16 * (2 + u64::from(setup.tiles().1.div_ceil(RASTER_BAND_ROWS)))
 }
 
 /// The counters of a finished frame; `total` is the scan's total of entries.
@@ -503,6 +538,8 @@ fn frame_counts(stats: &[u32], total: u64, invocations: u32) -> SplatCounts {
         oversized: s(splat_stat::OVERSIZED),
         evaluated: s(9) | s(11) << 32,
         contributions: s(10) | s(12) << 32,
+        unordered: s(splat_stat::UNORDERED),
+        large_buckets: s(splat_stat::LARGE_BUCKETS),
     }
 }
 
@@ -580,8 +617,9 @@ impl<'a> SplatRecording<'a> {
         self.push
     }
 
-    /// Records the frame: constants, projection, scan, `splat_plan`, then `splat_bin` and each
-    /// band of `splat_raster`, all indirect. Returns the dispatches recorded.
+    /// Records the frame: constants, projection, scan, `splat_plan`, then `splat_bin`,
+    /// `splat_order` and each band of `splat_raster`, all indirect. Returns the dispatches
+    /// recorded.
     pub fn record(
         &self,
         rec: &mut Recorder<'_>,
@@ -610,10 +648,22 @@ impl<'a> SplatRecording<'a> {
             0,
             "splat_bin",
         )?;
-        // Segments, project, three scan passes, plan and bin, then a band at a time.
-        let mut dispatches = u32::from(pipelines.segments.is_some()) + 6;
-        // Band b's arguments follow splat_bin's, at 16 (b + 1).
-        let mut offset = 16;
+        let order = order_push(setup);
+        let push = bytemuck::bytes_of(&order);
+        let [first, second] = &self.accumulation.order;
+        rec.dispatch_indirect(&pipelines.order[0], first, push, args, 16, "splat_order")?;
+        // The second pass reads how many buckets the first handed it: none where it did not run.
+        rec.dispatch(
+            &pipelines.order[1],
+            second,
+            push,
+            [ORDER_LARGE_GROUPS, 1, 1],
+            "splat_order",
+        )?;
+        // Segments, project, three scan passes, plan, bin and two of order, then the bands.
+        let mut dispatches = u32::from(pipelines.segments.is_some()) + 8;
+        // Band b's arguments follow splat_bin's and splat_order's, at 16 (b + 2).
+        let mut offset = 32;
         let mut row = 0;
         while row < self.push.tiles_y {
             let push = RasterPush {
@@ -640,6 +690,7 @@ impl<'a> SplatRecording<'a> {
         let mut v = self.projection.detach();
         v.push(self.plan.detach());
         v.push(self.accumulation.bin.detach());
+        v.extend(self.accumulation.order.into_iter().map(BindGroup::detach));
         v.push(self.accumulation.raster.detach());
         v
     }
@@ -756,7 +807,7 @@ pub fn splat_frame(
         return Err(VkError::Usage("splat frame buffers do not fit the setup".into()).into());
     }
     let constants = SplatConstants::upload(ctx, &ConstantData::new(setup, kernels, tf))?;
-    let mut stage_ms = [0.0; 4];
+    let mut stage_ms = [0.0; 5];
     let (tiles_x, tiles_y) = setup.tiles();
     let (stats, total, timings) =
         project(ctx, pipelines, kernels, targets, &constants, setup, hull)?;
@@ -790,6 +841,15 @@ pub fn splat_frame(
                     [kernel_groups(kernels), 1, 1],
                     "splat_bin",
                 )?;
+                let order = order_push(setup);
+                let push = bytemuck::bytes_of(&order);
+                let groups_of = [
+                    order_groups(setup.buckets() as u32),
+                    [ORDER_LARGE_GROUPS, 1, 1],
+                ];
+                for ((p, g), n) in pipelines.order.iter().zip(&groups.order).zip(groups_of) {
+                    rec.dispatch(p, g, push, n, "splat_order")?;
+                }
             }
             rec.dispatch(
                 &pipelines.raster,
@@ -830,6 +890,20 @@ mod tests {
     use super::*;
 
     #[test]
+    fn order_groups_cover_every_bucket_within_the_dispatch_limit() {
+        for buckets in [1u32, 64, 65, 65_535 * 64, 65_535 * 64 + 1, 1 << 24] {
+            let [x, y, z] = order_groups(buckets);
+            assert!(x <= 65_535 && y <= 65_535 && z == 1);
+            let invocations = u64::from(x) * u64::from(y) * u64::from(GROUP);
+            assert!(invocations >= u64::from(buckets), "{buckets}: {x} × {y}");
+            assert!(
+                invocations < u64::from(buckets) + u64::from(x * GROUP),
+                "{buckets}"
+            );
+        }
+    }
+
+    #[test]
     fn plan_runs_the_frame_only_where_it_fits() {
         let push = PlanPush {
             buckets: 10,
@@ -841,8 +915,8 @@ mod tests {
             segments: 1,
             band_rows: 2,
         };
-        let ok = vec![[3, 1, 1], [4, 2, 1], [4, 2, 1], [4, 1, 1]];
-        let none = vec![[0, 1, 1]; 4];
+        let ok = vec![[3, 1, 1], [1, 1, 1], [4, 2, 1], [4, 2, 1], [4, 1, 1]];
+        let none = vec![[0, 1, 1]; 5];
         let clean = [0u32; 15];
         assert_eq!(plan_groups(&push, 80, &clean), ok);
         assert_eq!(plan_groups(&push, 81, &clean), none, "over the budget");

@@ -18,6 +18,17 @@ pub(super) const SCAN_BINDINGS: [u32; 4] = [
     binding::BUCKET_OFFSETS,
     binding::BUCKET_CURSORS,
 ];
+/// What both passes of `splat_order` bind: the bucket offsets, the list they sort, the
+/// counters, and the bucket cursors (the large buckets' indices, once the scatter is done).
+pub(super) const ORDER_BINDINGS: [u32; 4] = [
+    binding::OFFSET_TEXELS,
+    binding::SPLAT_LIST,
+    binding::SPLAT_STATS,
+    binding::BUCKET_CURSORS,
+];
+/// Workgroups of `splat_order`'s second pass, which heapsorts the buckets too large for its
+/// first (a grid-stride loop over them: there are few).
+pub(super) const ORDER_LARGE_GROUPS: u32 = 16;
 /// Pixels per `splat_raster` invocation without an apron (every tile size is a multiple).
 const RASTER_PIXELS: u32 = 4;
 /// Hull hits `splat_segments` keeps per pixel (`HULL_MAX_HITS` of its variant).
@@ -27,8 +38,10 @@ pub const SEGMENT_HITS: usize = 2 * super::PIXEL_SEGMENTS + 4;
 pub(super) const GROUP: u32 = 64;
 /// `SplatCounts` counters in the stats buffer.
 /// Counter slots: 0–5 and 8 one word each; 64-bit ones: 9 and 10 with high words 11 and 12,
-/// 6 and 7 with high words 13 and 14; 15 the tiles cut short (`splat_stat::RASTER_TRUNCATED`).
-const STATS: usize = 16;
+/// 6 and 7 with high words 13 and 14; 15 the tiles cut short (`splat_stat::RASTER_TRUNCATED`);
+/// 16 the buckets left out of kernel order (`splat_stat::UNORDERED`), 17 those handed to
+/// `splat_order`'s second pass (`splat_stat::LARGE_BUCKETS`).
+const STATS: usize = 18;
 
 /// The kernels uploaded once per dataset: one `Sample` each, volume in `metric_off.z`.
 pub struct GpuKernels {
@@ -212,6 +225,7 @@ impl SplatVariant {
             "splat/splat_project.comp",
             "splat/splat_scan.comp",
             "splat/splat_bin.comp",
+            "splat/splat_order.comp",
             "splat/splat_raster.comp",
         ]);
         k
@@ -269,6 +283,8 @@ pub struct SplatPipelines {
     /// `splat_plan`, compiled for recorded frames only (`SplatPipelines::with_plan`).
     pub(super) plan: Option<ComputePipeline>,
     pub(super) bin: ComputePipeline,
+    /// `splat_order`'s two passes.
+    pub(super) order: [ComputePipeline; 2],
     pub(super) raster: ComputePipeline,
     pub(super) segments: Option<ComputePipeline>,
 }
@@ -333,6 +349,14 @@ impl SplatPipelines {
                 scan_push,
             )
         };
+        let order = |pass: u32| {
+            make(
+                "splat/splat_order.comp",
+                &[("ORDER_PASS".into(), pass.to_string())],
+                &ORDER_BINDINGS,
+                scan_push,
+            )
+        };
         Ok(Self {
             variant: variant.clone(),
             project: make("splat/splat_project.comp", &[], &project, 0)?,
@@ -347,6 +371,7 @@ impl SplatPipelines {
                 &[PARAMS, SPLAT_WORDS, BUCKET_CURSORS, SPLAT_LIST],
                 0,
             )?,
+            order: [order(1)?, order(2)?],
             raster: make(
                 "splat/splat_raster.comp",
                 &[],

@@ -16,8 +16,9 @@
 //!   resampling filter, bounding box, depth and sheet range, with the culling guards; counts
 //!   one entry per (image tile, sheet) the kernel touches into the bucket `tile · sheets +
 //!   sheet`;
-//! - `splat_scan` and `splat_bin` ([`raster::splat_bin`]): a counting sort of the entries by
-//!   bucket, all on the GPU (an exclusive scan of the bucket counts, then a scatter), so that
+//! - `splat_scan`, `splat_bin` and `splat_order` ([`raster::splat_bin`]): a counting sort of
+//!   the entries by bucket, all on the GPU (an exclusive scan of the bucket counts, a scatter,
+//!   then each bucket in kernel order: frames are the same to the bit on every run), so that
 //!   each tile's entries lie together, sheet after sheet;
 //! - `splat_raster` ([`raster`]): one workgroup per tile for the whole frame, one invocation
 //!   per column of four pixels (one pixel with an apron). The tile walks its entries front to
@@ -625,6 +626,14 @@ pub struct SplatCounts {
     pub evaluated: u64,
     /// Evaluations that added to a pixel's sheet in registers (footprint ≠ 0).
     pub contributions: u64,
+    /// (tile, sheet) buckets that `splat_order` could not put in kernel order (llvmpipe's loop
+    /// limit): their sheets are right but summed in an order that can change between runs, so
+    /// the frame is not reproducible to the bit. 0 on the CPU twin, whose buckets are built in
+    /// kernel order.
+    pub unordered: u64,
+    /// Buckets of more entries than `splat_order`'s insertion sort takes, heapsorted by its
+    /// second pass (0 on the CPU twin).
+    pub large_buckets: u64,
 }
 
 impl SplatCounts {

@@ -1,9 +1,11 @@
 //! Stages `splat_scan`, `splat_bin` and `splat_raster`: f64 twins of the GLSL kernels of the
 //! same names, and [`splat_image`], the whole frame on the CPU.
 //!
-//! - `splat_scan` + `splat_bin` ([`splat_bin`]): a counting sort of the (kernel, tile, sheet)
-//!   entries by bucket `tile · sheets + sheet`: `offsets[b]..offsets[b + 1]` of the sorted list
-//!   are bucket b's kernels. Order inside a bucket is free: a sheet is a sum.
+//! - `splat_scan` + `splat_bin` + `splat_order` ([`splat_bin`]): a counting sort of the
+//!   (kernel, tile, sheet) entries by bucket `tile · sheets + sheet`: `offsets[b]..offsets[b +
+//!   1]` of the sorted list are bucket b's kernels, in kernel order (a sheet is a sum, and one
+//!   order of its terms makes every run give the same bits; the GPU's atomics fill a bucket in
+//!   any order and `splat_order` sorts it).
 //! - `splat_raster` ([`splat_raster`], one tile): the tile walks sheet k = 0, 1, … front to
 //!   back. Every pixel of the tile (and of its one-pixel apron when post-shaded isosurfaces
 //!   need gradients) adds each entry's `splat_footprint` over the sheet's depth range to its
@@ -70,7 +72,8 @@ pub struct Bins {
     pub list: Vec<u32>,
 }
 
-/// `splat_scan` + `splat_bin`: the counting sort of every kept splat's (tile, sheet) entries.
+/// `splat_scan` + `splat_bin` + `splat_order`: the counting sort of every kept splat's (tile,
+/// sheet) entries, each bucket in kernel order.
 pub fn splat_bin(setup: &SplatSetup, splats: &[Splat]) -> Bins {
     let (tiles_x, _) = setup.tiles();
     let slabs = setup.slabs as usize;

@@ -52,6 +52,7 @@ static SOURCES: &[(&str, &str)] = embed![
     "splat/splat_project.comp",
     "splat/splat_scan.comp",
     "splat/splat_bin.comp",
+    "splat/splat_order.comp",
     "splat/splat_raster.comp",
     "splat/splat_segments.comp",
     "splat/splat_plan.comp",

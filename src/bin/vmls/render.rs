@@ -174,6 +174,8 @@ pub fn run_render(
                 "footprints_accumulated": r.counts.accumulated,
                 "footprint_pixels_evaluated": r.counts.evaluated,
                 "footprint_pixels_contributing": r.counts.contributions,
+                "buckets_unordered": r.counts.unordered,
+                "buckets_heapsorted": r.counts.large_buckets,
                 "gpu_ms_per_kernel": {
                     "splat_project": r.stage_ms[0] / r.counts.projected.max(1) as f64,
                     "splat_sort": r.stage_ms[1] / r.counts.kept().max(1) as f64,
