@@ -881,3 +881,54 @@ fn ranks_find_a_hole_that_a_grid_summarys_pieces_leave() {
         }
     }
 }
+
+#[test]
+fn ranks_cut_the_whole_fields_tree_past_the_subsample_size() {
+    // 70 000 scattered points and 10 000 of them written twice (shared points of the pieces):
+    // past SUBSAMPLE, so the tree is cut from one sample in two. The whole file merges the
+    // copies before it subsamples and the ranks merge them after reading their shares, so a
+    // subsample by index would differ; by coordinates it is the same samples.
+    let d = dir("subsample");
+    let points: Vec<[f64; 3]> = (0..70_000)
+        .flat_map(|i| {
+            let t = i as f64;
+            let p = [
+                0.618_033_988_749_894_9,
+                0.414_213_562_373_095,
+                0.732_050_807_568_877_2,
+            ]
+            .map(|a| (t * a).fract())
+            .map(|x| 2.0 * x - 1.0);
+            // Every 7th point twice, the copy right after it: the copies shift the indices of
+            // every point after them.
+            vec![p; 1 + usize::from(i % 7 == 0)]
+        })
+        .collect();
+    let path = vtp_files(&d, &points, 20_000);
+    let settings = SampleSettings::default();
+    let dataset = load_dataset(&path).expect("dataset");
+    let set = SampleSet::from_dataset(&dataset, &path, Some("f"), &settings).expect("set");
+    assert_eq!(set.len(), 70_000, "the copies merged");
+    let scene = common::general_scene(&["reconstruction.method=\"gaussian\"".to_string()]);
+    let whole =
+        Field::from_samples_deferred(set, scene.reconstruction, &scene.octree).expect("field");
+    let summary = Summary::read(&path).expect("summary");
+    for ranks in [2, 3] {
+        let tree = vmls::bricks::decompose(&whole, ranks).expect("tree");
+        let bricks = LocalRanks::run(ranks, |ex| {
+            read_scattered(
+                ex,
+                &summary,
+                Some("f"),
+                &settings,
+                scene.reconstruction,
+                scene.octree,
+                None,
+            )
+        });
+        for (rank, brick) in bricks.into_iter().enumerate() {
+            let brick = brick.unwrap_or_else(|e| panic!("{ranks} ranks, rank {rank}: {e}"));
+            assert_eq!(brick.tree, tree, "{ranks} ranks, rank {rank}: the tree");
+        }
+    }
+}

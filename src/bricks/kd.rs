@@ -3,7 +3,7 @@
 //!
 //! Each split halves the ranks (⌊n/2⌋ below the plane, the rest above) along the box's longest
 //! axis, at the quantile of the samples' coordinates that gives each side its ranks' share.
-//! The quantile is read from a subsample of at most [`SUBSAMPLE`] samples: every sample costs
+//! The quantile is read from a subsample of about [`SUBSAMPLE`] samples: every sample costs
 //! about the same (a kernel to splat; an MLS solve over a support that holds about the same
 //! count of samples everywhere, kNN supports being sized so), so the count is the cost. A grid
 //! is cut at one of its sample planes, so that every brick is a sub-grid whose faces carry
@@ -14,7 +14,8 @@ use super::{Aabb, BrickError};
 use crate::data::dataset::grid_point;
 use crate::samples::{Positions, SampleSet};
 
-/// Samples the quantiles are read from, at most.
+/// Samples the quantiles are read from: a grid's every s-th, scattered samples' about this
+/// many ([`picked`]).
 pub const SUBSAMPLE: usize = 1 << 16;
 
 /// A node of the tree: a rank's box, or a plane with the nodes below and above it.
@@ -58,9 +59,27 @@ pub fn subsample_stride(n: usize) -> usize {
     n.div_ceil(SUBSAMPLE).max(1)
 }
 
-/// The subsample of `n` samples at `position(i)` that the quantiles are read from.
+/// The subsample of a grid's `n` samples at `position(i)` that the quantiles are read from:
+/// every [`subsample_stride`]-th by index.
 fn subsample(n: usize, position: impl Fn(usize) -> [f64; 3]) -> Vec<[f64; 3]> {
     (0..n).step_by(subsample_stride(n)).map(position).collect()
+}
+
+/// Whether scattered samples' subsample holds the sample at `p`, one in `stride` of them: by a
+/// hash of its coordinates' bits, not by its index, so that ranks that read a file's pieces
+/// apart pick the same samples as one process that read it whole, whatever order the pieces
+/// left them in and whichever copies of a shared point were merged (SplitMix64's finaliser
+/// over the three coordinates).
+pub fn picked(p: [f64; 3], stride: usize) -> bool {
+    let mix = |mut z: u64| {
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    };
+    let h = p
+        .iter()
+        .fold(0x9e37_79b9_7f4a_7c15u64, |h, c| mix(h ^ c.to_bits()));
+    h % stride.max(1) as u64 == 0
 }
 
 impl KdTree {
@@ -78,13 +97,22 @@ impl KdTree {
             }),
             Positions::Scattered(_) => None,
         };
-        let points = subsample(samples.len(), |i| samples.position(i));
+        let points = match planes {
+            Some(_) => subsample(samples.len(), |i| samples.position(i)),
+            None => {
+                let stride = subsample_stride(samples.len());
+                (0..samples.len())
+                    .map(|i| samples.position(i))
+                    .filter(|&p| picked(p, stride))
+                    .collect()
+            }
+        };
         Self::build(points, planes, samples.domain_box(), ranks)
     }
 
     /// The tree of scattered samples in `domain` from `points`, a subsample of them taken by
-    /// the caller (as [`subsample_stride`] takes it): the samples of a parallel file that the
-    /// ranks read in parts.
+    /// the caller (as [`picked`] takes it from the whole set: the samples of a parallel file
+    /// that the ranks read in parts), or any subsample for a tree that only routes samples.
     pub fn decompose_points(
         points: Vec<[f64; 3]>,
         domain: Aabb,

@@ -9,7 +9,8 @@
 //! 1. The ranks gather their counts, bounding boxes and a subsample of their positions (every
 //!    s-th of the whole set, s = [`super::kd::subsample_stride`], by each sample's index in
 //!    the whole set: a grid's sample index, else the pieces' order); a first tree cut from it
-//!    sends every sample to the rank whose box holds it, where coincident samples merge (with
+//!    (only to route: any balanced tree serves) sends every sample to the rank whose box holds
+//!    it, where coincident samples merge (with
 //!    the whole set's tolerance: coincident samples fall in one box; a grid's shared face
 //!    samples are one).
 //! 2. Supports from the k nearest neighbours, exactly: a rank's own k-th neighbour distance
@@ -24,15 +25,16 @@
 //!    lies between their pieces ([`crate::samples::mesh::hull_of_faces`]); a curvilinear
 //!    grid's: the whole grid's sides in each share ([`crate::samples::mesh::structured_sides`]).
 //! 4. The frame (the domain's centre), the value range and the supports' extent over the ranks;
-//!    the final tree from the subsample in the frame, as the whole field's tree is cut; every
+//!    the final tree from the merged samples in the frame, subsampled and cut as the whole
+//!    field's tree is ([`super::kd::picked`]); every
 //!    sample is sent to the rank whose box owns it and, as a ghost, to every rank whose box its
 //!    support reaches ([`super::distribute`]); the Gaussian sum's kernel volumes are computed
 //!    by each sample's owner and sent on to the ranks that hold it as a ghost.
 //!
 //! What can differ from the whole field read by one process: sums in another order (kernel
-//! volumes, merged values: rounding), and the tree when the whole set exceeds the subsample's
-//! size ([`super::kd::SUBSAMPLE`]) and is not a grid, or holds merged samples that are not
-//! exact copies (the subsample then differs; the bricks are still exact for their own tree).
+//! volumes, merged values: rounding). The final tree is cut from the merged samples'
+//! subsample, picked by their coordinates ([`super::kd::picked`]) as the whole field's is, so
+//! it is the whole field's tree at any size.
 //! Samples closer than the merge tolerance on two sides of a first-tree plane stay two
 //! samples. Anisotropic supports from a mesh's one-rings or a curvilinear grid's edges need
 //! neighbours that pieces split: [`super::parallel::ranks_read`] leaves those files to rank 0.
@@ -41,7 +43,7 @@ use super::distribute::{distribute, kernel_volumes, route, splat_ghosts};
 use super::exchange::{Exchange, all_max, all_min, all_sum, gather_f64, pod_bytes, pods, select};
 use super::ghosts::GhostCount;
 use super::ghosts::cell_of;
-use super::kd::{KdTree, subsample_stride};
+use super::kd::{KdTree, picked, subsample_stride};
 use super::part::{Part, read_part, sample_dims};
 use super::splat::SplatReach;
 use super::{Aabb, BrickError};
@@ -122,10 +124,9 @@ pub fn read_scattered<E: Exchange>(
             .map(|i| (whole.offset + i) as f64)
             .collect();
     }
-    let mut sub = subsample(ex, &part, whole.total);
-    let first_tree = ex.agree(
-        KdTree::decompose_points(sub.clone(), whole.bbox, ranks).map_err(|e| e.to_string()),
-    )?;
+    let sub = subsample(ex, &part, whole.total);
+    let first_tree =
+        ex.agree(KdTree::decompose_points(sub, whole.bbox, ranks).map_err(|e| e.to_string()))?;
     let owned = partition(ex, &part, &first_tree, whole.bbox, grid);
     let counts = all_sum(ex, &[owned.positions.len() as f64, owned.merged as f64]);
     let (count, merged) = (counts[0] as u64, counts[1] as usize);
@@ -251,13 +252,14 @@ pub fn read_scattered<E: Exchange>(
     let centre = (DVec3::from(lo) + DVec3::from(hi)) * 0.5;
     let c = centre.to_array();
     set.translate(c);
-    for p in &mut sub {
-        for a in 0..3 {
-            p[a] -= c[a];
-        }
-    }
-    let tree = ex
-        .agree(KdTree::decompose_points(sub, set.domain_box(), ranks).map_err(|e| e.to_string()))?;
+    let tree = ex.agree(
+        KdTree::decompose_points(
+            picked_subsample(ex, &set, count as usize),
+            set.domain_box(),
+            ranks,
+        )
+        .map_err(|e| e.to_string()),
+    )?;
     let range = {
         let (l, h) = set.values.iter().fold((f64::MAX, f64::MIN), |(l, h), v| {
             (l.min(f64::from(v)), h.max(f64::from(v)))
@@ -426,6 +428,21 @@ fn subsample<E: Exchange>(ex: &E, part: &Part, total: usize) -> Vec<[f64; 3]> {
     sub.sort_unstable_by_key(|p| p.map(f64::to_bits));
     sub.dedup_by_key(|p| p.map(f64::to_bits));
     sub
+}
+
+/// The subsample the final tree is cut from, on every rank: the samples each rank owns (the
+/// whole merged set, once) that [`super::kd::picked`] takes from a set of `total`, as
+/// [`KdTree::decompose`] takes them from the whole field.
+fn picked_subsample<E: Exchange>(ex: &E, set: &SampleSet, total: usize) -> Vec<[f64; 3]> {
+    let stride = subsample_stride(total);
+    let mine: Vec<[f64; 3]> = (0..set.len())
+        .map(|i| set.position(i))
+        .filter(|&p| picked(p, stride))
+        .collect();
+    ex.all_gather(pod_bytes(&mine))
+        .iter()
+        .flat_map(|b| pods::<[f64; 3]>(b))
+        .collect()
 }
 
 /// A rectilinear grid's coordinates along each axis, on every rank (its pieces' runs joined).
