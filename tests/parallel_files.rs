@@ -608,6 +608,8 @@ fn ranks_reading_a_mesh_points_or_grid_together_hold_the_whole_fields_bricks() {
         (&rectilinear, "f", "mls", Some(false)),
         (&curved, "f", "mls", None),
         (&curved, "c", "gaussian", None),
+        (&curved, "f", "mls", Some(true)),
+        (&curved, "c", "mls", Some(true)),
     ] {
         let settings = SampleSettings {
             anisotropic,

@@ -17,9 +17,10 @@
 //!    r_i bounds the true one from above, so the true neighbours lie in the ball of radius r_i;
 //!    each rank asks every other rank whose box that ball meets for its samples inside it, and
 //!    takes the k nearest of its own and the answers. A rectilinear grid's diagonal supports
-//!    come from its coordinates, which the ranks gather. The nearest distances' median (the
-//!    step unit) and the radius quantiles are selected over the ranks exactly
-//!    ([`super::exchange::select`]).
+//!    come from its coordinates, which the ranks gather; a curvilinear grid's edge supports
+//!    from its samples' index-direction neighbours, asked of their owners. The nearest
+//!    distances' median (the step unit) and the radius quantiles are selected over the ranks
+//!    exactly ([`super::exchange::select`]).
 //! 3. A mesh's hull: each rank's cells' faces that none of its cells shares
 //!    ([`crate::samples::mesh::boundary_faces`]) are gathered, and a face that two ranks list
 //!    lies between their pieces ([`crate::samples::mesh::hull_of_faces`]); a curvilinear
@@ -36,8 +37,10 @@
 //! subsample, picked by their coordinates ([`super::kd::picked`]) as the whole field's is, so
 //! it is the whole field's tree at any size.
 //! Samples closer than the merge tolerance on two sides of a first-tree plane stay two
-//! samples. Anisotropic supports from a mesh's one-rings or a curvilinear grid's edges need
-//! neighbours that pieces split: [`super::parallel::ranks_read`] leaves those files to rank 0.
+//! samples. A curvilinear grid's anisotropic (edge) supports read each sample's
+//! index-direction neighbours, asked by grid index of the rank that owns them
+//! ([`edge_supports`]). A mesh's one-ring supports need every cell around a point, which the
+//! pieces split: [`super::parallel::ranks_read`] leaves those files to rank 0.
 
 use super::distribute::{distribute, kernel_volumes, route, splat_ghosts};
 use super::exchange::{Exchange, all_max, all_min, all_sum, gather_f64, pod_bytes, pods, select};
@@ -146,13 +149,23 @@ pub fn read_scattered<E: Exchange>(
     // the others' from their k nearest neighbours.
     let coords = grid_coords(ex, &part, kind);
     let diagonal = kind == "RectilinearGrid" && settings.anisotropic.unwrap_or(true);
+    let edges = kind == "StructuredGrid" && settings.anisotropic.unwrap_or(false);
+    let nearest_only = SampleSettings {
+        knn: 1,
+        ..*settings
+    };
     let (metrics, nearest) = match &coords {
+        _ if edges => {
+            let (_, nearest) = knn_supports(ex, &owned.positions, &first_tree, &nearest_only);
+            let dims = whole.dims.unwrap_or([1; 3]);
+            let metrics = edge_supports(ex, &owned, dims, settings.support);
+            (
+                ex.agree(metrics.map_err(|e| format!("{path}: {e}")))?,
+                nearest,
+            )
+        }
         Some(c) if diagonal => {
-            let one = SampleSettings {
-                knn: 1,
-                ..*settings
-            };
-            let (_, nearest) = knn_supports(ex, &owned.positions, &first_tree, &one);
+            let (_, nearest) = knn_supports(ex, &owned.positions, &first_tree, &nearest_only);
             let sampled = if whole.array.1 == Location::Cell {
                 [0, 1, 2].map(|a| centres(&c[a]))
             } else {
@@ -212,6 +225,7 @@ pub fn read_scattered<E: Exchange>(
         inverted_cells: whole.inverted,
         support_kind: match (diagonal, anisotropic) {
             (true, _) => "diagonal",
+            (false, true) if edges => "anisotropic-edges",
             (false, true) => "anisotropic",
             (false, false) => "isotropic",
         },
@@ -346,6 +360,8 @@ pub fn read_scattered<E: Exchange>(
 struct Whole {
     /// Samples in the whole set (before merging), and the first of this rank's.
     total: usize,
+    /// A grid's samples along each axis (its points, or its cells for cell data).
+    dims: Option<[usize; 3]>,
     offset: usize,
     inverted: usize,
     /// The samples' bounding box.
@@ -390,17 +406,17 @@ fn gather_heads<E: Exchange>(ex: &E, part: &Part, summary: &Summary) -> Result<W
         )),
     })?;
     // A grid's samples are its points or cells, each once (pieces share their faces' points).
-    let total = match summary.whole {
-        Some(w) => {
-            let points = [0, 1, 2].map(|a| (w[2 * a + 1] - w[2 * a] + 1) as usize);
-            sample_dims(points, array.1 == Location::Cell)
-                .iter()
-                .product()
-        }
+    let dims = summary.whole.map(|w| {
+        let points = [0, 1, 2].map(|a| (w[2 * a + 1] - w[2 * a] + 1) as usize);
+        sample_dims(points, array.1 == Location::Cell)
+    });
+    let total = match dims {
+        Some(d) => d.iter().product(),
         None => heads.iter().map(|h| h[0] as usize).sum(),
     };
     Ok(Whole {
         total,
+        dims,
         offset: heads[..ex.rank()].iter().map(|h| h[0] as usize).sum(),
         inverted: heads.iter().map(|h| h[1] as usize).sum(),
         bbox: (
@@ -443,6 +459,68 @@ fn picked_subsample<E: Exchange>(ex: &E, set: &SampleSet, total: usize) -> Vec<[
         .iter()
         .flat_map(|b| pods::<[f64; 3]>(b))
         .collect()
+}
+
+/// A curvilinear grid's edge supports of the samples `owned` (whole-grid indices of a grid of
+/// `dims` samples), as [`supports::structured`] gives the whole grid: each sample's
+/// index-direction neighbours that another rank owns (across a kd plane) are asked of every
+/// rank and sent back by their owner.
+fn edge_supports<E: Exchange>(
+    ex: &E,
+    owned: &Owned,
+    dims: [usize; 3],
+    support: f64,
+) -> Result<Vec<Metric>, String> {
+    let linear = |q: [usize; 3]| (q[0] + dims[0] * (q[1] + dims[1] * q[2])) as u64;
+    let mut at: std::collections::HashMap<u64, [f64; 3]> = owned
+        .index
+        .iter()
+        .zip(&owned.positions)
+        .map(|(&g, &p)| (g as u64, p))
+        .collect();
+    let mut missing: Vec<u64> = owned
+        .index
+        .iter()
+        .flat_map(|&g| supports::edge_neighbours(supports::grid_index(dims, g as usize), dims))
+        .map(linear)
+        .filter(|g| !at.contains_key(g))
+        .collect();
+    missing.sort_unstable();
+    missing.dedup();
+    // Every rank sees every rank's questions and answers those about samples it owns.
+    let answers: Vec<Vec<u8>> = ex
+        .all_gather(pod_bytes(&missing))
+        .iter()
+        .map(|asked| {
+            let found: Vec<[f64; 4]> = pods::<u64>(asked)
+                .iter()
+                .filter_map(|g| at.get(g).map(|p| [*g as f64, p[0], p[1], p[2]]))
+                .collect();
+            pod_bytes(&found)
+        })
+        .collect();
+    for got in ex.all_to_all(answers) {
+        for r in pods::<[f64; 4]>(&got) {
+            at.insert(r[0] as u64, [r[1], r[2], r[3]]);
+        }
+    }
+    if let Some(g) = missing.iter().find(|g| !at.contains_key(g)) {
+        return Err(format!(
+            "grid sample {g} is on no rank: the pieces leave a hole"
+        ));
+    }
+    Ok(owned
+        .index
+        .iter()
+        .zip(&owned.positions)
+        .map(|(&g, &here)| {
+            let idx = supports::grid_index(dims, g as usize);
+            // Every neighbour is known (checked above); a missing one would count as no edge.
+            supports::structured_at(idx, dims, support, |q| {
+                at.get(&linear(q)).copied().unwrap_or(here)
+            })
+        })
+        .collect())
 }
 
 /// A rectilinear grid's coordinates along each axis, on every rank (its pieces' runs joined).

@@ -65,7 +65,7 @@ pub fn read_part(
     }
     if summary.whole.is_some() {
         for &p in &mine {
-            read_grid_piece(summary, p, array, settings, &mut part)?;
+            read_grid_piece(summary, p, array, &mut part)?;
         }
         return Ok(part);
     }
@@ -118,7 +118,6 @@ fn read_grid_piece(
     summary: &Summary,
     p: usize,
     array: Option<&str>,
-    settings: &SampleSettings,
     part: &mut Part,
 ) -> Result<(), BrickError> {
     let source = summary.pieces[p].source.display().to_string();
@@ -153,9 +152,6 @@ fn read_grid_piece(
     part.values.extend(data.values.as_f32().iter());
     match &dataset.geometry {
         Geometry::Structured { dims, points } => {
-            if settings.anisotropic == Some(true) {
-                return Err(refused(&source, "edge supports need the grid's neighbours"));
-            }
             if cell_data {
                 part.positions.extend(structured_centroids(*dims, points).1);
             } else {

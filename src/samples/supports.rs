@@ -410,52 +410,84 @@ impl RectilinearSupports {
 
 /// Ellipsoids spanned by the local index-direction edges of a curvilinear grid.
 pub fn structured(dims: [usize; 3], points: &[[f64; 3]], support: f64) -> Vec<Metric> {
-    let index = |i: usize, j: usize, k: usize| i + dims[0] * (j + dims[1] * k);
     (0..points.len())
         .into_par_iter()
         .map(|n| {
-            let idx = [
-                n % dims[0],
-                (n / dims[0]) % dims[1],
-                n / (dims[0] * dims[1]),
-            ];
-            let mut cov = [0.0; 6];
-            for a in 0..3 {
-                if dims[a] < 2 {
-                    continue;
-                }
-                let step = |d: isize| -> Option<[f64; 3]> {
-                    let mut q = idx;
-                    let v = q[a] as isize + d;
-                    if v < 0 || v >= dims[a] as isize {
-                        return None;
-                    }
-                    q[a] = v as usize;
-                    Some(offset(points[n], points[index(q[0], q[1], q[2])]))
-                };
-                let len2 = |e: &[f64; 3]| e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
-                let e = match (step(-1), step(1)) {
-                    (Some(l), Some(r)) => {
-                        if len2(&l) > len2(&r) {
-                            l
-                        } else {
-                            r
-                        }
-                    }
-                    (Some(e), None) | (None, Some(e)) => e,
-                    (None, None) => continue,
-                };
-                cov[0] += e[0] * e[0];
-                cov[1] += e[1] * e[1];
-                cov[2] += e[2] * e[2];
-                cov[3] += e[0] * e[1];
-                cov[4] += e[0] * e[2];
-                cov[5] += e[1] * e[2];
-            }
-            let s2 = support * support;
-            metric_from_covariance(&cov.map(|c| c * s2))
+            structured_at(grid_index(dims, n), dims, support, |q| {
+                points[q[0] + dims[0] * (q[1] + dims[1] * q[2])]
+            })
         })
         .collect()
+}
+
+/// The (i, j, k) of sample `n` of a grid of `dims` samples, i fastest.
+pub fn grid_index(dims: [usize; 3], n: usize) -> [usize; 3] {
+    [
+        n % dims[0],
+        (n / dims[0]) % dims[1],
+        n / (dims[0] * dims[1]),
+    ]
+}
+
+/// The index-direction neighbours of sample `idx` of a grid of `dims` samples, which
+/// [`structured_at`] reads: one step either way along every axis with two samples or more.
+pub fn edge_neighbours(idx: [usize; 3], dims: [usize; 3]) -> impl Iterator<Item = [usize; 3]> {
+    (0..3).filter(move |&a| dims[a] >= 2).flat_map(move |a| {
+        [-1isize, 1].into_iter().filter_map(move |d| {
+            let v = idx[a] as isize + d;
+            (v >= 0 && v < dims[a] as isize).then(|| {
+                let mut q = idx;
+                q[a] = v as usize;
+                q
+            })
+        })
+    })
+}
+
+/// The support of sample `idx` of a curvilinear grid of `dims` samples (module docs): from
+/// its position and its neighbours' along each index direction, `point(q)` of sample q.
+pub fn structured_at(
+    idx: [usize; 3],
+    dims: [usize; 3],
+    support: f64,
+    point: impl Fn([usize; 3]) -> [f64; 3],
+) -> Metric {
+    let here = point(idx);
+    let mut cov = [0.0; 6];
+    for a in 0..3 {
+        if dims[a] < 2 {
+            continue;
+        }
+        let step = |d: isize| -> Option<[f64; 3]> {
+            let mut q = idx;
+            let v = q[a] as isize + d;
+            if v < 0 || v >= dims[a] as isize {
+                return None;
+            }
+            q[a] = v as usize;
+            Some(offset(here, point(q)))
+        };
+        let len2 = |e: &[f64; 3]| e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
+        let e = match (step(-1), step(1)) {
+            (Some(l), Some(r)) => {
+                if len2(&l) > len2(&r) {
+                    l
+                } else {
+                    r
+                }
+            }
+            (Some(e), None) | (None, Some(e)) => e,
+            (None, None) => continue,
+        };
+        cov[0] += e[0] * e[0];
+        cov[1] += e[1] * e[1];
+        cov[2] += e[2] * e[2];
+        cov[3] += e[0] * e[1];
+        cov[4] += e[0] * e[2];
+        cov[5] += e[1] * e[2];
+    }
+    let s2 = support * support;
+    metric_from_covariance(&cov.map(|c| c * s2))
 }
 
 #[cfg(test)]
