@@ -12,7 +12,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use vmls::bricks::exchange::LocalRanks;
 use vmls::bricks::parallel::GridPlan;
-use vmls::bricks::parallel_scattered::read_scattered;
+use vmls::bricks::parallel_scattered::{ScatteredBrick, read_scattered};
 use vmls::bricks::{Ghosts, divide, piece_of};
 use vmls::data::dataset::{Dataset, Geometry};
 use vmls::data::load_dataset;
@@ -626,17 +626,7 @@ fn ranks_reading_a_mesh_points_or_grid_together_hold_the_whole_fields_bricks() {
                 "{}, {array}, {method}, anisotropic {anisotropic:?}, {ranks} ranks",
                 path.display()
             );
-            let bricks = LocalRanks::run(ranks, |ex| {
-                read_scattered(
-                    ex,
-                    &summary,
-                    Some(array),
-                    &settings,
-                    scene.reconstruction,
-                    scene.octree,
-                    None,
-                )
-            });
+            let bricks = read_on_ranks(ranks, &summary, array, &settings, &scene, None);
             let bricks: Vec<_> = bricks
                 .into_iter()
                 .map(|b| b.unwrap_or_else(|e| panic!("{what}: {e}")))
@@ -688,26 +678,40 @@ fn ranks_reading_a_mesh_points_or_grid_together_hold_the_whole_fields_bricks() {
     }
 }
 
-/// What each of `ranks` ranks reading `summary` together with `settings` failed with.
-fn failures(summary: &Summary, ranks: usize, settings: &SampleSettings) -> Vec<String> {
-    let scene = common::general_scene(&[]);
+/// Each of `ranks` ranks' brick of `summary`'s `array` read together with `settings` and the
+/// scene's reconstruction, for ray casting or for splatting `view`.
+fn read_on_ranks(
+    ranks: usize,
+    summary: &Summary,
+    array: &str,
+    settings: &SampleSettings,
+    scene: &vmls::scene::Scene,
+    view: Option<&vmls::view::View<'_>>,
+) -> Vec<Result<ScatteredBrick, vmls::bricks::BrickError>> {
     LocalRanks::run(ranks, |ex| {
         read_scattered(
             ex,
             summary,
-            Some("f"),
+            Some(array),
             settings,
             scene.reconstruction,
             scene.octree,
-            None,
+            view,
         )
-        .err()
-        .map(|e| e.to_string())
     })
-    .into_iter()
-    .enumerate()
-    .map(|(rank, e)| e.unwrap_or_else(|| panic!("rank {rank} went on")))
-    .collect()
+}
+
+/// What each of `ranks` ranks reading `summary` together with `settings` failed with.
+fn failures(summary: &Summary, ranks: usize, settings: &SampleSettings) -> Vec<String> {
+    let scene = common::general_scene(&[]);
+    read_on_ranks(ranks, summary, "f", settings, &scene, None)
+        .into_iter()
+        .enumerate()
+        .map(|(rank, b)| match b {
+            Err(e) => e.to_string(),
+            Ok(_) => panic!("rank {rank} went on"),
+        })
+        .collect()
 }
 
 #[test]
@@ -770,17 +774,7 @@ fn ranks_reading_together_for_a_splatting_view_hold_the_kernels_its_sheets_need(
         let summary = Summary::read(path).expect("summary");
         for ranks in [2, 3] {
             let what = format!("{}, {method}, {ranks} ranks", path.display());
-            let bricks = LocalRanks::run(ranks, |ex| {
-                read_scattered(
-                    ex,
-                    &summary,
-                    Some("f"),
-                    &settings,
-                    scene.reconstruction,
-                    scene.octree,
-                    Some(&view),
-                )
-            });
+            let bricks = read_on_ranks(ranks, &summary, "f", &settings, &scene, Some(&view));
             let tree = vmls::bricks::decompose(&whole, ranks).expect("tree");
             let mut ghosts = 0;
             for (rank, brick) in bricks.into_iter().enumerate() {
@@ -917,17 +911,7 @@ fn ranks_cut_the_whole_fields_tree_past_the_subsample_size() {
     let summary = Summary::read(&path).expect("summary");
     for ranks in [2, 3] {
         let tree = vmls::bricks::decompose(&whole, ranks).expect("tree");
-        let bricks = LocalRanks::run(ranks, |ex| {
-            read_scattered(
-                ex,
-                &summary,
-                Some("f"),
-                &settings,
-                scene.reconstruction,
-                scene.octree,
-                None,
-            )
-        });
+        let bricks = read_on_ranks(ranks, &summary, "f", &settings, &scene, None);
         for (rank, brick) in bricks.into_iter().enumerate() {
             let brick = brick.unwrap_or_else(|e| panic!("{ranks} ranks, rank {rank}: {e}"));
             assert_eq!(brick.tree, tree, "{ranks} ranks, rank {rank}: the tree");

@@ -303,12 +303,7 @@ pub fn anisotropic_neighbourhoods(
                 .collect();
             let mut cov = [0.0; 6];
             for y in &ys {
-                cov[0] += y[0] * y[0];
-                cov[1] += y[1] * y[1];
-                cov[2] += y[2] * y[2];
-                cov[3] += y[0] * y[1];
-                cov[4] += y[0] * y[2];
-                cov[5] += y[1] * y[2];
+                add_outer(&mut cov, y);
             }
             let shape = metric_from_covariance(&cov.map(|c| c / ys.len().max(1) as f64));
             let far = ys
@@ -319,6 +314,16 @@ pub fn anisotropic_neighbourhoods(
             shape.map(|m| m * scale)
         })
         .collect()
+}
+
+/// Adds `y yᵀ` to the symmetric `cov` (xx, yy, zz, xy, xz, yz).
+fn add_outer(cov: &mut [f64; 6], y: &[f64; 3]) {
+    cov[0] += y[0] * y[0];
+    cov[1] += y[1] * y[1];
+    cov[2] += y[2] * y[2];
+    cov[3] += y[0] * y[1];
+    cov[4] += y[0] * y[2];
+    cov[5] += y[1] * y[2];
 }
 
 /// The one-ring of every point of a mesh: the other points of the cells it belongs to.
@@ -479,12 +484,7 @@ pub fn structured_at(
             (Some(e), None) | (None, Some(e)) => e,
             (None, None) => continue,
         };
-        cov[0] += e[0] * e[0];
-        cov[1] += e[1] * e[1];
-        cov[2] += e[2] * e[2];
-        cov[3] += e[0] * e[1];
-        cov[4] += e[0] * e[2];
-        cov[5] += e[1] * e[2];
+        add_outer(&mut cov, &e);
     }
     let s2 = support * support;
     metric_from_covariance(&cov.map(|c| c * s2))

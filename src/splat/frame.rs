@@ -2,9 +2,8 @@
 //! recorded into an application's command buffer ([`SplatRecording`], `Renderer::record`).
 //!
 //! Both run the same stages on the same buffers: `splat_segments` (post-shaded over a hull),
-//! `splat_project`, the three passes of `splat_scan`, `splat_bin`, `splat_order` and
-//! `splat_raster`. They
-//! differ in how the accumulation learns the projection's outcome:
+//! `splat_project`, the three passes of `splat_scan`, `splat_bin`, the two of `splat_order`
+//! and `splat_raster`. They differ in how the accumulation learns the projection's outcome:
 //! - [`splat_frame`] is a few submissions. The first runs the projection and the scan; the host
 //!   reads the counters and one number, the total of entries, to check the work budget and size
 //!   the entry list ([`check_projection`]). Then `splat_raster` runs in bands of
@@ -12,9 +11,9 @@
 //!   stop request ([`FrameControl::stop`]) ends the frame within one band.
 //! - A recorded frame has no host between its commands: its entry list is sized before it is
 //!   recorded (from an earlier count), and `splat_plan` reads the total and the counters on the
-//!   GPU and dispatches `splat_bin`, `splat_order` and each band of `splat_raster` indirectly,
-//!   or none of them
-//!   where the entries do not fit or a check fails ([`plan_groups`], its twin).
+//!   GPU and dispatches `splat_bin`, `splat_order`'s first pass and each band of
+//!   `splat_raster` indirectly, or none of them where the entries do not fit or a check fails
+//!   ([`plan_groups`], its twin); `splat_order`'s second pass finds nothing to do then.
 //!   `Renderer::retire` reads the same numbers and names what stopped the frame.
 
 use super::gpu::{
@@ -48,7 +47,8 @@ pub struct SplatGpuImage {
     pub variant: String,
 }
 
-/// The names of [`SplatGpuImage::stage_ms`]: `splat_sort` is `splat_scan` and `splat_bin`.
+/// The names of [`SplatGpuImage::stage_ms`]: `splat_sort` is `splat_scan` and `splat_bin`,
+/// `splat_order` both passes of that stage.
 pub const STAGES: [&str; 5] = [
     "splat_project",
     "splat_sort",
@@ -346,8 +346,8 @@ fn kernel_groups(kernels: &GpuKernels) -> u32 {
     kernels.count.div_ceil(GROUP).clamp(1, 65_535)
 }
 
-/// Workgroups of `splat_order`, one invocation per bucket: rows of at most 65 535 workgroups
-/// (twin of `splat_plan`'s).
+/// Workgroups of `splat_order`'s first pass, one invocation per bucket: rows of at most
+/// 65 535 workgroups (twin of `splat_plan`'s).
 pub fn order_groups(buckets: u32) -> [u32; 3] {
     let groups = buckets.div_ceil(GROUP).max(1);
     let x = groups.min(65_535);
@@ -489,11 +489,10 @@ pub fn check_raster(stats: &[u32]) -> Result<(), RenderError> {
 }
 
 /// Stage `splat_plan` (GLSL: `glsl/splat/splat_plan.comp`): the workgroup counts of
-/// `splat_bin`, `splat_order`, then of each band of `push.band_rows` tile rows of
-/// `splat_raster`, in a recorded
-/// frame, from the scan's `total` and the projection's counters `stats`: the whole frame, or
-/// none (x = 0) where the entries exceed the list or the budget, or a kernel or pixel
-/// overflowed.
+/// `splat_bin`, of `splat_order`'s first pass, then of each band of `push.band_rows` tile rows
+/// of `splat_raster`, in a recorded frame, from the scan's `total` and the projection's
+/// counters `stats`: the whole frame, or none (x = 0) where the entries exceed the list or the
+/// budget, or a kernel or pixel overflowed.
 pub fn plan_groups(push: &PlanPush, total: u32, stats: &[u32]) -> Vec<[u32; 3]> {
     let stat = |i: usize| stats.get(i).copied().unwrap_or(0);
     let run = total <= push.capacity
@@ -618,8 +617,8 @@ impl<'a> SplatRecording<'a> {
     }
 
     /// Records the frame: constants, projection, scan, `splat_plan`, then `splat_bin`,
-    /// `splat_order` and each band of `splat_raster`, all indirect. Returns the dispatches
-    /// recorded.
+    /// `splat_order`'s first pass and each band of `splat_raster`, indirect, and
+    /// `splat_order`'s second pass. Returns the dispatches recorded.
     pub fn record(
         &self,
         rec: &mut Recorder<'_>,
