@@ -599,6 +599,8 @@ fn ranks_reading_a_mesh_points_or_grid_together_hold_the_whole_fields_bricks() {
     let (curved, _) = grid_files(&d, "StructuredGrid", whole, 3, &curved_at);
     for (path, array, method, anisotropic) in [
         (&mesh, "f", "mls", None),
+        (&mesh, "f", "mls", Some(true)),
+        (&mesh, "f", "gaussian", Some(true)),
         (&cloud, "f", "mls", None),
         (&cloud, "f", "mls", Some(true)),
         (&cloud, "f", "gaussian", None),
@@ -730,24 +732,6 @@ fn a_rank_that_cannot_read_its_piece_stops_every_rank_with_its_message() {
         assert!(
             e.contains("rank 2 of 3") && e.contains(&name),
             "rank {rank}: {e}"
-        );
-    }
-}
-
-#[test]
-fn one_ring_supports_of_a_split_mesh_are_refused_by_name() {
-    let d = dir("scattered-one-ring");
-    let (points, cells) = lattice(2);
-    let mesh = vtu_files(&d, &points, &cells, 10, false);
-    let summary = Summary::read(&mesh).expect("summary");
-    let settings = SampleSettings {
-        anisotropic: Some(true),
-        ..SampleSettings::default()
-    };
-    for e in failures(&summary, 2, &settings) {
-        assert!(
-            e.contains("reconstruction.anisotropic") && e.contains("rank 0"),
-            "{e}"
         );
     }
 }

@@ -28,19 +28,16 @@ use crate::samples::{Domain, Positions, SampleSet, SampleSettings, Supports};
 use crate::view::View;
 use glam::DVec3;
 
-/// Whether the ranks read the parallel file at `path` themselves ([`GridPlan`],
-/// [`super::parallel_scattered`]) for a scene that splats (`splat`) or ray casts with sample
-/// `settings`; otherwise rank 0 reads it whole and sends each rank its piece. Every parallel
-/// kind, ray cast or splatted, but a `.pvtu` with anisotropic supports (a mesh's point data's
-/// one-rings need the cells around each point, which the pieces split; a `.pvts`'s grid edges
-/// are asked of the ranks that hold them).
-pub fn ranks_read(path: &std::path::Path, settings: &SampleSettings) -> bool {
+/// Whether the ranks read the file at `path` themselves ([`GridPlan`],
+/// [`super::parallel_scattered`]); otherwise rank 0 reads it whole and sends each rank its
+/// piece: every parallel kind, ray cast or splatted, with any supports (the neighbours that
+/// pieces split, a mesh's one-rings and a curvilinear grid's edges, are asked of the ranks
+/// that hold them).
+pub fn ranks_read(path: &std::path::Path) -> bool {
     let name = path.to_string_lossy().to_ascii_lowercase();
-    let split_neighbours = name.ends_with(".pvtu");
     [".pvti", ".pvtr", ".pvts", ".pvtu", ".pvtp"]
         .iter()
         .any(|e| name.ends_with(e))
-        && !(split_neighbours && settings.anisotropic == Some(true))
 }
 
 /// A `.pvti`'s grid as the whole field would hold it, and its decomposition.

@@ -39,8 +39,8 @@
 //! Samples closer than the merge tolerance on two sides of a first-tree plane stay two
 //! samples. A curvilinear grid's anisotropic (edge) supports read each sample's
 //! index-direction neighbours, asked by grid index of the rank that owns them
-//! ([`edge_supports`]). A mesh's one-ring supports need every cell around a point, which the
-//! pieces split: [`super::parallel::ranks_read`] leaves those files to rank 0.
+//! ([`edge_supports`]); a mesh's one-ring supports join the rings each rank's cells give a
+//! point at the point's owner ([`ring_supports`]).
 
 use super::distribute::{distribute, kernel_volumes, route, splat_ghosts};
 use super::exchange::{Exchange, all_max, all_min, all_sum, gather_f64, pod_bytes, pods, select};
@@ -148,13 +148,20 @@ pub fn read_scattered<E: Exchange>(
     // from its coordinates (with the nearest distances, the spacing, from one neighbour),
     // the others' from their k nearest neighbours.
     let coords = grid_coords(ex, &part, kind);
+    let anisotropic = settings.anisotropic.unwrap_or(false);
     let diagonal = kind == "RectilinearGrid" && settings.anisotropic.unwrap_or(true);
     let edges = kind == "StructuredGrid" && settings.anisotropic.unwrap_or(false);
+    let rings = kind == "UnstructuredGrid" && whole.array.1 == Location::Point && anisotropic;
     let nearest_only = SampleSettings {
         knn: 1,
         ..*settings
     };
     let (metrics, nearest) = match &coords {
+        _ if rings => {
+            let (_, nearest) = knn_supports(ex, &owned.positions, &first_tree, &nearest_only);
+            let metrics = ring_supports(ex, &part, &owned, &first_tree, settings.knn_support);
+            (metrics, nearest)
+        }
         _ if edges => {
             let (_, nearest) = knn_supports(ex, &owned.positions, &first_tree, &nearest_only);
             let dims = whole.dims.unwrap_or([1; 3]);
@@ -211,7 +218,6 @@ pub fn read_scattered<E: Exchange>(
         .fold(0.0, f64::max);
     let thinnest = 1.0 / all_max(ex, &[lambda])[0].sqrt();
 
-    let anisotropic = settings.anisotropic.unwrap_or(false);
     let provenance = Provenance {
         kind: match kind {
             "UnstructuredGrid" => "unstructured mesh",
@@ -226,6 +232,7 @@ pub fn read_scattered<E: Exchange>(
         support_kind: match (diagonal, anisotropic) {
             (true, _) => "diagonal",
             (false, true) if edges => "anisotropic-edges",
+            (false, true) if rings => "anisotropic-one-ring",
             (false, true) => "anisotropic",
             (false, false) => "isotropic",
         },
@@ -461,6 +468,79 @@ fn picked_subsample<E: Exchange>(ex: &E, set: &SampleSet, total: usize) -> Vec<[
         .collect()
 }
 
+/// A mesh's one-ring supports of the samples `owned` (on the ranks of `tree`), as
+/// [`supports::anisotropic_neighbourhoods`] gives the whole mesh: each rank sends the one-ring
+/// of every point of its cells, by the points' indices in the whole set, to the rank that owns
+/// the point; there the rings of a point's copies join, each neighbour stands for the sample it
+/// merged into (the ranks share which index merged into which), and the neighbours are summed
+/// in the whole set's order, as the whole mesh sums them.
+fn ring_supports<E: Exchange>(
+    ex: &E,
+    part: &Part,
+    owned: &Owned,
+    tree: &KdTree,
+    support: f64,
+) -> Vec<Metric> {
+    // Every merged copy's index, with the index and position of the sample it merged into.
+    let mine: Vec<[f64; 5]> = owned
+        .copies
+        .iter()
+        .map(|&(raw, j)| {
+            let p = owned.positions[j];
+            [raw, owned.index[j], p[0], p[1], p[2]]
+        })
+        .collect();
+    let merged_into: std::collections::HashMap<u64, (f64, [f64; 3])> = ex
+        .all_gather(pod_bytes(&mine))
+        .iter()
+        .flat_map(|b| pods::<[f64; 5]>(b))
+        .map(|r| (r[0] as u64, (r[1], [r[2], r[3], r[4]])))
+        .collect();
+    // (the point's index, a neighbour's index and position) to the point's owner.
+    let out = route(
+        part.positions.len(),
+        ex.size(),
+        |i, v| {
+            for &b in part.rings.get(i).into_iter().flatten() {
+                let q = part.positions[b as usize];
+                v.extend([part.index[i], part.index[b as usize], q[0], q[1], q[2]]);
+            }
+        },
+        |i, send| send(tree.owner(part.positions[i])),
+    );
+    let at: std::collections::HashMap<u64, usize> = owned
+        .index
+        .iter()
+        .enumerate()
+        .map(|(j, &g)| (g as u64, j))
+        .collect();
+    let mut rings: Vec<Vec<(f64, [f64; 3])>> = vec![Vec::new(); owned.positions.len()];
+    for got in ex.all_to_all(out) {
+        for r in pods::<[f64; 5]>(&got) {
+            let key = |g: f64| merged_into.get(&(g as u64)).map_or(g, |m| m.0);
+            let Some(&j) = at.get(&(key(r[0]) as u64)) else {
+                continue;
+            };
+            let (b, q) = merged_into
+                .get(&(r[1] as u64))
+                .copied()
+                .unwrap_or((r[1], [r[2], r[3], r[4]]));
+            if b != owned.index[j] {
+                rings[j].push((b, q));
+            }
+        }
+    }
+    rings
+        .iter_mut()
+        .zip(&owned.positions)
+        .map(|(ring, &p)| {
+            ring.sort_by(|x, y| x.0.total_cmp(&y.0));
+            ring.dedup_by(|x, y| x.0 == y.0);
+            supports::anisotropic_neighbourhood(p, ring.iter().map(|x| x.1), support)
+        })
+        .collect()
+}
+
 /// A curvilinear grid's edge supports of the samples `owned` (whole-grid indices of a grid of
 /// `dims` samples), as [`supports::structured`] gives the whole grid: each sample's
 /// index-direction neighbours that another rank owns (across a kd plane) are asked of every
@@ -572,6 +652,9 @@ struct Owned {
     values: Vec<f32>,
     index: Vec<f64>,
     merged: usize,
+    /// Samples merged into another (meshes and points): their index in the whole set, and the
+    /// sample's they merged into, in `index`.
+    copies: Vec<(f64, usize)>,
 }
 
 /// Every sample to the rank whose box of `tree` holds it, with its index in the whole set;
@@ -609,6 +692,7 @@ fn partition<E: Exchange>(ex: &E, part: &Part, tree: &KdTree, bbox: Aabb, grid: 
             values: kept.iter().map(|r| r[3] as f32).collect(),
             index: kept.iter().map(|r| r[4]).collect(),
             merged: 0,
+            copies: Vec::new(),
         };
     }
     let merged = merge_duplicates_within(
@@ -622,11 +706,18 @@ fn partition<E: Exchange>(ex: &E, part: &Part, tree: &KdTree, bbox: Aabb, grid: 
     for (r, &j) in records.iter().zip(&merged.remap) {
         index[j as usize] = index[j as usize].min(r[4]);
     }
+    let copies = records
+        .iter()
+        .zip(&merged.remap)
+        .filter(|(r, j)| r[4] != index[**j as usize])
+        .map(|(r, &j)| (r[4], j as usize))
+        .collect();
     Owned {
         positions: merged.positions,
         values: merged.values,
         index,
         merged: merged.merged,
+        copies,
     }
 }
 

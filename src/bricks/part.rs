@@ -1,8 +1,9 @@
 //! What one rank reads of a parallel file's pieces when the ranks read it together
 //! ([`super::parallel_scattered`]): a contiguous share of the pieces, as samples (positions,
 //! values, and for grids each sample's index in the whole grid) with what the whole field's
-//! domain and supports need from them — a mesh's unshared cell faces, a curvilinear grid's
-//! boundary triangles in the share, a rectilinear grid's coordinates.
+//! domain and supports need from them — a mesh's unshared cell faces (and, for one-ring
+//! supports, its points' one-rings in the share), a curvilinear grid's boundary triangles in
+//! the share, a rectilinear grid's coordinates.
 
 use super::BrickError;
 use crate::data::dataset::{Geometry, Location};
@@ -10,6 +11,7 @@ use crate::data::vtk_xml_parallel::Summary;
 use crate::samples::mesh::{
     Face, Triangle, boundary_faces, check_cells, structured_centroids, structured_sides,
 };
+use crate::samples::supports::one_rings;
 use crate::samples::{SampleSettings, centres, check_settings};
 
 /// What a rank read of its share of the pieces.
@@ -22,6 +24,9 @@ pub struct Part {
     pub index: Vec<f64>,
     /// A mesh: the faces none of this share's cells shares.
     pub faces: Vec<Face>,
+    /// A mesh's point data with one-ring supports: each point's one-ring in this share's cells
+    /// (indices into `positions`); empty otherwise.
+    pub rings: Vec<Vec<u32>>,
     /// A curvilinear grid: the whole grid's sides in this share.
     pub triangles: Vec<Triangle>,
     /// A rectilinear grid: (point index along the axis, coordinate) per axis.
@@ -82,10 +87,8 @@ pub fn read_part(
             let checked = check_cells(points, cells, &source).map_err(sample)?;
             part.inverted = checked.inverted;
             if !cell_data && settings.anisotropic == Some(true) {
-                return Err(refused(
-                    &source,
-                    "one-ring supports need the cells around each point",
-                ));
+                let identity: Vec<u32> = (0..points.len() as u32).collect();
+                part.rings = one_rings(cells, &identity, points.len());
             }
             part.positions = if cell_data {
                 checked.centroids
@@ -104,13 +107,6 @@ pub fn read_part(
         }
     }
     Ok(part)
-}
-
-fn refused(source: &str, why: &str) -> BrickError {
-    BrickError::Setting {
-        key: "reconstruction.anisotropic",
-        message: format!("{source}: {why}, which the pieces split: rank 0 reads such a file"),
-    }
 }
 
 /// Adds piece `p` of a curvilinear or rectilinear grid to `part`.

@@ -363,7 +363,7 @@ impl RankBrick {
 
     /// Every rank reads the summary of the parallel file at `path` and a part of its pieces,
     /// so that no rank holds the whole field ([`crate::bricks::parallel::ranks_read`] says
-    /// which files and settings): of an image (`.pvti`), the pieces that meet its brick and
+    /// which files): of an image (`.pvti`), the pieces that meet its brick and
     /// its ghost planes ([`GridPlan`]; the ranks agree on the value range); of the other kinds
     /// (`.pvtr`, `.pvts`, `.pvtu`, `.pvtp`), a contiguous share, redistributed to the kd boxes
     /// with exact supports and ghosts ([`read_scattered`]). The bricks are those

@@ -297,23 +297,30 @@ pub fn anisotropic_neighbourhoods(
         .par_iter()
         .zip(neighbours)
         .map(|(p, n)| {
-            let ys: Vec<[f64; 3]> = n
-                .iter()
-                .map(|&j| offset(*p, positions[j as usize]))
-                .collect();
-            let mut cov = [0.0; 6];
-            for y in &ys {
-                add_outer(&mut cov, y);
-            }
-            let shape = metric_from_covariance(&cov.map(|c| c / ys.len().max(1) as f64));
-            let far = ys
-                .iter()
-                .map(|y| super::metric_rho2(&shape, *y))
-                .fold(0.0, f64::max);
-            let scale = 1.0 / (support * support * far.max(f64::MIN_POSITIVE));
-            shape.map(|m| m * scale)
+            anisotropic_neighbourhood(*p, n.iter().map(|&j| positions[j as usize]), support)
         })
         .collect()
+}
+
+/// The anisotropic support of a sample at `p` from its neighbours' positions, summed in their
+/// order ([`anisotropic_neighbourhoods`] of one sample).
+pub fn anisotropic_neighbourhood(
+    p: [f64; 3],
+    neighbours: impl Iterator<Item = [f64; 3]>,
+    support: f64,
+) -> Metric {
+    let ys: Vec<[f64; 3]> = neighbours.map(|q| offset(p, q)).collect();
+    let mut cov = [0.0; 6];
+    for y in &ys {
+        add_outer(&mut cov, y);
+    }
+    let shape = metric_from_covariance(&cov.map(|c| c / ys.len().max(1) as f64));
+    let far = ys
+        .iter()
+        .map(|y| super::metric_rho2(&shape, *y))
+        .fold(0.0, f64::max);
+    let scale = 1.0 / (support * support * far.max(f64::MIN_POSITIVE));
+    shape.map(|m| m * scale)
 }
 
 /// Adds `y yᵀ` to the symmetric `cov` (xx, yy, zz, xy, xz, yz).

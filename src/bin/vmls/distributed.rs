@@ -32,7 +32,7 @@ impl From<DistributedError> for CliError {
 fn parallel_image(scene: &Scene) -> Option<(&std::path::Path, Option<&str>)> {
     match &scene.volume {
         vmls::scene::VolumeSource::File { path, array }
-            if vmls::bricks::parallel::ranks_read(path, &scene.samples) =>
+            if vmls::bricks::parallel::ranks_read(path) =>
         {
             Some((path.as_path(), array.as_deref()))
         }
