@@ -460,6 +460,10 @@ fn splatting_from_the_command_line() {
     assert_eq!(stats["method"], "splat-post");
     assert_eq!(stats["splat"]["kernels_projected"], 729);
     assert!(stats["gpu_ms"]["splat_raster"].as_f64().expect("ms") > 0.0);
+    // Every bucket put in kernel order: the frame is reproducible to the bit.
+    assert_eq!(stats["splat"]["buckets_unordered"], 0);
+    assert!(stats["splat"]["buckets_heapsorted"].as_u64().is_some());
+    assert!(stats["gpu_ms"]["splat_order"].as_f64().expect("ms") > 0.0);
     assert!(
         stats["variant"]
             .as_str()
