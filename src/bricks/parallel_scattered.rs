@@ -472,8 +472,9 @@ fn picked_subsample<E: Exchange>(ex: &E, set: &SampleSet, total: usize) -> Vec<[
 /// [`supports::anisotropic_neighbourhoods`] gives the whole mesh: each rank sends the one-ring
 /// of every point of its cells, by the points' indices in the whole set, to the rank that owns
 /// the point; there the rings of a point's copies join, each neighbour stands for the sample it
-/// merged into (the ranks share which index merged into which), and the neighbours are summed
-/// in the whole set's order, as the whole mesh sums them.
+/// merged into, and the neighbours are summed in the whole set's order, as the whole mesh sums
+/// them. Copies merge on the rank that owns their position, so a rank resolves its own points
+/// and neighbours itself and asks the owner of a neighbour across a kd plane only.
 fn ring_supports<E: Exchange>(
     ex: &E,
     part: &Part,
@@ -481,25 +482,24 @@ fn ring_supports<E: Exchange>(
     tree: &KdTree,
     support: f64,
 ) -> Vec<Metric> {
-    // Every merged copy's index, with the index and position of the sample it merged into.
-    let mine: Vec<[f64; 5]> = owned
-        .copies
+    let (rank, ranks) = (ex.rank(), ex.size());
+    // Each of this rank's samples by its index in the whole set, and each merged copy's index.
+    let mut at: std::collections::HashMap<u64, usize> = owned
+        .index
         .iter()
-        .map(|&(raw, j)| {
-            let p = owned.positions[j];
-            [raw, owned.index[j], p[0], p[1], p[2]]
-        })
+        .enumerate()
+        .map(|(j, &g)| (g as u64, j))
         .collect();
-    let merged_into: std::collections::HashMap<u64, (f64, [f64; 3])> = ex
-        .all_gather(pod_bytes(&mine))
-        .iter()
-        .flat_map(|b| pods::<[f64; 5]>(b))
-        .map(|r| (r[0] as u64, (r[1], [r[2], r[3], r[4]])))
-        .collect();
+    at.extend(owned.copies.iter().map(|&(raw, j)| (raw as u64, j)));
+    // The sample a point of index g merged into (its index and position), where it is here.
+    let resolve = |g: f64| {
+        at.get(&(g as u64))
+            .map(|&j| (owned.index[j], owned.positions[j]))
+    };
     // (the point's index, a neighbour's index and position) to the point's owner.
     let out = route(
         part.positions.len(),
-        ex.size(),
+        ranks,
         |i, v| {
             for &b in part.rings.get(i).into_iter().flatten() {
                 let q = part.positions[b as usize];
@@ -508,26 +508,50 @@ fn ring_supports<E: Exchange>(
         },
         |i, send| send(tree.owner(part.positions[i])),
     );
-    let at: std::collections::HashMap<u64, usize> = owned
-        .index
+    let got: Vec<Vec<[f64; 5]>> = ex
+        .all_to_all(out)
         .iter()
-        .enumerate()
-        .map(|(j, &g)| (g as u64, j))
+        .map(|b| pods::<[f64; 5]>(b))
+        .collect();
+    // Neighbours another rank owns: asked of it by index.
+    let mut asks: Vec<Vec<f64>> = vec![Vec::new(); ranks];
+    for r in got.iter().flatten() {
+        let owner = tree.owner([r[2], r[3], r[4]]);
+        if owner != rank {
+            asks[owner].push(r[1]);
+        }
+    }
+    for a in &mut asks {
+        a.sort_by(f64::total_cmp);
+        a.dedup();
+    }
+    let answers: Vec<Vec<u8>> = ex
+        .all_to_all(asks.iter().map(|a| pod_bytes(a)).collect())
+        .iter()
+        .map(|asked| {
+            let found: Vec<[f64; 5]> = pods::<f64>(asked)
+                .iter()
+                .filter_map(|&g| resolve(g).map(|(k, p)| [g, k, p[0], p[1], p[2]]))
+                .collect();
+            pod_bytes(&found)
+        })
+        .collect();
+    let remote: std::collections::HashMap<u64, (f64, [f64; 3])> = ex
+        .all_to_all(answers)
+        .iter()
+        .flat_map(|b| pods::<[f64; 5]>(b))
+        .map(|r| (r[0] as u64, (r[1], [r[2], r[3], r[4]])))
         .collect();
     let mut rings: Vec<Vec<(f64, [f64; 3])>> = vec![Vec::new(); owned.positions.len()];
-    for got in ex.all_to_all(out) {
-        for r in pods::<[f64; 5]>(&got) {
-            let key = |g: f64| merged_into.get(&(g as u64)).map_or(g, |m| m.0);
-            let Some(&j) = at.get(&(key(r[0]) as u64)) else {
-                continue;
-            };
-            let (b, q) = merged_into
-                .get(&(r[1] as u64))
-                .copied()
-                .unwrap_or((r[1], [r[2], r[3], r[4]]));
-            if b != owned.index[j] {
-                rings[j].push((b, q));
-            }
+    for r in got.iter().flatten() {
+        let Some(&j) = at.get(&(r[0] as u64)) else {
+            continue;
+        };
+        let b = resolve(r[1])
+            .or_else(|| remote.get(&(r[1] as u64)).copied())
+            .unwrap_or((r[1], [r[2], r[3], r[4]]));
+        if b.0 != owned.index[j] {
+            rings[j].push(b);
         }
     }
     rings
