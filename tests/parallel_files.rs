@@ -545,6 +545,18 @@ fn vtp_files(d: &Path, points: &[[f64; 3]], per: usize) -> PathBuf {
     path
 }
 
+/// Point i of a Kronecker sequence in [-1, 1)³: scattered, no two alike.
+fn kronecker(i: usize) -> [f64; 3] {
+    let t = i as f64;
+    [
+        0.618_033_988_749_894_9,
+        0.414_213_562_373_095,
+        0.732_050_807_568_877_2,
+    ]
+    .map(|a| (t * a).fract())
+    .map(|x| 2.0 * x - 1.0)
+}
+
 /// A brick's own samples and its ghosts as (position, value, metric) bits, in order.
 type Bits = Vec<([u64; 3], u32, [u64; 6])>;
 fn brick_bits(s: &SampleSet, own: usize) -> (Bits, Bits) {
@@ -579,18 +591,7 @@ fn ranks_reading_a_mesh_points_or_grid_together_hold_the_whole_fields_bricks() {
     let (points, cells) = lattice(4);
     let mesh = vtu_files(&d, &points, &cells, 37, true);
     // Scattered points: a Kronecker sequence, every 7th point written twice (a shared point).
-    let mut scattered: Vec<[f64; 3]> = (0..600)
-        .map(|i| {
-            let t = i as f64;
-            [
-                0.618_033_988_749_894_9,
-                0.414_213_562_373_095,
-                0.732_050_807_568_877_2,
-            ]
-            .map(|a| (t * a).fract())
-            .map(|x| 2.0 * x - 1.0)
-        })
-        .collect();
+    let mut scattered: Vec<[f64; 3]> = (0..600).map(kronecker).collect();
     let copies: Vec<[f64; 3]> = scattered.iter().step_by(7).copied().collect();
     scattered.extend(copies);
     let cloud = vtp_files(&d, &scattered, 90);
@@ -871,17 +872,9 @@ fn ranks_cut_the_whole_fields_tree_past_the_subsample_size() {
     let d = dir("subsample");
     let points: Vec<[f64; 3]> = (0..70_000)
         .flat_map(|i| {
-            let t = i as f64;
-            let p = [
-                0.618_033_988_749_894_9,
-                0.414_213_562_373_095,
-                0.732_050_807_568_877_2,
-            ]
-            .map(|a| (t * a).fract())
-            .map(|x| 2.0 * x - 1.0);
             // Every 7th point twice, the copy right after it: the copies shift the indices of
             // every point after them.
-            vec![p; 1 + usize::from(i % 7 == 0)]
+            vec![kronecker(i); 1 + usize::from(i % 7 == 0)]
         })
         .collect();
     let path = vtp_files(&d, &points, 20_000);

@@ -36,17 +36,8 @@ layout(std430, binding = BINDING_BUCKET_CURSORS) buffer LargeBuf { uint large[];
 // Below llvmpipe's 65 535, with room for the loops' last passes.
 const uint SORT_ITERATIONS = 60000u;
 // The first pass sorts buckets up to this size, within 64 * 63 / 2 + 2 * 64 + 1 = 2 145 loop
-// iterations (insertion_bound): far below the limit, so it needs no count.
+// iterations (see insertion_sort): far below the limit, so it needs no count.
 const uint INSERTION_MAX = 64u;
-
-// The subgroup's largest of n: its lanes loop as long as that lane.
-uint largest_of(uint n) {
-#if SPLAT_SUBGROUP_OPS == 1
-    return subgroupMax(n);
-#else
-    return n;
-#endif
-}
 
 uint lo;
 uint sheet;
@@ -96,6 +87,15 @@ void main() {
     insertion_sort(n);
 }
 #else
+// The subgroup's largest of n: its lanes loop as long as that lane.
+uint largest_of(uint n) {
+#if SPLAT_SUBGROUP_OPS == 1
+    return subgroupMax(n);
+#else
+    return n;
+#endif
+}
+
 // Loop iterations of heapsorts of buckets of at most n entries: n/2 + n - 1 sift-downs of at
 // most floor(log2 n) + 1 steps, and a pass that ends each loop.
 uint heap_bound(uint n) {

@@ -82,6 +82,13 @@ pub fn picked(p: [f64; 3], stride: usize) -> bool {
     h % stride.max(1) as u64 == 0
 }
 
+/// Of `points`, part of a scattered set of `total` samples, those its subsample holds
+/// ([`picked`]).
+pub fn picked_of(points: impl Iterator<Item = [f64; 3]>, total: usize) -> Vec<[f64; 3]> {
+    let stride = subsample_stride(total);
+    points.filter(|&p| picked(p, stride)).collect()
+}
+
 impl KdTree {
     /// Cuts the bounding box of `samples`' domain into `ranks` boxes.
     pub fn decompose(samples: &SampleSet, ranks: usize) -> Result<Self, BrickError> {
@@ -99,13 +106,10 @@ impl KdTree {
         };
         let points = match planes {
             Some(_) => subsample(samples.len(), |i| samples.position(i)),
-            None => {
-                let stride = subsample_stride(samples.len());
-                (0..samples.len())
-                    .map(|i| samples.position(i))
-                    .filter(|&p| picked(p, stride))
-                    .collect()
-            }
+            None => picked_of(
+                (0..samples.len()).map(|i| samples.position(i)),
+                samples.len(),
+            ),
         };
         Self::build(points, planes, samples.domain_box(), ranks)
     }

@@ -46,7 +46,7 @@ use super::distribute::{distribute, kernel_volumes, route, splat_ghosts};
 use super::exchange::{Exchange, all_max, all_min, all_sum, gather_f64, pod_bytes, pods, select};
 use super::ghosts::GhostCount;
 use super::ghosts::cell_of;
-use super::kd::{KdTree, picked, subsample_stride};
+use super::kd::{KdTree, picked_of, subsample_stride};
 use super::part::{Part, read_part, sample_dims};
 use super::splat::SplatReach;
 use super::{Aabb, BrickError};
@@ -150,29 +150,24 @@ pub fn read_scattered<E: Exchange>(
     let coords = grid_coords(ex, &part, kind);
     let anisotropic = settings.anisotropic.unwrap_or(false);
     let diagonal = kind == "RectilinearGrid" && settings.anisotropic.unwrap_or(true);
-    let edges = kind == "StructuredGrid" && settings.anisotropic.unwrap_or(false);
+    let edges = kind == "StructuredGrid" && anisotropic;
     let rings = kind == "UnstructuredGrid" && whole.array.1 == Location::Point && anisotropic;
-    let nearest_only = SampleSettings {
-        knn: 1,
-        ..*settings
-    };
-    let (metrics, nearest) = match &coords {
-        _ if rings => {
-            let (_, nearest) = knn_supports(ex, &owned.positions, &first_tree, &nearest_only);
-            let metrics = ring_supports(ex, &part, &owned, &first_tree, settings.knn_support);
-            (metrics, nearest)
-        }
+    // Supports by a rule of the data where it has one (one-rings, grid edges, rectilinear gaps),
+    // else from the k nearest neighbours; the nearest distances (the spacing) from neighbours.
+    let ruled: Option<Vec<Metric>> = match &coords {
+        _ if rings => Some(ring_supports(
+            ex,
+            &part,
+            &owned,
+            &first_tree,
+            settings.knn_support,
+        )),
         _ if edges => {
-            let (_, nearest) = knn_supports(ex, &owned.positions, &first_tree, &nearest_only);
             let dims = whole.dims.unwrap_or([1; 3]);
             let metrics = edge_supports(ex, &owned, dims, settings.support);
-            (
-                ex.agree(metrics.map_err(|e| format!("{path}: {e}")))?,
-                nearest,
-            )
+            Some(ex.agree(metrics.map_err(|e| format!("{path}: {e}")))?)
         }
         Some(c) if diagonal => {
-            let (_, nearest) = knn_supports(ex, &owned.positions, &first_tree, &nearest_only);
             let sampled = if whole.array.1 == Location::Cell {
                 [0, 1, 2].map(|a| centres(&c[a]))
             } else {
@@ -180,21 +175,26 @@ pub fn read_scattered<E: Exchange>(
             };
             let dims = sampled.each_ref().map(Vec::len);
             let r = supports::RectilinearSupports::new(&sampled, settings.support);
-            let metrics = owned
-                .index
-                .iter()
-                .map(|&g| {
-                    let g = g as usize;
-                    r.at([
-                        g % dims[0],
-                        (g / dims[0]) % dims[1],
-                        g / (dims[0] * dims[1]),
-                    ])
-                })
-                .collect();
+            Some(
+                owned
+                    .index
+                    .iter()
+                    .map(|&g| r.at(supports::grid_index(dims, g as usize)))
+                    .collect(),
+            )
+        }
+        _ => None,
+    };
+    let (metrics, nearest) = match ruled {
+        Some(metrics) => {
+            let one = SampleSettings {
+                knn: 1,
+                ..*settings
+            };
+            let (_, nearest) = knn_supports(ex, &owned.positions, &first_tree, &one);
             (metrics, nearest)
         }
-        _ => knn_supports(ex, &owned.positions, &first_tree, settings),
+        None => knn_supports(ex, &owned.positions, &first_tree, settings),
     };
     ex.agree(if kind != "PolyData" || count >= 2 {
         Ok(())
@@ -457,11 +457,7 @@ fn subsample<E: Exchange>(ex: &E, part: &Part, total: usize) -> Vec<[f64; 3]> {
 /// whole merged set, once) that [`super::kd::picked`] takes from a set of `total`, as
 /// [`KdTree::decompose`] takes them from the whole field.
 fn picked_subsample<E: Exchange>(ex: &E, set: &SampleSet, total: usize) -> Vec<[f64; 3]> {
-    let stride = subsample_stride(total);
-    let mine: Vec<[f64; 3]> = (0..set.len())
-        .map(|i| set.position(i))
-        .filter(|&p| picked(p, stride))
-        .collect();
+    let mine = picked_of((0..set.len()).map(|i| set.position(i)), total);
     ex.all_gather(pod_bytes(&mine))
         .iter()
         .flat_map(|b| pods::<[f64; 3]>(b))
