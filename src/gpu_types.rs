@@ -101,6 +101,12 @@ pub mod binding {
     /// A recorded frame's indirect dispatch arguments, `uvec4(x, y, z, 0)` each: one per band
     /// (`raycast_next`), or splat_bin's, splat_order's and splat_raster's (`splat_plan`).
     pub const DISPATCH_ARGS: u32 = 37;
+    /// A paged fine grid's page table (`recon::pages`): the slot of each page, as `r32ui`
+    /// texels (read-only).
+    pub const RESAMPLE_PAGES: u32 = 38;
+    /// A paged fine grid's slots as recon_resample fills them: `uvec2` (page, 0), or
+    /// (`SLOT_CONSTANT`, the value's bits) for a shared slot.
+    pub const RESAMPLE_SLOTS: u32 = 39;
 
     /// How kernels read a binding: the grid and the octree's samples, nodes and references
     /// through texel-buffer views (one AVX2 gather per 8 lanes on llvmpipe instead of a per-lane
@@ -113,7 +119,7 @@ pub mod binding {
             | TRANSFER_TEXELS | SPLAT_KERNELS | SPLATS | HULL_TRIS => BindingKind::TexelRgba32Float,
             NODES | SPLAT_WORDS | HULL_NODES => BindingKind::TexelRgba32Uint,
             SPLAT_LIST => BindingKind::TexelRg32Uint,
-            INDICES | PROBE_TEXELS | SKIP_TABLE | GRID_WORDS | OFFSET_TEXELS => {
+            INDICES | PROBE_TEXELS | SKIP_TABLE | GRID_WORDS | OFFSET_TEXELS | RESAMPLE_PAGES => {
                 BindingKind::TexelR32Uint
             }
             PARAMS => BindingKind::Uniform,
@@ -122,7 +128,7 @@ pub mod binding {
     }
 
     /// Every binding with its macro name.
-    pub const ALL: [(&str, u32); 38] = [
+    pub const ALL: [(&str, u32); 40] = [
         ("BINDING_PARAMS", PARAMS),
         ("BINDING_GRID", GRID),
         ("BINDING_SAMPLES", SAMPLES),
@@ -161,6 +167,8 @@ pub mod binding {
         ("BINDING_OFFSET_TEXELS", OFFSET_TEXELS),
         ("BINDING_TARGET_PACKED", TARGET_PACKED),
         ("BINDING_DISPATCH_ARGS", DISPATCH_ARGS),
+        ("BINDING_RESAMPLE_PAGES", RESAMPLE_PAGES),
+        ("BINDING_RESAMPLE_SLOTS", RESAMPLE_SLOTS),
     ];
 }
 

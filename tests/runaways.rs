@@ -56,7 +56,7 @@ fn auto_takes_the_fast_path_only_where_its_fine_grid_stays_moderate() {
     assert_eq!(fast["factor"], 0, "{fast}");
     let why = fast["declined"].as_str().unwrap_or_default();
     assert!(
-        why.contains("531441 points") && why.contains("first frame"),
+        why.contains("531441 solved points") && why.contains("first frame"),
         "{why}"
     );
     // 130³: 259³ = 17.4 M fine points, past auto's 2^24: the general path, and --stats says why.

@@ -393,9 +393,13 @@ MlsResult exact_evaluate(vec3 x) {
 // The fast path's fine grid (recon_resample.comp): (f, ∇f) at MLS_RESAMPLED points per
 // spacing, x fastest.
 layout(binding = BINDING_RESAMPLED, rgba32f) uniform readonly imageBuffer resampled;
+#if RESAMPLE_PAGED == 1
+// A paged grid's page table (src/recon/pages.rs): each page's slot in `resampled`.
+layout(binding = BINDING_RESAMPLE_PAGES, r32ui) uniform readonly uimageBuffer resample_pages;
+#endif
 
 // Stage `resample_evaluate` (twin: ResampledGrid::evaluate in src/recon/resample.rs): x clamped
-// into the box; from the fine cell around it (8 texel reads), f = Σ w_c (f_c + ½ ∇f_c·(x − x_c))
+// into the box; from the fine cell around it (8 texel reads; paged: after its page's slot), f = Σ w_c (f_c + ½ ∇f_c·(x − x_c))
 // with trilinear weights w_c (exact for quadratics) and ∇f interpolated trilinearly; undefined
 // (terms 0) where a corner is (f = the quiet NaN RESAMPLE_UNDEFINED, compared as bits: a NaN
 // compare could be folded away).
@@ -406,8 +410,19 @@ MlsResult resampled_evaluate(vec3 x) {
     g = clamp(g, vec3(0.0), vec3(dims - 1));
     ivec3 cell = min(ivec3(g), max(dims - 2, ivec3(0)));
     vec3 u = g - vec3(cell);
+#if RESAMPLE_PAGED == 1
+    // The cell's page, its slot (one table read), and the cell's corner in the slot.
+    const int edge = RESAMPLE_PAGE + 1;
+    ivec3 counts = (max(dims - 1, ivec3(1)) + RESAMPLE_PAGE - 1) / RESAMPLE_PAGE;
+    ivec3 page = min(cell / RESAMPLE_PAGE, counts - 1);
+    ivec3 local = cell - page * RESAMPLE_PAGE;
+    int slot = int(imageLoad(resample_pages, page.x + counts.x * (page.y + counts.y * page.z)).x);
+    ivec3 next = ivec3(dims.x > 1 ? 1 : 0, dims.y > 1 ? edge : 0, dims.z > 1 ? edge * edge : 0);
+    int base = slot * edge * edge * edge + local.x + edge * (local.y + edge * local.z);
+#else
     ivec3 next = ivec3(dims.x > 1 ? 1 : 0, dims.y > 1 ? dims.x : 0, dims.z > 1 ? dims.x * dims.y : 0);
     int base = cell.x + dims.x * (cell.y + dims.y * cell.z);
+#endif
     float value = 0.0;
     vec3 gradient = vec3(0.0);
     bool defined = true;

@@ -3,7 +3,9 @@
 // (MLS, Gaussian or exact, the variant's MLS_RESAMPLED = 0) at every point of the grid
 // RESAMPLE_FACTOR times finer, written as vec4(f, ∇f), x fastest: the fast path's fine grid.
 // Undefined points (no neighbour) get the quiet NaN RESAMPLE_UNDEFINED in f and zeros in ∇f,
-// as on the CPU (resample::UNDEFINED).
+// as on the CPU (resample::UNDEFINED). RESAMPLE_PAGED: the points of a paged grid's pool
+// (twin: ResampledGrid::build_paged), slot after slot, RESAMPLE_PAGE + 1 points per slot edge:
+// a solved slot's from its page's corner, a shared slot filled with its value.
 #extension GL_EXT_control_flow_attributes : require
 
 layout(local_size_x = 64) in;
@@ -15,6 +17,9 @@ layout(local_size_x = 64) in;
 // lavapipe), not maxStorageBufferRange (128 MiB).
 layout(binding = BINDING_RESAMPLE_TARGET, rgba32f) uniform writeonly imageBuffer fine;
 layout(push_constant) uniform Push { CountPush push; };
+#if RESAMPLE_PAGED == 1
+layout(std430, binding = BINDING_RESAMPLE_SLOTS) readonly buffer Slots { uvec2 slots[]; };
+#endif
 
 #include "field/neighbours.glsl"
 
@@ -25,7 +30,23 @@ void main() {
         return;
     }
     uvec3 dims = uvec3(params.field.grid_dims.xyz - 1) * uint(RESAMPLE_FACTOR) + 1u;
+#if RESAMPLE_PAGED == 1
+    const uint edge = uint(RESAMPLE_PAGE) + 1u;
+    uvec2 slot = slots[n / (edge * edge * edge)];
+    if (slot.x == RESAMPLE_SLOT_CONSTANT) {
+        imageStore(fine, int(n), vec4(uintBitsToFloat(slot.y), vec3(0.0)));
+        return;
+    }
+    uvec3 counts = (max(dims - 1u, uvec3(1u)) + uint(RESAMPLE_PAGE) - 1u) / uint(RESAMPLE_PAGE);
+    uvec3 page = uvec3(slot.x % counts.x, (slot.x / counts.x) % counts.y,
+                       slot.x / (counts.x * counts.y));
+    uint local = n % (edge * edge * edge);
+    uvec3 idx = min(page * uint(RESAMPLE_PAGE)
+                    + uvec3(local % edge, (local / edge) % edge, local / (edge * edge)),
+                    dims - 1u);
+#else
     uvec3 idx = uvec3(n % dims.x, (n / dims.x) % dims.y, n / (dims.x * dims.y));
+#endif
     vec3 spacing = 1.0 / params.field.grid_inv_spacing.xyz;
     vec3 x = params.field.grid_origin.xyz + vec3(idx) * (spacing / float(RESAMPLE_FACTOR));
     MlsResult m = mls_evaluate(x);

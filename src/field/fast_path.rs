@@ -7,10 +7,12 @@ use super::{Field, skip};
 use crate::recon::ReconError;
 use crate::recon::ReconMethod;
 use crate::recon::mls::{MlsSettings, MlsValue, Neighbours, mls_evaluate};
+use crate::recon::pages::{Constants, Pages, grid_reach, scattered_reach};
 use crate::recon::resample::{
-    AUTO_FACTOR, AUTO_MAX_POINTS, FINE_POINT_DEVICE_BYTES, Lattice, MAX_POINTS, ResampledGrid,
+    AUTO_FACTOR, AUTO_MAX_POINTS, FINE_POINT_DEVICE_BYTES, Lattice, MAX_LATTICE_POINTS, MAX_POINTS,
+    ResampledGrid, fine_dims,
 };
-use crate::samples::Positions;
+use crate::samples::{Positions, Supports};
 
 impl Field {
     /// `reconstruction.resample = "auto"` as the field sees it: [`AUTO_FACTOR`] where the
@@ -29,14 +31,13 @@ impl Field {
             self.fast_path_declined = Some(e.to_string());
             return;
         }
-        let points = self.lattice().fine_points(AUTO_FACTOR);
+        let points = self.stored_fine_points();
         if points > AUTO_MAX_POINTS {
-            self.reconstruction.resample = 0;
-            self.fast_path_declined = Some(format!(
-                "\"auto\" declined the fast path: its fine grid would hold {points} points ({} \
+            let bytes = self.fine_device_bytes();
+            self.decline_fast_path(format!(
+                "\"auto\" declined the fast path: its fine grid would hold {points} points ({bytes} \
                  bytes on the device, built in the first frame), more than auto's \
-                 {AUTO_MAX_POINTS}; set reconstruction.resample = {AUTO_FACTOR} to take it anyway",
-                points * FINE_POINT_DEVICE_BYTES
+                 {AUTO_MAX_POINTS}; set reconstruction.resample = {AUTO_FACTOR} to take it anyway"
             ));
         }
     }
@@ -47,27 +48,105 @@ impl Field {
         self.reconstruction.resample = 0;
         self.fast_path_declined = Some(why);
         self.resampled = std::sync::OnceLock::new();
+        self.pages = std::sync::OnceLock::new();
         self.blocks = std::sync::OnceLock::new();
     }
 
-    /// The fast path as `--stats` states it: its factor, fine points and device bytes, or why
+    /// The fast path as `--stats` states it: its factor, the lattice's fine points, the points
+    /// it stores (fewer where it is paged, with its pages) and their device bytes, or why
     /// `"auto"` declined it.
     pub fn fast_path(&self) -> serde_json::Value {
         let factor = self.reconstruction.resample;
         match Some(self.lattice()).filter(|_| factor > 0) {
             Some(l) => {
-                let points = l.fine_points(factor);
-                serde_json::json!({
+                let mut v = serde_json::json!({
                     "factor": factor,
-                    "fine_points": points,
-                    "device_bytes": points * FINE_POINT_DEVICE_BYTES,
-                })
+                    "fine_points": l.fine_points(factor),
+                    "stored_points": self.stored_fine_points(),
+                    "device_bytes": self.fine_device_bytes(),
+                });
+                if let Some(p) = self.fine_pages() {
+                    v["pages"] = serde_json::json!({
+                        "pages": p.table.len(),
+                        "slots": p.slots.len(),
+                        "solved_points": p.solved_points(),
+                    });
+                }
+                v
             }
             None => serde_json::json!({
                 "factor": 0,
                 "declined": self.fast_path_declined,
             }),
         }
+    }
+
+    /// The fast path's page table ([`crate::recon::pages`]), classified once: `None` without
+    /// the fast path, for the generator's exact field, and where the dense fine grid is kept.
+    pub fn fine_pages(&self) -> Option<&Pages> {
+        let factor = self.reconstruction.resample;
+        if factor == 0 {
+            return None;
+        }
+        self.pages
+            .get_or_init(|| self.classify_pages(factor))
+            .as_ref()
+    }
+
+    /// Stage `resample_pages`: each page's slot from the samples whose supports reach it.
+    fn classify_pages(&self, factor: u32) -> Option<Pages> {
+        let constants = match self.reconstruction.method {
+            ReconMethod::Mls => Constants::Any,
+            ReconMethod::Gaussian => Constants::Zero,
+            ReconMethod::Exact => return None,
+        };
+        let l = self.lattice();
+        let fine = fine_dims(l.dims, factor);
+        let value = |i: usize| f64::from(self.samples.values.get(i));
+        let (reach, constants) = match (&self.samples.positions, &self.samples.supports) {
+            (Positions::Grid { dims, spacing, .. }, Supports::Uniform(h)) => {
+                let r = std::array::from_fn(|a| h[a] / spacing[a]);
+                (grid_reach(*dims, factor, r, value), constants)
+            }
+            _ => {
+                // Each support's box, widened a millionth: the kernels' f32 positions may fall
+                // inside a support whose f64 box just misses a page.
+                let step = l.spacing.map(|s| s / f64::from(factor));
+                let samples = (0..self.samples.len()).map(|i| {
+                    let e = self.samples.support_extent(i).map(|e| e * (1.0 + 1e-6));
+                    (self.samples.position(i), e, value(i))
+                });
+                let reach = scattered_reach(fine, l.origin, step, samples);
+                (reach, Constants::Never)
+            }
+        };
+        Pages::classify(fine, &reach, constants)
+    }
+
+    /// Points the fast path's fine grid stores (0 without it): the lattice's, or the pool's
+    /// where it is paged.
+    pub fn stored_fine_points(&self) -> u64 {
+        let factor = self.reconstruction.resample;
+        match self.fine_pages() {
+            Some(p) => p.points(),
+            None if factor > 0 => self.lattice().fine_points(factor),
+            None => 0,
+        }
+    }
+
+    /// Points `recon_resample` solves (0 without the fast path): a paged grid's shared slots are
+    /// filled, not solved.
+    pub fn solved_fine_points(&self) -> u64 {
+        match self.fine_pages() {
+            Some(p) => p.solved_points(),
+            None => self.stored_fine_points(),
+        }
+    }
+
+    /// Device bytes of the fine grid and its page table.
+    pub fn fine_device_bytes(&self) -> u64 {
+        let table = self.fine_pages().map_or(0, |p| p.table.len() as u64 * 4);
+        self.stored_fine_points() * FINE_POINT_DEVICE_BYTES + table
     }
 
     /// The coarse grid the fast path refines: a regular grid's points, or for irregular data a
@@ -91,18 +170,29 @@ impl Field {
         }
     }
 
-    /// The fast path needs a fine grid of at most [`MAX_POINTS`] points over its lattice
-    /// ([`Field::lattice`]).
+    /// The fast path needs a lattice of at most [`MAX_LATTICE_POINTS`] fine points, and a fine
+    /// grid (dense, or paged where that stores fewer) of at most [`MAX_POINTS`].
     pub(super) fn check_resample(&self) -> Result<(), ReconError> {
         let factor = self.reconstruction.resample;
         let lattice = self.lattice();
+        let [x, y, z] = lattice.dims;
         let points = lattice.fine_points(factor);
-        if points > MAX_POINTS {
-            let [x, y, z] = lattice.dims;
+        if points > MAX_LATTICE_POINTS {
             return Err(ReconError::Setting {
                 key: "reconstruction.resample",
                 value: format!("{factor} ({points} fine points for a {x}x{y}x{z} lattice)"),
-                expected: "a factor giving at most 2^27 fine points (2 GiB)",
+                expected: "a factor giving at most 2^33 fine points over the lattice",
+            });
+        }
+        let stored = self.stored_fine_points();
+        if stored > MAX_POINTS {
+            return Err(ReconError::Setting {
+                key: "reconstruction.resample",
+                value: format!(
+                    "{factor} ({stored} fine points stored for a {x}x{y}x{z} lattice, paged \
+                     where the field is constant or undefined)"
+                ),
+                expected: "a factor giving at most 2^27 stored fine points (2 GiB)",
             });
         }
         Ok(())
@@ -121,7 +211,8 @@ impl Field {
         let neighbours = self.neighbours().ok()?;
         let l = self.lattice();
         Some(self.resampled.get_or_init(|| {
-            ResampledGrid::build(l.dims, l.origin, l.spacing, factor, |x| {
+            let pages = self.fine_pages().cloned();
+            ResampledGrid::build_paged(l.dims, l.origin, l.spacing, factor, pages, |x| {
                 self.fine_point(neighbours.as_ref(), x)
             })
         }))

@@ -10,27 +10,28 @@ use crate::vk::{BindGroup, Buffer, BufferUsage, Context, ShaderCompiler, VkError
 
 /// The fast path's device data, built from the uploaded neighbour data (all `None` without it).
 struct FastPath {
-    fine: Option<Buffer>,
-    ms: f64,
+    fine: Option<super::resample::FineGrid>,
     blocks: Option<(Buffer, super::skip::Blocks)>,
 }
 
 impl FastPath {
     /// The fine grid (`recon_resample` from `data`) and its skipping blocks.
     fn build(ctx: &Context, field: &Field, data: &[(u32, &Buffer)]) -> Result<Self, VkError> {
-        let Some((fine, ms)) = super::resample::resample_grid(ctx, field, data)? else {
+        let Some(fine) = super::resample::resample_grid(ctx, field, data)? else {
             return Ok(Self {
                 fine: None,
-                ms: 0.0,
                 blocks: None,
             });
         };
-        let blocks = super::resample::block_buffer(ctx, field, &fine)?;
+        let blocks = super::resample::block_buffer(ctx, field, &fine.points)?;
         Ok(Self {
             fine: Some(fine),
-            ms,
             blocks: Some(blocks),
         })
+    }
+
+    fn ms(&self) -> f64 {
+        self.fine.as_ref().map_or(0.0, |f| f.ms)
     }
 }
 
@@ -43,8 +44,9 @@ pub struct GpuField {
     grid: Option<Buffer>,
     /// The grid's binding ([`Variant::grid_binding`]).
     grid_binding: u32,
-    /// The fast path's fine grid (`reconstruction.resample`), computed on the GPU at upload.
-    resampled: Option<Buffer>,
+    /// The fast path's fine grid (`reconstruction.resample`), computed on the GPU at upload,
+    /// with its page table where it is paged.
+    resampled: Option<super::resample::FineGrid>,
     /// GPU milliseconds recon_resample took.
     pub resample_ms: f64,
     /// The fast field's range per skipping block, `vec4(min, max, 0, 0)`, and the host's copy.
@@ -153,8 +155,8 @@ impl GpuField {
                 Ok(Self {
                     grid_binding: binding,
                     grid: Some(grid),
+                    resample_ms: fast.ms(),
                     resampled: fast.fine,
-                    resample_ms: fast.ms,
                     blocks: fast.blocks,
                     octree: None,
                     hull: None,
@@ -203,8 +205,8 @@ impl GpuField {
                 Ok(Self {
                     grid_binding: binding::GRID,
                     grid: None,
+                    resample_ms: fast.ms(),
                     resampled: fast.fine,
-                    resample_ms: fast.ms,
                     blocks: fast.blocks,
                     octree: Some(octree),
                     hull: None,
@@ -220,7 +222,10 @@ impl GpuField {
             b.push((self.grid_binding, g));
         }
         if let Some(r) = &self.resampled {
-            b.push((binding::RESAMPLED, r));
+            b.push((binding::RESAMPLED, &r.points));
+            if let Some(p) = &r.pages {
+                b.push((binding::RESAMPLE_PAGES, p));
+            }
         }
         if let Some([s, n, i]) = &self.octree {
             b.push((binding::SAMPLES, s));

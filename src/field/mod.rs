@@ -89,6 +89,8 @@ pub struct Field {
     /// The fast path's fine grid, built at first CPU use (`reconstruction.resample`; the GPU
     /// builds its own).
     resampled: std::sync::OnceLock<ResampledGrid>,
+    /// The fast path's page table, classified at first use ([`Field::fine_pages`]).
+    pages: std::sync::OnceLock<Option<crate::recon::pages::Pages>>,
     /// Block ranges of the CPU fine grid, for empty-space skipping.
     blocks: std::sync::OnceLock<skip::Blocks>,
     /// Why `reconstruction.resample = "auto"` chose the general path, where it did.
@@ -217,6 +219,7 @@ impl Field {
             thinnest,
             radii,
             resampled: std::sync::OnceLock::new(),
+            pages: std::sync::OnceLock::new(),
             blocks: std::sync::OnceLock::new(),
             fast_path_declined: None,
             clip,

@@ -12,22 +12,31 @@ use crate::vk::{BindGroup, Buffer, BufferUsage, Context, ShaderCompiler, VkError
 /// Invocations per workgroup of recon_resample.comp.
 const GROUP: u32 = 64;
 
+/// The fast path's fine grid on the device: its points (`vec4(f, ∇f)` each, dense or the
+/// pool's slots), a paged grid's page table, and the GPU milliseconds `recon_resample` took.
+pub struct FineGrid {
+    pub points: Buffer,
+    pub pages: Option<Buffer>,
+    pub ms: f64,
+}
+
 /// The fine grid of a field with `reconstruction.resample` > 0, computed on the GPU from the
-/// uploaded neighbour data (`data`: the grid's binding, or the octree's three), as
-/// `vec4(f, ∇f)` per fine point; `None` without the fast path. Returns the buffer and the GPU
-/// milliseconds it took.
+/// uploaded neighbour data (`data`: the grid's binding, or the octree's three); `None`
+/// without the fast path. A paged grid ([`Field::fine_pages`]) solves only its solved slots'
+/// points and fills the shared ones.
 pub fn resample_grid(
     ctx: &Context,
     field: &Field,
     data: &[(u32, &Buffer)],
-) -> Result<Option<(Buffer, f64)>, VkError> {
+) -> Result<Option<FineGrid>, VkError> {
     let factor = field.reconstruction.resample;
     if factor == 0 {
         return Ok(None);
     }
-    let points = field.lattice().fine_points(factor);
+    let points = field.stored_fine_points();
     let count = u32::try_from(points)
         .map_err(|_| VkError::Usage(format!("{points} fine points exceed 2^32")))?;
+    let pages = field.fine_pages();
     let compiler = ShaderCompiler::new()?;
     // The general path, with the field's own derivative at every fine point (the fast path's
     // interpolation needs ∇f, not the local fit's slope).
@@ -36,10 +45,14 @@ pub fn resample_grid(
         gradient: crate::recon::GradientMode::Analytic,
         ..Variant::of(field)
     };
+    let slots = pages
+        .map(|p| Buffer::from_slice(ctx, "resample slots", &p.gpu_slots()))
+        .transpose()?;
     let ids: Vec<u32> = data
         .iter()
         .map(|(b, _)| *b)
         .chain([binding::RESAMPLE_TARGET])
+        .chain(slots.as_ref().map(|_| binding::RESAMPLE_SLOTS))
         .collect();
     let pipeline = pipeline_for(
         ctx,
@@ -60,6 +73,9 @@ pub fn resample_grid(
         (binding::RESAMPLE_TARGET, &fine),
         (binding::PARAMS, &params),
     ]);
+    if let Some(s) = &slots {
+        all.push((binding::RESAMPLE_SLOTS, s));
+    }
     let group = BindGroup::new(ctx, &pipeline, &all)?;
     // One dispatch covers every point (2D when the groups exceed a dimension's limit): one
     // evaluation per invocation, at most 2^27 of them (resample::MAX_POINTS).
@@ -80,7 +96,14 @@ pub fn resample_grid(
     })?;
     let ms = times.iter().filter_map(|t| t.gpu_ms).sum();
     drop(group);
-    Ok(Some((fine, ms)))
+    let table = pages
+        .map(|p| Buffer::from_slice_as(ctx, "resample pages", &p.table, BufferUsage::Texel))
+        .transpose()?;
+    Ok(Some(FineGrid {
+        points: fine,
+        pages: table,
+        ms,
+    }))
 }
 
 /// The skipping blocks of the GPU's fine grid ([`crate::field::skip::Blocks`]), as
@@ -97,10 +120,14 @@ pub fn block_buffer(
     let dims = resample::fine_dims(g.dims, factor);
     let data: Vec<[f32; 4]> = fine.read(ctx)?;
     let h = g.spacing.map(|s| s / f64::from(factor));
+    let pages = field.fine_pages();
     let (blocks, ranges) = resample::block_ranges(
         dims,
         factor as usize * crate::field::skip::SKIP_BLOCK,
-        |i| resample::point_bounds(data[i].map(f64::from), h),
+        |i| {
+            let p = data[resample::point_index(dims, pages, i)];
+            resample::point_bounds(p.map(f64::from), h)
+        },
     );
     // Rounded outwards to f32, so that the kernel's ranges contain the f64 ones.
     let texels: Vec<[f32; 4]> = ranges

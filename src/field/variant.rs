@@ -51,6 +51,9 @@ pub struct Variant {
     /// Whether the kernel evaluates the fast path (the ray caster, mls_eval) or the general one
     /// (recon_resample, which computes the fine grid from it).
     pub resampled: bool,
+    /// The fast path's fine grid is paged ([`crate::recon::pages`]): one page-table read
+    /// before the corners'.
+    pub paged: bool,
     /// Empty-space skipping in the ray caster ([`super::skip`]).
     pub skip: bool,
     /// Rays clipped to a brick's box ([`Field::piece`]), steps anchored to the undivided ray.
@@ -81,6 +84,7 @@ impl Variant {
             exact: r.method == crate::recon::ReconMethod::Exact,
             resample: r.resample,
             resampled: r.resample > 0,
+            paged: field.fine_pages().is_some(),
             skip: false,
             clip: false,
             method: None,
@@ -146,6 +150,18 @@ impl Variant {
             if self.resampled { self.resample } else { 0 }.to_string(),
         ));
         d.push(("RESAMPLE_FACTOR".into(), self.resample.max(1).to_string()));
+        d.push((
+            "RESAMPLE_PAGED".into(),
+            flag(self.paged && self.resample > 0),
+        ));
+        d.push((
+            "RESAMPLE_PAGE".into(),
+            crate::recon::pages::PAGE.to_string(),
+        ));
+        d.push((
+            "RESAMPLE_SLOT_CONSTANT".into(),
+            format!("{}u", crate::recon::pages::SLOT_CONSTANT),
+        ));
         d.push(("SKIP".into(), flag(self.skip)));
         d.push(("CLIP".into(), flag(self.clip)));
         d.push(("SKIP_BLOCK".into(), super::skip::SKIP_BLOCK.to_string()));
@@ -223,6 +239,10 @@ impl Variant {
             format!("-resample{}", self.resample)
         } else {
             String::new()
+        } + if self.paged && self.resample > 0 {
+            "-paged"
+        } else {
+            ""
         } + if self.skip { "-skip" } else { "" }
             + if self.clip { "-clip" } else { "" }
             + &if self.grid == Storage::F32 {

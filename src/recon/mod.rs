@@ -7,6 +7,7 @@ pub mod gaussian;
 pub mod mls;
 pub mod octree;
 pub mod octree_codes;
+pub mod pages;
 pub mod resample;
 pub mod support_index;
 

@@ -17,6 +17,8 @@
 //! the lattice's: `tests/resample.rs` bounds it (RMSE and maximum over dense random points
 //! inside the hull, per data kind). The lattice is uniform, not adaptive: a mesh graded more
 //! than the fine spacing resolves is interpolated more coarsely where its cells are smallest.
+//! It is stored only where the field varies: pages where supports reach nothing or one constant
+//! share a slot ([`super::pages`]; `tests/resample_pages.rs`).
 //!
 //! Contract of [`ResampledGrid::evaluate`] (stage `resample_evaluate`, GPU twin
 //! `resampled_evaluate` in `glsl/field/neighbours.glsl`):
@@ -32,6 +34,7 @@
 //! ([`ResampledGrid::block_ranges`], [`point_bounds`]), which is what empty-space skipping needs.
 
 use super::mls::MlsValue;
+use super::pages::{PAGE_EDGE, PAGE_POINTS, Pages, Slot};
 use rayon::prelude::*;
 
 /// Largest refinement factor (`reconstruction.resample`).
@@ -41,8 +44,11 @@ pub const MAX_FACTOR: u32 = 8;
 /// 8.5e-3 (quadratic) of the data range in RMSE (BENCHMARKS.md), and it costs 8× the grid's
 /// points in memory; larger factors pay much more first-frame time for little.
 pub const AUTO_FACTOR: u32 = 2;
-/// Largest number of fine points: 2 GiB of `vec4`s (checked before anything is built).
+/// Largest number of fine points stored: 2 GiB of `vec4`s (checked before anything is built).
 pub const MAX_POINTS: u64 = 1 << 27;
+/// Largest number of fine points over the lattice, stored or not (a paged grid's table holds
+/// one word per 16³ of them: 8 MiB at this bound).
+pub const MAX_LATTICE_POINTS: u64 = 1 << 33;
 
 /// Most fine points `reconstruction.resample = "auto"` takes the fast path for: 2^24 (256 MiB on
 /// the device, and a first frame that builds them in seconds on lavapipe). A 200³ grid would
@@ -125,12 +131,15 @@ pub struct ResampledGrid {
     /// Coarse spacing; fine points are `spacing / factor` apart.
     pub spacing: [f64; 3],
     pub factor: u32,
+    /// The page table of a paged fine grid ([`super::pages`]); `None`: dense, x fastest.
+    pub pages: Option<Pages>,
+    /// The points: dense, or the pool's slots one after the other.
     pub data: Vec<[f64; 4]>,
 }
 
 impl ResampledGrid {
     /// Stage `recon_resample`: `eval` (the general path) at every fine point of a grid with
-    /// `dims` points at `origin` and `spacing`.
+    /// `dims` points at `origin` and `spacing`, dense.
     pub fn build(
         dims: [usize; 3],
         origin: [f64; 3],
@@ -138,29 +147,60 @@ impl ResampledGrid {
         factor: u32,
         eval: impl Fn([f64; 3]) -> Option<MlsValue> + Sync,
     ) -> Self {
+        Self::build_paged(dims, origin, spacing, factor, None, eval)
+    }
+
+    /// [`ResampledGrid::build`] into `pages` where given: `eval` at the points of the solved
+    /// slots only, the shared slots filled with their value.
+    pub fn build_paged(
+        dims: [usize; 3],
+        origin: [f64; 3],
+        spacing: [f64; 3],
+        factor: u32,
+        pages: Option<Pages>,
+        eval: impl Fn([f64; 3]) -> Option<MlsValue> + Sync,
+    ) -> Self {
         let fine = fine_dims(dims, factor);
         let step = spacing.map(|s| s / f64::from(factor));
-        let data = (0..fine[0] * fine[1] * fine[2])
-            .into_par_iter()
-            .map(|n| {
-                let idx = [
-                    n % fine[0],
-                    (n / fine[0]) % fine[1],
-                    n / (fine[0] * fine[1]),
-                ];
-                let x = std::array::from_fn(|a| origin[a] + idx[a] as f64 * step[a]);
-                eval(x).map_or(UNDEFINED, |m| {
-                    [m.value, m.gradient[0], m.gradient[1], m.gradient[2]]
-                })
+        let solve = |idx: [usize; 3]| {
+            let x = std::array::from_fn(|a| origin[a] + idx[a] as f64 * step[a]);
+            eval(x).map_or(UNDEFINED, |m| {
+                [m.value, m.gradient[0], m.gradient[1], m.gradient[2]]
             })
-            .collect();
+        };
+        let data = match &pages {
+            None => (0..fine[0] * fine[1] * fine[2])
+                .into_par_iter()
+                .map(|n| {
+                    solve([
+                        n % fine[0],
+                        (n / fine[0]) % fine[1],
+                        n / (fine[0] * fine[1]),
+                    ])
+                })
+                .collect(),
+            Some(p) => (0..p.slots.len() * PAGE_POINTS)
+                .into_par_iter()
+                .map(|n| match p.slots[n / PAGE_POINTS] {
+                    Slot::Solved(page) => solve(p.fine_index(page, n % PAGE_POINTS)),
+                    Slot::Constant(c) if c.is_nan() => UNDEFINED,
+                    Slot::Constant(c) => [c, 0.0, 0.0, 0.0],
+                })
+                .collect(),
+        };
         Self {
             dims: fine,
             origin,
             spacing,
             factor,
+            pages,
             data,
         }
+    }
+
+    /// Where fine point `idx` is stored in `data`.
+    pub fn index(&self, idx: [usize; 3]) -> usize {
+        point_index(self.dims, self.pages.as_ref(), idx)
     }
 
     /// Continuous fine-grid coordinate of x, clamped into the box.
@@ -180,14 +220,18 @@ impl ResampledGrid {
         let mut cell = [0usize; 3];
         let mut u = [0.0; 3];
         let mut next = [0usize; 3];
-        let strides = [1, self.dims[0], self.dims[0] * self.dims[1]];
+        // Dense: the grid's strides; paged: the slot's, from the cell's corner in its page.
+        let strides = match self.pages {
+            None => [1, self.dims[0], self.dims[0] * self.dims[1]],
+            Some(_) => [1, PAGE_EDGE, PAGE_EDGE * PAGE_EDGE],
+        };
         for a in 0..3 {
             let last = self.dims[a].saturating_sub(2);
             cell[a] = (g[a].floor() as usize).min(last);
             u[a] = g[a] - cell[a] as f64;
             next[a] = if self.dims[a] > 1 { strides[a] } else { 0 };
         }
-        let base = cell[0] + strides[1] * cell[1] + strides[2] * cell[2];
+        let base = self.index(cell);
         let h = self.spacing.map(|s| s / f64::from(self.factor));
         let mut v = [0.0; 4];
         for corner in 0..8 {
@@ -222,7 +266,18 @@ impl ResampledGrid {
     /// Per block of `block`³ fine cells: see [`block_ranges`].
     pub fn block_ranges(&self, block: usize) -> ([usize; 3], Vec<[f64; 2]>) {
         let h = self.spacing.map(|s| s / f64::from(self.factor));
-        block_ranges(self.dims, block, |i| point_bounds(self.data[i], h))
+        block_ranges(self.dims, block, |idx| {
+            point_bounds(self.data[self.index(idx)], h)
+        })
+    }
+}
+
+/// Where fine point `idx` of a grid of `dims` fine points is stored: x fastest, or in its
+/// page's slot.
+pub fn point_index(dims: [usize; 3], pages: Option<&Pages>, idx: [usize; 3]) -> usize {
+    match pages {
+        None => idx[0] + dims[0] * (idx[1] + dims[1] * idx[2]),
+        Some(p) => p.locate(idx),
     }
 }
 
@@ -274,7 +329,7 @@ pub fn point_bounds(p: [f64; 4], h: [f64; 3]) -> [f64; 2] {
 }
 
 /// Per block of `block`³ fine cells (x fastest) of a fine grid with `dims` points: the smallest
-/// lower and the largest upper bound `bounds(index)` ([`point_bounds`]) of its (block + 1)³ fine
+/// lower and the largest upper bound `bounds(idx)` ([`point_bounds`]) of its (block + 1)³ fine
 /// points, which bound the fast field over the block rigorously (tested against dense sampling
 /// in `tests/resample.rs`). Undefined points (NaN bounds) are left out: the field is undefined
 /// in every cell they touch; a block of undefined points only gets [+∞, −∞], an empty range.
@@ -282,7 +337,7 @@ pub fn point_bounds(p: [f64; 4], h: [f64; 3]) -> [f64; 2] {
 pub fn block_ranges(
     dims: [usize; 3],
     block: usize,
-    bounds: impl Fn(usize) -> [f64; 2] + Sync,
+    bounds: impl Fn([usize; 3]) -> [f64; 2] + Sync,
 ) -> ([usize; 3], Vec<[f64; 2]>) {
     let cells = dims.map(|d| d.saturating_sub(1).max(1));
     let blocks = cells.map(|c| c.div_ceil(block));
@@ -301,7 +356,7 @@ pub fn block_ranges(
             for k in lo[2]..=hi[2] {
                 for j in lo[1]..=hi[1] {
                     for i in lo[0]..=hi[0] {
-                        let v = bounds(i + dims[0] * (j + dims[1] * k));
+                        let v = bounds([i, j, k]);
                         r = [r[0].min(v[0]), r[1].max(v[1])];
                     }
                 }
@@ -369,7 +424,9 @@ mod tests {
             (0, 0.0),
             "a cell with an undefined corner"
         );
-        let (_, ranges) = block_ranges(grid.dims, 1, |i| point_bounds(grid.data[i], [1.0; 3]));
+        let (_, ranges) = block_ranges(grid.dims, 1, |i| {
+            point_bounds(grid.data[grid.index(i)], [1.0; 3])
+        });
         assert!(ranges[0][0] <= ranges[0][1] && ranges[0][1].is_finite());
         assert!(
             ranges[1][0] <= ranges[1][1],

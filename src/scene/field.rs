@@ -166,11 +166,11 @@ impl Scene {
         let Some(evaluations) = self.frame_evaluations(field) else {
             return;
         };
-        let points = field.lattice().fine_points(factor);
+        let points = field.solved_fine_points();
         if points > evaluations {
             field.decline_fast_path(format!(
-                "\"auto\" declined the fast path: its fine grid's {points} points (one solve \
-                 each, in the first frame) exceed the {evaluations} solves the first frame \
+                "\"auto\" declined the fast path: its fine grid's {points} solved points (one \
+                 solve each, in the first frame) exceed the {evaluations} solves the first frame \
                  makes without it at this image size and step; set reconstruction.resample = \
                  {factor} to take it anyway (later frames are cheaper with it)"
             ));
