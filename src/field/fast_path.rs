@@ -16,7 +16,7 @@ use crate::samples::{Positions, Supports};
 
 impl Field {
     /// `reconstruction.resample = "auto"` as the field sees it: [`AUTO_FACTOR`] where the
-    /// fast path serves and its fine grid holds at most [`AUTO_MAX_POINTS`] points (device
+    /// fast path serves and its fine grid stores at most [`AUTO_MAX_POINTS`] points (device
     /// memory and a first-frame build both grow with them), else 0 with the reason kept for
     /// `--stats`. The scene weighs the first frame and a pilot after this
     /// (`Scene::fit_fast_path`).
@@ -26,6 +26,17 @@ impl Field {
         }
         self.reconstruction.resample_auto = false;
         self.reconstruction.resample = AUTO_FACTOR;
+        // Past this many lattice points even a paged grid would have to store under a sixteenth
+        // of them to fit; auto declines without reading every sample to classify its pages.
+        let dense = self.lattice().fine_points(AUTO_FACTOR);
+        if dense > 16 * AUTO_MAX_POINTS {
+            self.decline_fast_path(format!(
+                "\"auto\" declined the fast path: its lattice has {dense} fine points, more than \
+                 16 times auto's {AUTO_MAX_POINTS} stored points; set reconstruction.resample = \
+                 {AUTO_FACTOR} to take it anyway"
+            ));
+            return;
+        }
         if let Err(e) = self.check_resample() {
             self.reconstruction.resample = 0;
             self.fast_path_declined = Some(e.to_string());

@@ -144,7 +144,7 @@ impl Pages {
             table,
             slots,
         };
-        let dense = super::resample::fine_points(fine.map(|d| d.max(1)), 1) as f64;
+        let dense = fine.iter().map(|&d| d.max(1) as f64).product::<f64>();
         (pages.points() as f64 <= PAGED_SHARE * dense).then_some(pages)
     }
 
@@ -192,13 +192,14 @@ impl Pages {
     }
 
     /// Per slot, `uvec2` for `recon_resample`: (page, 0) for a solved slot, ([`SLOT_CONSTANT`],
-    /// the value's f32 bits) for a shared one (undefined: the quiet NaN `UNDEFINED_BITS`).
+    /// the value's f32 bits) for a shared one (undefined: the quiet NaN, which is
+    /// `resample::UNDEFINED_BITS`).
     pub fn gpu_slots(&self) -> Vec<[u32; 2]> {
         self.slots
             .iter()
             .map(|s| match *s {
                 Slot::Solved(p) => [p, 0],
-                Slot::Constant(c) if c.is_nan() => [SLOT_CONSTANT, super::resample::UNDEFINED_BITS],
+                Slot::Constant(c) if c.is_nan() => [SLOT_CONSTANT, f32::NAN.to_bits()],
                 Slot::Constant(c) => [SLOT_CONSTANT, (c as f32).to_bits()],
             })
             .collect()
@@ -227,7 +228,7 @@ pub fn grid_reach(
     reach: [f64; 3],
     value: impl Fn(usize) -> f64 + Sync,
 ) -> Vec<Reach> {
-    let fine = super::resample::fine_dims(dims, factor);
+    let fine = dims.map(|d| (d.max(1) - 1) * factor as usize + 1);
     let counts = Pages::counts(fine);
     let f = f64::from(factor);
     (0..counts.iter().product::<usize>())

@@ -371,6 +371,18 @@ pub fn block_ranges(
 mod tests {
     use super::*;
 
+    /// A page of undefined points reaches the GPU as the undefined bits, and the pages' fine
+    /// dimensions are the fine grid's.
+    #[test]
+    fn pages_agree_with_the_fine_grid() {
+        use crate::recon::pages::{Constants, Reach, grid_reach};
+        let fine = fine_dims([41, 41, 2], 2);
+        let p = Pages::classify(fine, &[Reach::NONE; 25], Constants::Never).expect("paged");
+        assert_eq!(p.gpu_slots()[0][1], UNDEFINED_BITS);
+        let r = grid_reach([41, 41, 2], 2, [1.0; 3], |_| 0.0);
+        assert_eq!(r.len(), Pages::counts(fine).iter().product::<usize>());
+    }
+
     /// A trilinear function is reproduced exactly, gradient channels included.
     #[test]
     fn trilinear_fields_are_exact() {
