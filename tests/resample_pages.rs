@@ -135,6 +135,58 @@ fn paged_fine_grids_hold_what_the_dense_grid_would() {
     }
 }
 
+/// Dense random points: the paged fast field never leaves its block's range, also next to the
+/// faces where a solved page meets a shared one.
+#[test]
+fn paged_block_ranges_bound_the_fast_field() {
+    let f = masked_field(ReconMethod::Mls, 2);
+    let blocks = f.blocks().expect("blocks");
+    let n = f.neighbours().expect("neighbours");
+    let mut empty = 0;
+    for p in vmls::probe::random_points(&f, 20_000, 0.0, 23) {
+        let v = f.evaluate(n.as_ref(), p).expect("defined").value;
+        let g = (glam::DVec3::from(p) - blocks.origin) / blocks.size;
+        let b: [usize; 3] =
+            std::array::from_fn(|a| (g[a].floor().max(0.0) as usize).min(blocks.dims[a] - 1));
+        let r = blocks.ranges[b[0] + blocks.dims[0] * (b[1] + blocks.dims[1] * b[2])];
+        assert!(v >= r[0] && v <= r[1], "{p:?}: {v} outside {r:?}");
+        if r[0] == r[1] {
+            empty += 1;
+        }
+    }
+    // The background's blocks are the constant 0 exactly (read from the page table).
+    assert!(empty > 10_000, "{empty} points in constant blocks");
+}
+
+/// Supports too small to cover a grid's cells leave points undefined: a page reached by one
+/// value is then not shared (it would be defined where the solve is not).
+#[test]
+fn grids_with_gaps_between_supports_share_no_constant_pages() {
+    let volume = volume_from([129, 33, 33], [1.0; 3], [0.0; 3], |p| {
+        if p[0] < 110.0 { 5.0 } else { p[1] }
+    });
+    let mut shared = Vec::new();
+    for support in [0.6, 2.4] {
+        let mut r = recon(
+            Basis::Linear,
+            Weight::Wendland,
+            GradientMode::Analytic,
+            NeighbourMode::Grid,
+            support,
+        );
+        r.resample = 2;
+        let f = Field::new(volume.clone(), r, &OctreeSettings::default(), |_| {}).expect("field");
+        shared.push(
+            f.fine_pages()
+                .is_some_and(|p| p.slots.contains(&Slot::Constant(5.0))),
+        );
+        if f.fine_pages().is_some() {
+            check_points(&f, 97);
+        }
+    }
+    assert_eq!(shared, vec![false, true], "support 0.6, 2.4");
+}
+
 #[test]
 fn scattered_pages_leave_the_space_between_clusters_undefined() {
     let f = clusters();

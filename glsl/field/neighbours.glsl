@@ -391,7 +391,7 @@ MlsResult exact_evaluate(vec3 x) {
 
 #if MLS_RESAMPLED > 0
 // The fast path's fine grid (recon_resample.comp): (f, ∇f) at MLS_RESAMPLED points per
-// spacing, x fastest.
+// spacing, x fastest, or in pages (RESAMPLE_PAGED).
 layout(binding = BINDING_RESAMPLED, rgba32f) uniform readonly imageBuffer resampled;
 #if RESAMPLE_PAGED == 1
 // A paged grid's page table (src/recon/pages.rs): each page's slot in `resampled`.

@@ -38,8 +38,7 @@ impl Field {
             return;
         }
         if let Err(e) = self.check_resample() {
-            self.reconstruction.resample = 0;
-            self.fast_path_declined = Some(e.to_string());
+            self.decline_fast_path(e.to_string());
             return;
         }
         let points = self.stored_fine_points();
@@ -116,7 +115,19 @@ impl Field {
         let value = |i: usize| f64::from(self.samples.values.get(i));
         let (reach, constants) = match (&self.samples.positions, &self.samples.supports) {
             (Positions::Grid { dims, spacing, .. }, Supports::Uniform(h)) => {
-                let r = std::array::from_fn(|a| h[a] / spacing[a]);
+                let r: [f64; 3] = std::array::from_fn(|a| h[a] / spacing[a]);
+                // A cell's centre is the point furthest from its corners: inside their supports
+                // (ρ < 1) the whole box is defined, else a page reached by one value may still
+                // hold undefined points.
+                let centre: f64 = (0..3)
+                    .filter(|&a| dims[a] > 1)
+                    .map(|a| (0.5 / r[a]).powi(2))
+                    .sum();
+                let constants = if centre < 1.0 {
+                    constants
+                } else {
+                    Constants::Never
+                };
                 (grid_reach(*dims, factor, r, value), constants)
             }
             _ => {
@@ -199,10 +210,7 @@ impl Field {
         if stored > MAX_POINTS {
             return Err(ReconError::Setting {
                 key: "reconstruction.resample",
-                value: format!(
-                    "{factor} ({stored} fine points stored for a {x}x{y}x{z} lattice, paged \
-                     where the field is constant or undefined)"
-                ),
+                value: format!("{factor} ({stored} fine points stored for a {x}x{y}x{z} lattice)"),
                 expected: "a factor giving at most 2^27 stored fine points (2 GiB)",
             });
         }

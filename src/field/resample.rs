@@ -120,14 +120,11 @@ pub fn block_buffer(
     let dims = resample::fine_dims(g.dims, factor);
     let data: Vec<[f32; 4]> = fine.read(ctx)?;
     let h = g.spacing.map(|s| s / f64::from(factor));
-    let pages = field.fine_pages();
     let (blocks, ranges) = resample::block_ranges(
         dims,
         factor as usize * crate::field::skip::SKIP_BLOCK,
-        |i| {
-            let p = data[resample::point_index(dims, pages, i)];
-            resample::point_bounds(p.map(f64::from), h)
-        },
+        field.fine_pages(),
+        |at| resample::point_bounds(data[at].map(f64::from), h),
     );
     // Rounded outwards to f32, so that the kernel's ranges contain the f64 ones.
     let texels: Vec<[f32; 4]> = ranges

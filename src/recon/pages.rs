@@ -11,8 +11,9 @@
 //! support, a superset of the ellipsoid) decides its slot:
 //! - none: the field is undefined on the whole page (no sample has weight), so it shares the
 //!   one slot of undefined points;
-//! - all of one value c, on a regular grid (whose supports cover its whole box, so that no
-//!   point is undefined) where the reconstruction reproduces constants (MLS fits a constant
+//! - all of one value c, on a regular grid whose supports cover its whole box (no point is
+//!   undefined: the cell centre lies inside its corners' supports) where the reconstruction
+//!   reproduces constants (MLS fits a constant
 //!   exactly, value and analytic gradient; the Gaussian sum only for c = 0, where every term is
 //!   zero): the field is c with zero gradient on the page, which shares the slot of value c;
 //! - else the page is solved into a slot of its own (stage `recon_resample`).
@@ -78,7 +79,7 @@ pub enum Constants {
     /// Zero only (the Gaussian sum).
     Zero,
     /// None: some points of a page its samples reach may lie outside every support, and be
-    /// undefined there, not constant (irregular data; a grid's supports cover its whole box).
+    /// undefined there, not constant (irregular data, or a grid whose supports leave gaps).
     Never,
 }
 
@@ -106,7 +107,8 @@ impl Pages {
         let counts = Self::counts(fine);
         debug_assert_eq!(reach.len(), counts.iter().product::<usize>());
         let mut slots = Vec::new();
-        let mut shared: Vec<(u64, u32)> = Vec::new();
+        // Shared slots by their value's bits (−0 taken as +0).
+        let mut shared: std::collections::HashMap<u64, u32> = std::collections::HashMap::new();
         let table = reach
             .iter()
             .enumerate()
@@ -117,25 +119,20 @@ impl Pages {
                     && (constants == Constants::Any
                         || (constants == Constants::Zero && r.lo == 0.0))
                 {
-                    Some(r.lo)
+                    Some(r.lo + 0.0)
                 } else {
                     None
                 };
-                let slot = match constant {
+                match constant {
                     None => {
                         slots.push(Slot::Solved(p as u32));
-                        slots.len() - 1
+                        (slots.len() - 1) as u32
                     }
-                    Some(c) => match shared.iter().find(|(bits, _)| *bits == c.to_bits()) {
-                        Some(&(_, s)) => s as usize,
-                        None => {
-                            slots.push(Slot::Constant(c));
-                            shared.push((c.to_bits(), (slots.len() - 1) as u32));
-                            slots.len() - 1
-                        }
-                    },
-                };
-                slot as u32
+                    Some(c) => *shared.entry(c.to_bits()).or_insert_with(|| {
+                        slots.push(Slot::Constant(c));
+                        (slots.len() - 1) as u32
+                    }),
+                }
             })
             .collect();
         let pages = Self {
@@ -165,12 +162,75 @@ impl Pages {
 
     /// The pool index of fine point `idx` (its page's, or the previous page's on a shared face).
     pub fn locate(&self, idx: [usize; 3]) -> usize {
-        let page: [usize; 3] = std::array::from_fn(|a| (idx[a] / PAGE).min(self.counts[a] - 1));
+        let page: [usize; 3] = std::array::from_fn(|a| self.last_page(idx[a], a));
         let local: [usize; 3] = std::array::from_fn(|a| idx[a] - page[a] * PAGE);
         let p = page[0] + self.counts[0] * (page[1] + self.counts[1] * page[2]);
         self.table[p] as usize * PAGE_POINTS
             + local[0]
             + PAGE_EDGE * (local[1] + PAGE_EDGE * local[2])
+    }
+
+    /// The lowest page along axis `a` whose slots hold fine coordinate `i`: the page below its
+    /// own where `i` lies on their shared face.
+    fn first_page(&self, i: usize, a: usize) -> usize {
+        let below = if i > 0 && i.is_multiple_of(PAGE) {
+            i / PAGE - 1
+        } else {
+            i / PAGE
+        };
+        below.min(self.counts[a] - 1)
+    }
+
+    /// The page along axis `a` that holds fine coordinate `i` as its own (the last page also
+    /// holds the grid's upper face).
+    fn last_page(&self, i: usize, a: usize) -> usize {
+        (i / PAGE).min(self.counts[a] - 1)
+    }
+
+    /// Every pool index holding fine point `idx`: a point on a face, edge or corner between
+    /// pages is stored in each of their slots (the same value up to the solve's rounding, where
+    /// a solved page meets a shared one).
+    pub fn copies(&self, idx: [usize; 3]) -> impl Iterator<Item = usize> + '_ {
+        let span: [[usize; 2]; 3] =
+            std::array::from_fn(|a| [self.first_page(idx[a], a), self.last_page(idx[a], a)]);
+        (span[2][0]..=span[2][1]).flat_map(move |k| {
+            (span[1][0]..=span[1][1]).flat_map(move |j| {
+                (span[0][0]..=span[0][1]).map(move |i| {
+                    let page = [i, j, k];
+                    let p = i + self.counts[0] * (j + self.counts[1] * k);
+                    let l: [usize; 3] = std::array::from_fn(|a| idx[a] - page[a] * PAGE);
+                    self.table[p] as usize * PAGE_POINTS
+                        + l[0]
+                        + PAGE_EDGE * (l[1] + PAGE_EDGE * l[2])
+                })
+            })
+        })
+    }
+
+    /// The value of the shared slot that holds every fine point of the inclusive box [lo, hi]
+    /// (NaN: undefined), or `None` where some page holding one of them is solved or another
+    /// value: what block ranges need without reading the points.
+    pub fn constant_over(&self, lo: [usize; 3], hi: [usize; 3]) -> Option<f64> {
+        let first: [usize; 3] = std::array::from_fn(|a| self.first_page(lo[a], a));
+        let last: [usize; 3] = std::array::from_fn(|a| self.last_page(hi[a], a));
+        let mut slot = None;
+        for k in first[2]..=last[2] {
+            for j in first[1]..=last[1] {
+                for i in first[0]..=last[0] {
+                    let s = self.table[i + self.counts[0] * (j + self.counts[1] * k)];
+                    if !matches!(self.slots[s as usize], Slot::Constant(_))
+                        || slot.is_some_and(|t| t != s)
+                    {
+                        return None;
+                    }
+                    slot = Some(s);
+                }
+            }
+        }
+        match self.slots[slot? as usize] {
+            Slot::Constant(c) => Some(c),
+            Slot::Solved(_) => None,
+        }
     }
 
     /// The fine point a solved slot's point `local` (x fastest within the slot) stands for:
@@ -360,6 +420,46 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A point on faces between pages is found in each of their slots; a box whose pages all
+    /// share one slot has its constant, and none otherwise.
+    #[test]
+    fn face_points_have_a_copy_in_every_page_that_holds_them() {
+        let fine = [2 * PAGE + 1, 2 * PAGE + 1, 1];
+        let p = Pages {
+            fine,
+            counts: [2, 2, 1],
+            table: vec![0, 1, 1, 1],
+            slots: vec![Slot::Solved(0), Slot::Constant(0.0)],
+        };
+        let slots = |idx| p.copies(idx).map(|at| at / PAGE_POINTS).collect::<Vec<_>>();
+        assert_eq!(slots([3, 3, 0]), vec![0]);
+        assert_eq!(slots([PAGE, 3, 0]), vec![0, 1]);
+        assert_eq!(slots([PAGE, PAGE, 0]), vec![0, 1, 1, 1]);
+        assert_eq!(slots([2 * PAGE, 2 * PAGE, 0]), vec![1]);
+        for idx in [[PAGE, 3, 0], [PAGE, PAGE, 0], [PAGE + 2, PAGE, 0]] {
+            for at in p.copies(idx) {
+                let Slot::Solved(page) = p.slots[at / PAGE_POINTS] else {
+                    continue;
+                };
+                assert_eq!(p.fine_index(page, at % PAGE_POINTS), idx);
+            }
+        }
+        assert_eq!(
+            p.constant_over([PAGE + 1, 1, 0], [PAGE + 4, 4, 0]),
+            Some(0.0)
+        );
+        assert_eq!(
+            p.constant_over([PAGE, 1, 0], [PAGE + 4, 4, 0]),
+            None,
+            "a face of page 0"
+        );
+        assert_eq!(
+            p.constant_over([2, 2, 0], [4, 4, 0]),
+            None,
+            "the solved page"
+        );
     }
 
     /// A grid page's reach holds the samples within the support of its box, and no others.

@@ -266,8 +266,8 @@ impl ResampledGrid {
     /// Per block of `block`³ fine cells: see [`block_ranges`].
     pub fn block_ranges(&self, block: usize) -> ([usize; 3], Vec<[f64; 2]>) {
         let h = self.spacing.map(|s| s / f64::from(self.factor));
-        block_ranges(self.dims, block, |idx| {
-            point_bounds(self.data[self.index(idx)], h)
+        block_ranges(self.dims, block, self.pages.as_ref(), |at| {
+            point_bounds(self.data[at], h)
         })
     }
 }
@@ -329,15 +329,19 @@ pub fn point_bounds(p: [f64; 4], h: [f64; 3]) -> [f64; 2] {
 }
 
 /// Per block of `block`³ fine cells (x fastest) of a fine grid with `dims` points: the smallest
-/// lower and the largest upper bound `bounds(idx)` ([`point_bounds`]) of its (block + 1)³ fine
-/// points, which bound the fast field over the block rigorously (tested against dense sampling
-/// in `tests/resample.rs`). Undefined points (NaN bounds) are left out: the field is undefined
-/// in every cell they touch; a block of undefined points only gets [+∞, −∞], an empty range.
-/// Returns the block counts per axis and the ranges.
+/// lower and the largest upper bound `bounds(at)` ([`point_bounds`]) of the stored points at
+/// its (block + 1)³ fine points (`at` an index into the grid's data; paged: every copy of a point
+/// on a face between pages, since a cell reads its own page's, and a block whose pages all share
+/// one constant slot is that constant without reading its points). They bound the fast field
+/// over the block rigorously (tested against dense sampling in `tests/resample.rs`). Undefined
+/// points (NaN bounds) are left out: the field is undefined in every cell they touch; a block of
+/// undefined points only gets [+∞, −∞], an empty range. Returns the block counts per axis and
+/// the ranges.
 pub fn block_ranges(
     dims: [usize; 3],
     block: usize,
-    bounds: impl Fn([usize; 3]) -> [f64; 2] + Sync,
+    pages: Option<&Pages>,
+    bounds: impl Fn(usize) -> [f64; 2] + Sync,
 ) -> ([usize; 3], Vec<[f64; 2]>) {
     let cells = dims.map(|d| d.saturating_sub(1).max(1));
     let blocks = cells.map(|c| c.div_ceil(block));
@@ -353,11 +357,18 @@ pub fn block_ranges(
             let hi: [usize; 3] =
                 std::array::from_fn(|a| ((b[a] + 1) * block).min(dims[a].saturating_sub(1)));
             let mut r = [f64::INFINITY, f64::NEG_INFINITY];
+            let mut add = |v: [f64; 2]| r = [r[0].min(v[0]), r[1].max(v[1])];
+            if let Some(c) = pages.and_then(|p| p.constant_over(lo, hi)) {
+                add([c, c]);
+                return r;
+            }
             for k in lo[2]..=hi[2] {
                 for j in lo[1]..=hi[1] {
                     for i in lo[0]..=hi[0] {
-                        let v = bounds([i, j, k]);
-                        r = [r[0].min(v[0]), r[1].max(v[1])];
+                        match pages {
+                            None => add(bounds(i + dims[0] * (j + dims[1] * k))),
+                            Some(p) => p.copies([i, j, k]).for_each(|at| add(bounds(at))),
+                        }
                     }
                 }
             }
@@ -436,15 +447,15 @@ mod tests {
             (0, 0.0),
             "a cell with an undefined corner"
         );
-        let (_, ranges) = block_ranges(grid.dims, 1, |i| {
-            point_bounds(grid.data[grid.index(i)], [1.0; 3])
+        let (_, ranges) = block_ranges(grid.dims, 1, None, |at| {
+            point_bounds(grid.data[at], [1.0; 3])
         });
         assert!(ranges[0][0] <= ranges[0][1] && ranges[0][1].is_finite());
         assert!(
             ranges[1][0] <= ranges[1][1],
             "defined corners still bound block 1"
         );
-        let (_, ranges) = block_ranges([1, 1, 1], 1, |_| [f64::NAN; 2]);
+        let (_, ranges) = block_ranges([1, 1, 1], 1, None, |_| [f64::NAN; 2]);
         assert!(
             ranges[0][0] > ranges[0][1],
             "no defined point: {:?}",
