@@ -94,10 +94,7 @@ fn block_ranges_bound_the_fast_field() {
     let (mut tight, mut count) = (0.0f64, 0);
     for p in random_points(&f, 20_000, 0.0, 21) {
         let v = f.evaluate(n.as_ref(), p).expect("defined").value;
-        let g = (glam::DVec3::from(p) - blocks.origin) / blocks.size;
-        let b: [usize; 3] =
-            std::array::from_fn(|a| (g[a].floor().max(0.0) as usize).min(blocks.dims[a] - 1));
-        let r = blocks.ranges[b[0] + blocks.dims[0] * (b[1] + blocks.dims[1] * b[2])];
+        let r = blocks.range_at(glam::DVec3::from(p));
         assert!(v >= r[0] && v <= r[1], "{p:?}: {v} outside {r:?}");
         tight = tight.max((r[1] - r[0]) / (f.value_range().1 - f.value_range().0));
         count += 1;

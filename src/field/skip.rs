@@ -192,9 +192,7 @@ impl Blocks {
     /// Stage `skip_block`: the block holding o + t·d (clamped into the grid), whether it is
     /// empty for `table`, and the ray parameter where the ray leaves it.
     pub fn lookup(&self, table: &SkipTable, o: DVec3, d: DVec3, t: f64) -> (bool, f64) {
-        let g = (o + d * t - self.origin) / self.size;
-        let b: [usize; 3] =
-            std::array::from_fn(|a| (g[a].floor().max(0.0) as usize).min(self.dims[a] - 1));
+        let b = self.block_of(o + d * t);
         let lo = self.origin + DVec3::new(b[0] as f64, b[1] as f64, b[2] as f64) * self.size;
         let hi = lo + self.size;
         let mut exit = f64::INFINITY;
@@ -210,6 +208,18 @@ impl Blocks {
         }
         let r = self.ranges[b[0] + self.dims[0] * (b[1] + self.dims[1] * b[2])];
         (table.empty(r[0], r[1]), exit)
+    }
+
+    /// The block holding x, clamped into the grid.
+    fn block_of(&self, x: DVec3) -> [usize; 3] {
+        let g = (x - self.origin) / self.size;
+        std::array::from_fn(|a| (g[a].floor().max(0.0) as usize).min(self.dims[a] - 1))
+    }
+
+    /// The value range of the block holding x (clamped into the grid).
+    pub fn range_at(&self, x: DVec3) -> [f64; 2] {
+        let b = self.block_of(x);
+        self.ranges[b[0] + self.dims[0] * (b[1] + self.dims[1] * b[2])]
     }
 
     /// Stage `skip_run`: from t, across consecutive empty blocks, at most [`SKIP_RUN`] of them
