@@ -29,10 +29,6 @@ impl FastPath {
             blocks: Some(blocks),
         })
     }
-
-    fn ms(&self) -> f64 {
-        self.fine.as_ref().map_or(0.0, |f| f.ms)
-    }
 }
 
 /// Hull crossings a ray-cast frame first allows per ray ([`Variant::hull_hits`]): the
@@ -47,8 +43,6 @@ pub struct GpuField {
     /// The fast path's fine grid (`reconstruction.resample`), computed on the GPU at upload,
     /// with its page table where it is paged.
     resampled: Option<super::resample::FineGrid>,
-    /// GPU milliseconds recon_resample took.
-    pub resample_ms: f64,
     /// The fast field's range per skipping block, `vec4(min, max, 0, 0)`, and the host's copy.
     blocks: Option<(Buffer, super::skip::Blocks)>,
     octree: Option<[Buffer; 3]>,
@@ -112,7 +106,6 @@ impl GpuField {
             grid: None,
             grid_binding: binding::GRID,
             resampled: None,
-            resample_ms: 0.0,
             blocks: None,
             octree: None,
             hull,
@@ -155,7 +148,6 @@ impl GpuField {
                 Ok(Self {
                     grid_binding: binding,
                     grid: Some(grid),
-                    resample_ms: fast.ms(),
                     resampled: fast.fine,
                     blocks: fast.blocks,
                     octree: None,
@@ -205,7 +197,6 @@ impl GpuField {
                 Ok(Self {
                     grid_binding: binding::GRID,
                     grid: None,
-                    resample_ms: fast.ms(),
                     resampled: fast.fine,
                     blocks: fast.blocks,
                     octree: Some(octree),
@@ -213,6 +204,11 @@ impl GpuField {
                 })
             }
         }
+    }
+
+    /// GPU milliseconds recon_resample took (0 without the fast path).
+    pub fn resample_ms(&self) -> f64 {
+        self.resampled.as_ref().map_or(0.0, |f| f.ms)
     }
 
     /// (binding, buffer) pairs of the neighbour data.

@@ -307,7 +307,7 @@ impl Renderer {
     /// GPU milliseconds the fast path's fine grid took to build at upload (0 without it): a
     /// cost of the first frame only.
     pub fn fast_path_build_ms(&self) -> f64 {
-        self.gpu_field.resample_ms
+        self.gpu_field.resample_ms()
     }
 
     /// The preintegration tables of the last frame that used any.
