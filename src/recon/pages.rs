@@ -13,9 +13,9 @@
 //!   one slot of undefined points;
 //! - all of one value c, on a regular grid whose supports cover its whole box (no point is
 //!   undefined: the cell centre lies inside its corners' supports) where the reconstruction
-//!   reproduces constants (MLS fits a constant
-//!   exactly, value and analytic gradient; the Gaussian sum only for c = 0, where every term is
-//!   zero): the field is c with zero gradient on the page, which shares the slot of value c;
+//!   reproduces constants (MLS fits a constant exactly, value and analytic gradient; the
+//!   Gaussian sum only for c = 0, where every term is zero): the field is c with zero gradient
+//!   on the page, which shares the slot of value c;
 //! - else the page is solved into a slot of its own (stage `recon_resample`).
 //!
 //! The shared slots differ from what a solve would store only by the solve's rounding. Paging
@@ -160,9 +160,14 @@ impl Pages {
         (solved * PAGE_POINTS) as u64
     }
 
-    /// The pool index of fine point `idx` (its page's, or the previous page's on a shared face).
+    /// The pool index of fine point `idx` in the slot of the page that holds it as its own
+    /// (the last page also holds the grid's upper face): where a cell starting there reads it.
     pub fn locate(&self, idx: [usize; 3]) -> usize {
-        let page: [usize; 3] = std::array::from_fn(|a| self.last_page(idx[a], a));
+        self.in_slot(std::array::from_fn(|a| self.last_page(idx[a], a)), idx)
+    }
+
+    /// The pool index of fine point `idx` in the slot of `page`, which holds it.
+    fn in_slot(&self, page: [usize; 3], idx: [usize; 3]) -> usize {
         let local: [usize; 3] = std::array::from_fn(|a| idx[a] - page[a] * PAGE);
         let p = page[0] + self.counts[0] * (page[1] + self.counts[1] * page[2]);
         self.table[p] as usize * PAGE_POINTS
@@ -195,14 +200,7 @@ impl Pages {
             std::array::from_fn(|a| [self.first_page(idx[a], a), self.last_page(idx[a], a)]);
         (span[2][0]..=span[2][1]).flat_map(move |k| {
             (span[1][0]..=span[1][1]).flat_map(move |j| {
-                (span[0][0]..=span[0][1]).map(move |i| {
-                    let page = [i, j, k];
-                    let p = i + self.counts[0] * (j + self.counts[1] * k);
-                    let l: [usize; 3] = std::array::from_fn(|a| idx[a] - page[a] * PAGE);
-                    self.table[p] as usize * PAGE_POINTS
-                        + l[0]
-                        + PAGE_EDGE * (l[1] + PAGE_EDGE * l[2])
-                })
+                (span[0][0]..=span[0][1]).map(move |i| self.in_slot([i, j, k], idx))
             })
         })
     }
