@@ -399,8 +399,8 @@ layout(binding = BINDING_RESAMPLE_PAGES, r32ui) uniform readonly uimageBuffer re
 #endif
 
 // Stage `resample_evaluate` (twin: ResampledGrid::evaluate in src/recon/resample.rs): x clamped
-// into the box; from the fine cell around it (8 texel reads; paged: after its page's slot), f = Σ w_c (f_c + ½ ∇f_c·(x − x_c))
-// with trilinear weights w_c (exact for quadratics) and ∇f interpolated trilinearly; undefined
+// into the box; from the fine cell around it (8 texel reads; paged: after its page's slot),
+// f = Σ w_c (f_c + ½ ∇f_c·(x − x_c)) with trilinear weights w_c (exact for quadratics) and ∇f interpolated trilinearly; undefined
 // (terms 0) where a corner is (f = the quiet NaN RESAMPLE_UNDEFINED, compared as bits: a NaN
 // compare could be folded away).
 MlsResult resampled_evaluate(vec3 x) {

@@ -128,7 +128,7 @@ impl Field {
                 } else {
                     Constants::Never
                 };
-                (grid_reach(*dims, factor, r, value), constants)
+                (grid_reach(*dims, fine, factor, r, value), constants)
             }
             _ => {
                 // Each support's box, widened a millionth: the kernels' f32 positions may fall

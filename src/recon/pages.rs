@@ -278,15 +278,15 @@ fn page_range(counts: [usize; 3], fine: [usize; 3], p: usize) -> [[usize; 2]; 3]
 }
 
 /// Stage `resample_pages` for a regular grid of `dims` samples (`value(i)`, x fastest) refined
-/// `factor` times, whose supports reach `reach` sample spacings along each axis: per page, the
-/// samples within that reach of its box.
+/// `factor` times into `fine` points per axis (`resample::fine_dims`), whose supports reach
+/// `reach` sample spacings along each axis: per page, the samples within that reach of its box.
 pub fn grid_reach(
     dims: [usize; 3],
+    fine: [usize; 3],
     factor: u32,
     reach: [f64; 3],
     value: impl Fn(usize) -> f64 + Sync,
 ) -> Vec<Reach> {
-    let fine = dims.map(|d| (d.max(1) - 1) * factor as usize + 1);
     let counts = Pages::counts(fine);
     let f = f64::from(factor);
     (0..counts.iter().product::<usize>())
@@ -465,7 +465,8 @@ mod tests {
     fn grid_reach_spans_the_support_around_each_page() {
         let dims = [40, 3, 3];
         // Values: the sample's x index; factor 2: page 0 covers samples 0..8, page 1 8..16.
-        let reach = grid_reach(dims, 2, [2.5, 2.5, 2.5], |i| (i % 40) as f64);
+        let fine = [79, 5, 5];
+        let reach = grid_reach(dims, fine, 2, [2.5, 2.5, 2.5], |i| (i % 40) as f64);
         assert_eq!(reach.len(), 5);
         assert_eq!((reach[0].lo, reach[0].hi), (0.0, 11.0));
         assert_eq!((reach[1].lo, reach[1].hi), (5.0, 19.0));

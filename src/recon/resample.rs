@@ -390,7 +390,7 @@ mod tests {
         let fine = fine_dims([41, 41, 2], 2);
         let p = Pages::classify(fine, &[Reach::NONE; 25], Constants::Never).expect("paged");
         assert_eq!(p.gpu_slots()[0][1], UNDEFINED_BITS);
-        let r = grid_reach([41, 41, 2], 2, [1.0; 3], |_| 0.0);
+        let r = grid_reach([41, 41, 2], fine, 2, [1.0; 3], |_| 0.0);
         assert_eq!(r.len(), Pages::counts(fine).iter().product::<usize>());
     }
 
