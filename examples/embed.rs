@@ -57,6 +57,9 @@ pub struct Frames {
     pub rendered_ms: Vec<f64>,
     /// Dispatches of the last recorded frame, and submissions of the last `render()` frame.
     pub dispatches: u32,
+    /// Ray casting a mesh: per recorded frame (in retire order), whether it walked its rays'
+    /// hull segments or read those its slot kept for the same camera.
+    pub hull_segments: Vec<Option<vmls::renderer::HullSegments>>,
     pub submissions: u32,
     pub width: u32,
     pub height: u32,
@@ -313,6 +316,7 @@ pub fn run(
             recorded_ms: Vec::new(),
             rendered_ms: Vec::new(),
             dispatches: 0,
+            hull_segments: Vec::new(),
             submissions: 0,
             width,
             height,
@@ -339,6 +343,7 @@ pub fn run(
                     let done = renderer.retire(&frame)?;
                     out.recorded_ms.extend(done.gpu_ms);
                     out.dispatches = done.dispatches;
+                    out.hull_segments.push(done.hull_segments);
                     let ptr = device.map_memory(
                         readbacks[k].1.memory,
                         0,

@@ -107,6 +107,10 @@ pub mod binding {
     /// A paged fine grid's slots as recon_resample fills them: `uvec2` (page, 0), or
     /// (`SLOT_CONSTANT`, the value's bits) for a shared slot.
     pub const RESAMPLE_SLOTS: u32 = 39;
+    /// Each pixel's inside segments of a mesh's hull for the frame's camera, as rgba32f texels
+    /// (`raycast::segments`): written by the ray casters that walk the hull and keep what they
+    /// found (`HULL_CACHED` 2), read by those that read it instead (`HULL_CACHED` 1).
+    pub const RAY_SEGMENTS: u32 = 40;
 
     /// How kernels read a binding: the grid and the octree's samples, nodes and references
     /// through texel-buffer views (one AVX2 gather per 8 lanes on llvmpipe instead of a per-lane
@@ -116,7 +120,9 @@ pub mod binding {
         use crate::vk::BindingKind;
         match b {
             SAMPLES | GRID | RESAMPLED | RESAMPLE_TARGET | PREINT | SKIP_BLOCKS
-            | TRANSFER_TEXELS | SPLAT_KERNELS | SPLATS | HULL_TRIS => BindingKind::TexelRgba32Float,
+            | TRANSFER_TEXELS | SPLAT_KERNELS | SPLATS | HULL_TRIS | RAY_SEGMENTS => {
+                BindingKind::TexelRgba32Float
+            }
             NODES | SPLAT_WORDS | HULL_NODES => BindingKind::TexelRgba32Uint,
             SPLAT_LIST => BindingKind::TexelRg32Uint,
             INDICES | PROBE_TEXELS | SKIP_TABLE | GRID_WORDS | OFFSET_TEXELS | RESAMPLE_PAGES => {
@@ -128,7 +134,7 @@ pub mod binding {
     }
 
     /// Every binding with its macro name.
-    pub const ALL: [(&str, u32); 40] = [
+    pub const ALL: [(&str, u32); 41] = [
         ("BINDING_PARAMS", PARAMS),
         ("BINDING_GRID", GRID),
         ("BINDING_SAMPLES", SAMPLES),
@@ -169,6 +175,7 @@ pub mod binding {
         ("BINDING_DISPATCH_ARGS", DISPATCH_ARGS),
         ("BINDING_RESAMPLE_PAGES", RESAMPLE_PAGES),
         ("BINDING_RESAMPLE_SLOTS", RESAMPLE_SLOTS),
+        ("BINDING_RAY_SEGMENTS", RAY_SEGMENTS),
     ];
 }
 

@@ -71,6 +71,41 @@ fn recorded_frames_equal_render_bit_for_bit() {
     assert_ne!(out.frames[0], out.frames[1]);
 }
 
+/// Ray casting a tetrahedral mesh: each slot finds its hull segments at its first frame of a
+/// camera and reuses them while the camera stays, and every recorded frame still equals
+/// `render()`'s to the bit, turning or not.
+#[test]
+fn recorded_mesh_frames_reuse_hull_segments_and_equal_render() {
+    use vmls::renderer::HullSegments::{Found, Reused};
+    let mesh = "volume.file=\"tests/data/legacy/unstructured-42-ascii.vtk\"";
+    for (turn, expect) in [
+        (0.35, [Found, Found, Found, Found]),
+        // Two slots, each with its own cache: each walks at its first frame.
+        (0.0, [Found, Found, Reused, Reused]),
+    ] {
+        let _guard = validated();
+        let before = embed::MESSAGES.load(Ordering::SeqCst);
+        let out =
+            embed::run(&overrides(&[mesh]), 4, turn, TargetFormat::Rgba32f).expect("example runs");
+        assert_eq!(
+            embed::MESSAGES.load(Ordering::SeqCst),
+            before,
+            "validation messages"
+        );
+        for (i, (got, want)) in out.frames.iter().zip(&out.rendered).enumerate() {
+            let want: &[u8] = bytemuck::cast_slice(want);
+            assert!(got == want, "turn {turn}, frame {i}: differs from render()");
+        }
+        if turn == 0.0 {
+            assert_eq!(
+                out.frames[0], out.frames[3],
+                "the same camera, the same image"
+            );
+        }
+        assert_eq!(out.hull_segments, expect.map(Some), "turn {turn}");
+    }
+}
+
 /// Recorded splatting frames equal `render()`'s to the bit: the same stages on the same
 /// buffers, and `splat_order` puts each bucket in kernel order, so every sheet sums its entries
 /// in one order whoever filled the bucket (before it, they differed by up to 3.0e-6). The

@@ -336,3 +336,126 @@ fn rays_with_more_crossings_than_the_first_variant_keeps_render_again_with_all()
     let (img, _) = both(&field, &across);
     assert!(img.variant.ends_with("-hull8"), "{}", img.variant);
 }
+
+/// The largest channel difference between two GPU images.
+fn gpu_diff(a: &[[f32; 4]], b: &[[f32; 4]]) -> f32 {
+    a.iter()
+        .zip(b)
+        .flat_map(|(p, q)| (0..4).map(move |k| (p[k] - q[k]).abs()))
+        .fold(0.0, f32::max)
+}
+
+/// A renderer walks a mesh's hull once per camera and keeps the segments: a frame of the same
+/// camera with another transfer function reads them, a frame of another camera walks again,
+/// and every image equals the uncached walk's (the stateless `render`) and matches the CPU
+/// twin, also for adaptive frames integrated in many chunks.
+#[test]
+fn hull_segments_are_found_once_per_camera_and_images_equal_the_walk() {
+    use vmls::renderer::{HullSegments, Renderer};
+    let field = torus_field();
+    let first = scene(&[
+        ORTHO,
+        ORTHO_HEIGHT,
+        "camera.eye=[0.5, -4.0, 1.5]",
+        "camera.up=[0.0, 0.0, 1.0]",
+    ]);
+    let other_tf = scene(&[
+        ORTHO,
+        ORTHO_HEIGHT,
+        "camera.eye=[0.5, -4.0, 1.5]",
+        "camera.up=[0.0, 0.0, 1.0]",
+        "transfer.points=[[0.0, 1.0, 0.4, 0.2, 1.0], [1.0, 0.2, 0.6, 1.0, 9.0]]",
+    ]);
+    let moved = scene(&[
+        ORTHO,
+        ORTHO_HEIGHT,
+        "camera.eye=[-1.0, -4.0, 2.5]",
+        "camera.up=[0.0, 0.0, 1.0]",
+    ]);
+    let walked: Vec<_> = [&first, &other_tf, &moved]
+        .iter()
+        .map(|s| both(&field, s))
+        .collect();
+    let (ctx, _) = gpu();
+    let mut renderer = Renderer::new(&ctx, field.clone()).expect("renderer");
+    let expect = [
+        HullSegments::Found,
+        HullSegments::Reused,
+        HullSegments::Found,
+    ];
+    for (i, s) in [&first, &other_tf, &moved].iter().enumerate() {
+        let (img, stats) = renderer.render(&s.view(), |_| {}).expect("frame");
+        let suffix = match expect[i] {
+            HullSegments::Found => "-hull8-keep",
+            HullSegments::Reused => "-hull8-cached",
+        };
+        assert!(img.variant.contains(suffix), "{}", img.variant);
+        assert_eq!(stats.hull_segments, Some(expect[i]), "frame {i}");
+        let (walk, cpu) = &walked[i];
+        assert!(!walk.variant.contains("-cached"), "{}", walk.variant);
+        let d = gpu_diff(&img.pixels, &walk.pixels);
+        assert!(
+            d <= 1e-6,
+            "frame {i}: cached segments against the walk: {d:e}"
+        );
+        let rgba: Vec<[f64; 4]> = cpu.iter().map(|p| p.rgba).collect();
+        let worst = common::splat::max_diff(&img.pixels, &rgba);
+        assert!(worst < 2e-3, "frame {i}: GPU vs CPU {worst:.2e}");
+    }
+    // A frame's own camera again after the move: found again (the cache holds one camera).
+    let (_, stats) = renderer.render(&first.view(), |_| {}).expect("frame");
+    assert_eq!(stats.hull_segments, Some(HullSegments::Found));
+    // Adaptive with l_max / l_min = 260: a dispatch per top interval, so every ray runs in
+    // several chunks (only the first keeps the segments).
+    let adaptive = scene(&[
+        ORTHO,
+        ORTHO_HEIGHT,
+        "camera.eye=[0.3, -4.0, 1.6]",
+        "camera.up=[0.0, 0.0, 1.0]",
+        "render.method=\"adaptive\"",
+        "render.l_min=0.01",
+    ]);
+    let setup = adaptive.ray_setup(&field).expect("setup");
+    assert_eq!(vmls::renderer::default_chunk(&setup), 1);
+    let (walk, _) = both(&field, &adaptive);
+    for expect in [HullSegments::Found, HullSegments::Reused] {
+        let (img, stats) = renderer.render(&adaptive.view(), |_| {}).expect("frame");
+        assert_eq!(stats.hull_segments, Some(expect));
+        assert!(stats.bands > 0);
+        let d = gpu_diff(&img.pixels, &walk.pixels);
+        assert!(d <= 1e-6, "adaptive, {expect:?}: against the walk: {d:e}");
+    }
+    drop(renderer);
+    finish(ctx);
+}
+
+/// Rays with more crossings than the first variant keeps: the cached segments say so, and the
+/// renderer renders the frame again with every crossing, finding the segments for that bound.
+#[test]
+fn cached_segments_past_the_first_bound_render_again_with_all() {
+    use vmls::renderer::{HullSegments, Renderer};
+    let field = comb_field();
+    let along = scene(&[
+        ORTHO,
+        "camera.view_height=1.5",
+        "camera.eye=[-6.0, 0.0, 0.0]",
+        "camera.up=[0.0, 0.0, 1.0]",
+        "camera.width=12",
+        "camera.height=12",
+    ]);
+    let (walk, cpu) = both(&field, &along);
+    let (ctx, _) = gpu();
+    let mut renderer = Renderer::new(&ctx, field.clone()).expect("renderer");
+    for expect in [HullSegments::Found, HullSegments::Found] {
+        // The second frame starts from the first bound again and overflows again: a renderer
+        // does not keep the larger bound between frames.
+        let (img, stats) = renderer.render(&along.view(), |_| {}).expect("frame");
+        assert!(img.variant.ends_with("-hull-keep"), "{}", img.variant);
+        assert_eq!(stats.hull_segments, Some(expect));
+        assert!(gpu_diff(&img.pixels, &walk.pixels) <= 1e-6);
+        let rgba: Vec<[f64; 4]> = cpu.iter().map(|p| p.rgba).collect();
+        assert!(common::splat::max_diff(&img.pixels, &rgba) < 2e-3);
+    }
+    drop(renderer);
+    finish(ctx);
+}

@@ -64,8 +64,18 @@ void count_skip(float len, uint steps, uint restart) {
 }
 #endif
 
-#if HULL == 1
+#if HULL == 1 && HULL_CACHED == 1
+// The hull segments an earlier frame of this camera kept (raycast::segments): no walk.
+layout(binding = BINDING_RAY_SEGMENTS, rgba32f) uniform readonly imageBuffer ray_segments;
+#include "raycast/segments.glsl"
+#elif HULL == 1
 #include "field/hull.glsl"
+#if HULL_CACHED == 2
+// Where this frame keeps the segments it walks, for the next frames of its camera.
+layout(binding = BINDING_RAY_SEGMENTS, rgba32f) uniform writeonly imageBuffer ray_segments;
+#define RAY_SEGMENTS_WRITE 1
+#include "raycast/segments.glsl"
+#endif
 #endif
 
 // Outcome of integrating one chunk of a ray.
@@ -406,7 +416,16 @@ void main() {
     camera_ray(pixel, o, d);
 #if HULL == 1
     vec2 segs[HULL_SEGMENTS];
+#if HULL_CACHED == 1
+    int segments = segments_load(index, segs);
+#else
     int segments = hull_segments(o, d, segs);
+#if HULL_CACHED == 2
+    if (band.first == 0u) {
+        segments_store(index, segments, segs);
+    }
+#endif
+#endif
     if (segments < 0) {
         image[index] = vec4(0.0);
         counts[index] = RAY_DONE | RAY_HULL_OVERFLOW;

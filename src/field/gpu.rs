@@ -63,6 +63,11 @@ impl GpuField {
         self.grid.is_some() || self.octree.is_some()
     }
 
+    /// Whether the field's mesh hull is on the device (rays are clipped to it).
+    pub fn has_hull(&self) -> bool {
+        self.hull.is_some()
+    }
+
     /// Uploads the samples the ray caster reads (the grid and its fast path, or the samples
     /// and octree), once; the octree must have been built ([`Field::octree`]).
     pub fn upload_data(&mut self, ctx: &Context, field: &Field) -> Result<(), VkError> {

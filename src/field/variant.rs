@@ -42,6 +42,9 @@ pub struct Variant {
     /// lavapipe, so frames start with [`super::gpu::FIRST_HULL_HITS`] and only a frame with a ray past
     /// them is rendered again with `bvh::MAX_HITS` (the CPU twin's bound).
     pub hull_hits: u32,
+    /// Whether the ray caster keeps the hull segments it walks, or reads kept ones
+    /// ([`crate::raycast::segments`]).
+    pub hull_cache: HullCache,
     /// The Gaussian-sum field instead of MLS (`reconstruction.method = "gaussian"`).
     pub gaussian: bool,
     /// The generator's analytic field instead of a reconstruction (`"exact"`).
@@ -63,6 +66,18 @@ pub struct Variant {
     pub grid: Storage,
 }
 
+/// How the ray caster comes by each ray's inside segments of a mesh's hull
+/// ([`crate::raycast::segments`], `HULL_CACHED`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HullCache {
+    /// It walks the hull's BVH in every chunk.
+    Off,
+    /// It walks it, and the chunks that start rays keep the segments in the frame's cache.
+    Keep,
+    /// It reads the segments a frame of the same camera kept; the walk is not compiled in.
+    Read,
+}
+
 impl Variant {
     /// The variant a field needs.
     pub fn of(field: &Field) -> Self {
@@ -80,6 +95,7 @@ impl Variant {
             full_metric: field.has_full_metric(),
             hull: false,
             hull_hits: crate::samples::bvh::MAX_HITS as u32,
+            hull_cache: HullCache::Off,
             gaussian: r.method == crate::recon::ReconMethod::Gaussian,
             exact: r.method == crate::recon::ReconMethod::Exact,
             resample: r.resample,
@@ -170,6 +186,13 @@ impl Variant {
         d.extend(super::exact::defines());
         d.push(("HULL".into(), flag(self.hull)));
         d.push(("HULL_MAX_HITS".into(), self.hull_hits.to_string()));
+        let cached = match self.hull_cache {
+            _ if !self.hull => 0,
+            HullCache::Off => 0,
+            HullCache::Read => 1,
+            HullCache::Keep => 2,
+        };
+        d.push(("HULL_CACHED".into(), cached.to_string()));
         let ray_method = match self.method {
             Some(Method::Fixed) => 1,
             Some(Method::Adaptive) => 2,
@@ -235,6 +258,11 @@ impl Variant {
             "-hull".to_string()
         } else {
             format!("-hull{}", self.hull_hits)
+        } + match self.hull_cache {
+            _ if !self.hull => "",
+            HullCache::Off => "",
+            HullCache::Read => "-cached",
+            HullCache::Keep => "-keep",
         } + &if self.resampled {
             format!("-resample{}", self.resample)
         } else {

@@ -16,7 +16,7 @@ use super::setup::RaySetup;
 use crate::field::Field;
 use crate::field::gpu::GpuField;
 use crate::field::skip::{SkipReport, SkipTable};
-use crate::field::variant::{Variant, pipeline_for};
+use crate::field::variant::{HullCache, Variant, pipeline_for};
 use crate::gpu_types::{RayPush, binding, params_copies, ray_count};
 use crate::view::Method;
 use crate::view::shading::iso_buffer_data;
@@ -110,7 +110,13 @@ pub(crate) fn frame_bindings(
     if ray_stats(setup, skip) {
         ids.push(binding::RAY_STATS);
     }
-    ids.extend(gpu_field.hull_bindings().iter().map(|(b, _)| *b));
+    let cache = super::segments::hull_cache(setup, gpu_field.has_hull());
+    if cache != HullCache::Read {
+        ids.extend(gpu_field.hull_bindings().iter().map(|(b, _)| *b));
+    }
+    if cache != HullCache::Off {
+        ids.push(binding::RAY_SEGMENTS);
+    }
     ids.extend([
         binding::TRANSFER,
         binding::TRANSFER_TEXELS,
@@ -234,6 +240,8 @@ pub(crate) struct FrameTargets {
     /// One band's indirect dispatch arguments (`raycast_next`), for [`run_bands`], which
     /// submits a band at a time.
     pub(crate) args: Buffer,
+    /// The hull segments of the last camera (`None` until a frame of a mesh caches them).
+    pub(crate) segments: Option<super::segments::SegmentCache>,
 }
 
 pub(crate) fn frame_targets(ctx: &Context, pixels: u64) -> Result<FrameTargets, VkError> {
@@ -244,6 +252,7 @@ pub(crate) fn frame_targets(ctx: &Context, pixels: u64) -> Result<FrameTargets, 
         ray_state: Buffer::new(ctx, "ray state", pixels * 16, BufferUsage::Storage)?,
         ray_stats: Buffer::new(ctx, "ray report", pixels * 16, BufferUsage::Storage)?,
         args: Buffer::new(ctx, "band dispatch arguments", 16, BufferUsage::Storage)?,
+        segments: None,
     })
 }
 
@@ -366,7 +375,17 @@ pub(crate) fn frame_buffers<'a>(
     setup: &RaySetup,
 ) -> Vec<(u32, &'a Buffer)> {
     let mut all = gpu_field.bindings();
-    all.extend(gpu_field.hull_bindings());
+    let cache = super::segments::hull_cache(setup, gpu_field.has_hull());
+    if cache != HullCache::Read {
+        all.extend(gpu_field.hull_bindings());
+    }
+    if let Some(c) = targets
+        .segments
+        .as_ref()
+        .filter(|_| cache != HullCache::Off)
+    {
+        all.push((binding::RAY_SEGMENTS, &c.texels));
+    }
     all.extend([
         (binding::PARAMS, &constants.params),
         (binding::TRANSFER, &constants.tf),

@@ -19,6 +19,7 @@ pub fn variant_for_render(field: &Field, setup: &RaySetup) -> Variant {
         isosurfaces: setup.isosurfaces.len(),
         hull: field.hull.is_some(),
         hull_hits: setup.hull_hits,
+        hull_cache: super::segments::hull_cache(setup, field.hull.is_some()),
         skip: setup.skip,
         clip: setup.clip.is_some(),
         ..Variant::of(field)

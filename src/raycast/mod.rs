@@ -13,6 +13,7 @@ mod ray;
 // The CPU twin of the kernel `raycast` carries the kernel's name, as every stage does.
 #[allow(clippy::module_inception)]
 pub mod raycast;
+pub mod segments;
 pub mod setup;
 pub mod tables;
 

@@ -79,6 +79,12 @@ pub struct RaySetup {
     pub skip_auto: bool,
     /// Hull crossings the GPU kernel keeps per ray ([`crate::field::variant::Variant::hull_hits`]).
     pub hull_hits: u32,
+    /// Keep the hull's segments in the cache of the frame's buffers ([`super::segments`]):
+    /// the `Renderer` sets it where a mesh's cache fits the device.
+    pub hull_cache: bool,
+    /// With `hull_cache`: the frame walks the hull and stores the segments (its camera is not
+    /// the cache's), else it reads them.
+    pub hull_store: bool,
     /// The fraction of ray length "auto" found in empty blocks when it decided.
     pub skip_estimate: Option<f64>,
     pub background: [f64; 3],
@@ -178,6 +184,8 @@ impl RaySetup {
                 && !mls2008,
             skip_estimate: None,
             hull_hits: FIRST_HULL_HITS,
+            hull_cache: false,
+            hull_store: false,
             background: render.background,
             clip: field.clip(),
             window: field

@@ -32,12 +32,14 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Instant;
 
 mod record;
+mod segments;
 mod splatting;
 pub mod target;
 pub mod tolerance;
 
 pub use crate::vk::{Access, ExternalCommands, Target, TargetFormat};
 pub use record::{FrameInFlight, RecordedFrame, next_groups};
+pub use segments::HullSegments;
 
 /// Renderer identities, so that a frame is retired only by the renderer that recorded it.
 static NEXT_RENDERER: AtomicU64 = AtomicU64::new(1);
@@ -198,6 +200,10 @@ pub struct FrameStats {
     /// What `render.tolerance` chose for this view (its pilot frames ran for the first frame
     /// of the view only).
     pub tolerance: Option<tolerance::ToleranceReport>,
+    /// Ray casting a mesh: whether the frame found its rays' hull segments or reused those of
+    /// an earlier frame of the same camera (`None` where it walks the hull in the ray caster,
+    /// or splats).
+    pub hull_segments: Option<HullSegments>,
 }
 
 /// A compiled variant: its macro definitions, its bindings and the pipeline.
@@ -350,12 +356,14 @@ impl Renderer {
         let mut pipeline_built = false;
         // Once more with every crossing the CPU twin allows if a ray had more than the first
         // variant keeps (Bands::HullHits).
-        let (variant, gpu_ms, bands) = loop {
+        let (variant, gpu_ms, bands, hull_segments) = loop {
+            let found = self.render_segments(&mut setup)?;
             let variant = variant_for_render(&self.field, &setup);
             let bindings = frame_bindings(&self.gpu_field, &setup, has_tables, variant.skip);
             let (index, built) = self.ray_pipeline(&variant, bindings)?;
             pipeline_built |= built;
             let tables = self.tables.current().filter(|_| has_tables);
+            let with_table = tables.is_some();
             let constants = frame_constants(
                 &self.ctx,
                 &self.field,
@@ -371,7 +379,7 @@ impl Renderer {
             else {
                 return Err(VkError::Usage("frame buffers missing".into()).into());
             };
-            let table = if tables.is_some() {
+            let table = if with_table {
                 self.table_buffer.as_ref().map(|(_, b)| &**b)
             } else {
                 None
@@ -390,7 +398,10 @@ impl Renderer {
                 &mut progress,
                 self.stop.as_deref(),
             )? {
-                Bands::Done(ms, bands) => break (variant, ms, bands),
+                Bands::Done(ms, bands) => {
+                    self.segments_stored(&setup);
+                    break (variant, ms, bands, found);
+                }
                 Bands::HullHits => setup.hull_hits = crate::samples::bvh::MAX_HITS as u32,
                 Bands::Stopped => return Err(RenderError::Interrupted),
             }
@@ -411,6 +422,7 @@ impl Renderer {
                 bands,
                 skip_estimate: setup.skip_estimate,
                 tolerance: None,
+                hull_segments,
             },
         ))
     }
@@ -430,6 +442,7 @@ impl Renderer {
         if let Some(budget) = self.budget {
             setup.check_budget(budget)?;
         }
+        self.choose_hull_cache(&mut setup);
         if !self.gpu_field.has_data() {
             self.field.octree()?;
             self.gpu_field.upload_data(&self.ctx, &self.field)?;

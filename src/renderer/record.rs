@@ -52,6 +52,7 @@
 //! tile rows, for progress and Ctrl-C), and its background is composited by `target_pack`.
 
 use super::Renderer;
+use super::segments::{HullSegments, decide, mark, retire_segments};
 use crate::field::RenderError;
 use crate::field::skip::SkipReport;
 use crate::field::variant::Variant;
@@ -99,6 +100,9 @@ pub struct RecordedFrame {
     pub skip: Option<SkipReport>,
     /// What splatting did (the splatting methods only).
     pub splat: Option<crate::splat::SplatCounts>,
+    /// Ray casting a mesh: whether the frame walked its rays' hull segments or read those of
+    /// an earlier frame of its slot with the same camera.
+    pub hull_segments: Option<HullSegments>,
 }
 
 /// The buffers, descriptor sets and timestamps of one frame in flight.
@@ -109,7 +113,7 @@ pub(super) struct Slot {
     splatting: bool,
     /// Constant buffers, reallocated when a frame needs more room.
     constants: Option<FrameConstants>,
-    targets: Option<FrameTargets>,
+    pub(super) targets: Option<FrameTargets>,
     /// The pixels in the target image's format, where it is not RGBA32F (or, splatting, over
     /// a background).
     pub(super) packed: Option<Buffer>,
@@ -124,6 +128,7 @@ pub(super) struct Slot {
     pub(super) timer: FrameTimer,
     variant: Option<Variant>,
     hull_hits: u32,
+    hull_segments: Option<HullSegments>,
     chunk: u32,
     dispatches: u32,
     /// Splatting frames' buffers, from the slot's first splatting frame on.
@@ -147,6 +152,7 @@ impl Slot {
             timer: FrameTimer::new(ctx)?,
             variant: None,
             hull_hits: 0,
+            hull_segments: None,
             chunk: 0,
             dispatches: 0,
             splat: None,
@@ -287,7 +293,16 @@ impl Renderer {
         if let Some(shading) = view.settings.method.splat_shading() {
             return self.prepare_splat(view, shading);
         }
-        self.record_setup(view)?;
+        let mut setup = self.record_setup(view)?;
+        // Both variants of a mesh's frames: the one that walks the hull and keeps its segments,
+        // and the one that reads them at a camera's later frames.
+        for keep in [true, false]
+            .into_iter()
+            .take(if setup.hull_cache { 2 } else { 1 })
+        {
+            setup.hull_store = keep;
+            self.record_pipeline(&setup)?;
+        }
         Ok(())
     }
 
@@ -301,21 +316,25 @@ impl Renderer {
     }
 
     /// The host half of a recorded frame ([`Renderer::ray_frame`] with what retired frames
-    /// taught): its ray setup and variant, the ray caster's pipeline (its index) and
-    /// `raycast_next`'s.
-    fn record_setup(&mut self, view: &View<'_>) -> Result<(RaySetup, Variant, usize), RenderError> {
+    /// taught): its ray setup.
+    fn record_setup(&mut self, view: &View<'_>) -> Result<RaySetup, RenderError> {
         let mut setup = self.ray_frame(view)?.setup;
         if let Some(h) = self.record.hull_hits {
             setup.hull_hits = h;
         }
+        Ok(setup)
+    }
+
+    /// A recorded frame's variant, the ray caster's pipeline (its index) and `raycast_next`'s.
+    fn record_pipeline(&mut self, setup: &RaySetup) -> Result<(Variant, usize), RenderError> {
         let has_tables = setup.method.preintegrated();
-        let variant = variant_for_render(&self.field, &setup);
-        let bindings = frame_bindings(&self.gpu_field, &setup, has_tables, variant.skip);
+        let variant = variant_for_render(&self.field, setup);
+        let bindings = frame_bindings(&self.gpu_field, setup, has_tables, variant.skip);
         let (index, _) = self.ray_pipeline(&variant, bindings)?;
         if self.record.next.is_none() {
             self.record.next = Some(next_pipeline(&self.ctx, &self.compiler)?);
         }
-        Ok((setup, variant, index))
+        Ok((variant, index))
     }
 
     /// Records one frame of `view` (ray cast or splatted) into `cmd` and the write of its pixels into
@@ -337,7 +356,10 @@ impl Renderer {
         if let Some(shading) = view.settings.method.splat_shading() {
             return self.record_splat(cmd, view, target, shading);
         }
-        let (setup, variant, index) = self.record_setup(view)?;
+        let mut setup = self.record_setup(view)?;
+        let slot_index = self.free_slot()?;
+        let hull_segments = decide(self.slots[slot_index].targets.as_ref(), &mut setup);
+        let (variant, index) = self.record_pipeline(&setup)?;
         // A chunk learned from a cut-short frame applies only where it is smaller than this
         // setup's own (the adaptive integrator's default is far smaller than the others').
         let own = setup.chunk.unwrap_or_else(|| default_chunk(&setup));
@@ -353,7 +375,6 @@ impl Renderer {
         };
         let tables = self.tables.current().filter(|_| has_tables);
         let data = constant_data(&self.field, &setup, view.transfer, tables, variant.skip);
-        let slot_index = self.free_slot()?;
         let ctx = self.ctx.clone();
         let table = if has_tables {
             self.table_buffer.as_ref().map(|(_, b)| b.clone())
@@ -407,6 +428,9 @@ impl Renderer {
             )?);
         }
         slot.table = table;
+        if let Some(t) = slot.targets.as_mut() {
+            mark(&ctx, t, &setup, true)?;
+        }
         let (Some(constants), Some(targets), Some(args), Some(next)) = (
             slot.constants.as_ref(),
             slot.targets.as_ref(),
@@ -477,6 +501,7 @@ impl Renderer {
         slot.keep_groups(groups);
         slot.variant = Some(variant);
         slot.hull_hits = setup.hull_hits;
+        slot.hull_segments = hull_segments;
         slot.chunk = chunk;
         Ok(slot.begin(slot_index, generation, dispatches, false, self.id))
     }
@@ -516,6 +541,9 @@ impl Renderer {
         if slot.splatting {
             return self.retire_splat(frame.slot, gpu_ms);
         }
+        if let Some(t) = slot.targets.as_mut() {
+            retire_segments(t);
+        }
         let (Some(targets), Some(variant)) = (slot.targets.as_ref(), slot.variant) else {
             return Err(VkError::Usage("retire: the frame's buffers are missing".into()).into());
         };
@@ -528,6 +556,7 @@ impl Renderer {
             None
         };
         let (hull_hits, chunk, dispatches) = (slot.hull_hits, slot.chunk, slot.dispatches);
+        let slot_segments = slot.hull_segments;
         if counts.iter().any(|c| c & ray_count::HULL_OVERFLOW != 0)
             && (hull_hits as usize) < crate::samples::bvh::MAX_HITS
         {
@@ -579,6 +608,7 @@ impl Renderer {
             variant: variant.name("raycast"),
             skip,
             splat: None,
+            hull_segments: slot_segments,
         })
     }
 

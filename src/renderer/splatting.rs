@@ -188,6 +188,7 @@ impl Renderer {
                 bands: image.submissions,
                 skip_estimate: None,
                 tolerance: None,
+                hull_segments: None,
             },
         ))
     }
@@ -384,6 +385,7 @@ impl Renderer {
                 variant: variant.clone(),
                 skip: None,
                 splat: Some(counts),
+                hull_segments: None,
             }),
             Retired::Overflowed(total) => {
                 let held = plan.capacity;

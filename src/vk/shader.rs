@@ -47,6 +47,7 @@ static SOURCES: &[(&str, &str)] = embed![
     "raycast/adaptive.glsl",
     "raycast/raycast.comp",
     "raycast/raycast_next.comp",
+    "raycast/segments.glsl",
     "splat/splat.glsl",
     "splat/splat_params.glsl",
     "splat/splat_project.comp",

@@ -193,6 +193,7 @@ pub fn run_render(
                 "pipeline_built": f.pipeline_built,
                 "buffers_allocated": f.targets_allocated,
                 "skip_auto_fraction": f.skip_estimate,
+                "hull_segments": f.hull_segments.map(|h| h.name()),
                 "tolerance": f.tolerance.as_ref().map(tolerance_json),
             })).collect::<Vec<_>>(),
             "tolerance": first.tolerance.as_ref().map(tolerance_json),

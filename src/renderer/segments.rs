@@ -1,0 +1,122 @@
+//! The renderer's half of the hull segments cache ([`crate::raycast::segments`]): a ray-cast
+//! frame of a mesh stores its rays' hull segments where its camera or crossing bound differs
+//! from the one its frame buffers' cache holds, and reads them otherwise.
+//!
+//! [`Renderer::render`] marks the cache invalid before a frame that stores and valid once the
+//! frame's bands all completed (a stopped frame leaves it invalid). A recorded frame that stores
+//! marks it pending: [`Renderer::retire`] makes it valid, since only a completed submission wrote
+//! the texels (a recorded command buffer that is discarded leaves the cache invalid, and the
+//! slot's next frame stores again). Each slot's buffers have their own cache, so a frame in
+//! flight never reads texels that another frame rewrites.
+
+use super::Renderer;
+use crate::field::RenderError;
+use crate::raycast::RaySetup;
+use crate::raycast::frame::FrameTargets;
+use crate::raycast::segments::{SegmentCache, SegmentsKey, fits};
+use crate::vk::{Context, VkError};
+
+/// Whether a frame walked its rays' hull segments or read those of an earlier frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HullSegments {
+    /// Walked for this frame's camera and stored.
+    Found,
+    /// Read from the cache an earlier frame of the same camera filled.
+    Reused,
+}
+
+impl HullSegments {
+    /// The name `--stats` gives it.
+    pub fn name(self) -> &'static str {
+        match self {
+            HullSegments::Found => "found",
+            HullSegments::Reused => "reused",
+        }
+    }
+}
+
+impl Renderer {
+    /// Sets `setup.hull_cache` where the field has a hull and the frame's cache fits a texel
+    /// view of the device.
+    pub(super) fn choose_hull_cache(&self, setup: &mut RaySetup) {
+        let pixels = u64::from(setup.camera.width) * u64::from(setup.camera.height);
+        setup.hull_cache = self.gpu_field.has_hull() && fits(self.ctx.info(), pixels);
+    }
+
+    /// Before a [`Renderer::render`] frame (its buffers allocated): whether it keeps or reads
+    /// the segments (`setup.hull_store`, which picks the variant), the cache allocated and,
+    /// where the frame keeps, invalid until [`Renderer::segments_stored`]. `None` where the
+    /// frame does not cache.
+    pub(super) fn render_segments(
+        &mut self,
+        setup: &mut RaySetup,
+    ) -> Result<Option<HullSegments>, RenderError> {
+        let found = decide(self.targets.as_ref(), setup);
+        if let Some(targets) = self.targets.as_mut() {
+            mark(&self.ctx, targets, setup, false)?;
+        }
+        Ok(found)
+    }
+
+    /// After a [`Renderer::render`] frame's bands all completed: what it kept is valid.
+    pub(super) fn segments_stored(&mut self, setup: &RaySetup) {
+        if let Some(cache) = self.targets.as_mut().and_then(|t| t.segments.as_mut())
+            && setup.hull_cache
+        {
+            cache.valid = Some(SegmentsKey::of(setup));
+        }
+    }
+}
+
+/// Whether a frame of `setup` whose buffers are `targets` keeps its segments (its camera's are
+/// not in the cache: another camera's, none, or buffers of another size) or reads them; sets
+/// `setup.hull_store`. `None` where the frame does not cache.
+pub(super) fn decide(targets: Option<&FrameTargets>, setup: &mut RaySetup) -> Option<HullSegments> {
+    setup.hull_store = false;
+    if !setup.hull_cache {
+        return None;
+    }
+    let pixels = u64::from(setup.camera.width) * u64::from(setup.camera.height);
+    let held = targets
+        .filter(|t| t.pixels == pixels)
+        .and_then(|t| t.segments.as_ref())
+        .and_then(|c| c.valid);
+    if held == Some(SegmentsKey::of(setup)) {
+        return Some(HullSegments::Reused);
+    }
+    setup.hull_store = true;
+    Some(HullSegments::Found)
+}
+
+/// Once the frame's buffers are allocated: the cache allocated at the first frame that caches,
+/// and, where the frame keeps, invalid (and pending for its own camera when it is `recorded`).
+pub(super) fn mark(
+    ctx: &Context,
+    targets: &mut FrameTargets,
+    setup: &RaySetup,
+    recorded: bool,
+) -> Result<(), VkError> {
+    if !setup.hull_cache {
+        return Ok(());
+    }
+    if targets.segments.is_none() {
+        targets.segments = Some(SegmentCache::new(ctx, targets.pixels)?);
+    }
+    if let Some(cache) = targets.segments.as_mut() {
+        cache.pending = None;
+        if setup.hull_store {
+            cache.valid = None;
+            cache.pending = recorded.then(|| SegmentsKey::of(setup));
+        }
+    }
+    Ok(())
+}
+
+/// At a recorded frame's retire: the segments it stored are now in the texels.
+pub(super) fn retire_segments(targets: &mut FrameTargets) {
+    if let Some(cache) = targets.segments.as_mut()
+        && let Some(key) = cache.pending.take()
+    {
+        cache.valid = Some(key);
+    }
+}
