@@ -38,9 +38,14 @@ fn validated() -> std::sync::MutexGuard<'static, ()> {
 
 /// Runs the example with validation on and checks what it must.
 fn check(extra: &[&str], format: TargetFormat, frames: usize) -> embed::Frames {
+    check_turning(extra, format, frames, 0.35)
+}
+
+/// [`check`] with the camera turning `turn` radians a frame.
+fn check_turning(extra: &[&str], format: TargetFormat, frames: usize, turn: f64) -> embed::Frames {
     let _guard = validated();
     let before = embed::MESSAGES.load(Ordering::SeqCst);
-    let out = embed::run(&overrides(extra), frames, 0.35, format).expect("example runs");
+    let out = embed::run(&overrides(extra), frames, turn, format).expect("example runs");
     assert_eq!(
         embed::MESSAGES.load(Ordering::SeqCst),
         before,
@@ -83,15 +88,7 @@ fn recorded_mesh_frames_reuse_hull_segments_and_equal_render() {
         // Two slots, each with its own cache: each walks at its first frame.
         (0.0, [Found, Found, Reused, Reused]),
     ] {
-        let _guard = validated();
-        let before = embed::MESSAGES.load(Ordering::SeqCst);
-        let out =
-            embed::run(&overrides(&[mesh]), 4, turn, TargetFormat::Rgba32f).expect("example runs");
-        assert_eq!(
-            embed::MESSAGES.load(Ordering::SeqCst),
-            before,
-            "validation messages"
-        );
+        let out = check_turning(&[mesh], TargetFormat::Rgba32f, 4, turn);
         for (i, (got, want)) in out.frames.iter().zip(&out.rendered).enumerate() {
             let want: &[u8] = bytemuck::cast_slice(want);
             assert!(got == want, "turn {turn}, frame {i}: differs from render()");
@@ -114,12 +111,18 @@ fn recorded_mesh_frames_reuse_hull_segments_and_equal_render() {
 fn recorded_splatting_frames_equal_render() {
     // Post-shaded over a tetrahedral mesh's hull: `splat_segments` runs first.
     let mesh = "volume.file=\"tests/data/legacy/unstructured-42-ascii.vtk\"";
-    for (method, data) in [("splat", ""), ("splat-post", ""), ("splat-post", mesh)] {
+    for (method, data, turn) in [
+        ("splat", "", 0.35),
+        ("splat-post", "", 0.35),
+        ("splat-post", mesh, 0.35),
+        // A still camera: each slot's second frame reuses its hull segments.
+        ("splat-post", mesh, 0.0),
+    ] {
         let m = format!("render.method=\"{method}\"");
         // A background, which recorded splatting frames composite in `target_pack`.
         let mut extra = vec![m.as_str(), "render.background=[0.2, 0.3, 0.4]"];
         extra.extend([data].into_iter().filter(|d| !d.is_empty()));
-        let out = check(&extra, TargetFormat::Rgba32f, 3);
+        let out = check_turning(&extra, TargetFormat::Rgba32f, 4, turn);
         for (i, (got, want)) in out.frames.iter().zip(&out.rendered).enumerate() {
             let got: &[f32] = bytemuck::cast_slice(got);
             let want: &[f32] = bytemuck::cast_slice(want);
@@ -130,6 +133,17 @@ fn recorded_splatting_frames_equal_render() {
                 .map(|(a, b)| (a - b).abs())
                 .fold(0.0f32, f32::max);
             assert!(worst == 0.0, "{method} frame {i}: off by {worst:e}");
+        }
+        use vmls::renderer::HullSegments::{Found, Reused};
+        let segments = match (data.is_empty(), turn == 0.0) {
+            (true, _) => [None; 4],
+            (false, false) => [Some(Found); 4],
+            (false, true) => [Some(Found), Some(Found), Some(Reused), Some(Reused)],
+        };
+        assert_eq!(out.hull_segments, segments, "{method}, turn {turn}");
+        if turn == 0.0 {
+            assert_eq!(out.frames[0], out.frames[3]);
+            continue;
         }
         assert_ne!(out.frames[0], out.frames[1]);
         // The background is in the recorded frames: a corner pixel, outside the volume.

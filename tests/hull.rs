@@ -459,3 +459,56 @@ fn cached_segments_past_the_first_bound_render_again_with_all() {
     drop(renderer);
     finish(ctx);
 }
+
+/// Post-shaded splatting over a mesh keeps its pixels' hull segments for the next frames of a
+/// camera the same way: a frame of the same camera with another transfer function skips
+/// `splat_segments`, and every image equals a fresh renderer's, which finds them.
+#[test]
+fn splatting_keeps_hull_segments_for_its_camera() {
+    use vmls::renderer::{HullSegments, Renderer};
+    let field = torus_field();
+    let post = "render.method=\"splat-post\"";
+    let first = scene(&[
+        post,
+        ORTHO,
+        ORTHO_HEIGHT,
+        "camera.eye=[0.5, -4.0, 1.5]",
+        "camera.up=[0.0, 0.0, 1.0]",
+    ]);
+    let other_tf = scene(&[
+        post,
+        ORTHO,
+        ORTHO_HEIGHT,
+        "camera.eye=[0.5, -4.0, 1.5]",
+        "camera.up=[0.0, 0.0, 1.0]",
+        "transfer.points=[[0.0, 1.0, 0.4, 0.2, 1.0], [1.0, 0.2, 0.6, 1.0, 9.0]]",
+    ]);
+    let moved = scene(&[
+        post,
+        ORTHO,
+        ORTHO_HEIGHT,
+        "camera.eye=[-1.0, -4.0, 2.5]",
+        "camera.up=[0.0, 0.0, 1.0]",
+    ]);
+    let (ctx, _) = gpu();
+    let mut renderer = Renderer::new(&ctx, field.clone()).expect("renderer");
+    let expect = [
+        HullSegments::Found,
+        HullSegments::Reused,
+        HullSegments::Found,
+    ];
+    for (i, s) in [&first, &other_tf, &moved].iter().enumerate() {
+        let (img, stats) = renderer.render(&s.view(), |_| {}).expect("frame");
+        assert_eq!(stats.hull_segments, Some(expect[i]), "frame {i}");
+        let mut fresh = Renderer::new(&ctx, field.clone()).expect("renderer");
+        let (want, stats) = fresh.render(&s.view(), |_| {}).expect("frame");
+        assert_eq!(stats.hull_segments, Some(HullSegments::Found));
+        assert!(
+            img.pixels.iter().any(|p| p[3] > 0.1),
+            "frame {i} draws the torus"
+        );
+        assert_eq!(img.pixels, want.pixels, "frame {i}");
+    }
+    drop(renderer);
+    finish(ctx);
+}

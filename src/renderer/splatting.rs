@@ -11,6 +11,7 @@
 //! growing what the next frames reserve.
 
 use super::record::{FrameInFlight, RecordedFrame, Slot, SplatSlot};
+use super::segments::HullSegments;
 use super::{FrameStats, GpuImage, Renderer, SplatReport};
 use crate::field::RenderError;
 use crate::gpu_types::PlanPush;
@@ -188,7 +189,13 @@ impl Renderer {
                 bands: image.submissions,
                 skip_estimate: None,
                 tolerance: None,
-                hull_segments: None,
+                hull_segments: image.segments_reused.map(|reused| {
+                    if reused {
+                        HullSegments::Reused
+                    } else {
+                        HullSegments::Found
+                    }
+                }),
             },
         ))
     }
@@ -201,6 +208,10 @@ impl Renderer {
         frame: &SplatFrame,
     ) -> Result<u64, RenderError> {
         self.splat_targets_for(&frame.setup)?;
+        // The count's own splat_segments rewrites the buffers' segments.
+        if let Some(t) = self.splat_targets.as_mut() {
+            t.segments_held = None;
+        }
         let (Some(kernels), Some(targets)) =
             (self.splat_kernels.as_ref(), self.splat_targets.as_ref())
         else {
@@ -292,8 +303,17 @@ impl Renderer {
             s.targets = None;
             s.targets = Some(SplatTargets::new(&ctx, setup, kernels)?);
         }
+        // The slot's segments, where its last frame left this camera's: splat_segments does
+        // not run; else it does, and they are the slot's once the frame is retired.
+        let mut reused = false;
         if let Some(t) = s.targets.as_mut() {
             t.reserve_entries(&ctx, reserve, limit)?;
+            reused = t.holds_segments(setup);
+            t.segments_pending = None;
+            if !reused && t.has_segments() {
+                t.segments_held = None;
+                t.segments_pending = Some(SplatTargets::segments_key(setup));
+            }
         }
         let args_bytes = plan_args_bytes(setup);
         if s.args.as_ref().is_none_or(|a| a.size() < args_bytes) {
@@ -312,7 +332,11 @@ impl Renderer {
         };
         let max_entries = setup.max_entries(self.budget);
         let pipelines = &self.splat_pipelines[frame.index];
-        let hull = self.gpu_field.hull_bindings();
+        let hull = if reused {
+            Vec::new()
+        } else {
+            self.gpu_field.hull_bindings()
+        };
         let recording = SplatRecording::new(
             &ctx,
             pipelines,
@@ -363,7 +387,7 @@ impl Renderer {
         gpu_ms: Option<f64>,
     ) -> Result<RecordedFrame, RenderError> {
         let ctx = self.ctx.clone();
-        let slot = &self.slots[slot];
+        let slot = &mut self.slots[slot];
         let dispatches = slot.dispatches();
         let Some(SplatSlot {
             targets: Some(targets),
@@ -373,20 +397,32 @@ impl Renderer {
             variant,
             invocations,
             ..
-        }) = slot.splat.as_ref()
+        }) = slot.splat.as_mut()
         else {
             return Err(VkError::Usage("retire: the frame's buffers are missing".into()).into());
         };
         match retired_counts(&ctx, targets, setup, plan, *budget, *invocations)? {
-            Retired::Counts(counts) => Ok(RecordedFrame {
-                gpu_ms,
-                evaluations: counts.evaluated,
-                dispatches,
-                variant: variant.clone(),
-                skip: None,
-                splat: Some(counts),
-                hull_segments: None,
-            }),
+            Retired::Counts(counts) => {
+                let hull_segments =
+                    targets
+                        .has_segments()
+                        .then(|| match targets.segments_pending.take() {
+                            Some(key) => {
+                                targets.segments_held = Some(key);
+                                HullSegments::Found
+                            }
+                            None => HullSegments::Reused,
+                        });
+                Ok(RecordedFrame {
+                    gpu_ms,
+                    evaluations: counts.evaluated,
+                    dispatches,
+                    variant: variant.clone(),
+                    skip: None,
+                    splat: Some(counts),
+                    hull_segments,
+                })
+            }
             Retired::Overflowed(total) => {
                 let held = plan.capacity;
                 let learned = self.record.splat_entries.unwrap_or(0).max(total);

@@ -45,6 +45,9 @@ pub struct SplatGpuImage {
     pub stage_ms: [f64; 5],
     pub submissions: u32,
     pub variant: String,
+    /// Post-shaded over a hull: whether the pixels' hull segments were those an earlier frame
+    /// of the same camera left in the frame buffers (`splat_segments` did not run).
+    pub segments_reused: Option<bool>,
 }
 
 /// The names of [`SplatGpuImage::stage_ms`]: `splat_sort` is `splat_scan` and `splat_bin`,
@@ -263,7 +266,9 @@ impl<'a> ProjectionGroups<'a> {
         // Each pass binds a prefix of the same buffers (SCAN_BINDINGS).
         let scan_buffers = [&t.counts, &t.sums, &t.offsets, &t.cursors];
         let scan_bind: Vec<(u32, &Buffer)> = SCAN_BINDINGS.into_iter().zip(scan_buffers).collect();
-        let segments = match &pipelines.segments {
+        // No hull bindings: the frame's camera's segments are in `t` already, and
+        // splat_segments does not run.
+        let segments = match pipelines.segments.as_ref().filter(|_| !hull.is_empty()) {
             Some(p) => {
                 let mut b = vec![
                     (binding::PARAMS, &constants.params),
@@ -660,7 +665,7 @@ impl<'a> SplatRecording<'a> {
             "splat_order",
         )?;
         // Segments, project, three scan passes, plan, bin and two of order, then the bands.
-        let mut dispatches = u32::from(pipelines.segments.is_some()) + 8;
+        let mut dispatches = u32::from(self.projection.segments.is_some()) + 8;
         // Band b's arguments follow splat_bin's and splat_order's, at 16 (b + 2).
         let mut offset = 32;
         let mut row = 0;
@@ -808,6 +813,12 @@ pub fn splat_frame(
     let constants = SplatConstants::upload(ctx, &ConstantData::new(setup, kernels, tf))?;
     let mut stage_ms = [0.0; 5];
     let (tiles_x, tiles_y) = setup.tiles();
+    // The hull segments of this camera, where the last frame of these buffers left them.
+    let reused = targets.holds_segments(setup);
+    if !reused {
+        targets.segments_held = None;
+    }
+    let hull = if reused { &[][..] } else { hull };
     let (stats, total, timings) =
         project(ctx, pipelines, kernels, targets, &constants, setup, hull)?;
     sum_ms(&timings, &mut stage_ms);
@@ -868,6 +879,10 @@ pub fn splat_frame(
     let image: Vec<[f32; 4]> = t.image.read(ctx)?;
     let stats: Vec<u32> = t.stats.read(ctx)?;
     check_raster(&stats)?;
+    let segments_reused = t.segments.is_some().then_some(reused);
+    if segments_reused.is_some() {
+        targets.segments_held = Some(SplatTargets::segments_key(setup));
+    }
     let bg = setup.background.map(|c| c as f32);
     let n = (setup.camera.width * setup.camera.height) as usize;
     let pixels = image
@@ -881,6 +896,7 @@ pub fn splat_frame(
         stage_ms,
         submissions,
         variant: pipelines.variant().name(),
+        segments_reused,
     })
 }
 

@@ -5,7 +5,7 @@
 use super::project::KernelKind;
 use super::{Antialias, SCAN_BLOCK, Shading, SplatSetup};
 use crate::field::Field;
-use crate::gpu_types::{RasterPush, ScanPush, Splat, binding};
+use crate::gpu_types::{CameraBlock, RasterPush, ScanPush, Splat, binding};
 use crate::vk::{
     Buffer, BufferUsage, ComputePipeline, Context, ShaderCompiler, ShaderSource, VkError,
 };
@@ -438,6 +438,11 @@ pub struct SplatTargets {
     pub(super) stats: Buffer,
     pub(super) list: Option<Buffer>,
     pub(super) segments: Option<Buffer>,
+    /// The camera whose pixels' hull segments `segments` holds (post-shaded over a hull): a
+    /// frame of that camera skips `splat_segments`. `None`: none yet, or being rewritten.
+    pub segments_held: Option<CameraBlock>,
+    /// The camera a recorded frame's `splat_segments` writes for: held once it is retired.
+    pub segments_pending: Option<CameraBlock>,
 }
 
 impl SplatTargets {
@@ -449,6 +454,22 @@ impl SplatTargets {
             setup.tile,
             setup.hull && setup.shading == Shading::Post,
         )
+    }
+
+    /// What [`SplatTargets::segments_held`] compares: the camera's GPU block, from which the
+    /// kernel makes the pixels' rays.
+    pub fn segments_key(setup: &SplatSetup) -> CameraBlock {
+        setup.camera.gpu_block(&setup.basis, setup.eye)
+    }
+
+    /// Whether these buffers hold pixels' hull segments (post-shaded over a hull).
+    pub fn has_segments(&self) -> bool {
+        self.segments.is_some()
+    }
+
+    /// Whether a frame of `setup` finds its pixels' hull segments already in these buffers.
+    pub fn holds_segments(&self, setup: &SplatSetup) -> bool {
+        self.segments.is_some() && self.segments_held == Some(Self::segments_key(setup))
     }
 
     pub(super) fn segments(&self) -> Result<&Buffer, VkError> {
@@ -529,6 +550,8 @@ impl SplatTargets {
             } else {
                 None
             },
+            segments_held: None,
+            segments_pending: None,
         })
     }
 }
