@@ -57,8 +57,8 @@ pub struct Frames {
     pub rendered_ms: Vec<f64>,
     /// Dispatches of the last recorded frame, and submissions of the last `render()` frame.
     pub dispatches: u32,
-    /// Ray casting a mesh: per recorded frame (in retire order), whether it walked its rays'
-    /// hull segments or read those its slot kept for the same camera.
+    /// A mesh, ray cast or splatted post-shaded: per recorded frame (in retire order), whether
+    /// it found its rays' hull segments or read those its slot kept for the same camera.
     pub hull_segments: Vec<Option<vmls::renderer::HullSegments>>,
     pub submissions: u32,
     pub width: u32,

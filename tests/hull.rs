@@ -429,8 +429,9 @@ fn hull_segments_are_found_once_per_camera_and_images_equal_the_walk() {
     finish(ctx);
 }
 
-/// Rays with more crossings than the first variant keeps: the cached segments say so, and the
-/// renderer renders the frame again with every crossing, finding the segments for that bound.
+/// Rays with more crossings than the first variant keeps: the kept segments say so, the
+/// renderer renders the frame again with every crossing and keeps those, and the next frame of
+/// the camera reads them at that bound.
 #[test]
 fn cached_segments_past_the_first_bound_render_again_with_all() {
     use vmls::renderer::{HullSegments, Renderer};
@@ -446,11 +447,13 @@ fn cached_segments_past_the_first_bound_render_again_with_all() {
     let (walk, cpu) = both(&field, &along);
     let (ctx, _) = gpu();
     let mut renderer = Renderer::new(&ctx, field.clone()).expect("renderer");
-    for expect in [HullSegments::Found, HullSegments::Found] {
-        // The second frame starts from the first bound again and overflows again: a renderer
-        // does not keep the larger bound between frames.
+    for (expect, suffix) in [
+        (HullSegments::Found, "-hull-keep"),
+        // The segments kept at the larger bound serve the next frame of the camera.
+        (HullSegments::Reused, "-hull-cached"),
+    ] {
         let (img, stats) = renderer.render(&along.view(), |_| {}).expect("frame");
-        assert!(img.variant.ends_with("-hull-keep"), "{}", img.variant);
+        assert!(img.variant.ends_with(suffix), "{}", img.variant);
         assert_eq!(stats.hull_segments, Some(expect));
         assert!(gpu_diff(&img.pixels, &walk.pixels) <= 1e-6);
         let rgba: Vec<[f64; 4]> = cpu.iter().map(|p| p.rgba).collect();

@@ -46,7 +46,9 @@ int segments_load(uint pixel, out vec2 seg[HULL_SEGMENTS]) {
     [[unroll]] for (int i = 0; i < HULL_SEGMENTS; ++i) {
         seg[i] = vec2(f[1 + 2 * i], f[2 + 2 * i]);
     }
-    return int(f[0]);
+    // Written by segments_store for this pixel (the host's key says so); clamped all the same,
+    // since the ray caster indexes its segments by it.
+    return clamp(int(f[0]), -1, HULL_SEGMENTS);
 }
 #endif
 

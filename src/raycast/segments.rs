@@ -21,7 +21,6 @@
 use super::setup::RaySetup;
 use crate::field::variant::HullCache;
 use crate::gpu_types::CameraBlock;
-use crate::samples::bvh::MAX_HITS;
 use crate::vk::{Buffer, BufferUsage, Context, DeviceInfo, VkError};
 
 /// The rgba32f texels a pixel's entry takes for rays of at most `hull_hits` crossings: its
@@ -31,11 +30,18 @@ pub fn texels_per_pixel(hull_hits: u32) -> u64 {
     floats.div_ceil(4)
 }
 
-/// Whether a frame of `pixels` can cache its segments: the entries of the largest bound a frame
-/// may need ([`MAX_HITS`], after an overflow) fit one texel view of the device. Where they do
-/// not, the ray caster walks the hull in every chunk, uncached.
-pub fn fits(info: &DeviceInfo, pixels: u64) -> bool {
-    pixels * texels_per_pixel(MAX_HITS as u32) <= info.max_texel_buffer_elements
+/// The most device memory a frame's cache may take: 48 bytes a pixel at the first crossing
+/// bound, so images up to about 2 300² cache at it and 1 300² after an overflow.
+pub const MAX_CACHE_BYTES: u64 = 256 << 20;
+
+/// Whether a frame of `pixels` can cache its segments for rays of at most `hull_hits`
+/// crossings: the entries fit one texel view of the device (with indices a 32-bit int holds)
+/// and [`MAX_CACHE_BYTES`]. Where they do not, the ray caster walks the hull in every frame,
+/// as without a cache.
+pub fn fits(info: &DeviceInfo, pixels: u64, hull_hits: u32) -> bool {
+    let texels = pixels * texels_per_pixel(hull_hits);
+    texels <= info.max_texel_buffer_elements.min(i32::MAX as u64)
+        && 16 * texels <= MAX_CACHE_BYTES.min(info.max_heap_bytes / 4)
 }
 
 /// How a frame of `setup` comes by its segments, for a field with or without a hull.
@@ -47,11 +53,13 @@ pub fn hull_cache(setup: &RaySetup, has_hull: bool) -> HullCache {
     }
 }
 
-/// What a cache's segments were found for: the camera's GPU block and the crossing bound.
+/// What a cache's segments were found for: the camera's GPU block, the pixels dispatched (a
+/// brick's window stores only its own) and the crossing bound.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct SegmentsKey {
     camera: CameraBlock,
-    hull_hits: u32,
+    window: Option<[u32; 4]>,
+    pub(crate) hull_hits: u32,
 }
 
 impl SegmentsKey {
@@ -62,8 +70,17 @@ impl SegmentsKey {
         );
         Self {
             camera,
+            window: setup.window,
             hull_hits: setup.hull_hits,
         }
+    }
+
+    /// Whether segments kept for `self` serve a frame of `other`: the same rays, and at least
+    /// its crossing bound (entries of a larger bound hold every crossing the smaller keeps).
+    pub(crate) fn serves(&self, other: &SegmentsKey) -> bool {
+        self.camera == other.camera
+            && self.window == other.window
+            && self.hull_hits >= other.hull_hits
     }
 }
 
@@ -72,18 +89,55 @@ impl SegmentsKey {
 /// key, since only a completed submission wrote the texels.
 pub(crate) struct SegmentCache {
     pub(crate) texels: Buffer,
+    /// The crossing bound whose entries the texels have room for.
+    pub(crate) hull_hits: u32,
     pub(crate) valid: Option<SegmentsKey>,
     pub(crate) pending: Option<SegmentsKey>,
 }
 
 impl SegmentCache {
-    /// Room for `pixels` entries at the largest crossing bound.
-    pub(crate) fn new(ctx: &Context, pixels: u64) -> Result<Self, VkError> {
-        let bytes = 16 * pixels.max(1) * texels_per_pixel(MAX_HITS as u32);
+    /// Room for `pixels` entries of rays of at most `hull_hits` crossings.
+    pub(crate) fn new(ctx: &Context, pixels: u64, hull_hits: u32) -> Result<Self, VkError> {
+        let bytes = 16 * pixels.max(1) * texels_per_pixel(hull_hits);
         Ok(Self {
             texels: Buffer::new(ctx, "hull segments", bytes, BufferUsage::Texel)?,
+            hull_hits,
             valid: None,
             pending: None,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn key(eye: f32, window: Option<[u32; 4]>, hull_hits: u32) -> SegmentsKey {
+        SegmentsKey {
+            camera: CameraBlock {
+                eye: [eye, 0.0, 0.0, 0.0],
+                ..CameraBlock::default()
+            },
+            window,
+            hull_hits,
+        }
+    }
+
+    /// Kept segments serve only the same rays (camera and dispatched window), at their bound
+    /// or a smaller one; and an entry has room for its bound's segments.
+    #[test]
+    fn kept_segments_serve_the_same_rays_at_no_larger_bound() {
+        let kept = key(1.0, None, 8);
+        assert!(kept.serves(&key(1.0, None, 8)));
+        assert!(!kept.serves(&key(1.5, None, 8)), "another camera");
+        assert!(!kept.serves(&key(1.0, Some([0, 0, 4, 4]), 8)), "a window");
+        assert!(
+            !key(1.0, Some([0, 0, 4, 4]), 8).serves(&kept),
+            "only the window's pixels"
+        );
+        assert!(!kept.serves(&key(1.0, None, 32)), "fewer crossings kept");
+        assert!(key(1.0, None, 32).serves(&kept), "every crossing kept");
+        assert_eq!(texels_per_pixel(8), 3);
+        assert_eq!(texels_per_pixel(32), 9);
     }
 }

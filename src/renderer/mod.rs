@@ -134,6 +134,9 @@ pub fn render(
 ) -> Result<GpuImage, VkError> {
     check_tables(setup, tables)?;
     let mut resolved = setup.clone();
+    // Stateless: nothing keeps hull segments for a next frame.
+    resolved.hull_cache = false;
+    resolved.hull_store = false;
     resolved.resolve_skip(gpu_field.blocks(), tf, field);
     let tables = tables.filter(|_| resolved.method.preintegrated());
     let table = tables.map(|t| table_buffer(ctx, t)).transpose()?;
@@ -200,9 +203,9 @@ pub struct FrameStats {
     /// What `render.tolerance` chose for this view (its pilot frames ran for the first frame
     /// of the view only).
     pub tolerance: Option<tolerance::ToleranceReport>,
-    /// Ray casting a mesh: whether the frame found its rays' hull segments or reused those of
-    /// an earlier frame of the same camera (`None` where it walks the hull in the ray caster,
-    /// or splats).
+    /// A mesh, ray cast or splatted post-shaded: whether the frame found its rays' hull segments
+    /// or reused those of an earlier frame of the same camera (`None` without a hull, where the
+    /// cache does not fit, or splatting pre-shaded).
     pub hull_segments: Option<HullSegments>,
 }
 

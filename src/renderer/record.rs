@@ -100,8 +100,8 @@ pub struct RecordedFrame {
     pub skip: Option<SkipReport>,
     /// What splatting did (the splatting methods only).
     pub splat: Option<crate::splat::SplatCounts>,
-    /// Ray casting a mesh: whether the frame walked its rays' hull segments or read those of
-    /// an earlier frame of its slot with the same camera.
+    /// A mesh, ray cast or splatted post-shaded: whether the frame found its rays' hull
+    /// segments or read those of an earlier frame of its slot with the same camera.
     pub hull_segments: Option<HullSegments>,
 }
 
@@ -358,7 +358,11 @@ impl Renderer {
         }
         let mut setup = self.record_setup(view)?;
         let slot_index = self.free_slot()?;
-        let hull_segments = decide(self.slots[slot_index].targets.as_ref(), &mut setup);
+        let hull_segments = decide(
+            self.ctx.info(),
+            self.slots[slot_index].targets.as_ref(),
+            &mut setup,
+        );
         let (variant, index) = self.record_pipeline(&setup)?;
         // A chunk learned from a cut-short frame applies only where it is smaller than this
         // setup's own (the adaptive integrator's default is far smaller than the others').

@@ -14,7 +14,7 @@ use crate::field::RenderError;
 use crate::raycast::RaySetup;
 use crate::raycast::frame::FrameTargets;
 use crate::raycast::segments::{SegmentCache, SegmentsKey, fits};
-use crate::vk::{Context, VkError};
+use crate::vk::{Context, DeviceInfo, VkError};
 
 /// Whether a frame walked its rays' hull segments or read those of an earlier frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -36,11 +36,10 @@ impl HullSegments {
 }
 
 impl Renderer {
-    /// Sets `setup.hull_cache` where the field has a hull and the frame's cache fits a texel
-    /// view of the device.
+    /// Sets `setup.hull_cache` where the field has a hull ([`decide`] turns it off where the
+    /// frame's cache would not fit).
     pub(super) fn choose_hull_cache(&self, setup: &mut RaySetup) {
-        let pixels = u64::from(setup.camera.width) * u64::from(setup.camera.height);
-        setup.hull_cache = self.gpu_field.has_hull() && fits(self.ctx.info(), pixels);
+        setup.hull_cache = self.gpu_field.has_hull();
     }
 
     /// Before a [`Renderer::render`] frame (its buffers allocated): whether it keeps or reads
@@ -51,7 +50,7 @@ impl Renderer {
         &mut self,
         setup: &mut RaySetup,
     ) -> Result<Option<HullSegments>, RenderError> {
-        let found = decide(self.targets.as_ref(), setup);
+        let found = decide(self.ctx.info(), self.targets.as_ref(), setup);
         if let Some(targets) = self.targets.as_mut() {
             mark(&self.ctx, targets, setup, false)?;
         }
@@ -68,20 +67,28 @@ impl Renderer {
     }
 }
 
-/// Whether a frame of `setup` whose buffers are `targets` keeps its segments (its camera's are
-/// not in the cache: another camera's, none, or buffers of another size) or reads them; sets
-/// `setup.hull_store`. `None` where the frame does not cache.
-pub(super) fn decide(targets: Option<&FrameTargets>, setup: &mut RaySetup) -> Option<HullSegments> {
+/// Whether a frame of `setup` whose buffers are `targets` keeps its segments (its rays' are
+/// not in the cache: another camera's or window's, none, or buffers of another size) or reads
+/// them; sets `setup.hull_store`, and raises `setup.hull_hits` to the bound of segments it
+/// reads (kept after an overflow, they hold every crossing). Turns `setup.hull_cache` off and
+/// returns `None` where the cache would not fit the device ([`fits`]), or without a hull.
+pub(super) fn decide(
+    info: &DeviceInfo,
+    targets: Option<&FrameTargets>,
+    setup: &mut RaySetup,
+) -> Option<HullSegments> {
     setup.hull_store = false;
-    if !setup.hull_cache {
+    let pixels = u64::from(setup.camera.width) * u64::from(setup.camera.height);
+    if !setup.hull_cache || !fits(info, pixels, setup.hull_hits) {
+        setup.hull_cache = false;
         return None;
     }
-    let pixels = u64::from(setup.camera.width) * u64::from(setup.camera.height);
     let held = targets
         .filter(|t| t.pixels == pixels)
         .and_then(|t| t.segments.as_ref())
         .and_then(|c| c.valid);
-    if held == Some(SegmentsKey::of(setup)) {
+    if let Some(held) = held.filter(|h| h.serves(&SegmentsKey::of(setup))) {
+        setup.hull_hits = held.hull_hits;
         return Some(HullSegments::Reused);
     }
     setup.hull_store = true;
@@ -99,8 +106,14 @@ pub(super) fn mark(
     if !setup.hull_cache {
         return Ok(());
     }
-    if targets.segments.is_none() {
-        targets.segments = Some(SegmentCache::new(ctx, targets.pixels)?);
+    // Room for this frame's bound (an overflow's frame again needs more).
+    if targets
+        .segments
+        .as_ref()
+        .is_none_or(|c| c.hull_hits < setup.hull_hits)
+    {
+        targets.segments = None;
+        targets.segments = Some(SegmentCache::new(ctx, targets.pixels, setup.hull_hits)?);
     }
     if let Some(cache) = targets.segments.as_mut() {
         cache.pending = None;
