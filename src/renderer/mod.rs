@@ -250,6 +250,8 @@ pub struct Renderer {
     record: record::RecordState,
     /// The settings `render.tolerance` chose for the last view that had one.
     tolerance: Option<tolerance::Resolved>,
+    /// Frames keep their hull segments but do not read kept ones (a tolerance's pilots).
+    segments_keep_only: bool,
 }
 
 impl Drop for Renderer {
@@ -305,6 +307,7 @@ impl Renderer {
             slots: Vec::new(),
             record: record::RecordState::default(),
             tolerance: None,
+            segments_keep_only: false,
         })
     }
 

@@ -50,7 +50,8 @@ impl Renderer {
         &mut self,
         setup: &mut RaySetup,
     ) -> Result<Option<HullSegments>, RenderError> {
-        let found = decide(self.ctx.info(), self.targets.as_ref(), setup);
+        let held = self.targets.as_ref().filter(|_| !self.segments_keep_only);
+        let found = decide(self.ctx.info(), held, setup);
         if let Some(targets) = self.targets.as_mut() {
             mark(&self.ctx, targets, setup, false)?;
         }

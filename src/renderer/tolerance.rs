@@ -220,7 +220,13 @@ impl Renderer {
         if let Some(r) = self.tolerance.as_ref().filter(|r| r.key == key) {
             return Ok(Some((r.settings.clone(), r.report.clone())));
         }
-        let (settings, report) = self.resolve(view, tolerance)?;
+        // Pilots keep hull segments but never read them: at their size a walk costs less than
+        // compiling the variant that reads (the frame after the pilots has another size, and
+        // walks anyway).
+        self.segments_keep_only = true;
+        let resolved = self.resolve(view, tolerance);
+        self.segments_keep_only = false;
+        let (settings, report) = resolved?;
         self.tolerance = Some(Resolved {
             key,
             settings: settings.clone(),
