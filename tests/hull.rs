@@ -305,18 +305,22 @@ fn comb_field() -> Field {
     linear_octree_field(set, 2.4)
 }
 
-#[test]
-fn rays_with_more_crossings_than_the_first_variant_keeps_render_again_with_all() {
-    let field = comb_field();
-    // Along the row: the central rays cross 12 faces, past the first variant's 8.
-    let along = scene(&[
+/// Along the comb's row: the central rays cross 12 faces, past the first variant's 8.
+fn comb_along() -> Scene {
+    scene(&[
         ORTHO,
         "camera.view_height=1.5",
         "camera.eye=[-6.0, 0.0, 0.0]",
         "camera.up=[0.0, 0.0, 1.0]",
         "camera.width=12",
         "camera.height=12",
-    ]);
+    ])
+}
+
+#[test]
+fn rays_with_more_crossings_than_the_first_variant_keeps_render_again_with_all() {
+    let field = comb_field();
+    let along = comb_along();
     let (img, cpu) = both(&field, &along);
     assert!(img.variant.ends_with("-hull"), "{}", img.variant);
     let centre = 6 * 12 + 6;
@@ -345,6 +349,32 @@ fn gpu_diff(a: &[[f32; 4]], b: &[[f32; 4]]) -> f32 {
         .fold(0.0, f32::max)
 }
 
+/// A view of the torus, the same view with another transfer function, and another camera:
+/// each with `extra`.
+fn three_views(extra: &[&str]) -> [Scene; 3] {
+    let with = |more: &[&str]| {
+        let mut o = extra.to_vec();
+        o.extend([ORTHO, ORTHO_HEIGHT, "camera.up=[0.0, 0.0, 1.0]"]);
+        o.extend(more);
+        scene(&o)
+    };
+    [
+        with(&["camera.eye=[0.5, -4.0, 1.5]"]),
+        with(&[
+            "camera.eye=[0.5, -4.0, 1.5]",
+            "transfer.points=[[0.0, 1.0, 0.4, 0.2, 1.0], [1.0, 0.2, 0.6, 1.0, 9.0]]",
+        ]),
+        with(&["camera.eye=[-1.0, -4.0, 2.5]"]),
+    ]
+}
+
+/// What [`three_views`]' frames do with the hull's segments, one renderer after the other.
+const THREE_VIEWS: [vmls::renderer::HullSegments; 3] = [
+    vmls::renderer::HullSegments::Found,
+    vmls::renderer::HullSegments::Reused,
+    vmls::renderer::HullSegments::Found,
+];
+
 /// A renderer walks a mesh's hull once per camera and keeps the segments: a frame of the same
 /// camera with another transfer function reads them, a frame of another camera walks again,
 /// and every image equals the uncached walk's (the stateless `render`) and matches the CPU
@@ -353,36 +383,14 @@ fn gpu_diff(a: &[[f32; 4]], b: &[[f32; 4]]) -> f32 {
 fn hull_segments_are_found_once_per_camera_and_images_equal_the_walk() {
     use vmls::renderer::{HullSegments, Renderer};
     let field = torus_field();
-    let first = scene(&[
-        ORTHO,
-        ORTHO_HEIGHT,
-        "camera.eye=[0.5, -4.0, 1.5]",
-        "camera.up=[0.0, 0.0, 1.0]",
-    ]);
-    let other_tf = scene(&[
-        ORTHO,
-        ORTHO_HEIGHT,
-        "camera.eye=[0.5, -4.0, 1.5]",
-        "camera.up=[0.0, 0.0, 1.0]",
-        "transfer.points=[[0.0, 1.0, 0.4, 0.2, 1.0], [1.0, 0.2, 0.6, 1.0, 9.0]]",
-    ]);
-    let moved = scene(&[
-        ORTHO,
-        ORTHO_HEIGHT,
-        "camera.eye=[-1.0, -4.0, 2.5]",
-        "camera.up=[0.0, 0.0, 1.0]",
-    ]);
+    let [first, other_tf, moved] = three_views(&[]);
     let walked: Vec<_> = [&first, &other_tf, &moved]
         .iter()
         .map(|s| both(&field, s))
         .collect();
     let (ctx, _) = gpu();
     let mut renderer = Renderer::new(&ctx, field.clone()).expect("renderer");
-    let expect = [
-        HullSegments::Found,
-        HullSegments::Reused,
-        HullSegments::Found,
-    ];
+    let expect = THREE_VIEWS;
     for (i, s) in [&first, &other_tf, &moved].iter().enumerate() {
         let (img, stats) = renderer.render(&s.view(), |_| {}).expect("frame");
         let suffix = match expect[i] {
@@ -436,14 +444,7 @@ fn hull_segments_are_found_once_per_camera_and_images_equal_the_walk() {
 fn cached_segments_past_the_first_bound_render_again_with_all() {
     use vmls::renderer::{HullSegments, Renderer};
     let field = comb_field();
-    let along = scene(&[
-        ORTHO,
-        "camera.view_height=1.5",
-        "camera.eye=[-6.0, 0.0, 0.0]",
-        "camera.up=[0.0, 0.0, 1.0]",
-        "camera.width=12",
-        "camera.height=12",
-    ]);
+    let along = comb_along();
     let (walk, cpu) = both(&field, &along);
     let (ctx, _) = gpu();
     let mut renderer = Renderer::new(&ctx, field.clone()).expect("renderer");
@@ -470,36 +471,10 @@ fn cached_segments_past_the_first_bound_render_again_with_all() {
 fn splatting_keeps_hull_segments_for_its_camera() {
     use vmls::renderer::{HullSegments, Renderer};
     let field = torus_field();
-    let post = "render.method=\"splat-post\"";
-    let first = scene(&[
-        post,
-        ORTHO,
-        ORTHO_HEIGHT,
-        "camera.eye=[0.5, -4.0, 1.5]",
-        "camera.up=[0.0, 0.0, 1.0]",
-    ]);
-    let other_tf = scene(&[
-        post,
-        ORTHO,
-        ORTHO_HEIGHT,
-        "camera.eye=[0.5, -4.0, 1.5]",
-        "camera.up=[0.0, 0.0, 1.0]",
-        "transfer.points=[[0.0, 1.0, 0.4, 0.2, 1.0], [1.0, 0.2, 0.6, 1.0, 9.0]]",
-    ]);
-    let moved = scene(&[
-        post,
-        ORTHO,
-        ORTHO_HEIGHT,
-        "camera.eye=[-1.0, -4.0, 2.5]",
-        "camera.up=[0.0, 0.0, 1.0]",
-    ]);
+    let [first, other_tf, moved] = three_views(&["render.method=\"splat-post\""]);
     let (ctx, _) = gpu();
     let mut renderer = Renderer::new(&ctx, field.clone()).expect("renderer");
-    let expect = [
-        HullSegments::Found,
-        HullSegments::Reused,
-        HullSegments::Found,
-    ];
+    let expect = THREE_VIEWS;
     for (i, s) in [&first, &other_tf, &moved].iter().enumerate() {
         let (img, stats) = renderer.render(&s.view(), |_| {}).expect("frame");
         assert_eq!(stats.hull_segments, Some(expect[i]), "frame {i}");
