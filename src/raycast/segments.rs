@@ -11,8 +11,9 @@
 //!
 //! Contract:
 //! - the cache holds the segments of one camera (its GPU block, which is what the kernel's rays
-//!   are made from) at one `HULL_MAX_HITS` ([`SegmentsKey`]); a frame of another camera or
-//!   bound keeps, a frame of the same one reads;
+//!   are made from), one set of dispatched pixels (a brick's window) and one `HULL_MAX_HITS`
+//!   ([`SegmentsKey`]); a frame of the same rays at that bound or a smaller one reads (at the
+//!   cache's bound), any other keeps;
 //! - per pixel, [`texels_per_pixel`] rgba32f texels: the segment count (−1 past `HULL_MAX_HITS`
 //!   crossings, which the ray caster then reports as its walk does) and the segments;
 //! - an image is the same whether its segments were walked or read (`tests/hull.rs`,

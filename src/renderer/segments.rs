@@ -1,6 +1,8 @@
 //! The renderer's half of the hull segments cache ([`crate::raycast::segments`]): a ray-cast
-//! frame of a mesh stores its rays' hull segments where its camera or crossing bound differs
-//! from the one its frame buffers' cache holds, and reads them otherwise.
+//! frame of a mesh stores its rays' hull segments where the cache of its frame buffers does not
+//! serve it (another camera, window or a smaller crossing bound), and reads them otherwise. A
+//! tolerance's pilot frames only store: at their size a walk costs less than building the
+//! variant that reads.
 //!
 //! [`Renderer::render`] marks the cache invalid before a frame that stores and valid once the
 //! frame's bands all completed (a stopped frame leaves it invalid). A recorded frame that stores
@@ -16,10 +18,11 @@ use crate::raycast::frame::FrameTargets;
 use crate::raycast::segments::{SegmentCache, SegmentsKey, fits};
 use crate::vk::{Context, DeviceInfo, VkError};
 
-/// Whether a frame walked its rays' hull segments or read those of an earlier frame.
+/// Whether a frame found its rays' hull segments (ray casting: the walk; post-shaded
+/// splatting: `splat_segments`) or read those of an earlier frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum HullSegments {
-    /// Walked for this frame's camera and stored.
+    /// Found for this frame's camera, and kept for the next frames of it.
     Found,
     /// Read from the cache an earlier frame of the same camera filled.
     Reused,
