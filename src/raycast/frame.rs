@@ -110,7 +110,7 @@ pub(crate) fn frame_bindings(
     if ray_stats(setup, skip) {
         ids.push(binding::RAY_STATS);
     }
-    let cache = super::segments::hull_cache(setup, gpu_field.has_hull());
+    let cache = setup.hull_cache;
     if cache != HullCache::Read {
         ids.extend(gpu_field.hull_bindings().iter().map(|(b, _)| *b));
     }
@@ -375,7 +375,7 @@ pub(crate) fn frame_buffers<'a>(
     setup: &RaySetup,
 ) -> Vec<(u32, &'a Buffer)> {
     let mut all = gpu_field.bindings();
-    let cache = super::segments::hull_cache(setup, gpu_field.has_hull());
+    let cache = setup.hull_cache;
     if cache != HullCache::Read {
         all.extend(gpu_field.hull_bindings());
     }

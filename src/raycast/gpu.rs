@@ -19,7 +19,7 @@ pub fn variant_for_render(field: &Field, setup: &RaySetup) -> Variant {
         isosurfaces: setup.isosurfaces.len(),
         hull: field.hull.is_some(),
         hull_hits: setup.hull_hits,
-        hull_cache: super::segments::hull_cache(setup, field.hull.is_some()),
+        hull_cache: setup.hull_cache,
         skip: setup.skip,
         clip: setup.clip.is_some(),
         ..Variant::of(field)

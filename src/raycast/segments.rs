@@ -1,8 +1,9 @@
 //! The hull segments cache (issue 27 §1, "cache what the hull BVH gives a ray"): a frame of a
 //! camera that the cache does not hold walks the hull's BVH as before (stage `hull_segments`,
 //! whose CPU twin is `samples::bvh`), and the chunks that start its rays keep what they found in
-//! a buffer of the frame's ([`HullCache::Keep`], `glsl/raycast/segments.glsl`); a later frame of
-//! the same camera reads it instead, from a variant without the walk ([`HullCache::Read`]). On
+//! a buffer of the frame's ([`crate::field::variant::HullCache::Keep`],
+//! `glsl/raycast/segments.glsl`); a later frame of
+//! the same camera reads it instead, from a variant without the walk (`HullCache::Read`). On
 //! the room-fire mesh at 512² the walk was about half of a frame's GPU time, which every frame
 //! of an unchanged camera (a transfer-function edit, a tolerance's pilots, a benchmark's
 //! repeats) paid again. The walk is not merely skipped at run time in one variant: with it
@@ -20,7 +21,6 @@
 //!   `tests/embed_example.rs`).
 
 use super::setup::RaySetup;
-use crate::field::variant::HullCache;
 use crate::gpu_types::CameraBlock;
 use crate::vk::{Buffer, BufferUsage, Context, DeviceInfo, VkError};
 
@@ -43,15 +43,6 @@ pub fn fits(info: &DeviceInfo, pixels: u64, hull_hits: u32) -> bool {
     let texels = pixels * texels_per_pixel(hull_hits);
     texels <= info.max_texel_buffer_elements.min(i32::MAX as u64)
         && 16 * texels <= MAX_CACHE_BYTES.min(info.max_heap_bytes / 4)
-}
-
-/// How a frame of `setup` comes by its segments, for a field with or without a hull.
-pub fn hull_cache(setup: &RaySetup, has_hull: bool) -> HullCache {
-    match (has_hull && setup.hull_cache, setup.hull_store) {
-        (false, _) => HullCache::Off,
-        (true, true) => HullCache::Keep,
-        (true, false) => HullCache::Read,
-    }
 }
 
 /// What a cache's segments were found for: the camera's GPU block, the pixels dispatched (a

@@ -4,6 +4,7 @@
 use super::preintegration;
 use crate::field::gpu::FIRST_HULL_HITS;
 use crate::field::skip::{Blocks, RUN_NUDGE, SkipTable};
+use crate::field::variant::HullCache;
 use crate::field::{Field, RenderError, scalar_range};
 use crate::view::camera::{Camera, Projection, ViewBasis};
 use crate::view::shading;
@@ -79,12 +80,9 @@ pub struct RaySetup {
     pub skip_auto: bool,
     /// Hull crossings the GPU kernel keeps per ray ([`crate::field::variant::Variant::hull_hits`]).
     pub hull_hits: u32,
-    /// Keep the hull's segments in the cache of the frame's buffers ([`super::segments`]):
-    /// the `Renderer` sets it where a mesh's cache fits the device.
-    pub hull_cache: bool,
-    /// With `hull_cache`: the frame walks the hull and stores the segments (its camera is not
-    /// the cache's), else it reads them.
-    pub hull_store: bool,
+    /// How the frame comes by its rays' hull segments ([`super::segments`]): the `Renderer`
+    /// keeps or reads them where a mesh's cache fits the device; `Off` walks as without one.
+    pub hull_cache: HullCache,
     /// The fraction of ray length "auto" found in empty blocks when it decided.
     pub skip_estimate: Option<f64>,
     pub background: [f64; 3],
@@ -184,8 +182,7 @@ impl RaySetup {
                 && !mls2008,
             skip_estimate: None,
             hull_hits: FIRST_HULL_HITS,
-            hull_cache: false,
-            hull_store: false,
+            hull_cache: HullCache::Off,
             background: render.background,
             clip: field.clip(),
             window: field

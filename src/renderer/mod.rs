@@ -11,7 +11,7 @@
 
 use crate::field::gpu::GpuField;
 use crate::field::skip::SkipReport;
-use crate::field::variant::Variant;
+use crate::field::variant::{HullCache, Variant};
 use crate::field::{Field, RenderError};
 use crate::raycast::frame::FrameTargets;
 use crate::raycast::frame::{
@@ -135,8 +135,7 @@ pub fn render(
     check_tables(setup, tables)?;
     let mut resolved = setup.clone();
     // Stateless: nothing keeps hull segments for a next frame.
-    resolved.hull_cache = false;
-    resolved.hull_store = false;
+    resolved.hull_cache = HullCache::Off;
     resolved.resolve_skip(gpu_field.blocks(), tf, field);
     let tables = tables.filter(|_| resolved.method.preintegrated());
     let table = tables.map(|t| table_buffer(ctx, t)).transpose()?;

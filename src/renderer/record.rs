@@ -55,7 +55,7 @@ use super::Renderer;
 use super::segments::{HullSegments, decide, mark, retire_segments};
 use crate::field::RenderError;
 use crate::field::skip::SkipReport;
-use crate::field::variant::Variant;
+use crate::field::variant::{HullCache, Variant};
 use crate::gpu_types::ray_count;
 use crate::raycast::RaySetup;
 use crate::raycast::frame::{
@@ -294,13 +294,14 @@ impl Renderer {
             return self.prepare_splat(view, shading);
         }
         let mut setup = self.record_setup(view)?;
-        // Both variants of a mesh's frames: the one that walks the hull and keeps its segments,
-        // and the one that reads them at a camera's later frames.
-        for keep in [true, false]
-            .into_iter()
-            .take(if setup.hull_cache { 2 } else { 1 })
-        {
-            setup.hull_store = keep;
+        // A mesh's frames have two variants: the one that walks the hull and keeps its
+        // segments, and the one that reads them at a camera's later frames.
+        let modes: &[HullCache] = match setup.hull_cache {
+            HullCache::Off => &[HullCache::Off],
+            _ => &[HullCache::Keep, HullCache::Read],
+        };
+        for &mode in modes {
+            setup.hull_cache = mode;
             self.record_pipeline(&setup)?;
         }
         Ok(())

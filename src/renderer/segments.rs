@@ -13,6 +13,7 @@
 
 use super::Renderer;
 use crate::field::RenderError;
+use crate::field::variant::HullCache;
 use crate::raycast::RaySetup;
 use crate::raycast::frame::FrameTargets;
 use crate::raycast::segments::{SegmentCache, SegmentsKey, fits};
@@ -29,6 +30,15 @@ pub enum HullSegments {
 }
 
 impl HullSegments {
+    /// Reused where `reused`, else found.
+    pub(super) fn of(reused: bool) -> Self {
+        if reused {
+            HullSegments::Reused
+        } else {
+            HullSegments::Found
+        }
+    }
+
     /// The name `--stats` gives it.
     pub fn name(self) -> &'static str {
         match self {
@@ -39,14 +49,18 @@ impl HullSegments {
 }
 
 impl Renderer {
-    /// Sets `setup.hull_cache` where the field has a hull ([`decide`] turns it off where the
-    /// frame's cache would not fit).
+    /// `setup.hull_cache` where the field has a hull ([`decide`] then says whether the frame
+    /// keeps or reads, or turns it off where the cache would not fit).
     pub(super) fn choose_hull_cache(&self, setup: &mut RaySetup) {
-        setup.hull_cache = self.gpu_field.has_hull();
+        setup.hull_cache = if self.gpu_field.has_hull() {
+            HullCache::Keep
+        } else {
+            HullCache::Off
+        };
     }
 
     /// Before a [`Renderer::render`] frame (its buffers allocated): whether it keeps or reads
-    /// the segments (`setup.hull_store`, which picks the variant), the cache allocated and,
+    /// the segments (`setup.hull_cache`, which picks the variant), the cache allocated and,
     /// where the frame keeps, invalid until [`Renderer::segments_stored`]. `None` where the
     /// frame does not cache.
     pub(super) fn render_segments(
@@ -64,7 +78,7 @@ impl Renderer {
     /// After a [`Renderer::render`] frame's bands all completed: what it kept is valid.
     pub(super) fn segments_stored(&mut self, setup: &RaySetup) {
         if let Some(cache) = self.targets.as_mut().and_then(|t| t.segments.as_mut())
-            && setup.hull_cache
+            && setup.hull_cache != HullCache::Off
         {
             cache.valid = Some(SegmentsKey::of(setup));
         }
@@ -73,18 +87,17 @@ impl Renderer {
 
 /// Whether a frame of `setup` whose buffers are `targets` keeps its segments (its rays' are
 /// not in the cache: another camera's or window's, none, or buffers of another size) or reads
-/// them; sets `setup.hull_store`, and raises `setup.hull_hits` to the bound of segments it
-/// reads (kept after an overflow, they hold every crossing). Turns `setup.hull_cache` off and
-/// returns `None` where the cache would not fit the device ([`fits`]), or without a hull.
+/// them (`setup.hull_cache`), raising `setup.hull_hits` to the bound of segments it reads (kept
+/// after an overflow, they hold every crossing). Turns the cache off and returns `None` where
+/// it would not fit the device ([`fits`]), or without a hull.
 pub(super) fn decide(
     info: &DeviceInfo,
     targets: Option<&FrameTargets>,
     setup: &mut RaySetup,
 ) -> Option<HullSegments> {
-    setup.hull_store = false;
     let pixels = u64::from(setup.camera.width) * u64::from(setup.camera.height);
-    if !setup.hull_cache || !fits(info, pixels, setup.hull_hits) {
-        setup.hull_cache = false;
+    if setup.hull_cache == HullCache::Off || !fits(info, pixels, setup.hull_hits) {
+        setup.hull_cache = HullCache::Off;
         return None;
     }
     let held = targets
@@ -93,9 +106,10 @@ pub(super) fn decide(
         .and_then(|c| c.valid);
     if let Some(held) = held.filter(|h| h.serves(&SegmentsKey::of(setup))) {
         setup.hull_hits = held.hull_hits;
+        setup.hull_cache = HullCache::Read;
         return Some(HullSegments::Reused);
     }
-    setup.hull_store = true;
+    setup.hull_cache = HullCache::Keep;
     Some(HullSegments::Found)
 }
 
@@ -107,7 +121,7 @@ pub(super) fn mark(
     setup: &RaySetup,
     recorded: bool,
 ) -> Result<(), VkError> {
-    if !setup.hull_cache {
+    if setup.hull_cache == HullCache::Off {
         return Ok(());
     }
     // Room for this frame's bound (an overflow's frame again needs more).
@@ -121,7 +135,7 @@ pub(super) fn mark(
     }
     if let Some(cache) = targets.segments.as_mut() {
         cache.pending = None;
-        if setup.hull_store {
+        if setup.hull_cache == HullCache::Keep {
             cache.valid = None;
             cache.pending = recorded.then(|| SegmentsKey::of(setup));
         }

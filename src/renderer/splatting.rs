@@ -189,13 +189,7 @@ impl Renderer {
                 bands: image.submissions,
                 skip_estimate: None,
                 tolerance: None,
-                hull_segments: image.segments_reused.map(|reused| {
-                    if reused {
-                        HullSegments::Reused
-                    } else {
-                        HullSegments::Found
-                    }
-                }),
+                hull_segments: image.segments_reused.map(HullSegments::of),
             },
         ))
     }
@@ -210,7 +204,7 @@ impl Renderer {
         self.splat_targets_for(&frame.setup)?;
         // The count's own splat_segments rewrites the buffers' segments.
         if let Some(t) = self.splat_targets.as_mut() {
-            t.segments_held = None;
+            t.forget_segments();
         }
         let (Some(kernels), Some(targets)) =
             (self.splat_kernels.as_ref(), self.splat_targets.as_ref())
@@ -308,12 +302,7 @@ impl Renderer {
         let mut reused = false;
         if let Some(t) = s.targets.as_mut() {
             t.reserve_entries(&ctx, reserve, limit)?;
-            reused = t.holds_segments(setup);
-            t.segments_pending = None;
-            if !reused && t.has_segments() {
-                t.segments_held = None;
-                t.segments_pending = Some(SplatTargets::segments_key(setup));
-            }
+            reused = t.plan_segments(setup, true);
         }
         let args_bytes = plan_args_bytes(setup);
         if s.args.as_ref().is_none_or(|a| a.size() < args_bytes) {
@@ -403,16 +392,7 @@ impl Renderer {
         };
         match retired_counts(&ctx, targets, setup, plan, *budget, *invocations)? {
             Retired::Counts(counts) => {
-                let hull_segments =
-                    targets
-                        .has_segments()
-                        .then(|| match targets.segments_pending.take() {
-                            Some(key) => {
-                                targets.segments_held = Some(key);
-                                HullSegments::Found
-                            }
-                            None => HullSegments::Reused,
-                        });
+                let hull_segments = targets.retire_segments().map(HullSegments::of);
                 Ok(RecordedFrame {
                     gpu_ms,
                     evaluations: counts.evaluated,

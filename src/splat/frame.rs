@@ -814,10 +814,7 @@ pub fn splat_frame(
     let mut stage_ms = [0.0; 5];
     let (tiles_x, tiles_y) = setup.tiles();
     // The hull segments of this camera, where the last frame of these buffers left them.
-    let reused = targets.holds_segments(setup);
-    if !reused {
-        targets.segments_held = None;
-    }
+    let reused = targets.plan_segments(setup, false);
     let hull = if reused { &[][..] } else { hull };
     let (stats, total, timings) =
         project(ctx, pipelines, kernels, targets, &constants, setup, hull)?;
@@ -879,10 +876,8 @@ pub fn splat_frame(
     let image: Vec<[f32; 4]> = t.image.read(ctx)?;
     let stats: Vec<u32> = t.stats.read(ctx)?;
     check_raster(&stats)?;
-    let segments_reused = t.segments.is_some().then_some(reused);
-    if segments_reused.is_some() {
-        targets.segments_held = Some(SplatTargets::segments_key(setup));
-    }
+    let segments_reused = t.has_segments().then_some(reused);
+    targets.hold_segments(setup);
     let bg = setup.background.map(|c| c as f32);
     let n = (setup.camera.width * setup.camera.height) as usize;
     let pixels = image

@@ -440,9 +440,9 @@ pub struct SplatTargets {
     pub(super) segments: Option<Buffer>,
     /// The camera whose pixels' hull segments `segments` holds (post-shaded over a hull): a
     /// frame of that camera skips `splat_segments`. `None`: none yet, or being rewritten.
-    pub segments_held: Option<CameraBlock>,
+    segments_held: Option<CameraBlock>,
     /// The camera a recorded frame's `splat_segments` writes for: held once it is retired.
-    pub segments_pending: Option<CameraBlock>,
+    segments_pending: Option<CameraBlock>,
 }
 
 impl SplatTargets {
@@ -456,20 +456,52 @@ impl SplatTargets {
         )
     }
 
-    /// What [`SplatTargets::segments_held`] compares: the camera's GPU block, from which the
-    /// kernel makes the pixels' rays.
-    pub fn segments_key(setup: &SplatSetup) -> CameraBlock {
+    /// What the held segments are compared by: the camera's GPU block, from which the kernel
+    /// makes the pixels' rays.
+    fn segments_key(setup: &SplatSetup) -> CameraBlock {
         setup.camera.gpu_block(&setup.basis, setup.eye)
     }
 
-    /// Whether these buffers hold pixels' hull segments (post-shaded over a hull).
+    /// Whether these buffers have room for pixels' hull segments (post-shaded over a hull).
     pub fn has_segments(&self) -> bool {
         self.segments.is_some()
     }
 
-    /// Whether a frame of `setup` finds its pixels' hull segments already in these buffers.
-    pub fn holds_segments(&self, setup: &SplatSetup) -> bool {
-        self.segments.is_some() && self.segments_held == Some(Self::segments_key(setup))
+    /// Before a frame of `setup`: whether its pixels' hull segments are in these buffers
+    /// already (`splat_segments` then does not run). Otherwise they are forgotten until the
+    /// frame holds them: [`SplatTargets::hold_segments`] after it, or at a `recorded` frame's
+    /// retire ([`SplatTargets::retire_segments`]).
+    pub fn plan_segments(&mut self, setup: &SplatSetup, recorded: bool) -> bool {
+        let key = Self::segments_key(setup);
+        let reused = self.has_segments() && self.segments_held == Some(key);
+        self.segments_pending = None;
+        if !reused && self.has_segments() {
+            self.segments_held = None;
+            self.segments_pending = recorded.then_some(key);
+        }
+        reused
+    }
+
+    /// After a frame of `setup` that passed the projection's checks: its segments are held.
+    pub fn hold_segments(&mut self, setup: &SplatSetup) {
+        if self.has_segments() {
+            self.segments_held = Some(Self::segments_key(setup));
+        }
+    }
+
+    /// Another pass of `splat_segments` (a projection of its own) rewrites them.
+    pub fn forget_segments(&mut self) {
+        self.segments_held = None;
+    }
+
+    /// At a completed recorded frame's retire: `Some(reused)` where these buffers have
+    /// segments; what the frame wrote is held from now on.
+    pub fn retire_segments(&mut self) -> Option<bool> {
+        let pending = self.segments_pending.take();
+        if pending.is_some() {
+            self.segments_held = pending;
+        }
+        self.has_segments().then_some(pending.is_none())
     }
 
     pub(super) fn segments(&self) -> Result<&Buffer, VkError> {
