@@ -12,7 +12,7 @@ use vmls::samples::Metric;
 use vmls::splat::project::KernelKind;
 use vmls::splat::project::{Kernel, sheet_share, splat_footprint, splat_project};
 use vmls::splat::raster::splat_image;
-use vmls::splat::{QUADRATURE_MAX_SHEET, RINGS, Shading, SheetShare, choose_ring};
+use vmls::splat::{QUADRATURE_MAX_SHEET, RINGS, SCAN_BLOCK, Shading, SheetShare, choose_ring};
 use vmls::view::camera::Projection;
 
 /// ∫ w·G_V(o + t d − p) dt over the whole line, V = σ²M⁻¹ (P = V⁻¹ = M/σ²).
@@ -169,7 +169,11 @@ fn one_kernel_footprint_is_the_line_integral_of_its_gaussian() {
 #[test]
 fn gpu_splatting_matches_its_cpu_twin_on_a_grid() {
     let (ctx, _) = gpu();
-    let cases: [(&str, &[&str]); 11] = [
+    let cases: [(&str, &[&str]); 12] = [
+        (
+            "pre-shaded, thin sheets (buckets over several scan blocks)",
+            &["render.method=\"splat\"", "splat.slab=0.004"],
+        ),
         (
             "pre-shaded surface splats",
             &[
@@ -248,7 +252,13 @@ fn gpu_splatting_matches_its_cpu_twin_on_a_grid() {
         extra.push("render.early_termination=0.9999");
         let s = scene(&extra);
         let shading = s.render.method.splat_shading().expect("a splat method");
-        let cpu = splat_image(&setup(&s, &field, shading), &field, &s.transfer).expect("CPU twin");
+        let frame_setup = setup(&s, &field, shading);
+        if name.starts_with("pre-shaded, thin sheets") {
+            // The scan's second level (block sums) only runs with more than one block.
+            let blocks = frame_setup.buckets().div_ceil(u64::from(SCAN_BLOCK));
+            assert!(blocks >= 3, "{name}: {blocks} scan blocks");
+        }
+        let cpu = splat_image(&frame_setup, &field, &s.transfer).expect("CPU twin");
         let (gpu, report) = gpu_frame(&mut renderer, &s);
         let diff = max_diff(&gpu, &cpu.pixels);
         eprintln!("GPU vs CPU, {name}: {diff:.2e}");

@@ -53,10 +53,12 @@ pub const TILE_SIZES: [u32; 3] = [8, 16, 32];
 /// an error naming `splat.slab` and the image size, never a silently truncated list.
 pub const MAX_KERNEL_ENTRIES: u64 = 60_000;
 /// At most this many (tile × sheet) buckets: the scan's second level is one workgroup of
-/// 256 invocations, each summing at most 64 blocks of `SCAN_BLOCK` buckets.
+/// 256 invocations, each summing at most 4 blocks of `SCAN_BLOCK` buckets.
 pub const MAX_BUCKETS: u64 = 1 << 24;
-/// Buckets per workgroup of `splat_scan`'s first and third levels.
-pub const SCAN_BLOCK: u32 = 1024;
+/// Buckets per workgroup of `splat_scan`'s first and third levels, 64 per invocation: few
+/// workgroups, because their barriers are the scan's cost on lavapipe (1 024, 4 096 and 16 384
+/// measured; BENCHMARKS.md, "The splatting sort's scan").
+pub const SCAN_BLOCK: u32 = 16384;
 /// Post-shaded splatting keeps each pixel's next sheets in `ring − 1` registers, one of these
 /// sizes (`SplatSetup::ring`): a kernel is then one entry per tile and per `ring` sheets it
 /// crosses, its lateral footprint evaluated once per pixel and entry and shared out to those
