@@ -17,6 +17,7 @@
 //! and adapts to clustered or graded ones.
 
 use super::mls::{MlsValue, Neighbours};
+use crate::samples::supports::in_spatial_order;
 use crate::samples::{Metric, Positions, SampleSet, metric_apply, metric_rho2};
 use rayon::prelude::*;
 
@@ -75,19 +76,20 @@ impl KernelVolumes {
         if let Positions::Grid { spacing, .. } = &samples.positions {
             return KernelVolumes::Uniform(spacing[0] * spacing[1] * spacing[2]);
         }
-        let volumes = (0..samples.len())
-            .into_par_iter()
-            .map(|i| {
-                let x = samples.position(i);
-                let mut density = 0.0;
-                neighbours.for_each(x, &mut |_, p, _, m| {
-                    let d = [x[0] - p[0], x[1] - p[1], x[2] - p[2]];
-                    density += gaussian_kernel(sigma, m, d).0;
-                });
-                // The sample's own kernel always counts, so density > 0.
-                1.0 / density.max(f64::MIN_POSITIVE)
-            })
-            .collect();
+        let volume = |i: usize| {
+            let x = samples.position(i);
+            let mut density = 0.0;
+            neighbours.for_each(x, &mut |_, p, _, m| {
+                let d = [x[0] - p[0], x[1] - p[1], x[2] - p[2]];
+                density += gaussian_kernel(sigma, m, d).0;
+            });
+            // The sample's own kernel always counts, so density > 0.
+            1.0 / density.max(f64::MIN_POSITIVE)
+        };
+        let volumes = match &samples.positions {
+            Positions::Scattered(p) => in_spatial_order(p, volume),
+            Positions::Grid { .. } => (0..samples.len()).into_par_iter().map(volume).collect(),
+        };
         KernelVolumes::PerSample(volumes)
     }
 }

@@ -173,18 +173,79 @@ pub fn knn_of_first(positions: &[[f64; 3]], first: usize, k: usize) -> Vec<Vec<u
     }
     let tree = Tree::new_from_slice(positions);
     let want = NonZero::new((k + 1).min(positions.len())).unwrap_or(NonZero::<usize>::MIN);
-    positions[..first]
+    in_spatial_order(&positions[..first], |i| {
+        tree.nearest_n::<SquaredEuclidean>(&positions[i], want)
+            .into_iter()
+            .map(|n| n.item)
+            .filter(|&j| j as usize != i)
+            .take(k)
+            .collect()
+    })
+}
+
+/// `f(i)` for every sample i of `positions`, in parallel, returned in index order but computed
+/// in the Morton order of the positions. A neighbourhood query then finds most of what it
+/// reads in cache from the query before it: kd-tree queries over 10⁶ scattered points took
+/// 2.5× less time in this order than in the points' own (BENCHMARKS.md, "A point cloud's
+/// first frame"). Each result is `f`'s alone, so the order changes no value.
+pub fn in_spatial_order<T, F>(positions: &[[f64; 3]], f: F) -> Vec<T>
+where
+    T: Send + Default + Clone,
+    F: Fn(usize) -> T + Sync,
+{
+    let computed: Vec<(u32, T)> = morton_order(positions)
+        .into_par_iter()
+        .map(|i| (i, f(i as usize)))
+        .collect();
+    let mut out = vec![T::default(); positions.len()];
+    for (i, v) in computed {
+        out[i as usize] = v;
+    }
+    out
+}
+
+/// Sample indices sorted by the Morton code of their positions over the points' bounding
+/// box (21 bits an axis; ties by index, so the order is deterministic).
+pub fn morton_order(positions: &[[f64; 3]]) -> Vec<u32> {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in positions {
+        for a in 0..3 {
+            lo[a] = lo[a].min(p[a]);
+            hi[a] = hi[a].max(p[a]);
+        }
+    }
+    let cells = f64::from((1u32 << 21) - 1);
+    let scale = [0, 1, 2].map(|a| {
+        let e = hi[a] - lo[a];
+        if e > 0.0 && e.is_finite() {
+            cells / e
+        } else {
+            0.0
+        }
+    });
+    // Spreads the low 21 bits of v two bits apart.
+    let spread = |v: u64| {
+        let mut x = v & 0x1f_ffff;
+        x = (x | x << 32) & 0x001f_0000_0000_ffff;
+        x = (x | x << 16) & 0x001f_0000_ff00_00ff;
+        x = (x | x << 8) & 0x100f_00f0_0f00_f00f;
+        x = (x | x << 4) & 0x10c3_0c30_c30c_30c3;
+        (x | x << 2) & 0x1249_2492_4924_9249
+    };
+    let mut keyed: Vec<(u64, u32)> = positions
         .par_iter()
         .enumerate()
         .map(|(i, p)| {
-            tree.nearest_n::<SquaredEuclidean>(p, want)
-                .into_iter()
-                .map(|n| n.item)
-                .filter(|&j| j as usize != i)
-                .take(k)
-                .collect()
+            let q = [0, 1, 2].map(|a| ((p[a] - lo[a]) * scale[a]).clamp(0.0, cells) as u64);
+            (
+                spread(q[0]) | spread(q[1]) << 1 | spread(q[2]) << 2,
+                i as u32,
+            )
         })
-        .collect()
+        .collect();
+    keyed.par_sort_unstable();
+    keyed.into_iter().map(|(_, i)| i).collect()
 }
 
 /// The samples within squared distance r² of any of `balls` (centre, r²; r² = ∞ takes every
@@ -500,6 +561,47 @@ pub fn structured_at(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn morton_order_is_the_z_curve_and_results_keep_their_index() {
+        // The corners of a cube, given in reverse: Morton order is x, then y, then z bits.
+        let corners: Vec<[f64; 3]> = (0..8)
+            .rev()
+            .map(|c| [0, 1, 2].map(|a| f64::from(c >> a & 1)))
+            .collect();
+        assert_eq!(morton_order(&corners), vec![7, 6, 5, 4, 3, 2, 1, 0]);
+        // A flat set (all z equal) and coincident points: still a permutation.
+        let flat = [[0.5, 0.0, 1.0], [0.0, 0.0, 1.0], [0.5, 0.0, 1.0]];
+        assert_eq!(morton_order(&flat), vec![1, 0, 2]);
+        let pts: Vec<[f64; 3]> = (0..1000)
+            .map(|i| {
+                let t = f64::from(i);
+                [
+                    (t * 0.618).fract(),
+                    (t * 0.414).fract(),
+                    (t * 0.732).fract(),
+                ]
+            })
+            .collect();
+        let doubled = in_spatial_order(&pts, |i| 2 * i);
+        assert!(doubled.iter().enumerate().all(|(i, &v)| v == 2 * i));
+        // The k nearest neighbours' distances agree with a brute-force search (this lattice
+        // has ties, so which of two equidistant samples comes first is not compared).
+        let knn = knn_of_first(&pts, pts.len(), 4);
+        for (i, found) in knn.iter().enumerate().step_by(37) {
+            let d2 = |j: usize| (0..3).map(|a| (pts[i][a] - pts[j][a]).powi(2)).sum::<f64>();
+            let mut all: Vec<f64> = (0..pts.len()).filter(|&j| j != i).map(d2).collect();
+            all.sort_by(f64::total_cmp);
+            assert_eq!(found.len(), 4, "sample {i}");
+            assert!(!found.contains(&(i as u32)), "sample {i} found itself");
+            for (&j, want) in found.iter().zip(&all[..4]) {
+                assert!(
+                    (d2(j as usize) - want).abs() < 1e-12,
+                    "sample {i}: {found:?}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn jacobi_reconstructs_a_rotated_metric() {
