@@ -206,15 +206,8 @@ where
 
 /// Sample indices sorted by the Morton code of their positions over the points' bounding
 /// box (21 bits an axis; ties by index, so the order is deterministic).
-pub fn morton_order(positions: &[[f64; 3]]) -> Vec<u32> {
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for p in positions {
-        for a in 0..3 {
-            lo[a] = lo[a].min(p[a]);
-            hi[a] = hi[a].max(p[a]);
-        }
-    }
+fn morton_order(positions: &[[f64; 3]]) -> Vec<u32> {
+    let (lo, hi) = super::points_box(positions);
     let cells = f64::from((1u32 << 21) - 1);
     let scale = [0, 1, 2].map(|a| {
         let e = hi[a] - lo[a];
