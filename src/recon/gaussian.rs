@@ -38,14 +38,21 @@ pub fn gaussian_norm(sigma: f64, m: &Metric) -> f64 {
     metric_det(m).max(0.0).sqrt() / (TWO_PI_3_2 * sigma * sigma * sigma)
 }
 
-/// G_{V}(d) and its gradient with respect to x (d = x − x_i), V = σ²M⁻¹; zero beyond ρ = 1.
-pub fn gaussian_kernel(sigma: f64, m: &Metric, d: [f64; 3]) -> (f64, [f64; 3]) {
+/// G_{V}(d) (d = x − x_i), V = σ²M⁻¹; zero beyond ρ = 1.
+pub fn gaussian_value(sigma: f64, m: &Metric, d: [f64; 3]) -> f64 {
     let rho2 = metric_rho2(m, d);
     if rho2 >= 1.0 {
+        return 0.0;
+    }
+    gaussian_norm(sigma, m) * (-0.5 * rho2 / (sigma * sigma)).exp()
+}
+
+/// G_{V}(d) and its gradient with respect to x (d = x − x_i), V = σ²M⁻¹; zero beyond ρ = 1.
+pub fn gaussian_kernel(sigma: f64, m: &Metric, d: [f64; 3]) -> (f64, [f64; 3]) {
+    let g = gaussian_value(sigma, m, d);
+    if g == 0.0 {
         return (0.0, [0.0; 3]);
     }
-    let norm = gaussian_norm(sigma, m);
-    let g = norm * (-0.5 * rho2 / (sigma * sigma)).exp();
     // ∇G = −G V⁻¹ d = −G M d / σ².
     let md = metric_apply(m, d);
     let s = -g / (sigma * sigma);
@@ -81,7 +88,7 @@ impl KernelVolumes {
             let mut density = 0.0;
             neighbours.for_each(x, &mut |_, p, _, m| {
                 let d = [x[0] - p[0], x[1] - p[1], x[2] - p[2]];
-                density += gaussian_kernel(sigma, m, d).0;
+                density += gaussian_value(sigma, m, d);
             });
             // The sample's own kernel always counts, so density > 0.
             1.0 / density.max(f64::MIN_POSITIVE)
