@@ -19,7 +19,6 @@
 use super::mls::{MlsValue, Neighbours};
 use crate::samples::supports::in_spatial_order;
 use crate::samples::{Metric, Positions, SampleSet, metric_apply, metric_rho2};
-use rayon::prelude::*;
 
 /// Default σ as a fraction of the support radius.
 pub const DEFAULT_SIGMA: f64 = 0.25;
@@ -80,9 +79,12 @@ impl KernelVolumes {
     /// Computes the volumes of a sample set; `neighbours` must list, for any x, every sample
     /// whose support contains x (the field's octree or grid).
     pub fn compute(samples: &SampleSet, neighbours: &(dyn Neighbours + Sync), sigma: f64) -> Self {
-        if let Positions::Grid { spacing, .. } = &samples.positions {
-            return KernelVolumes::Uniform(spacing[0] * spacing[1] * spacing[2]);
-        }
+        let positions = match &samples.positions {
+            Positions::Grid { spacing, .. } => {
+                return KernelVolumes::Uniform(spacing[0] * spacing[1] * spacing[2]);
+            }
+            Positions::Scattered(p) => p,
+        };
         let volume = |i: usize| {
             let x = samples.position(i);
             let mut density = 0.0;
@@ -93,11 +95,7 @@ impl KernelVolumes {
             // The sample's own kernel always counts, so density > 0.
             1.0 / density.max(f64::MIN_POSITIVE)
         };
-        let volumes = match &samples.positions {
-            Positions::Scattered(p) => in_spatial_order(p, volume),
-            Positions::Grid { .. } => (0..samples.len()).into_par_iter().map(volume).collect(),
-        };
-        KernelVolumes::PerSample(volumes)
+        KernelVolumes::PerSample(in_spatial_order(positions, volume))
     }
 }
 
