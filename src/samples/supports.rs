@@ -283,10 +283,7 @@ pub fn nearest_spacing(positions: &[[f64; 3]]) -> f64 {
             .into_iter()
             .map(|n| n.item as usize)
             .find(|&j| j != i)
-            .map_or(0.0, |j| {
-                let y = offset(p, positions[j]);
-                (y[0] * y[0] + y[1] * y[1] + y[2] * y[2]).sqrt()
-            })
+            .map_or(0.0, |j| distance(p, positions[j]))
     });
     let middle = d.len() / 2;
     *d.select_nth_unstable_by(middle, f64::total_cmp).1
@@ -294,6 +291,12 @@ pub fn nearest_spacing(positions: &[[f64; 3]]) -> f64 {
 
 fn offset(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [b[0] - a[0], b[1] - a[1], b[2] - a[2]]
+}
+
+/// |b − a|.
+fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
+    let y = offset(a, b);
+    (y[0] * y[0] + y[1] * y[1] + y[2] * y[2]).sqrt()
 }
 
 /// The metric of an axis-aligned ellipsoid with half axes h.
@@ -330,10 +333,7 @@ pub fn isotropic_neighbourhoods(
         .map(|(p, n)| {
             let d = n
                 .iter()
-                .map(|&j| {
-                    let y = offset(*p, positions[j as usize]);
-                    (y[0] * y[0] + y[1] * y[1] + y[2] * y[2]).sqrt()
-                })
+                .map(|&j| distance(*p, positions[j as usize]))
                 .fold(0.0, f64::max);
             isotropic(support * d.max(f64::MIN_POSITIVE))
         })
@@ -585,16 +585,19 @@ mod tests {
         assert!(doubled.iter().enumerate().all(|(i, &v)| v == 2 * i));
         // The k nearest neighbours' distances agree with a brute-force search (this lattice
         // has ties, so which of two equidistant samples comes first is not compared).
+        let d2 = |i: usize, j: usize| (0..3).map(|a| (pts[i][a] - pts[j][a]).powi(2)).sum::<f64>();
         let knn = knn_of_first(&pts, pts.len(), 4);
         for (i, found) in knn.iter().enumerate().step_by(37) {
-            let d2 = |j: usize| (0..3).map(|a| (pts[i][a] - pts[j][a]).powi(2)).sum::<f64>();
-            let mut all: Vec<f64> = (0..pts.len()).filter(|&j| j != i).map(d2).collect();
+            let mut all: Vec<f64> = (0..pts.len())
+                .filter(|&j| j != i)
+                .map(|j| d2(i, j))
+                .collect();
             all.sort_by(f64::total_cmp);
             assert_eq!(found.len(), 4, "sample {i}");
             assert!(!found.contains(&(i as u32)), "sample {i} found itself");
             for (&j, want) in found.iter().zip(&all[..4]) {
                 assert!(
-                    (d2(j as usize) - want).abs() < 1e-12,
+                    (d2(i, j as usize) - want).abs() < 1e-12,
                     "sample {i}: {found:?}"
                 );
             }
@@ -604,7 +607,7 @@ mod tests {
             .map(|i| {
                 (0..pts.len())
                     .filter(|&j| j != i)
-                    .map(|j| (0..3).map(|a| (pts[i][a] - pts[j][a]).powi(2)).sum::<f64>())
+                    .map(|j| d2(i, j))
                     .fold(f64::INFINITY, f64::min)
                     .sqrt()
             })
