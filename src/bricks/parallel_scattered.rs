@@ -753,7 +753,7 @@ fn knn_supports<E: Exchange>(
     let local = supports::knn_of_first(own, own.len(), k);
     let reach: Vec<f64> = own
         .iter()
-        .zip(&local)
+        .zip(local.iter())
         .map(|(p, n)| {
             if n.len() < k {
                 return f64::INFINITY;
@@ -803,13 +803,13 @@ fn knn_supports<E: Exchange>(
     );
     let neighbours = supports::knn_of_first(&around, own.len(), k);
     let metrics = if settings.anisotropic.unwrap_or(false) {
-        supports::anisotropic_neighbourhoods(&around, &neighbours, settings.knn_support)
+        supports::anisotropic_neighbourhoods(&around, neighbours.par_iter(), settings.knn_support)
     } else {
-        supports::isotropic_neighbourhoods(&around, &neighbours, settings.knn_support)
+        supports::isotropic_neighbourhoods(&around, neighbours.par_iter(), settings.knn_support)
     };
     let nearest = own
         .iter()
-        .zip(&neighbours)
+        .zip(neighbours.iter())
         .map(|(p, n)| {
             n.first().map_or(0.0, |&j| {
                 let q = around[j as usize];

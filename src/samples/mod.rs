@@ -24,6 +24,7 @@ pub mod supports;
 
 use crate::data::DataError;
 use crate::data::dataset::{Dataset, Geometry, Location, grid_point};
+use rayon::prelude::*;
 use std::path::Path;
 
 /// Default support factor of kNN-derived supports.
@@ -288,14 +289,7 @@ impl SampleSet {
         // Cell indices are used unchecked below: a dataset built by hand must pass the
         // loaders' checks too.
         dataset.validate(path)?;
-        let mut set = Self::build(dataset, path, array, settings)?;
-        set.spacing = match &set.positions {
-            Positions::Grid { spacing, .. } => {
-                spacing.iter().copied().fold(f64::INFINITY, f64::min)
-            }
-            Positions::Scattered(p) => supports::nearest_spacing(p),
-        };
-        Ok(set)
+        Self::build(dataset, path, array, settings)
     }
 
     fn build(
@@ -346,7 +340,7 @@ impl SampleSet {
                     values: data.values.clone(),
                     supports: Supports::Uniform(h),
                     domain: Domain::Box { lo, hi },
-                    spacing: 0.0,
+                    spacing: spacing.iter().copied().fold(f64::INFINITY, f64::min),
                     provenance,
                 })
             }
@@ -369,18 +363,21 @@ impl SampleSet {
                         [coords[0][x], coords[1][y], coords[2][z]]
                     })
                     .collect();
-                let metrics = if settings.anisotropic.unwrap_or(true) {
+                let knn = if settings.anisotropic.unwrap_or(true) {
                     provenance.support_kind = "diagonal";
-                    supports::rectilinear(&coords, settings.support)
+                    supports::KnnSupports {
+                        metrics: supports::rectilinear(&coords, settings.support),
+                        spacing: supports::nearest_spacing(&positions),
+                    }
                 } else {
                     supports::isotropic_knn(&positions, settings.knn_support, settings.knn)
                 };
                 Ok(Self {
                     positions: Positions::Scattered(positions),
                     values: data.values.as_f32().into_owned().into(),
-                    supports: Supports::PerSample(metrics),
+                    supports: Supports::PerSample(knn.metrics),
                     domain: Domain::Box { lo, hi },
-                    spacing: 0.0,
+                    spacing: knn.spacing,
                     provenance,
                 })
             }
@@ -392,18 +389,21 @@ impl SampleSet {
                 } else {
                     (*dims, points.clone())
                 };
-                let metrics = if settings.anisotropic.unwrap_or(false) {
+                let knn = if settings.anisotropic.unwrap_or(false) {
                     provenance.support_kind = "anisotropic-edges";
-                    supports::structured(dims, &points, settings.support)
+                    supports::KnnSupports {
+                        metrics: supports::structured(dims, &points, settings.support),
+                        spacing: supports::nearest_spacing(&points),
+                    }
                 } else {
                     supports::isotropic_knn(&points, settings.knn_support, settings.knn)
                 };
                 Ok(Self {
                     positions: Positions::Scattered(points),
                     values: data.values.as_f32().into_owned().into(),
-                    supports: Supports::PerSample(metrics),
+                    supports: Supports::PerSample(knn.metrics),
                     domain: hull,
-                    spacing: 0.0,
+                    spacing: knn.spacing,
                     provenance,
                 })
             }
@@ -418,23 +418,26 @@ impl SampleSet {
                 let merged = merge_duplicates(positions, values);
                 provenance.merged = merged.merged;
                 let hull = mesh::unstructured_hull(points, cells, &source_name)?;
-                let metrics = if settings.anisotropic.unwrap_or(false) && !cell_data {
+                let knn = if settings.anisotropic.unwrap_or(false) && !cell_data {
                     provenance.support_kind = "anisotropic-one-ring";
                     let rings = supports::one_rings(cells, &merged.remap, merged.positions.len());
-                    supports::anisotropic_neighbourhoods(
-                        &merged.positions,
-                        &rings,
-                        settings.knn_support,
-                    )
+                    supports::KnnSupports {
+                        metrics: supports::anisotropic_neighbourhoods(
+                            &merged.positions,
+                            rings.par_iter().map(Vec::as_slice),
+                            settings.knn_support,
+                        ),
+                        spacing: supports::nearest_spacing(&merged.positions),
+                    }
                 } else {
                     derive_scattered(&merged.positions, settings, &mut provenance)
                 };
                 Ok(Self {
                     positions: Positions::Scattered(merged.positions),
                     values: merged.values.into(),
-                    supports: Supports::PerSample(metrics),
+                    supports: Supports::PerSample(knn.metrics),
                     domain: Domain::Hull(hull),
-                    spacing: 0.0,
+                    spacing: knn.spacing,
                     provenance,
                 })
             }
@@ -450,16 +453,16 @@ impl SampleSet {
                         ),
                     });
                 }
-                let metrics = derive_scattered(&merged.positions, settings, &mut provenance);
+                let knn = derive_scattered(&merged.positions, settings, &mut provenance);
                 let mut set = Self {
                     positions: Positions::Scattered(merged.positions),
                     values: merged.values.into(),
-                    supports: Supports::PerSample(metrics),
+                    supports: Supports::PerSample(knn.metrics),
                     domain: Domain::Box {
                         lo: [0.0; 3],
                         hi: [0.0; 3],
                     },
-                    spacing: 0.0,
+                    spacing: knn.spacing,
                     provenance,
                 };
                 let (lo, hi) = set.support_box();
@@ -509,7 +512,7 @@ fn derive_scattered(
     positions: &[[f64; 3]],
     settings: &SampleSettings,
     provenance: &mut Provenance,
-) -> Vec<Metric> {
+) -> supports::KnnSupports {
     if settings.anisotropic.unwrap_or(false) {
         provenance.support_kind = "anisotropic";
         supports::anisotropic_knn(positions, settings.knn_support, settings.knn)

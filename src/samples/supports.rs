@@ -161,26 +161,82 @@ pub fn mean_radius(m: &Metric) -> f64 {
 }
 
 /// The k nearest other samples of every sample (fewer when there are fewer samples).
-fn knn(positions: &[[f64; 3]], k: usize) -> Vec<Vec<u32>> {
+fn knn(positions: &[[f64; 3]], k: usize) -> KnnLists {
     knn_of_first(positions, positions.len(), k)
 }
 
+/// Neighbour lists of one length, flat: sample i's are `indices[i·stride .. (i+1)·stride]`,
+/// nearest first. One allocation where a list per sample made 10⁷ of them at 10⁷ points,
+/// whose freed memory the allocator kept (BENCHMARKS.md, "A point cloud's spacing from its
+/// supports' neighbours").
+pub struct KnnLists {
+    stride: usize,
+    len: usize,
+    indices: Vec<u32>,
+}
+
+impl KnnLists {
+    /// Sample i's list.
+    pub fn get(&self, i: usize) -> &[u32] {
+        &self.indices[i * self.stride..(i + 1) * self.stride]
+    }
+
+    /// The lists in sample order.
+    pub fn iter(&self) -> impl Iterator<Item = &[u32]> {
+        (0..self.len).map(|i| self.get(i))
+    }
+
+    /// The lists in sample order, for rayon.
+    pub fn par_iter(&self) -> impl IndexedParallelIterator<Item = &[u32]> {
+        (0..self.len).into_par_iter().map(|i| self.get(i))
+    }
+}
+
 /// The `k` nearest other samples (indices into `positions`, nearest first) of each of the
-/// first `first` samples: a part of a set whose neighbours come with it.
-pub fn knn_of_first(positions: &[[f64; 3]], first: usize, k: usize) -> Vec<Vec<u32>> {
-    if first == 0 {
-        return Vec::new();
+/// first `first` samples: a part of a set whose neighbours come with it. Every list has
+/// min(k, n − 1) entries for n samples.
+pub fn knn_of_first(positions: &[[f64; 3]], first: usize, k: usize) -> KnnLists {
+    let stride = k.min(positions.len().saturating_sub(1));
+    if first == 0 || stride == 0 {
+        return KnnLists {
+            stride: 0,
+            len: first,
+            indices: Vec::new(),
+        };
     }
     let tree = Tree::new_from_slice(positions);
     let want = NonZero::new((k + 1).min(positions.len())).unwrap_or(NonZero::<usize>::MIN);
-    in_spatial_order(&positions[..first], |i| {
-        tree.nearest_n::<SquaredEuclidean>(&positions[i], want)
-            .into_iter()
-            .map(|n| n.item)
-            .filter(|&j| j as usize != i)
-            .take(k)
-            .collect()
-    })
+    // Queried in Morton order (see in_spatial_order), each list written at its query's rank,
+    // then moved to its sample's place.
+    let order = morton_order(&positions[..first]);
+    let mut ranked = vec![0u32; first * stride];
+    ranked
+        .par_chunks_mut(stride)
+        .zip(order.par_iter())
+        .for_each(|(list, &i)| {
+            let found = tree.nearest_n::<SquaredEuclidean>(&positions[i as usize], want);
+            let others = found.into_iter().map(|n| n.item).filter(|&j| j != i);
+            for (slot, j) in list.iter_mut().zip(others) {
+                *slot = j;
+            }
+        });
+    let mut rank = vec![0u32; first];
+    for (r, &i) in order.iter().enumerate() {
+        rank[i as usize] = r as u32;
+    }
+    let mut indices = vec![0u32; first * stride];
+    indices
+        .par_chunks_mut(stride)
+        .zip(rank.par_iter())
+        .for_each(|(list, &r)| {
+            let r = r as usize;
+            list.copy_from_slice(&ranked[r * stride..(r + 1) * stride]);
+        });
+    KnnLists {
+        stride,
+        len: first,
+        indices,
+    }
 }
 
 /// `f(i)` for every sample i of `positions`, in parallel, returned in index order but computed
@@ -274,17 +330,40 @@ pub fn nearest_spacing(positions: &[[f64; 3]]) -> f64 {
         return 1.0;
     }
     // The nearest other sample of each, without a neighbour list per sample (10⁷ small
-    // allocations at 10⁷ points), and the median by selection, not a sort.
+    // allocations at 10⁷ points).
     let tree = Tree::new_from_slice(positions);
     let two = NonZero::<usize>::MIN.saturating_add(1);
-    let mut d: Vec<f64> = in_spatial_order(positions, |i| {
+    median(in_spatial_order(positions, |i| {
         let p = positions[i];
         tree.nearest_n::<SquaredEuclidean>(&p, two)
             .into_iter()
             .map(|n| n.item as usize)
             .find(|&j| j != i)
             .map_or(0.0, |j| distance(p, positions[j]))
-    });
+    }))
+}
+
+/// [`nearest_spacing`] read off neighbour lists that hold each sample's nearest other sample
+/// first ([`knn`]'s), instead of from a tree and a query of its own: the same distances,
+/// so the same median.
+fn spacing_of_lists(positions: &[[f64; 3]], neighbours: &KnnLists) -> f64 {
+    if positions.len() < 2 {
+        return 1.0;
+    }
+    median(
+        positions
+            .par_iter()
+            .zip(neighbours.par_iter())
+            .map(|(p, n)| {
+                n.first()
+                    .map_or(0.0, |&j| distance(*p, positions[j as usize]))
+            })
+            .collect(),
+    )
+}
+
+/// The median of a non-empty list, by selection (not a sort: 10⁷ distances at 10⁷ points).
+fn median(mut d: Vec<f64>) -> f64 {
     let middle = d.len() / 2;
     *d.select_nth_unstable_by(middle, f64::total_cmp).1
 }
@@ -315,16 +394,28 @@ fn isotropic(h: f64) -> Metric {
     diagonal([h; 3])
 }
 
+/// Supports from each sample's k nearest other samples, and the sample spacing
+/// ([`nearest_spacing`]) that the same neighbour lists give: a point cloud's spacing needs no
+/// second tree and no second query per sample.
+pub struct KnnSupports {
+    pub metrics: Vec<Metric>,
+    pub spacing: f64,
+}
+
 /// h_i = support × distance to the k-th nearest other sample.
-pub fn isotropic_knn(positions: &[[f64; 3]], support: f64, k: usize) -> Vec<Metric> {
-    isotropic_neighbourhoods(positions, &knn(positions, k), support)
+pub fn isotropic_knn(positions: &[[f64; 3]], support: f64, k: usize) -> KnnSupports {
+    let lists = knn(positions, k);
+    KnnSupports {
+        metrics: isotropic_neighbourhoods(positions, lists.par_iter(), support),
+        spacing: spacing_of_lists(positions, &lists),
+    }
 }
 
 /// Balls through the farthest of given neighbourhoods (sample indices), scaled by `support`:
-/// one per neighbourhood.
-pub fn isotropic_neighbourhoods(
+/// one per neighbourhood, for the first samples of `positions`.
+pub fn isotropic_neighbourhoods<'a>(
     positions: &[[f64; 3]],
-    neighbours: &[Vec<u32>],
+    neighbours: impl IndexedParallelIterator<Item = &'a [u32]>,
     support: f64,
 ) -> Vec<Metric> {
     positions
@@ -341,15 +432,19 @@ pub fn isotropic_neighbourhoods(
 }
 
 /// Ellipsoids from the second moment of the k nearest neighbours (module docs).
-pub fn anisotropic_knn(positions: &[[f64; 3]], support: f64, k: usize) -> Vec<Metric> {
-    anisotropic_neighbourhoods(positions, &knn(positions, k), support)
+pub fn anisotropic_knn(positions: &[[f64; 3]], support: f64, k: usize) -> KnnSupports {
+    let lists = knn(positions, k);
+    KnnSupports {
+        metrics: anisotropic_neighbourhoods(positions, lists.par_iter(), support),
+        spacing: spacing_of_lists(positions, &lists),
+    }
 }
 
 /// Ellipsoids from the second moment of given neighbourhoods (sample indices), each scaled so
-/// that its farthest neighbour lies at ρ = 1/support.
-pub fn anisotropic_neighbourhoods(
+/// that its farthest neighbour lies at ρ = 1/support, for the first samples of `positions`.
+pub fn anisotropic_neighbourhoods<'a>(
     positions: &[[f64; 3]],
-    neighbours: &[Vec<u32>],
+    neighbours: impl IndexedParallelIterator<Item = &'a [u32]>,
     support: f64,
 ) -> Vec<Metric> {
     positions
@@ -602,6 +697,19 @@ mod tests {
                 );
             }
         }
+        // A part's lists are the whole set's first ones; fewer samples than k make shorter
+        // lists, each without its own sample.
+        let part = knn_of_first(&pts, 10, 4);
+        assert!((0..10).all(|i| part.get(i) == knn.get(i)));
+        assert_eq!(part.iter().count(), 10);
+        let few = knn_of_first(&pts[..3], 3, 8);
+        for (i, list) in few.iter().enumerate() {
+            let mut list = list.to_vec();
+            list.sort_unstable();
+            let others: Vec<u32> = (0..3).filter(|&j| j != i as u32).collect();
+            assert_eq!(list, others, "sample {i}");
+        }
+        assert_eq!(knn_of_first(&pts[..1], 1, 8).iter().count(), 1);
         // The spacing is the median nearest-neighbour distance, by brute force.
         let mut nearest: Vec<f64> = (0..pts.len())
             .map(|i| {
@@ -618,6 +726,24 @@ mod tests {
             (spacing - nearest[500]).abs() < 1e-12,
             "{spacing} vs {}",
             nearest[500]
+        );
+        // The supports' neighbour lists give the same spacing to the bit, also where samples
+        // coincide (a copy of every fourth one: 500 of the 1 250 distances are 0).
+        assert_eq!(
+            isotropic_knn(&pts, 1.5, 8).spacing.to_bits(),
+            spacing.to_bits()
+        );
+        assert_eq!(
+            anisotropic_knn(&pts, 1.5, 3).spacing.to_bits(),
+            spacing.to_bits()
+        );
+        let mut doubled = pts.clone();
+        doubled.extend(pts.iter().step_by(4));
+        let with_copies = nearest_spacing(&doubled);
+        assert!(with_copies > 0.0 && with_copies < spacing, "{with_copies}");
+        assert_eq!(
+            isotropic_knn(&doubled, 1.5, 8).spacing.to_bits(),
+            with_copies.to_bits()
         );
     }
 
@@ -649,7 +775,7 @@ mod tests {
                 pts.push([i as f64, j as f64, 0.0]);
             }
         }
-        for m in anisotropic_knn(&pts, 1.5, 8) {
+        for m in anisotropic_knn(&pts, 1.5, 8).metrics {
             let (l, _) = eigen_symmetric(&m);
             let (lo, hi) = (
                 l.iter().copied().fold(f64::MAX, f64::min),
