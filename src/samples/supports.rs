@@ -165,76 +165,74 @@ fn knn(positions: &[[f64; 3]], k: usize) -> KnnLists {
     knn_of_first(positions, positions.len(), k)
 }
 
-/// Neighbour lists of one length, flat: sample i's are `indices[i·stride .. (i+1)·stride]`,
-/// nearest first. One allocation where a list per sample made 10⁷ of them at 10⁷ points,
+/// Neighbour lists of one length, flat, nearest first, in the order they were found (the
+/// samples' Morton order): sample i's are `indices[r·stride .. (r+1)·stride]` for its rank
+/// r = `rank[i]`. One allocation where a list per sample made 10⁷ of them at 10⁷ points,
 /// whose freed memory the allocator kept (BENCHMARKS.md, "A point cloud's spacing from its
-/// supports' neighbours").
+/// supports' neighbours"), and no second copy to put them in sample order.
 pub struct KnnLists {
     stride: usize,
-    len: usize,
+    rank: Vec<u32>,
     indices: Vec<u32>,
 }
 
 impl KnnLists {
     /// Sample i's list.
     pub fn get(&self, i: usize) -> &[u32] {
-        &self.indices[i * self.stride..(i + 1) * self.stride]
+        let r = self.rank[i] as usize;
+        &self.indices[r * self.stride..(r + 1) * self.stride]
     }
 
     /// The lists in sample order.
     pub fn iter(&self) -> impl Iterator<Item = &[u32]> {
-        (0..self.len).map(|i| self.get(i))
+        (0..self.rank.len()).map(|i| self.get(i))
     }
 
     /// The lists in sample order, for rayon.
     pub fn par_iter(&self) -> impl IndexedParallelIterator<Item = &[u32]> {
-        (0..self.len).into_par_iter().map(|i| self.get(i))
+        (0..self.rank.len()).into_par_iter().map(|i| self.get(i))
     }
 }
 
 /// The `k` nearest other samples (indices into `positions`, nearest first) of each of the
 /// first `first` samples: a part of a set whose neighbours come with it. Every list has
-/// min(k, n − 1) entries for n samples.
+/// min(k, n − 1) entries for n samples; k ≥ 1 (`reconstruction.knn` is checked).
 pub fn knn_of_first(positions: &[[f64; 3]], first: usize, k: usize) -> KnnLists {
+    debug_assert!(k >= 1, "k nearest neighbours with k = 0");
     let stride = k.min(positions.len().saturating_sub(1));
     if first == 0 || stride == 0 {
         return KnnLists {
             stride: 0,
-            len: first,
+            rank: vec![0; first],
             indices: Vec::new(),
         };
     }
     let tree = Tree::new_from_slice(positions);
     let want = NonZero::new((k + 1).min(positions.len())).unwrap_or(NonZero::<usize>::MIN);
-    // Queried in Morton order (see in_spatial_order), each list written at its query's rank,
-    // then moved to its sample's place.
+    // Queried in Morton order (see in_spatial_order), each list stored at its query's rank.
     let order = morton_order(&positions[..first]);
-    let mut ranked = vec![0u32; first * stride];
-    ranked
+    let mut indices = vec![0u32; first * stride];
+    indices
         .par_chunks_mut(stride)
         .zip(order.par_iter())
         .for_each(|(list, &i)| {
             let found = tree.nearest_n::<SquaredEuclidean>(&positions[i as usize], want);
             let others = found.into_iter().map(|n| n.item).filter(|&j| j != i);
-            for (slot, j) in list.iter_mut().zip(others) {
-                *slot = j;
-            }
+            let filled = list
+                .iter_mut()
+                .zip(others)
+                .map(|(slot, j)| *slot = j)
+                .count();
+            // want = min(k + 1, n) found, at most one of them i itself.
+            debug_assert_eq!(filled, stride, "sample {i}: a short neighbour list");
         });
     let mut rank = vec![0u32; first];
     for (r, &i) in order.iter().enumerate() {
         rank[i as usize] = r as u32;
     }
-    let mut indices = vec![0u32; first * stride];
-    indices
-        .par_chunks_mut(stride)
-        .zip(rank.par_iter())
-        .for_each(|(list, &r)| {
-            let r = r as usize;
-            list.copy_from_slice(&ranked[r * stride..(r + 1) * stride]);
-        });
     KnnLists {
         stride,
-        len: first,
+        rank,
         indices,
     }
 }
@@ -710,6 +708,11 @@ mod tests {
             assert_eq!(list, others, "sample {i}");
         }
         assert_eq!(knn_of_first(&pts[..1], 1, 8).iter().count(), 1);
+        assert_eq!(knn_of_first(&pts, 0, 8).iter().count(), 0);
+        assert_eq!(
+            isotropic_knn(&pts[..3], 1.5, 8).spacing.to_bits(),
+            nearest_spacing(&pts[..3]).to_bits()
+        );
         // The spacing is the median nearest-neighbour distance, by brute force.
         let mut nearest: Vec<f64> = (0..pts.len())
             .map(|i| {
