@@ -370,7 +370,7 @@ impl SampleSet {
                         spacing: supports::nearest_spacing(&positions),
                     }
                 } else {
-                    supports::isotropic_knn(&positions, settings.knn_support, settings.knn)
+                    supports::knn_supports(&positions, settings.knn_support, settings.knn, false)
                 };
                 Ok(Self {
                     positions: Positions::Scattered(positions),
@@ -396,7 +396,7 @@ impl SampleSet {
                         spacing: supports::nearest_spacing(&points),
                     }
                 } else {
-                    supports::isotropic_knn(&points, settings.knn_support, settings.knn)
+                    supports::knn_supports(&points, settings.knn_support, settings.knn, false)
                 };
                 Ok(Self {
                     positions: Positions::Scattered(points),
@@ -513,12 +513,11 @@ fn derive_scattered(
     settings: &SampleSettings,
     provenance: &mut Provenance,
 ) -> supports::KnnSupports {
-    if settings.anisotropic.unwrap_or(false) {
+    let anisotropic = settings.anisotropic.unwrap_or(false);
+    if anisotropic {
         provenance.support_kind = "anisotropic";
-        supports::anisotropic_knn(positions, settings.knn_support, settings.knn)
-    } else {
-        supports::isotropic_knn(positions, settings.knn_support, settings.knn)
     }
+    supports::knn_supports(positions, settings.knn_support, settings.knn, anisotropic)
 }
 
 /// Midpoints of consecutive coordinates (a single coordinate stays).

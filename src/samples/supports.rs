@@ -400,11 +400,22 @@ pub struct KnnSupports {
     pub spacing: f64,
 }
 
-/// h_i = support × distance to the k-th nearest other sample.
-pub fn isotropic_knn(positions: &[[f64; 3]], support: f64, k: usize) -> KnnSupports {
+/// The supports of every sample from its k nearest other samples: anisotropic, ellipsoids
+/// from their second moment (module docs), else h_i = support × the distance to the k-th.
+pub fn knn_supports(
+    positions: &[[f64; 3]],
+    support: f64,
+    k: usize,
+    anisotropic: bool,
+) -> KnnSupports {
     let lists = knn(positions, k);
+    let metrics = if anisotropic {
+        anisotropic_neighbourhoods(positions, lists.par_iter(), support)
+    } else {
+        isotropic_neighbourhoods(positions, lists.par_iter(), support)
+    };
     KnnSupports {
-        metrics: isotropic_neighbourhoods(positions, lists.par_iter(), support),
+        metrics,
         spacing: spacing_of_lists(positions, &lists),
     }
 }
@@ -427,15 +438,6 @@ pub fn isotropic_neighbourhoods<'a>(
             isotropic(support * d.max(f64::MIN_POSITIVE))
         })
         .collect()
-}
-
-/// Ellipsoids from the second moment of the k nearest neighbours (module docs).
-pub fn anisotropic_knn(positions: &[[f64; 3]], support: f64, k: usize) -> KnnSupports {
-    let lists = knn(positions, k);
-    KnnSupports {
-        metrics: anisotropic_neighbourhoods(positions, lists.par_iter(), support),
-        spacing: spacing_of_lists(positions, &lists),
-    }
 }
 
 /// Ellipsoids from the second moment of given neighbourhoods (sample indices), each scaled so
@@ -710,7 +712,7 @@ mod tests {
         assert_eq!(knn_of_first(&pts[..1], 1, 8).iter().count(), 1);
         assert_eq!(knn_of_first(&pts, 0, 8).iter().count(), 0);
         assert_eq!(
-            isotropic_knn(&pts[..3], 1.5, 8).spacing.to_bits(),
+            knn_supports(&pts[..3], 1.5, 8, false).spacing.to_bits(),
             nearest_spacing(&pts[..3]).to_bits()
         );
         // The spacing is the median nearest-neighbour distance, by brute force.
@@ -733,11 +735,11 @@ mod tests {
         // The supports' neighbour lists give the same spacing to the bit, also where samples
         // coincide (a copy of every fourth one: 500 of the 1 250 distances are 0).
         assert_eq!(
-            isotropic_knn(&pts, 1.5, 8).spacing.to_bits(),
+            knn_supports(&pts, 1.5, 8, false).spacing.to_bits(),
             spacing.to_bits()
         );
         assert_eq!(
-            anisotropic_knn(&pts, 1.5, 3).spacing.to_bits(),
+            knn_supports(&pts, 1.5, 3, true).spacing.to_bits(),
             spacing.to_bits()
         );
         let mut doubled = pts.clone();
@@ -745,7 +747,7 @@ mod tests {
         let with_copies = nearest_spacing(&doubled);
         assert!(with_copies > 0.0 && with_copies < spacing, "{with_copies}");
         assert_eq!(
-            isotropic_knn(&doubled, 1.5, 8).spacing.to_bits(),
+            knn_supports(&doubled, 1.5, 8, false).spacing.to_bits(),
             with_copies.to_bits()
         );
     }
@@ -778,7 +780,7 @@ mod tests {
                 pts.push([i as f64, j as f64, 0.0]);
             }
         }
-        for m in anisotropic_knn(&pts, 1.5, 8).metrics {
+        for m in knn_supports(&pts, 1.5, 8, true).metrics {
             let (l, _) = eigen_symmetric(&m);
             let (lo, hi) = (
                 l.iter().copied().fold(f64::MAX, f64::min),
