@@ -10,7 +10,7 @@ use glam::DVec3;
 use vmls::renderer::Renderer;
 use vmls::samples::Metric;
 use vmls::splat::project::KernelKind;
-use vmls::splat::project::{Kernel, sheet_share, splat_footprint, splat_project};
+use vmls::splat::project::{Kernel, sheet_share, splat_footprint, splat_profile, splat_project};
 use vmls::splat::raster::splat_image;
 use vmls::splat::{QUADRATURE_MAX_SHEET, RINGS, SCAN_BLOCK, Shading, SheetShare, choose_ring};
 use vmls::view::camera::Projection;
@@ -169,7 +169,7 @@ fn one_kernel_footprint_is_the_line_integral_of_its_gaussian() {
 #[test]
 fn gpu_splatting_matches_its_cpu_twin_on_a_grid() {
     let (ctx, _) = gpu();
-    let cases: [(&str, &[&str]); 12] = [
+    let cases: [(&str, &[&str]); 13] = [
         (
             "pre-shaded, thin sheets (buckets over several scan blocks)",
             &["render.method=\"splat\"", "splat.slab=0.004"],
@@ -194,6 +194,14 @@ fn gpu_splatting_matches_its_cpu_twin_on_a_grid() {
                 "render.method=\"splat-post\"",
                 "splat.sheet_share=\"quadrature\"",
                 "splat.ring=4",
+            ],
+        ),
+        (
+            "post-shaded, quadrature widening kernels thinner than the sheets",
+            &[
+                "render.method=\"splat-post\"",
+                "splat.sheet_share=\"quadrature\"",
+                "splat.slab=4.0",
             ],
         ),
         (
@@ -253,6 +261,11 @@ fn gpu_splatting_matches_its_cpu_twin_on_a_grid() {
         let s = scene(&extra);
         let shading = s.render.method.splat_shading().expect("a splat method");
         let frame_setup = setup(&s, &field, shading);
+        assert_eq!(
+            frame_setup.widen,
+            name.contains("widening"),
+            "{name}: kernels widened"
+        );
         if name.starts_with("pre-shaded, thin sheets") {
             // The scan's second level (block sums) only runs with more than one block.
             let blocks = frame_setup.buckets().div_ceil(u64::from(SCAN_BLOCK));
@@ -291,7 +304,7 @@ fn gpu_splatting_matches_its_cpu_twin_on_a_grid() {
 }
 
 #[test]
-fn the_quadrature_sheet_share_keeps_its_bound_and_serves_only_thin_sheets() {
+fn the_quadrature_sheet_share_keeps_its_bound_and_widens_thinner_kernels() {
     // Against the erfc (1.5e-7) at every sheet position: within 1.5e-4 of the kernel's
     // integral up to QUADRATURE_MAX_SHEET deviations, and far off beyond it.
     let worst = |h: f64| {
@@ -312,19 +325,32 @@ fn the_quadrature_sheet_share_keeps_its_bound_and_serves_only_thin_sheets() {
         );
     }
     assert!(worst(3.0) > 1e-3, "{:.3e}", worst(3.0));
-    // Unset, post-shaded splatting takes the quadrature where every kernel's sheets are thin
-    // enough, and the erfc where they are not; pre-shaded splits always take the erfc.
+    // Unset, post-shaded splatting takes the quadrature where at most WIDEN_MAX_SHARE of the
+    // kernels are thinner than it serves (on this grid: none or all), and the erfc where more
+    // are; pre-shaded splits always take the erfc. Asked for, the quadrature widens the thinner
+    // kernels.
     let field = scene(&[]).field(|_| {}).expect("field");
-    let rule = |extra: &[&str], shading| setup(&scene(extra), &field, shading).sheet_share;
-    assert_eq!(rule(&[], Shading::Post), SheetShare::Quadrature);
-    assert_eq!(rule(&["splat.slab=4.0"], Shading::Post), SheetShare::Erfc);
-    assert_eq!(rule(&["splat.split=true"], Shading::Pre), SheetShare::Erfc);
-    for (extra, shading, key) in [
-        (
-            &["splat.sheet_share=\"quadrature\"", "splat.slab=4.0"][..],
-            Shading::Post,
-            "splat.sheet_share",
+    let rule = |extra: &[&str], shading| {
+        let s = setup(&scene(extra), &field, shading);
+        (s.sheet_share, s.widen)
+    };
+    assert_eq!(rule(&[], Shading::Post), (SheetShare::Quadrature, false));
+    assert_eq!(
+        rule(&["splat.slab=4.0"], Shading::Post),
+        (SheetShare::Erfc, false)
+    );
+    assert_eq!(
+        rule(
+            &["splat.sheet_share=\"quadrature\"", "splat.slab=4.0"],
+            Shading::Post
         ),
+        (SheetShare::Quadrature, true)
+    );
+    assert_eq!(
+        rule(&["splat.split=true"], Shading::Pre),
+        (SheetShare::Erfc, false)
+    );
+    for (extra, shading, key) in [
         (
             &["splat.sheet_share=\"quadrature\"", "splat.split=true"][..],
             Shading::Pre,
@@ -535,4 +561,78 @@ fn ewa_beats_no_lowpass_and_swan_on_a_minified_zebra() {
         4.0 * errors[0].1 < errors[2].1,
         "EWA must blur less than SWAN: {errors:?}"
     );
+}
+
+#[test]
+fn widened_kernels_keep_their_line_integrals() {
+    // Sheets 3 spacings thick and the quadrature asked for: every kernel here is thinner along
+    // the rays than it serves, so each is widened (SplatSetup::share_deviation). The sheets of a
+    // kernel's entries must hold its widened profile: its shares through every pixel of its
+    // footprint sum to its line integral there but for the tails beyond the cutoff. Entries
+    // cut at the unwidened kernel's reach (no reach added in splat_project) kept 0.54 of it.
+    let base = scene(&[
+        "render.method=\"splat-post\"",
+        "splat.sheet_share=\"quadrature\"",
+        "splat.slab=3.0",
+        "camera.width=128",
+        "camera.height=128",
+    ]);
+    let field = base.field(|_| {}).expect("field");
+    let metrics = [
+        ("isotropic", rotated_metric([0.04; 3], 0.0)),
+        ("flat 16:1", rotated_metric([0.16, 0.01, 0.05], 0.7)),
+    ];
+    let mut checked = 0;
+    for projection in [
+        Projection::Perspective {
+            fov_y_degrees: 30.0,
+        },
+        Projection::Orthographic { view_height: 1.6 },
+    ] {
+        let mut s = base.clone();
+        s.camera.projection = projection;
+        let setup = setup(&s, &field, Shading::Post);
+        let dev = setup.share_deviation().expect("kernels widened");
+        // Mass of a normal distribution within the cutoff, and the quadrature's error.
+        let kept = 1.0 - 2.0 * sheet_share(SheetShare::Erfc, setup.settings.cutoff, 1e30) - 1e-3;
+        for (name, metric) in &metrics {
+            let kernel = Kernel {
+                position: [0.1, -0.05, 0.02],
+                value: 0.7,
+                metric: *metric,
+                volume: 2e-3,
+                kind: KernelKind::Volume,
+            };
+            let splat = splat_project(&setup, &s.transfer, &kernel).expect("projected");
+            let (cx, cy) = (splat.centre[0].round(), splat.centre[1].round());
+            let mut worst: f64 = 1.0;
+            for y in -6..=6 {
+                for x in -6..=6 {
+                    let (px, py) = (cx + f64::from(x), cy + f64::from(y));
+                    let Some((amplitude, m, inv)) = splat_profile(&splat, &setup, px, py) else {
+                        continue;
+                    };
+                    assert!(inv > 1.0 / dev, "{name}: a kernel the sheets do not widen");
+                    let inv = inv.min(1.0 / dev);
+                    let shares: f64 = (splat.slabs[0]..=splat.slabs[1])
+                        .map(|k| {
+                            let (a, b) = setup.slab_bounds(k);
+                            sheet_share(SheetShare::Quadrature, (a - m) * inv, (b - m) * inv)
+                        })
+                        .sum();
+                    assert!(amplitude > 0.0);
+                    worst = worst.min(shares);
+                    checked += 1;
+                }
+            }
+            eprintln!(
+                "{name}, {projection:?}: shares sum to at least {worst:.5} of the line integral"
+            );
+            assert!(
+                worst >= kept,
+                "{name}, {projection:?}: {worst:.5} < {kept:.5}"
+            );
+        }
+    }
+    assert!(checked > 100, "{checked} pixels");
 }

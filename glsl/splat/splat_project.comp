@@ -253,6 +253,23 @@ Splat project(Sample k) {
     float gershgorin = max(max(dot(abs(v_f[0]), one), dot(abs(v_f[1]), one)), dot(abs(v_f[2]), one));
     depth_reach = max(depth_reach, cutoff * sqrt(gershgorin));
 #endif
+#if SPLAT_WIDEN == 1
+    // A kernel the quadrature widens reaches that much further (twin: thinner_than in
+    // src/splat/project.rs): its affine deviation, or for exact footprints a lower bound over
+    // every direction, sigma^2 / the metric's Gershgorin bound on its largest eigenvalue.
+    float widened = params.slab_world / float(QUADRATURE_MAX_SHEET);
+#if SPLAT_EXACT == 1
+    vec4 wm = k.metric, wmo = k.metric_off;
+    float lmax = max(max(wm.x + abs(wm.w) + abs(wmo.x), wm.y + abs(wm.w) + abs(wmo.y)),
+                     wm.z + abs(wmo.x) + abs(wmo.y));
+    float thinnest = sigma * sigma / lmax;
+#else
+    float thinnest = cond;
+#endif
+    if (thinnest < widened * widened) {
+        depth_reach += cutoff * widened;
+    }
+#endif
     float slab0 = params.slab0_world, slab = params.slab_world;
     float first = max(floor((t - depth_reach - slab0) / slab), float(params.sheet_first));
     float last = min(floor((t + depth_reach - slab0) / slab), float(params.sheet_last));

@@ -19,7 +19,8 @@
 // SPLAT_OCCLUSION the tile stops once every pixel of it is opaque. No atomics on pixels, no
 // sheet buffers; each pixel is written once. Variant macros: SPLAT_POST, SPLAT_ORTHO,
 // SPLAT_EXACT, SPLAT_RING (0, or post-shaded: one entry per SPLAT_RING sheets, the sheets ahead
-// in ring registers), SPLAT_QUADRATURE (its sheet shares by the quadrature, else the erfc),
+// in ring registers), SPLAT_QUADRATURE (its sheet shares by the quadrature, else the erfc;
+// SPLAT_WIDEN: kernels thinner than it serves shared as if that thick),
 // SPLAT_OCCLUSION, SPLAT_ISOSURFACES, SPLAT_SURFACES, SPLAT_HULL, SPLAT_BRICK (a brick's frame:
 // a pixel composites only the sheets whose midpoint on its ray lies in the brick's kd cell,
 // twin SplatSetup::owns), SPLAT_TILE,
@@ -334,6 +335,11 @@ void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) 
     // h <= QUADRATURE_MAX_SHEET keeps every sheet that matters within 13 deviations of its
     // seed, where f32's e^(-z^2/2) has not underflowed. Seeds further out are clamped (their
     // sheets are all ~0, and an unclamped rf could reach infinity against a zero g).
+#if SPLAT_WIDEN == 1
+    // A kernel thinner along this ray than the rule serves is shared out as if it were that
+    // thick (twin: SplatSetup::share_deviation); its entries reach as far (splat_project).
+    pr.z = min(pr.z, float(QUADRATURE_MAX_SHEET) / slab);
+#endif
     float h = slab * pr.z;
     float dz = 0.5 * h;
     float c = exp_e(-dz * dz);

@@ -116,6 +116,8 @@ pub struct SplatVariant {
     /// With ring registers: the quadrature sheet share (`SplatSetup::sheet_share`), else the
     /// erfc.
     pub quadrature: bool,
+    /// The quadrature widens kernels thinner than it serves (`SplatSetup::widen`).
+    pub widen: bool,
     pub occlusion: bool,
     pub isosurfaces: bool,
     /// Surface splats (pre-shaded isosurfaces).
@@ -152,6 +154,7 @@ impl SplatVariant {
             split: setup.split,
             ring: setup.ring,
             quadrature: setup.sheet_share == super::SheetShare::Quadrature,
+            widen: setup.widen,
             occlusion: setup.settings.occlusion,
             isosurfaces: !setup.isosurfaces.is_empty(),
             surfaces: setup.settings.surface && !setup.isosurfaces.is_empty(),
@@ -190,6 +193,11 @@ impl SplatVariant {
             ("SPLAT_SPLIT".into(), flag(self.split)),
             ("SPLAT_RING".into(), self.ring.to_string()),
             ("SPLAT_QUADRATURE".into(), flag(self.quadrature)),
+            ("SPLAT_WIDEN".into(), flag(self.widen)),
+            (
+                "QUADRATURE_MAX_SHEET".into(),
+                format!("{:?}", super::QUADRATURE_MAX_SHEET),
+            ),
             ("SPLAT_OCCLUSION".into(), flag(self.occlusion)),
             ("SPLAT_ISOSURFACES".into(), flag(self.isosurfaces)),
             ("SPLAT_SURFACES".into(), flag(self.surfaces)),
@@ -253,10 +261,10 @@ impl SplatVariant {
             if self.occlusion { " occlusion" } else { "" },
             if self.split { "" } else { " whole-kernels" },
             if self.ring > 0 {
-                let rule = if self.quadrature {
-                    "quadrature"
-                } else {
-                    "erfc"
+                let rule = match (self.quadrature, self.widen) {
+                    (true, true) => "quadrature widening-thin-kernels",
+                    (true, false) => "quadrature",
+                    (false, _) => "erfc",
                 };
                 format!(" ring {} {rule}", self.ring)
             } else {

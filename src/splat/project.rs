@@ -35,6 +35,7 @@
 
 use super::{Antialias, MIN_VARIANCE, Shading, SheetShare, SplatCounts, SplatSetup};
 use crate::samples::Metric;
+use crate::samples::supports::largest_eigenvalue_bound;
 use crate::view::shading::shade_cos;
 use crate::view::transfer::TransferFunction;
 use glam::DVec3;
@@ -315,6 +316,18 @@ fn exact_footprint(
     finite.then_some(out)
 }
 
+/// Whether some ray through the kernel may see a deviation below `dev`: the affine footprint's
+/// one along every ray (√cond), or, for exact footprints, a lower bound over all directions
+/// (the filtered variance is at least σ²/λ_max(M), bounded by Gershgorin).
+fn thinner_than(setup: &SplatSetup, kernel: &Kernel, exact: bool, cond: f64, dev: f64) -> bool {
+    let variance = if exact {
+        setup.sigma * setup.sigma / largest_eigenvalue_bound(&kernel.metric)
+    } else {
+        cond
+    };
+    variance < dev * dev
+}
+
 /// Projects one kernel; `Err` says why it is culled.
 pub fn splat_project(
     setup: &SplatSetup,
@@ -408,6 +421,15 @@ pub fn splat_project(
     let depth_reach = exact
         .as_ref()
         .map_or(affine_reach, |x| affine_reach.max(x.reach));
+    // A kernel the quadrature widens (SplatSetup::share_deviation) reaches that much further
+    // along a ray: where a ray through it may be thinner than the widened deviation (its
+    // affine deviation √cond, else at least σ × the support's shortest half axis).
+    let depth_reach = match setup.share_deviation() {
+        Some(dev) if thinner_than(setup, kernel, exact.is_some(), cond, dev) => {
+            depth_reach + cut * dev
+        }
+        _ => depth_reach,
+    };
     let first = ((t - depth_reach - setup.slab0) / setup.slab_world)
         .floor()
         .max(f64::from(k0));

@@ -230,6 +230,11 @@ pub fn splat_raster(
                             continue;
                         };
                         counts.contributions += 1;
+                        // A kernel thinner along this ray than the quadrature serves is shared
+                        // as if it were that thick (SplatSetup::share_deviation).
+                        let inv = setup
+                            .share_deviation()
+                            .map_or(inv, |dev| inv.min(1.0 / dev));
                         let share = |(a, b): (f64, f64)| {
                             amplitude * sheet_share(setup.sheet_share, (a - m) * inv, (b - m) * inv)
                         };

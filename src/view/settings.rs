@@ -197,7 +197,8 @@ pub enum SheetShare {
     /// The Hermite–Simpson rule on each sheet (the Gaussian at both boundaries and the middle,
     /// its slope at both boundaries; exact for quintics), the Gaussians by a product recurrence
     /// from two seeds per entry: a few multiplies per sheet. For sheets at most
-    /// [`crate::splat::QUADRATURE_MAX_SHEET`] deviations thick.
+    /// [`crate::splat::QUADRATURE_MAX_SHEET`] deviations thick: a kernel thinner along a ray
+    /// is shared as if it were that thick (`SplatSetup::share_deviation`).
     Quadrature,
 }
 
