@@ -807,18 +807,7 @@ fn knn_supports<E: Exchange>(
     } else {
         supports::isotropic_neighbourhoods(&around, neighbours.par_iter(), settings.knn_support)
     };
-    let nearest = own
-        .iter()
-        .zip(neighbours.iter())
-        .map(|(p, n)| {
-            n.first().map_or(0.0, |&j| {
-                let q = around[j as usize];
-                let y = [q[0] - p[0], q[1] - p[1], q[2] - p[2]];
-                (y[0] * y[0] + y[1] * y[1] + y[2] * y[2]).sqrt()
-            })
-        })
-        .collect();
-    (metrics, nearest)
+    (metrics, supports::nearest_distances(&around, &neighbours))
 }
 
 /// The hull of a mesh whose ranks found `faces` unshared among their own cells.

@@ -365,10 +365,10 @@ impl SampleSet {
                     .collect();
                 let knn = if settings.anisotropic.unwrap_or(true) {
                     provenance.support_kind = "diagonal";
-                    supports::KnnSupports {
-                        metrics: supports::rectilinear(&coords, settings.support),
-                        spacing: supports::nearest_spacing(&positions),
-                    }
+                    supports::SupportsAndSpacing::measured(
+                        supports::rectilinear(&coords, settings.support),
+                        &positions,
+                    )
                 } else {
                     supports::knn_supports(&positions, settings.knn_support, settings.knn, false)
                 };
@@ -391,10 +391,10 @@ impl SampleSet {
                 };
                 let knn = if settings.anisotropic.unwrap_or(false) {
                     provenance.support_kind = "anisotropic-edges";
-                    supports::KnnSupports {
-                        metrics: supports::structured(dims, &points, settings.support),
-                        spacing: supports::nearest_spacing(&points),
-                    }
+                    supports::SupportsAndSpacing::measured(
+                        supports::structured(dims, &points, settings.support),
+                        &points,
+                    )
                 } else {
                     supports::knn_supports(&points, settings.knn_support, settings.knn, false)
                 };
@@ -421,14 +421,14 @@ impl SampleSet {
                 let knn = if settings.anisotropic.unwrap_or(false) && !cell_data {
                     provenance.support_kind = "anisotropic-one-ring";
                     let rings = supports::one_rings(cells, &merged.remap, merged.positions.len());
-                    supports::KnnSupports {
-                        metrics: supports::anisotropic_neighbourhoods(
+                    supports::SupportsAndSpacing::measured(
+                        supports::anisotropic_neighbourhoods(
                             &merged.positions,
                             rings.par_iter().map(Vec::as_slice),
                             settings.knn_support,
                         ),
-                        spacing: supports::nearest_spacing(&merged.positions),
-                    }
+                        &merged.positions,
+                    )
                 } else {
                     derive_scattered(&merged.positions, settings, &mut provenance)
                 };
@@ -512,7 +512,7 @@ fn derive_scattered(
     positions: &[[f64; 3]],
     settings: &SampleSettings,
     provenance: &mut Provenance,
-) -> supports::KnnSupports {
+) -> supports::SupportsAndSpacing {
     let anisotropic = settings.anisotropic.unwrap_or(false);
     if anisotropic {
         provenance.support_kind = "anisotropic";

@@ -341,23 +341,26 @@ pub fn nearest_spacing(positions: &[[f64; 3]]) -> f64 {
     }))
 }
 
-/// [`nearest_spacing`] read off neighbour lists that hold each sample's nearest other sample
-/// first ([`knn`]'s), instead of from a tree and a query of its own: the same distances,
-/// so the same median.
+/// Each of the first samples' distance to its nearest other sample, read off neighbour lists
+/// that hold it first ([`knn_of_first`]'s): what [`nearest_spacing`] finds with a tree and a
+/// query of its own, the same distances.
+pub fn nearest_distances(positions: &[[f64; 3]], neighbours: &KnnLists) -> Vec<f64> {
+    positions
+        .par_iter()
+        .zip(neighbours.par_iter())
+        .map(|(p, n)| {
+            n.first()
+                .map_or(0.0, |&j| distance(*p, positions[j as usize]))
+        })
+        .collect()
+}
+
+/// [`nearest_spacing`] from the neighbour lists ([`nearest_distances`]): the same median.
 fn spacing_of_lists(positions: &[[f64; 3]], neighbours: &KnnLists) -> f64 {
     if positions.len() < 2 {
         return 1.0;
     }
-    median(
-        positions
-            .par_iter()
-            .zip(neighbours.par_iter())
-            .map(|(p, n)| {
-                n.first()
-                    .map_or(0.0, |&j| distance(*p, positions[j as usize]))
-            })
-            .collect(),
-    )
+    median(nearest_distances(positions, neighbours))
 }
 
 /// The median of a non-empty list, by selection (not a sort: 10⁷ distances at 10⁷ points).
@@ -392,12 +395,22 @@ fn isotropic(h: f64) -> Metric {
     diagonal([h; 3])
 }
 
-/// Supports from each sample's k nearest other samples, and the sample spacing
-/// ([`nearest_spacing`]) that the same neighbour lists give: a point cloud's spacing needs no
-/// second tree and no second query per sample.
-pub struct KnnSupports {
+/// Per-sample supports and the sample spacing ([`nearest_spacing`]). Supports from the k
+/// nearest neighbours ([`knn_supports`]) read the spacing off the same lists: a point cloud's
+/// spacing needs no second tree and no second query per sample.
+pub struct SupportsAndSpacing {
     pub metrics: Vec<Metric>,
     pub spacing: f64,
+}
+
+impl SupportsAndSpacing {
+    /// Supports found otherwise (grid edges, one-rings), the spacing by its own search.
+    pub fn measured(metrics: Vec<Metric>, positions: &[[f64; 3]]) -> Self {
+        Self {
+            metrics,
+            spacing: nearest_spacing(positions),
+        }
+    }
 }
 
 /// The supports of every sample from its k nearest other samples: anisotropic, ellipsoids
@@ -407,14 +420,14 @@ pub fn knn_supports(
     support: f64,
     k: usize,
     anisotropic: bool,
-) -> KnnSupports {
+) -> SupportsAndSpacing {
     let lists = knn(positions, k);
     let metrics = if anisotropic {
         anisotropic_neighbourhoods(positions, lists.par_iter(), support)
     } else {
         isotropic_neighbourhoods(positions, lists.par_iter(), support)
     };
-    KnnSupports {
+    SupportsAndSpacing {
         metrics,
         spacing: spacing_of_lists(positions, &lists),
     }

@@ -151,6 +151,11 @@ pub fn splat_raster(
     let (w, h) = (setup.camera.width as i32, setup.camera.height as i32);
     let edge = t + 2 * a;
     let post = setup.shading == Shading::Post;
+    // The quadrature's largest 1/deviation: thinner kernels are shared as if that thick
+    // (SplatSetup::share_deviation).
+    let widest_inv = setup
+        .share_deviation()
+        .map_or(f64::INFINITY, |dev| 1.0 / dev);
     let (x0, y0) = (tile.0 as i32 * t - a, tile.1 as i32 * t - a);
     let mut lanes: Vec<Lane> = (0..edge * edge)
         .map(|l| {
@@ -230,11 +235,7 @@ pub fn splat_raster(
                             continue;
                         };
                         counts.contributions += 1;
-                        // A kernel thinner along this ray than the quadrature serves is shared
-                        // as if it were that thick (SplatSetup::share_deviation).
-                        let inv = setup
-                            .share_deviation()
-                            .map_or(inv, |dev| inv.min(1.0 / dev));
+                        let inv = inv.min(widest_inv);
                         let share = |(a, b): (f64, f64)| {
                             amplitude * sheet_share(setup.sheet_share, (a - m) * inv, (b - m) * inv)
                         };
