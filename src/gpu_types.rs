@@ -111,6 +111,11 @@ pub mod binding {
     /// (`raycast::segments`): written by the ray casters that walk the hull and keep what they
     /// found (`HULL_CACHED` 2), read by those that read it instead (`HULL_CACHED` 1).
     pub const RAY_SEGMENTS: u32 = 40;
+    /// Splatting: where `splat_raster` leaves a tile walk that one dispatch could not finish
+    /// (llvmpipe's loop limit) for the next pass of its band: per tile of the band and
+    /// invocation a tag, the walk's position and its pixels' registers
+    /// (`SplatVariant::raster_tile_words`).
+    pub const SPLAT_RASTER_STATE: u32 = 41;
 
     /// How kernels read a binding: the grid and the octree's samples, nodes and references
     /// through texel-buffer views (one AVX2 gather per 8 lanes on llvmpipe instead of a per-lane
@@ -134,7 +139,7 @@ pub mod binding {
     }
 
     /// Every binding with its macro name.
-    pub const ALL: [(&str, u32); 41] = [
+    pub const ALL: [(&str, u32); 42] = [
         ("BINDING_PARAMS", PARAMS),
         ("BINDING_GRID", GRID),
         ("BINDING_SAMPLES", SAMPLES),
@@ -176,6 +181,7 @@ pub mod binding {
         ("BINDING_RESAMPLE_PAGES", RESAMPLE_PAGES),
         ("BINDING_RESAMPLE_SLOTS", RESAMPLE_SLOTS),
         ("BINDING_RAY_SEGMENTS", RAY_SEGMENTS),
+        ("BINDING_SPLAT_RASTER_STATE", SPLAT_RASTER_STATE),
     ];
 }
 
@@ -225,6 +231,14 @@ pub mod splat_stat {
     /// Buckets too large for `splat_order`'s first pass, handed to its second (their indices
     /// in the bucket cursors, which the scatter no longer needs).
     pub const LARGE_BUCKETS: usize = 17;
+    /// Invocations whose tile walk `splat_raster` left unfinished for the band's next pass
+    /// (their registers saved): a workgroup's invocations per tile and pass, fewer where
+    /// some of its subgroups had stopped, every pixel opaque.
+    pub const RESUMED: usize = 18;
+    /// The first of one word per band of `RASTER_BAND_ROWS` tile rows: the most entries any
+    /// tile of the band walks (`splat_walks`), from which its passes follow
+    /// (`splat::plan::RasterWalk::passes`).
+    pub const BAND_ENTRIES: usize = 19;
 }
 
 /// `#define BINDING_* n` for every binding (and `GRID_PAD`, the `RAY_*` count flags), to pass
@@ -256,6 +270,8 @@ pub fn binding_defines() -> Vec<(String, String)> {
         ),
         ("SPLAT_STAT_UNORDERED", splat_stat::UNORDERED as u32),
         ("SPLAT_STAT_LARGE_BUCKETS", splat_stat::LARGE_BUCKETS as u32),
+        ("SPLAT_STAT_RESUMED", splat_stat::RESUMED as u32),
+        ("SPLAT_STAT_BAND_ENTRIES", splat_stat::BAND_ENTRIES as u32),
         ("RAY_DONE", ray_count::DONE),
         ("RAY_TRUNCATED", ray_count::TRUNCATED),
         ("RAY_HULL_OVERFLOW", ray_count::HULL_OVERFLOW),
@@ -515,8 +531,16 @@ pub struct PlanPush {
     /// Tile rows per dispatch of `splat_raster`: one set of arguments per band follows
     /// splat_bin's and splat_order's.
     pub band_rows: u32,
+    /// `RasterPush::chunk` and `sheet_cost`, and the sheets walked (sheets, and one more
+    /// post-shaded): with each band's entries (`splat_walks`) they give its passes.
+    pub chunk: u32,
+    pub sheet_cost: u32,
+    pub steps: u32,
+    /// Passes recorded after each band's first: their arguments follow the bands', `resumes`
+    /// per band; those a band does not need dispatch nothing.
+    pub resumes: u32,
 }
-const _: () = assert!(std::mem::size_of::<PlanPush>() == 32);
+const _: () = assert!(std::mem::size_of::<PlanPush>() == 48);
 
 /// Constants of the splatting kernels. GLSL twin: `SplatParams`. The camera is the ray
 /// caster's [`CameraBlock`], so `camera.glsl` serves both renderers.
@@ -611,12 +635,36 @@ pub struct ScanPush {
 const _: () = assert!(std::mem::size_of::<ScanPush>() == 16);
 
 /// Push constants of `splat_raster`: the frame is rasterized in bands of tile rows (in
-/// `render()`, one submission each). GLSL twin: `RasterPush`.
+/// `render()`, one submission each), each band in passes that continue the walks the pass
+/// before left unfinished. GLSL twin: `RasterPush`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
 pub struct RasterPush {
     /// The band's first tile row.
     pub tile_row: u32,
-    pub _pad: [u32; 3],
+    /// This pass (0: the walks start), and the band's last recorded pass: a walk left
+    /// unfinished by it is counted as cut short.
+    pub pass: u32,
+    pub last_pass: u32,
+    /// Walk cost a pass may spend per tile (loop iterations: one per entry, `sheet_cost` per
+    /// sheet), below llvmpipe's 65 535.
+    pub chunk: u32,
+    pub sheet_cost: u32,
+    /// The band's index: its longest walk is in the counters (`splat_stat::BAND_ENTRIES`),
+    /// from which the kernel knows the band's last pass where fewer were recorded.
+    pub band: u32,
+    pub _pad: [u32; 2],
 }
-const _: () = assert!(std::mem::size_of::<RasterPush>() == 16);
+const _: () = assert!(std::mem::size_of::<RasterPush>() == 32);
+
+/// Push constants of `splat_walks`. GLSL twin: `WalkPush`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct WalkPush {
+    /// Image tiles, tiles per row, sheets (buckets per tile) and tile rows per band.
+    pub tiles: u32,
+    pub tiles_x: u32,
+    pub slabs: u32,
+    pub band_rows: u32,
+}
+const _: () = assert!(std::mem::size_of::<WalkPush>() == 16);

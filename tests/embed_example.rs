@@ -496,6 +496,27 @@ fn recorded_splatting_learns_its_entry_count() {
             assert!(matches!(err, RenderError::Budget { .. }), "{err}");
             renderer.set_work_budget(None);
             run(&mut renderer, &thin.view()).expect("without the budget it runs");
+
+            // Walks of a few hundred loop iterations a pass: the frames recorded so far took
+            // one pass a band, so the next records one, its walks do not finish, and retire
+            // says so; the one after records the passes it counted and equals render()'s,
+            // which the split leaves the same to the bit.
+            renderer.set_splat_raster_chunk(Some(300));
+            let err = run(&mut renderer, &thin.view()).expect_err("one pass a band is too few");
+            assert!(
+                matches!(err, RenderError::Recorded(_)) && err.to_string().contains("passes"),
+                "{err}"
+            );
+            let done = run(&mut renderer, &thin.view()).expect("the next records enough");
+            assert!(done.splat.expect("counts").resumed > 0);
+            let ptr = d
+                .map_memory(memory, 0, bytes, vk::MemoryMapFlags::empty())
+                .expect("map");
+            let split: Vec<f32> =
+                bytemuck::cast_slice(std::slice::from_raw_parts(ptr.cast::<u8>(), bytes as usize))
+                    .to_vec();
+            d.unmap_memory(memory);
+            assert!(split == want, "split walks differ from render()'s frame");
             assert_eq!(ctx.validation_errors(), 0);
         }
         teardown(app, pool, (buffer, memory), before);

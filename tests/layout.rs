@@ -223,7 +223,12 @@ fn glsl_and_rust_layouts_agree() {
         *rp,
         RasterPush {
             tile_row: 5,
-            _pad: [6, 7, 8]
+            pass: 6,
+            last_pass: 7,
+            chunk: 8,
+            sheet_cost: 9,
+            band: 10,
+            _pad: [11, 12]
         },
         "RasterPush"
     );
@@ -261,8 +266,23 @@ fn glsl_and_rust_layouts_agree() {
             tiles_y: 6,
             segments: 7,
             band_rows: 8,
+            chunk: 9,
+            sheet_cost: 10,
+            steps: 11,
+            resumes: 12,
         },
         "PlanPush"
+    );
+    let wp: &WalkPush = take(bytes, &mut at);
+    assert_eq!(
+        *wp,
+        WalkPush {
+            tiles: 1,
+            tiles_x: 2,
+            slabs: 3,
+            band_rows: 4
+        },
+        "WalkPush"
     );
 
     drop(group);

@@ -636,3 +636,150 @@ fn widened_kernels_keep_their_line_integrals() {
     }
     assert!(checked > 100, "{checked} pixels");
 }
+
+/// Stages `splat_walks` and `splat_plan` against their CPU twins (`band_entries`,
+/// `plan_groups`): each band's longest tile walk from bucket offsets of 5 × 7 tiles of 3
+/// sheets (the last band one tile row), and the workgroups of every indirect dispatch of a
+/// recorded frame, its bands' later passes included, with the frame let run or not.
+#[test]
+fn splat_walks_and_splat_plan_match_their_cpu_twins() {
+    use vmls::gpu_types::{PlanPush, WalkPush, binding, binding_defines, splat_stat};
+    use vmls::splat::plan::{RasterWalk, band_entries, plan_groups};
+    use vmls::vk::{BindGroup, Buffer, BufferUsage, ComputePipeline, ShaderSource};
+    let (ctx, compiler) = gpu();
+    let walk_push = WalkPush {
+        tiles: 35,
+        tiles_x: 5,
+        slabs: 3,
+        band_rows: 2,
+    };
+    let buckets = walk_push.tiles * walk_push.slabs;
+    // Bucket counts up to 400, two tiles (in bands 1 and 2) far longer: offsets are their
+    // running sum.
+    let mut offsets = vec![0u32];
+    for b in 0..buckets {
+        let count = (b * 7919 % 401) + if b == 40 || b == 70 { 5000 } else { 0 };
+        offsets.push(offsets[b as usize] + count);
+    }
+    let bands = band_entries(&walk_push, &offsets);
+    assert_eq!(bands.len(), 4);
+    let pipeline = |file: &str, bindings: &[u32], push: usize| {
+        let spirv = compiler
+            .compile(ShaderSource::File(file), &binding_defines())
+            .expect("compile");
+        let kinds: Vec<_> = bindings.iter().map(|&b| (b, binding::kind(b))).collect();
+        ComputePipeline::with_kinds(&ctx, file, &spirv, &kinds, push as u32).expect("pipeline")
+    };
+    let walks = pipeline(
+        "splat/splat_walks.comp",
+        &[binding::BUCKET_OFFSETS, binding::SPLAT_STATS],
+        std::mem::size_of::<WalkPush>(),
+    );
+    let plan = pipeline(
+        "splat/splat_plan.comp",
+        &[
+            binding::BUCKET_OFFSETS,
+            binding::SPLAT_STATS,
+            binding::DISPATCH_ARGS,
+        ],
+        std::mem::size_of::<PlanPush>(),
+    );
+    let offsets_buf = Buffer::from_slice(&ctx, "offsets", &offsets).expect("offsets");
+    let stats = Buffer::new(
+        &ctx,
+        "stats",
+        4 * (splat_stat::BAND_ENTRIES as u64 + 4),
+        BufferUsage::Storage,
+    )
+    .expect("stats");
+    let resumes = 3;
+    let args = Buffer::new(
+        &ctx,
+        "args",
+        16 * (2 + 4 * (1 + resumes)),
+        BufferUsage::Storage,
+    )
+    .expect("args");
+    let walk_group = BindGroup::new(
+        &ctx,
+        &walks,
+        &[
+            (binding::BUCKET_OFFSETS, &offsets_buf),
+            (binding::SPLAT_STATS, &stats),
+        ],
+    )
+    .expect("bind");
+    let plan_group = BindGroup::new(
+        &ctx,
+        &plan,
+        &[
+            (binding::BUCKET_OFFSETS, &offsets_buf),
+            (binding::SPLAT_STATS, &stats),
+            (binding::DISPATCH_ARGS, &args),
+        ],
+    )
+    .expect("bind");
+    let walk = RasterWalk {
+        chunk: 2000,
+        sheet_cost: 7,
+        steps: 4,
+    };
+    for capacity in [u32::MAX, 10] {
+        let push = PlanPush {
+            buckets,
+            capacity,
+            max_entries: u32::MAX,
+            bin_groups: 3,
+            tiles_x: 5,
+            tiles_y: 7,
+            segments: 0,
+            band_rows: 2,
+            chunk: walk.chunk,
+            sheet_cost: walk.sheet_cost,
+            steps: walk.steps,
+            resumes: resumes as u32,
+        };
+        ctx.submit(|rec| {
+            rec.fill(&stats, 0);
+            rec.dispatch(
+                &walks,
+                &walk_group,
+                bytemuck::bytes_of(&walk_push),
+                [1, 1, 1],
+                "splat_walks",
+            )?;
+            rec.dispatch(
+                &plan,
+                &plan_group,
+                bytemuck::bytes_of(&push),
+                [1, 1, 1],
+                "splat_plan",
+            )
+        })
+        .expect("submit");
+        let got_stats: Vec<u32> = stats.read(&ctx).expect("read");
+        assert_eq!(
+            got_stats[splat_stat::BAND_ENTRIES..],
+            bands[..],
+            "splat_walks"
+        );
+        let got: Vec<[u32; 4]> = args.read(&ctx).expect("read");
+        let want = plan_groups(&push, offsets[buckets as usize], &got_stats);
+        let got: Vec<[u32; 3]> = got.iter().map(|a| [a[0], a[1], a[2]]).collect();
+        assert_eq!(got, want, "splat_plan, capacity {capacity}");
+        let passes: Vec<u32> = bands.iter().map(|&e| walk.passes(e)).collect();
+        if capacity == u32::MAX {
+            // Some band takes one pass, another more than one.
+            assert!(
+                passes.contains(&1) && passes.iter().any(|&p| p > 1),
+                "{passes:?}"
+            );
+            assert!(got.iter().skip(2).any(|g| g[0] == 0) && got[2][0] == 5);
+        } else {
+            assert!(got.iter().all(|g| g[0] == 0), "nothing runs");
+        }
+    }
+    drop((walk_group, plan_group));
+    drop((walks, plan, offsets_buf, stats, args));
+    finish(ctx);
+}

@@ -140,6 +140,10 @@ struct PlanPush {
     uint tiles_y;
     uint segments;
     uint band_rows;
+    uint chunk;
+    uint sheet_cost;
+    uint steps;
+    uint resumes;
 };
 
 struct CountPush {
@@ -193,9 +197,20 @@ struct Splat {
 
 struct RasterPush {
     uint tile_row;
+    uint pass;
+    uint last_pass;
+    uint chunk;
+    uint sheet_cost;
+    uint band;
     uint _pad0;
     uint _pad1;
-    uint _pad2;
+};
+
+struct WalkPush {
+    uint tiles;
+    uint tiles_x;
+    uint slabs;
+    uint band_rows;
 };
 
 struct ScanPush {

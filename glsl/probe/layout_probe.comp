@@ -22,6 +22,7 @@ layout(std430, binding = BINDING_PROBE) writeonly buffer ProbeBuf {
     NextPush next_push;
     PackPush pack_push;
     PlanPush plan_push;
+    WalkPush walk_push;
 };
 
 vec4 v(float k) { return vec4(k, k + 0.25, k + 0.5, k + 0.75); }
@@ -148,7 +149,7 @@ void main() {
     splat.slabs = uvec4(10u, 11u, 12u, 13u);
 
     scan_push = ScanPush(1u, 2u, 3u, 4u);
-    raster_push = RasterPush(5u, 6u, 7u, 8u);
+    raster_push = RasterPush(5u, 6u, 7u, 8u, 9u, 10u, 11u, 12u);
 
     next_push.row_offset = 1u;
     next_push.rows = 2u;
@@ -161,5 +162,6 @@ void main() {
     pack_push._pad1 = 4u;
     pack_push.background = v(5.0);
 
-    plan_push = PlanPush(1u, 2u, 3u, 4u, 5u, 6u, 7u, 8u);
+    plan_push = PlanPush(1u, 2u, 3u, 4u, 5u, 6u, 7u, 8u, 9u, 10u, 11u, 12u);
+    walk_push = WalkPush(1u, 2u, 3u, 4u);
 }

@@ -1,17 +1,19 @@
 #version 450
-// Stage splat_plan (twin: plan_groups in src/splat/frame.rs): in a recorded frame, the one
+// Stage splat_plan (twin: plan_groups in src/splat/plan.rs): in a recorded frame, the one
 // decision render() makes on the host between the projection and the accumulation. From the
 // scan's total of binned entries and the projection's counters it writes the workgroup counts
 // of splat_bin, of splat_order's first pass (an invocation per bucket, rows of at most 65 535
-// workgroups) and of each band of push.band_rows tile rows of splat_raster, which all
-// dispatch indirectly: the whole frame where its
-// entries fit the list, the work budget allows them and no kernel or pixel overflowed; none
-// (x = 0) otherwise, so that nothing writes past the list, and Renderer::retire reads the same
-// numbers back and names what stopped the frame.
+// workgroups), of each band of push.band_rows tile rows of splat_raster, then of each band's
+// push.resumes later passes, which all dispatch indirectly: the whole frame where its
+// entries fit the list, the work budget allows them and no kernel or pixel overflowed, each
+// band's passes as many as its longest walk takes (splat_walks; twin RasterWalk::passes);
+// none (x = 0) otherwise, so that nothing writes past the list, and Renderer::retire reads the
+// same numbers back and names what stopped the frame.
 
 layout(local_size_x = 1) in;
 
 #include "common/types.glsl"
+#include "splat/walks.glsl"
 
 layout(std430, binding = BINDING_BUCKET_OFFSETS) readonly buffer OffsetBuf { uint offsets[]; };
 layout(std430, binding = BINDING_SPLAT_STATS) readonly buffer StatsBuf { uint stats[]; };
@@ -30,10 +32,15 @@ void main() {
     uint x = min(groups, 65535u);
     args[1] = run ? uvec4(x, (groups + x - 1u) / x, 1u, 0u) : uvec4(0u, 1u, 1u, 0u);
     uint rows = max(push.band_rows, 1u);
-    uint band = 2u;
-    for (uint row = 0u; row < push.tiles_y; row += rows) {
-        uint n = min(rows, push.tiles_y - row);
-        args[band] = run ? uvec4(push.tiles_x, n, 1u, 0u) : uvec4(0u, 1u, 1u, 0u);
-        band += 1u;
+    uint bands = (push.tiles_y + rows - 1u) / rows;
+    for (uint b = 0u; b < bands; ++b) {
+        uint n = min(rows, push.tiles_y - b * rows);
+        args[2u + b] = run ? uvec4(push.tiles_x, n, 1u, 0u) : uvec4(0u, 1u, 1u, 0u);
+        uint passes = raster_passes(stats[SPLAT_STAT_BAND_ENTRIES + b], push.steps, push.chunk,
+                                    push.sheet_cost);
+        for (uint pass = 1u; pass <= push.resumes; ++pass) {
+            args[2u + bands + b * push.resumes + pass - 1u] =
+                run && pass < passes ? uvec4(push.tiles_x, n, 1u, 0u) : uvec4(0u, 1u, 1u, 0u);
+        }
     }
 }

@@ -17,7 +17,11 @@
 // Empty sheets cost nothing: pre-shaded they composite nothing, post-shaded they are skipped
 // once the sheets behind them hold no value and value 0 has no extinction. With
 // SPLAT_OCCLUSION the tile stops once every pixel of it is opaque. No atomics on pixels, no
-// sheet buffers; each pixel is written once. Variant macros: SPLAT_POST, SPLAT_ORTHO,
+// sheet buffers; each pixel is written once. A band runs in passes (push.pass): a walk whose
+// cost would pass push.chunk loop iterations stops and saves its position and registers,
+// and the next pass goes on from there (llvmpipe ends an invocation's loops after 65 535
+// iterations in a dispatch; src/splat/plan.rs counts the passes). The split changes nothing
+// in the image, so the CPU twin walks in one go. Variant macros: SPLAT_POST, SPLAT_ORTHO,
 // SPLAT_EXACT, SPLAT_RING (0, or post-shaded: one entry per SPLAT_RING sheets, the sheets ahead
 // in ring registers), SPLAT_QUADRATURE (its sheet shares by the quadrature, else the erfc;
 // SPLAT_WIDEN: kernels thinner than it serves shared as if that thick),
@@ -47,10 +51,18 @@ layout(rgba32f, binding = BINDING_SPLATS) readonly uniform imageBuffer splat_tex
 layout(rgba32ui, binding = BINDING_SPLAT_WORDS) readonly uniform uimageBuffer splat_words;
 #define SPLAT_READ
 #include "splat/splat.glsl"
+#include "splat/walks.glsl"
 layout(r32ui, binding = BINDING_OFFSET_TEXELS) readonly uniform uimageBuffer offset_texels;
 layout(rg32ui, binding = BINDING_SPLAT_LIST) readonly uniform uimageBuffer list;
 layout(std430, binding = BINDING_IMAGE) writeonly buffer ImageBuf { vec4 image[]; };
 layout(std430, binding = BINDING_SPLAT_STATS) buffer StatsBuf { uint stats[]; };
+// Walks a pass leaves unfinished, per tile of the band and invocation: a tag (the pass that
+// continues it), the walk's position (at, k, live) and its pixels' registers. The position is
+// the same in every lane of a subgroup, but not always in every subgroup of a workgroup: with
+// subgroup votes each subgroup skips empty sheets by itself.
+layout(std430, binding = BINDING_SPLAT_RASTER_STATE) buffer StateBuf { uint raster_state[]; };
+#define INVOCATION_WORDS (4 + SPLAT_PIXELS * SPLAT_PIXEL_WORDS)
+#define TILE_WORDS (SPLAT_GROUP * INVOCATION_WORDS)
 
 #if SPLAT_POST == 1
 #if SPLAT_HULL == 1
@@ -544,6 +556,51 @@ void composite_post(inout Pixel px, uint k, float v1, vec2 lat) {
 }
 #endif
 
+// The registers a pixel carries from one pass to the next, each through F (twin of the word
+// count: RASTER_PIXEL_WORDS in src/splat/gpu.rs, which this must not exceed).
+#if SPLAT_POST == 0
+#if SPLAT_SURFACES == 1
+#define PIXEL_REGISTERS(F) \
+    F(px.acc.x) F(px.acc.y) F(px.acc.z) F(px.acc.w) F(px.ext.x) F(px.ext.y) F(px.ext.z) \
+    F(px.ext.w) F(px.sw) F(px.sa) F(px.sc.x) F(px.sc.y) F(px.sc.z)
+#else
+#define PIXEL_REGISTERS(F) \
+    F(px.acc.x) F(px.acc.y) F(px.acc.z) F(px.acc.w) F(px.ext.x) F(px.ext.y) F(px.ext.z) \
+    F(px.ext.w)
+#endif
+#else
+#define PIXEL_REGISTERS(F) \
+    F(px.acc.x) F(px.acc.y) F(px.acc.z) F(px.acc.w) F(px.sheet) F(px.v_2) F(px.v0) F(px.v) \
+    F(px.lat0.x) F(px.lat0.y) F(px.lat1.x) F(px.lat1.y)
+#if SPLAT_RING > 0 && 12 + SPLAT_RING - 1 > SPLAT_PIXEL_WORDS
+#error "a pixel's registers exceed SPLAT_PIXEL_WORDS"
+#endif
+#endif
+
+// Stores the pixel's registers from word w on.
+void save_pixel(Pixel px, uint w) {
+#define PUT(f) raster_state[w++] = floatBitsToUint(f);
+    PIXEL_REGISTERS(PUT)
+#if SPLAT_POST == 1 && SPLAT_RING > 0
+#define PUT_RING(r) PUT(px.r)
+    RING_REGISTERS(PUT_RING)
+#undef PUT_RING
+#endif
+#undef PUT
+}
+
+// Restores what save_pixel stored.
+void load_pixel(inout Pixel px, uint w) {
+#define GET(f) f = uintBitsToFloat(raster_state[w++]);
+    PIXEL_REGISTERS(GET)
+#if SPLAT_POST == 1 && SPLAT_RING > 0
+#define GET_RING(r) GET(px.r)
+    RING_REGISTERS(GET_RING)
+#undef GET_RING
+#endif
+#undef GET
+}
+
 // The invocation's pixels, one statement each.
 #if SPLAT_PIXELS == 1
 #define EACH(F) F(px0)
@@ -630,13 +687,54 @@ void main() {
     uint steps = params.slabs + uint(SPLAT_POST);
     // Ring registers holding something (the same in every lane: it follows the entries).
     uint live = 0u;
-    // The sheet being accumulated, and the next entry: (splat, sheet), past the last the
-    // closing sheet.
+    // The sheet being accumulated.
     uint k = 0u;
+    // Where this tile's walk and this invocation's registers wait between passes.
+    uint tile_words = (gl_WorkGroupID.y * params.tiles_x + gl_WorkGroupID.x) * uint(TILE_WORDS);
+    uint own_words = tile_words + lane * uint(INVOCATION_WORDS);
+    if (push.pass > 0u) {
+        // A later pass continues the walks the pass before left unfinished, with this
+        // invocation's registers; an invocation that had finished, its pixels written, has
+        // nothing to do (with subgroup votes, a whole subgroup: the tag is the same in all its
+        // lanes).
+        if (raster_state[own_words] != push.pass) {
+            return;
+        }
+        uvec3 position = uvec3(raster_state[own_words + 1u], raster_state[own_words + 2u],
+                               raster_state[own_words + 3u]);
+#if SPLAT_SUBGROUP_OPS == 1
+        // The same in every lane, and so known to the compiler as a subgroup's minimum: the
+        // list is then read once per subgroup and broadcast, not gathered lane by lane.
+        position = subgroupMin(position);
+#endif
+        at = position.x;
+        k = position.y;
+        live = position.z;
+        uint w = own_words + 4u;
+#define LOAD(px) load_pixel(px, w); w += uint(SPLAT_PIXEL_WORDS);
+        EACH(LOAD)
+#undef LOAD
+    }
+    uint at_start = at;
+    // The next entry: (splat, sheet), past the last the closing sheet.
     uvec2 entry = next_entry(at, at_end, steps);
+    // The walk's cost in this pass, in loop iterations (one per entry, push.sheet_cost per
+    // sheet, which counts the loops of compositing it): a pass stops before it would pass
+    // push.chunk, below llvmpipe's limit, and leaves the walk to the next (`cut`).
+    uint cost = 0u;
+    bool cut = false;
+    // Sheet-loop trips, which pick the workgroup vote's slot (k may jump by any count).
+    uint trip = 0u;
     // One iteration per sheet finished; the barrier of post-shaded isosurfaces sits at this
     // loop's level (inside a nested loop it hung lanes on lavapipe).
     while (k < steps) {
+        if (cost + push.sheet_cost > push.chunk) {
+            cut = true;
+            break;
+        }
+        cost += push.sheet_cost;
+        uint slot = trip % 3u;
+        trip += 1u;
         bool open = false;
 #define OPEN(px) open = open || pixel_open(px);
         EACH(OPEN)
@@ -647,17 +745,18 @@ void main() {
             break;
         }
 #elif VOTE == 3
-        // The workgroup stops once all its pixels are opaque: three slots, so that one
-        // barrier per sheet separates each slot's reset, its writes and its reads.
+        // The workgroup stops once all its pixels are opaque: three slots, one per trip in
+        // turn, so that one barrier per trip separates each slot's reset, its writes and its
+        // reads.
         if (open) {
-            open_slots[k % 3u] = 1u;
+            open_slots[slot] = 1u;
         }
         barrier();
-        if (open_slots[k % 3u] == 0u) {
+        if (open_slots[slot] == 0u) {
             break;
         }
         if (lane == 0u) {
-            open_slots[(k + 2u) % 3u] = 0u;
+            open_slots[(slot + 2u) % 3u] = 0u;
         }
 #endif
 #if SPLAT_SPLIT == 1
@@ -666,7 +765,10 @@ void main() {
 #else
         float ta = 0.0, tb = 0.0;
 #endif
-        while (entry.y == k) {
+        // Each entry costs one: the pass walks at most chunk - cost more.
+        uint at_sheet = at;
+        uint at_limit = at + (push.chunk - cost);
+        while (entry.y == k && at < at_limit) {
             Splat s = load_splat(entry.x);
 #if SPLAT_RING > 0
             // The entry covers sheets k .. k + span - 1 of the splat's.
@@ -680,6 +782,12 @@ void main() {
 #undef ACCUMULATE
             at += 1u;
             entry = next_entry(at, at_end, steps);
+        }
+        cost += at - at_sheet;
+        if (entry.y == k) {
+            // Sheet k is incomplete: the next pass goes on accumulating it.
+            cut = true;
+            break;
         }
 #if SPLAT_POST == 0
 #define FINISH(px) finish_pre(px, k);
@@ -699,17 +807,17 @@ void main() {
 #if VOTE == 2
         // The workgroup's vote rides on the same barrier (three slots: see VOTE 3).
         if (open) {
-            open_slots[k % 3u] = 1u;
+            open_slots[slot] = 1u;
         }
 #endif
         barrier();
 #if VOTE == 2
         // Every pixel is opaque: sheet k - 1 and later change nothing.
-        if (open_slots[k % 3u] == 0u) {
+        if (open_slots[slot] == 0u) {
             break;
         }
         if (lane == 0u) {
-            open_slots[(k + 2u) % 3u] = 0u;
+            open_slots[(slot + 2u) % 3u] = 0u;
         }
 #endif
         if (px0.own) {
@@ -763,14 +871,36 @@ void main() {
 #define OPEN(px) open_at_end = open_at_end || pixel_open(px);
     EACH(OPEN)
 #undef OPEN
-    if (k < steps && open_at_end) {
+    // A walk the chunk cut is left to the band's next pass, if there is one: the band's last
+    // is the one its longest walk needs (a recorded frame may have recorded more, which
+    // dispatch nothing). One that stops with a pixel open and no pass to go on was cut short,
+    // by the chunk or by llvmpipe's limit.
+    uint last_pass = min(push.last_pass, raster_passes(stats[SPLAT_STAT_BAND_ENTRIES + push.band],
+                                                       steps, push.chunk, push.sheet_cost) - 1u);
+    bool resume = cut && push.pass < last_pass;
+    if (k < steps && open_at_end && !resume) {
         atomicAdd(stats[SPLAT_STAT_RASTER_TRUNCATED], 1u);
     }
-    walked.x = at - offset_at(first_bucket);
-    walked.y = at_end - at;
+    if (resume) {
+        raster_state[own_words] = push.pass + 1u;
+        raster_state[own_words + 1u] = at;
+        raster_state[own_words + 2u] = k;
+        raster_state[own_words + 3u] = live;
+        uint w = own_words + 4u;
+#define SAVE(px) save_pixel(px, w); w += uint(SPLAT_PIXEL_WORDS);
+        EACH(SAVE)
+#undef SAVE
+        atomicAdd(stats[SPLAT_STAT_RESUMED], 1u);
+    } else if (push.pass < last_pass) {
+        // Finished: no later pass of the band continues it (in the first pass this also
+        // clears what an earlier band left in these words).
+        raster_state[own_words] = 0u;
+    }
+    walked.x = at - at_start;
+    walked.y = cut ? 0u : at_end - at;
     uvec2 footprints = uvec2(0u);
 #define WRITE(px) \
-    if (px.own) { \
+    if (px.own && !resume) { \
         image[px.p] = px.acc; \
     } \
     footprints += uvec2(px.evaluated, px.contributions);

@@ -242,6 +242,8 @@ pub struct Renderer {
     /// MLS or footprint evaluations a frame may plan (`None`: no limit); see
     /// [`Renderer::set_work_budget`].
     budget: Option<f64>,
+    /// [`Renderer::set_splat_raster_chunk`].
+    splat_raster_chunk: Option<u32>,
     /// This renderer's identity, carried by the frames it records.
     id: u64,
     /// Recorded frames' resources, one slot per frame in flight ([`Renderer::record`]).
@@ -283,6 +285,15 @@ impl Renderer {
         self.budget = budget;
     }
 
+    /// The walk cost one dispatch of `splat_raster` spends per tile
+    /// ([`crate::splat::plan::RasterWalk`]; `None`, the default:
+    /// [`crate::splat::plan::RASTER_CHUNK`], below llvmpipe's loop limit). It changes how a
+    /// tile's walk of its entries is split among passes, never the image: tests force small
+    /// ones to exercise the passes on small scenes.
+    pub fn set_splat_raster_chunk(&mut self, chunk: Option<u32>) {
+        self.splat_raster_chunk = chunk;
+    }
+
     /// Uploads the field's hull; its samples (grid, fast path or samples and octree) follow at
     /// the first ray-cast frame, which builds a deferred octree first: splatting reads
     /// neither.
@@ -302,6 +313,7 @@ impl Renderer {
             splat_targets: None,
             stop: None,
             budget: None,
+            splat_raster_chunk: None,
             id: NEXT_RENDERER.fetch_add(1, Ordering::Relaxed),
             slots: Vec::new(),
             record: record::RecordState::default(),

@@ -247,6 +247,9 @@ pub(super) struct RecordState {
     /// Splatting: the most entries a frame was seen to bin, which recorded frames' lists make
     /// room for (`None`: the next recorded frame counts them first).
     pub(super) splat_entries: Option<u64>,
+    /// Splatting: the most passes after a band's first that a frame's walks were seen to take
+    /// (`splat::plan::resumes_needed`), which recorded frames record.
+    pub(super) splat_resumes: u32,
 }
 
 impl RecordState {

@@ -17,9 +17,10 @@ use crate::field::RenderError;
 use crate::gpu_types::PlanPush;
 use crate::splat::frame::{
     ConstantData, FrameControl, Retired, SplatConstants, SplatRecording, count_entries,
-    entry_limit, plan_args_bytes, retired_counts, splat_frame,
+    entry_limit, retired_counts, splat_frame,
 };
 use crate::splat::gpu::{GpuKernels, SplatPipelines, SplatTargets, SplatVariant};
+use crate::splat::plan::{RasterWalk, plan_args_bytes};
 use crate::splat::{Shading, SplatSetup};
 use crate::view::View;
 use crate::view::shading::Isosurface;
@@ -46,7 +47,7 @@ impl Renderer {
         shading: Shading,
         recorded: bool,
     ) -> Result<SplatFrame, RenderError> {
-        let setup = SplatSetup::new(
+        let mut setup = SplatSetup::new(
             shading,
             &view.settings.splat,
             view.camera,
@@ -56,6 +57,7 @@ impl Renderer {
             view.lighting,
             &self.field,
         )?;
+        setup.raster_chunk = self.splat_raster_chunk;
         if let Some(budget) = self.budget {
             setup.check_budget(0, budget)?;
         }
@@ -194,8 +196,9 @@ impl Renderer {
         ))
     }
 
-    /// Counts the entries of a frame of `view` with a projection of its own, so that recorded
-    /// frames reserve room for them; returns the count.
+    /// Counts the entries of a frame of `view` with a projection of its own, and the passes its
+    /// walks take, so that recorded frames reserve room for them and record as many; returns
+    /// the count.
     fn count_splat_entries(
         &mut self,
         view: &View<'_>,
@@ -211,7 +214,7 @@ impl Renderer {
         else {
             return Err(VkError::Usage("splat frame buffers missing".into()).into());
         };
-        let total = count_entries(
+        let (total, resumes) = count_entries(
             &self.ctx,
             &self.splat_pipelines[frame.index],
             kernels,
@@ -223,6 +226,7 @@ impl Renderer {
         )?;
         let learned = self.record.splat_entries.unwrap_or(0).max(total);
         self.record.splat_entries = Some(learned);
+        self.record.splat_resumes = self.record.splat_resumes.max(resumes);
         Ok(total)
     }
 
@@ -302,9 +306,11 @@ impl Renderer {
         let mut reused = false;
         if let Some(t) = s.targets.as_mut() {
             t.reserve_entries(&ctx, reserve, limit)?;
+            t.reserve_raster_state(&ctx, &frame.variant, setup.tiles().0)?;
             reused = t.plan_segments(setup, true);
         }
-        let args_bytes = plan_args_bytes(setup);
+        let resumes = self.record.splat_resumes;
+        let args_bytes = plan_args_bytes(setup, resumes);
         if s.args.as_ref().is_none_or(|a| a.size() < args_bytes) {
             s.args = None;
             s.args = Some(Buffer::new(
@@ -336,6 +342,8 @@ impl Renderer {
             &hull,
             setup,
             max_entries,
+            RasterWalk::new(setup, data.tf_count())?,
+            resumes,
         )?;
         let pack_group = match pack {
             Some(p) => Some(
@@ -403,7 +411,18 @@ impl Renderer {
                     hull_segments,
                 })
             }
-            Retired::Overflowed(total) => {
+            Retired::Unfinished(needed) => {
+                let held = plan.resumes + 1;
+                self.record.splat_resumes = self.record.splat_resumes.max(needed);
+                Err(RenderError::Recorded(format!(
+                    "a band's tiles walked more entries than the {held} passes of splat_raster \
+                     recorded for it take (llvmpipe's loop limit), and its image is incomplete; \
+                     the next frames record {} (record again)",
+                    needed + 1
+                )))
+            }
+            Retired::Overflowed(total, needed) => {
+                self.record.splat_resumes = self.record.splat_resumes.max(needed);
                 let held = plan.capacity;
                 let learned = self.record.splat_entries.unwrap_or(0).max(total);
                 self.record.splat_entries = Some(learned);

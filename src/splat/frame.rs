@@ -2,38 +2,40 @@
 //! recorded into an application's command buffer ([`SplatRecording`], `Renderer::record`).
 //!
 //! Both run the same stages on the same buffers: `splat_segments` (post-shaded over a hull),
-//! `splat_project`, the three passes of `splat_scan`, `splat_bin`, the two of `splat_order`
-//! and `splat_raster`. They differ in how the accumulation learns the projection's outcome:
+//! `splat_project`, the three passes of `splat_scan`, `splat_walks`, `splat_bin`, the two of
+//! `splat_order` and `splat_raster`. `splat_raster` runs in bands of [`RASTER_BAND_ROWS`] tile
+//! rows, each band in as many passes as its longest tile walk takes ([`RasterWalk`](super::plan::RasterWalk): llvmpipe
+//! ends an invocation's loops after 65 535 iterations in a dispatch, and a tile of a dense
+//! point cloud walks more entries than that); a pass leaves the walks it could not finish,
+//! pixels' registers and all, to the next. The two ways differ in how the accumulation learns
+//! the projection's outcome:
 //! - [`splat_frame`] is a few submissions. The first runs the projection and the scan; the host
-//!   reads the counters and one number, the total of entries, to check the work budget and size
-//!   the entry list ([`check_projection`]). Then `splat_raster` runs in bands of
-//!   [`RASTER_BAND_ROWS`] tile rows, one submission each, so that every band is timed and a
-//!   stop request ([`FrameControl::stop`]) ends the frame within one band.
+//!   reads the counters, the total of entries and each band's longest walk, to check the work
+//!   budget, size the entry list ([`check_projection`]) and count each band's passes. Then
+//!   each band is one submission, so that every band is timed and a stop request
+//!   ([`FrameControl::stop`]) ends the frame within one band.
 //! - A recorded frame has no host between its commands: its entry list is sized before it is
 //!   recorded (from an earlier count), and `splat_plan` reads the total and the counters on the
 //!   GPU and dispatches `splat_bin`, `splat_order`'s first pass and each band of
 //!   `splat_raster` indirectly, or none of them where the entries do not fit or a check fails
-//!   ([`plan_groups`], its twin); `splat_order`'s second pass finds nothing to do then.
+//!   ([`plan_groups`](super::plan::plan_groups), its twin); `splat_order`'s second pass finds nothing to do then. Each
+//!   band's later passes are recorded as many times as an earlier count found needed
+//!   (`PlanPush::resumes`), those a band does not need dispatching nothing.
 //!   `Renderer::retire` reads the same numbers and names what stopped the frame.
 
 use super::gpu::{
-    GROUP, GpuKernels, ORDER_BINDINGS, ORDER_LARGE_GROUPS, SCAN_BINDINGS, SplatPipelines,
-    SplatTargets,
+    GpuKernels, ORDER_BINDINGS, ORDER_LARGE_GROUPS, SCAN_BINDINGS, SplatPipelines, SplatTargets,
+};
+use super::plan::{
+    GROUP, RASTER_BAND_ROWS, RasterWalk, order_groups, plan_groups, raster_bands, resumes_needed,
+    stat_band_entries, walk_push,
 };
 use super::{Shading, SplatCounts, SplatSetup};
 use crate::field::RenderError;
-use crate::gpu_types::{
-    PlanPush, RasterPush, ScanPush, SplatParams, binding, params_copies, splat_stat,
-};
+use crate::gpu_types::{PlanPush, ScanPush, SplatParams, binding, params_copies, splat_stat};
 use crate::view::transfer::TransferFunction;
 use crate::vk::{BindGroup, Buffer, BufferUsage, Context, Recorder, VkError};
 use std::sync::atomic::{AtomicBool, Ordering};
-
-/// Tile rows per dispatch of `splat_raster`. Small bands are faster on lavapipe: at 512²
-/// (64 tile rows) two rows a band took 6–9% less GPU and wall time than eight (BENCHMARKS.md,
-/// "Splatting frames recorded"), at 256² 5% less than four. In [`splat_frame`] each band is
-/// also one submission, so that Ctrl-C and the progress bar act within a fraction of a frame.
-pub const RASTER_BAND_ROWS: u32 = 2;
 
 /// A splatted frame as the GPU produced it.
 #[derive(Debug, Clone)]
@@ -50,8 +52,8 @@ pub struct SplatGpuImage {
     pub segments_reused: Option<bool>,
 }
 
-/// The names of [`SplatGpuImage::stage_ms`]: `splat_sort` is `splat_scan` and `splat_bin`,
-/// `splat_order` both passes of that stage.
+/// The names of [`SplatGpuImage::stage_ms`]: `splat_sort` is `splat_scan`, `splat_walks` and
+/// `splat_bin`, `splat_order` both passes of that stage.
 pub const STAGES: [&str; 5] = [
     "splat_project",
     "splat_sort",
@@ -118,7 +120,7 @@ fn sum_ms(timings: &[crate::vk::DispatchTiming], stage_ms: &mut [f64; 5]) {
     for t in timings {
         let i = match t.label.as_str() {
             "splat_project" => 0,
-            "splat_scan" | "splat_bin" => 1,
+            "splat_scan" | "splat_walks" | "splat_bin" => 1,
             "splat_raster" => 2,
             "splat_order" => 4,
             _ => 3,
@@ -158,6 +160,11 @@ pub struct ConstantData {
 }
 
 impl ConstantData {
+    /// Points of the transfer function's GPU table.
+    pub fn tf_count(&self) -> u32 {
+        (self.tf.len() / std::mem::size_of::<crate::gpu_types::TfPoint>()) as u32
+    }
+
     /// The constants of a setup with `tf` over `kernels`.
     pub fn new(setup: &SplatSetup, kernels: &GpuKernels, tf: &TransferFunction) -> Self {
         let gpu_tf = tf.to_gpu();
@@ -238,6 +245,7 @@ struct ProjectionGroups<'a> {
     segments: Option<BindGroup<'a>>,
     project: BindGroup<'a>,
     scan: [BindGroup<'a>; 3],
+    walks: BindGroup<'a>,
 }
 
 impl<'a> ProjectionGroups<'a> {
@@ -288,10 +296,18 @@ impl<'a> ProjectionGroups<'a> {
                 BindGroup::new(ctx, &pipelines.scan[1], &scan_bind[..3])?,
                 BindGroup::new(ctx, &pipelines.scan[2], &scan_bind)?,
             ],
+            walks: BindGroup::new(
+                ctx,
+                &pipelines.walks,
+                &[
+                    (binding::BUCKET_OFFSETS, &t.offsets),
+                    (binding::SPLAT_STATS, &t.stats),
+                ],
+            )?,
         })
     }
 
-    /// Records the counters' reset, then the projection and the scan.
+    /// Records the counters' reset, then the projection, the scan and `splat_walks`.
     fn record(
         &self,
         rec: &mut Recorder<'_>,
@@ -324,7 +340,14 @@ impl<'a> ProjectionGroups<'a> {
         for ((p, g), groups) in pipelines.scan.iter().zip(&self.scan).zip(passes) {
             rec.dispatch(p, g, push, groups, "splat_scan")?;
         }
-        Ok(())
+        let push = walk_push(setup);
+        rec.dispatch(
+            &pipelines.walks,
+            &self.walks,
+            bytemuck::bytes_of(&push),
+            order_groups(push.tiles),
+            "splat_walks",
+        )
     }
 
     fn detach(self) -> Vec<BindGroup<'static>> {
@@ -332,6 +355,7 @@ impl<'a> ProjectionGroups<'a> {
             self.segments.into_iter().map(BindGroup::detach).collect();
         v.push(self.project.detach());
         v.extend(self.scan.into_iter().map(BindGroup::detach));
+        v.push(self.walks.detach());
         v
     }
 }
@@ -349,14 +373,6 @@ fn pixel_groups(setup: &SplatSetup) -> [u32; 3] {
 /// kernels by the grid's stride).
 fn kernel_groups(kernels: &GpuKernels) -> u32 {
     kernels.count.div_ceil(GROUP).clamp(1, 65_535)
-}
-
-/// Workgroups of `splat_order`'s first pass, one invocation per bucket: rows of at most
-/// 65 535 workgroups (twin of `splat_plan`'s).
-pub fn order_groups(buckets: u32) -> [u32; 3] {
-    let groups = buckets.div_ceil(GROUP).max(1);
-    let x = groups.min(65_535);
-    [x, groups.div_ceil(x), 1]
 }
 
 /// `splat_order`'s push constants: the buckets.
@@ -411,6 +427,7 @@ impl<'a> AccumulationGroups<'a> {
             (binding::SPLAT_LIST, list),
             (binding::IMAGE, &t.image),
             (binding::SPLAT_STATS, &t.stats),
+            (binding::SPLAT_RASTER_STATE, t.raster_state()?),
         ];
         if setup.shading == Shading::Post {
             raster_bind.push((binding::TRANSFER, &constants.tf));
@@ -475,54 +492,24 @@ pub fn check_projection(
     Ok(())
 }
 
-/// Refuses a frame in which llvmpipe's loop limit cut a tile's walk of its entries short
-/// (`splat_stat::RASTER_TRUNCATED`, counted by `splat_raster`): its image would be missing
-/// sheets in those tiles.
+/// Refuses a frame in which a tile's walk of its entries was cut short
+/// (`splat_stat::RASTER_TRUNCATED`, counted by `splat_raster`): by llvmpipe's loop limit,
+/// where [`RasterWalk`] undercounted a walk's loops, or past the band's last pass. Its image
+/// would be missing sheets in those tiles.
 pub fn check_raster(stats: &[u32]) -> Result<(), RenderError> {
     match stats.get(splat_stat::RASTER_TRUNCATED).copied() {
         Some(n) if n > 0 => Err(RenderError::Setting {
             key: "splat.slab",
             message: format!(
                 "expected thicker sheets for this image: walks of image tiles through their \
-                 (tile, sheet) entries passed the 65 535 loop iterations that llvmpipe allows \
-                 an invocation in a dispatch, and were cut short ({n} invocations); raise \
-                 splat.slab or the image size, or lower splat.tile"
+                 (tile, sheet) entries ended before their last sheet ({n} invocations), cut \
+                 short by the 65 535 loop iterations that llvmpipe allows an invocation in a \
+                 dispatch although their passes were counted to stay below it; raise \
+                 splat.slab (fewer sheets to composite per pass)"
             ),
         }),
         _ => Ok(()),
     }
-}
-
-/// Stage `splat_plan` (GLSL: `glsl/splat/splat_plan.comp`): the workgroup counts of
-/// `splat_bin`, of `splat_order`'s first pass, then of each band of `push.band_rows` tile rows
-/// of `splat_raster`, in a recorded frame, from the scan's `total` and the projection's
-/// counters `stats`: the whole frame, or none (x = 0) where the entries exceed the list or the
-/// budget, or a kernel or pixel overflowed.
-pub fn plan_groups(push: &PlanPush, total: u32, stats: &[u32]) -> Vec<[u32; 3]> {
-    let stat = |i: usize| stats.get(i).copied().unwrap_or(0);
-    let run = total <= push.capacity
-        && total <= push.max_entries
-        && stat(splat_stat::OVERSIZED) == 0
-        && (push.segments == 0 || stat(splat_stat::SEGMENT_OVERFLOW) == 0);
-    let rows = push.band_rows.max(1);
-    let mut groups = if run {
-        vec![[push.bin_groups, 1, 1], order_groups(push.buckets)]
-    } else {
-        vec![[0, 1, 1]; 2]
-    };
-    let mut row = 0;
-    while row < push.tiles_y {
-        let n = rows.min(push.tiles_y - row);
-        groups.push(if run { [push.tiles_x, n, 1] } else { [0, 1, 1] });
-        row += n;
-    }
-    groups
-}
-
-/// Bytes of a recorded frame's indirect arguments: `splat_bin`'s, `splat_order`'s, then one
-/// per band.
-pub fn plan_args_bytes(setup: &SplatSetup) -> u64 {
-    16 * (2 + u64::from(setup.tiles().1.div_ceil(RASTER_BAND_ROWS)))
 }
 
 /// The counters of a finished frame; `total` is the scan's total of entries.
@@ -544,6 +531,7 @@ fn frame_counts(stats: &[u32], total: u64, invocations: u32) -> SplatCounts {
         contributions: s(10) | s(12) << 32,
         unordered: s(splat_stat::UNORDERED),
         large_buckets: s(splat_stat::LARGE_BUCKETS),
+        resumed: per_group(s(splat_stat::RESUMED)),
     }
 }
 
@@ -559,11 +547,14 @@ pub struct SplatRecording<'a> {
     plan: BindGroup<'a>,
     accumulation: AccumulationGroups<'a>,
     push: PlanPush,
+    walk: RasterWalk,
 }
 
 impl<'a> SplatRecording<'a> {
-    /// The bind groups of a frame of `setup` into `targets`, whose entry list must be
-    /// allocated; `max_entries` is what the work budget allows (`u32::MAX`: no budget).
+    /// The bind groups of a frame of `setup` into `targets`, whose entry list and raster
+    /// state must be allocated; `max_entries` is what the work budget allows (`u32::MAX`: no
+    /// budget), `walk` and `resumes` how each band's passes are counted and how many after
+    /// its first are recorded.
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         ctx: &Context,
@@ -575,6 +566,8 @@ impl<'a> SplatRecording<'a> {
         hull: &[(u32, &'a Buffer)],
         setup: &SplatSetup,
         max_entries: u32,
+        walk: RasterWalk,
+        resumes: u32,
     ) -> Result<Self, VkError> {
         if !targets.fits(setup, kernels) {
             return Err(VkError::Usage(
@@ -611,7 +604,12 @@ impl<'a> SplatRecording<'a> {
                 tiles_y,
                 segments: u32::from(pipelines.segments.is_some()),
                 band_rows: RASTER_BAND_ROWS,
+                chunk: walk.chunk,
+                sheet_cost: walk.sheet_cost,
+                steps: walk.steps,
+                resumes,
             },
+            walk,
         })
     }
 
@@ -621,9 +619,9 @@ impl<'a> SplatRecording<'a> {
         self.push
     }
 
-    /// Records the frame: constants, projection, scan, `splat_plan`, then `splat_bin`,
-    /// `splat_order`'s first pass and each band of `splat_raster`, indirect, and
-    /// `splat_order`'s second pass. Returns the dispatches recorded.
+    /// Records the frame: constants, projection, scan, `splat_walks`, `splat_plan`, then
+    /// `splat_bin`, `splat_order`'s first pass and each band's passes of `splat_raster`,
+    /// indirect, and `splat_order`'s second pass. Returns the dispatches recorded.
     pub fn record(
         &self,
         rec: &mut Recorder<'_>,
@@ -664,27 +662,35 @@ impl<'a> SplatRecording<'a> {
             [ORDER_LARGE_GROUPS, 1, 1],
             "splat_order",
         )?;
-        // Segments, project, three scan passes, plan, bin and two of order, then the bands.
-        let mut dispatches = u32::from(self.projection.segments.is_some()) + 8;
-        // Band b's arguments follow splat_bin's and splat_order's, at 16 (b + 2).
-        let mut offset = 32;
-        let mut row = 0;
-        while row < self.push.tiles_y {
-            let push = RasterPush {
-                tile_row: row,
-                _pad: [0; 3],
-            };
-            rec.dispatch_indirect(
-                &pipelines.raster,
-                &self.accumulation.raster,
-                bytemuck::bytes_of(&push),
-                args,
-                offset,
-                "splat_raster",
-            )?;
-            offset += 16;
-            row += self.push.band_rows;
-            dispatches += 1;
+        // Segments, project, three scan passes, walks, plan, bin and two of order, then the
+        // bands.
+        let mut dispatches = u32::from(self.projection.segments.is_some()) + 9;
+        // Band b's first pass's arguments follow splat_bin's and splat_order's, at
+        // 16 (b + 2); its later passes' follow all bands', at 16 (2 + bands + b resumes + r - 1).
+        let resumes = self.push.resumes;
+        let bands = self.push.tiles_y.div_ceil(self.push.band_rows);
+        for (b, row) in (0..self.push.tiles_y)
+            .step_by(self.push.band_rows as usize)
+            .enumerate()
+        {
+            let b = b as u64;
+            for pass in 0..=resumes {
+                let slot = if pass == 0 {
+                    2 + b
+                } else {
+                    2 + u64::from(bands) + b * u64::from(resumes) + u64::from(pass - 1)
+                };
+                let push = self.walk.push(row, pass, resumes);
+                rec.dispatch_indirect(
+                    &pipelines.raster,
+                    &self.accumulation.raster,
+                    bytemuck::bytes_of(&push),
+                    args,
+                    16 * slot,
+                    "splat_raster",
+                )?;
+                dispatches += 1;
+            }
         }
         Ok(dispatches)
     }
@@ -704,13 +710,17 @@ impl<'a> SplatRecording<'a> {
 pub enum Retired {
     /// It ran whole: its counters.
     Counts(SplatCounts),
-    /// It binned this many entries, more than its list held, and accumulated nothing.
-    Overflowed(u64),
+    /// It binned this many entries, more than its list held, and accumulated nothing; its
+    /// walks would have taken this many passes after each band's first.
+    Overflowed(u64, u32),
+    /// A band's tiles walked more entries than the passes recorded for it take: this many
+    /// passes after each band's first would have served.
+    Unfinished(u32),
 }
 
 /// A retired recorded frame's counters: reads the counters and the total back, refuses the
 /// frame as [`check_projection`] would, says where the entries exceeded the list's `capacity`
-/// (the plan's), and otherwise returns its counts.
+/// (the plan's) or the bands' walks the passes recorded, and otherwise returns its counts.
 pub fn retired_counts(
     ctx: &Context,
     targets: &SplatTargets,
@@ -720,6 +730,7 @@ pub fn retired_counts(
     invocations: u32,
 ) -> Result<Retired, RenderError> {
     let (stats, total) = read_counters(ctx, targets, setup)?;
+    let needed = resumes_needed(setup, RasterWalk::of_plan(plan), &stats);
     if plan_groups(plan, total, &stats)[0][0] == 0 {
         check_projection(setup, &stats, u64::from(total), budget, entry_limit(ctx))?;
         if total > plan.max_entries {
@@ -731,7 +742,10 @@ pub fn retired_counts(
             });
         }
         // What is left: the entries did not fit the list.
-        return Ok(Retired::Overflowed(u64::from(total)));
+        return Ok(Retired::Overflowed(u64::from(total), needed));
+    }
+    if needed > plan.resumes {
+        return Ok(Retired::Unfinished(needed));
     }
     check_raster(&stats)?;
     Ok(Retired::Counts(frame_counts(
@@ -771,9 +785,10 @@ fn read_counters(
     Ok((stats, total.first().copied().unwrap_or(0)))
 }
 
-/// The entries a frame of `setup` bins, from a projection of its own (one submission and a
-/// wait): how a recorded frame's list is sized before anything counted them. Refuses what
-/// [`check_projection`] refuses.
+/// The entries a frame of `setup` bins, and the passes after each band's first that its
+/// walks take ([`resumes_needed`]), from a projection of its own (one submission and a
+/// wait): how a recorded frame's list is sized and its passes counted before anything
+/// counted them. Refuses what [`check_projection`] refuses.
 #[allow(clippy::too_many_arguments)]
 pub fn count_entries(
     ctx: &Context,
@@ -784,14 +799,16 @@ pub fn count_entries(
     tf: &TransferFunction,
     hull: &[(u32, &Buffer)],
     budget: Option<f64>,
-) -> Result<u64, RenderError> {
+) -> Result<(u64, u32), RenderError> {
     if !targets.fits(setup, kernels) {
         return Err(VkError::Usage("splat frame buffers do not fit the setup".into()).into());
     }
-    let constants = SplatConstants::upload(ctx, &ConstantData::new(setup, kernels, tf))?;
+    let data = ConstantData::new(setup, kernels, tf);
+    let walk = RasterWalk::new(setup, data.tf_count())?;
+    let constants = SplatConstants::upload(ctx, &data)?;
     let (stats, total, _) = project(ctx, pipelines, kernels, targets, &constants, setup, hull)?;
     check_projection(setup, &stats, total, budget, entry_limit(ctx))?;
-    Ok(total)
+    Ok((total, resumes_needed(setup, walk, &stats)))
 }
 
 /// Renders one frame; `targets` must fit the setup (see [`SplatTargets::fits`]); `hull` are the
@@ -810,7 +827,9 @@ pub fn splat_frame(
     if !targets.fits(setup, kernels) {
         return Err(VkError::Usage("splat frame buffers do not fit the setup".into()).into());
     }
-    let constants = SplatConstants::upload(ctx, &ConstantData::new(setup, kernels, tf))?;
+    let data = ConstantData::new(setup, kernels, tf);
+    let walk = RasterWalk::new(setup, data.tf_count())?;
+    let constants = SplatConstants::upload(ctx, &data)?;
     let mut stage_ms = [0.0; 5];
     let (tiles_x, tiles_y) = setup.tiles();
     // The hull segments of this camera, where the last frame of these buffers left them.
@@ -826,6 +845,8 @@ pub fn splat_frame(
     let limit = entry_limit(ctx);
     check_projection(setup, &stats, total, control.budget, limit)?;
     targets.reserve_entries(ctx, total, limit)?;
+    targets.reserve_raster_state(ctx, pipelines.variant(), tiles_x)?;
+    let mut band_passes = stat_band_entries(&stats, raster_bands(setup)).map(|e| walk.passes(e));
 
     // Pass 2: the scatter, then the tiles in bands of rows.
     let t = &*targets;
@@ -835,10 +856,7 @@ pub fn splat_frame(
     while row < tiles_y {
         let rows = band.min(tiles_y - row);
         let first = row == 0;
-        let push = RasterPush {
-            tile_row: row,
-            _pad: [0; 3],
-        };
+        let passes = band_passes.next().unwrap_or(1);
         let timings = ctx.submit(|rec| {
             if first {
                 rec.dispatch(
@@ -858,13 +876,17 @@ pub fn splat_frame(
                     rec.dispatch(p, g, push, n, "splat_order")?;
                 }
             }
-            rec.dispatch(
-                &pipelines.raster,
-                &groups.raster,
-                bytemuck::bytes_of(&push),
-                [tiles_x, rows, 1],
-                "splat_raster",
-            )
+            for pass in 0..passes {
+                let push = walk.push(row, pass, passes - 1);
+                rec.dispatch(
+                    &pipelines.raster,
+                    &groups.raster,
+                    bytemuck::bytes_of(&push),
+                    [tiles_x, rows, 1],
+                    "splat_raster",
+                )?;
+            }
+            Ok(())
         })?;
         sum_ms(&timings, &mut stage_ms);
         submissions += 1;
@@ -893,63 +915,4 @@ pub fn splat_frame(
         variant: pipelines.variant().name(),
         segments_reused,
     })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn order_groups_cover_every_bucket_within_the_dispatch_limit() {
-        for buckets in [1u32, 64, 65, 65_535 * 64, 65_535 * 64 + 1, 1 << 24] {
-            let [x, y, z] = order_groups(buckets);
-            assert!(x <= 65_535 && y <= 65_535 && z == 1);
-            let invocations = u64::from(x) * u64::from(y) * u64::from(GROUP);
-            assert!(invocations >= u64::from(buckets), "{buckets}: {x} × {y}");
-            assert!(
-                invocations < u64::from(buckets) + u64::from(x * GROUP),
-                "{buckets}"
-            );
-        }
-    }
-
-    #[test]
-    fn plan_runs_the_frame_only_where_it_fits() {
-        let push = PlanPush {
-            buckets: 10,
-            capacity: 100,
-            max_entries: 80,
-            bin_groups: 3,
-            tiles_x: 4,
-            tiles_y: 5,
-            segments: 1,
-            band_rows: 2,
-        };
-        let ok = vec![[3, 1, 1], [1, 1, 1], [4, 2, 1], [4, 2, 1], [4, 1, 1]];
-        let none = vec![[0, 1, 1]; 5];
-        let clean = [0u32; 15];
-        assert_eq!(plan_groups(&push, 80, &clean), ok);
-        assert_eq!(plan_groups(&push, 81, &clean), none, "over the budget");
-        let roomy = PlanPush {
-            max_entries: u32::MAX,
-            ..push
-        };
-        assert_eq!(plan_groups(&roomy, 100, &clean), ok);
-        assert_eq!(plan_groups(&roomy, 101, &clean), none, "over the list");
-        let mut oversized = clean;
-        oversized[splat_stat::OVERSIZED] = 1;
-        assert_eq!(plan_groups(&push, 1, &oversized), none);
-        let mut segments = clean;
-        segments[splat_stat::SEGMENT_OVERFLOW] = 2;
-        assert_eq!(plan_groups(&push, 1, &segments), none);
-        let no_hull = PlanPush {
-            segments: 0,
-            ..push
-        };
-        assert_eq!(
-            plan_groups(&no_hull, 1, &segments),
-            ok,
-            "no segments kernel ran"
-        );
-    }
 }

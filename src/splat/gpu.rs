@@ -5,7 +5,7 @@
 use super::project::KernelKind;
 use super::{Antialias, SCAN_BLOCK, Shading, SplatSetup};
 use crate::field::Field;
-use crate::gpu_types::{CameraBlock, RasterPush, ScanPush, Splat, binding};
+use crate::gpu_types::{CameraBlock, RasterPush, ScanPush, Splat, WalkPush, binding, splat_stat};
 use crate::vk::{
     Buffer, BufferUsage, ComputePipeline, Context, ShaderCompiler, ShaderSource, VkError,
 };
@@ -29,19 +29,20 @@ pub(super) const ORDER_BINDINGS: [u32; 4] = [
 /// Workgroups of `splat_order`'s second pass, which heapsorts the buckets too large for its
 /// first (a grid-stride loop over them: there are few).
 pub(super) const ORDER_LARGE_GROUPS: u32 = 16;
-/// Pixels per `splat_raster` invocation without an apron (every tile size is a multiple).
-const RASTER_PIXELS: u32 = 4;
 /// Hull hits `splat_segments` keeps per pixel (`HULL_MAX_HITS` of its variant).
 pub const SEGMENT_HITS: usize = 2 * super::PIXEL_SEGMENTS + 4;
 
-/// Invocations per workgroup of the one-dimensional kernels.
-pub(super) const GROUP: u32 = 64;
+/// Words of a pixel's registers that `splat_raster` saves between passes (`SPLAT_PIXEL_WORDS`):
+/// the most any variant keeps, post-shaded with a ring of 16 sheets (27).
+const RASTER_PIXEL_WORDS: u32 = 28;
 /// `SplatCounts` counters in the stats buffer.
 /// Counter slots: 0–5 and 8 one word each; 64-bit ones: 9 and 10 with high words 11 and 12,
 /// 6 and 7 with high words 13 and 14; 15 the tiles cut short (`splat_stat::RASTER_TRUNCATED`);
 /// 16 the buckets left out of kernel order (`splat_stat::UNORDERED`), 17 those handed to
-/// `splat_order`'s second pass (`splat_stat::LARGE_BUCKETS`).
-const STATS: usize = 18;
+/// `splat_order`'s second pass (`splat_stat::LARGE_BUCKETS`), 18 the walks resumed
+/// (`splat_stat::RESUMED`); then one word per band, its tiles' most entries
+/// (`splat_stat::BAND_ENTRIES`).
+const STATS: usize = splat_stat::BAND_ENTRIES;
 
 /// The kernels uploaded once per dataset: one `Sample` each, volume in `metric_off.z`.
 pub struct GpuKernels {
@@ -145,7 +146,7 @@ impl SplatVariant {
     /// The variant a setup needs on a device.
     pub fn of(setup: &SplatSetup, device: &crate::vk::DeviceInfo) -> Self {
         let subgroup = device.subgroup_size.clamp(1, 128);
-        let pixels = Self::pixels_per_invocation(setup);
+        let pixels = setup.raster_pixels();
         Self {
             shading: setup.shading,
             antialias: setup.settings.antialias,
@@ -166,11 +167,6 @@ impl SplatVariant {
             group: (setup.group_size() / pixels).next_multiple_of(subgroup.max(8)),
             subgroup_ops: device.subgroup_ops,
         }
-    }
-
-    /// Pixels per `splat_raster` invocation for a setup (see [`SplatVariant::pixels`]).
-    pub fn pixels_per_invocation(setup: &SplatSetup) -> u32 {
-        if setup.apron() > 0 { 1 } else { RASTER_PIXELS }
     }
 
     /// shaderc macro definitions.
@@ -214,6 +210,7 @@ impl SplatVariant {
                 super::MAX_KERNEL_ENTRIES.to_string(),
             ),
             ("SPLAT_SEGMENTS".into(), super::PIXEL_SEGMENTS.to_string()),
+            ("SPLAT_PIXEL_WORDS".into(), RASTER_PIXEL_WORDS.to_string()),
             // Raw hits `splat_segments` keeps per pixel: the crossings of PIXEL_SEGMENTS
             // segments, plus room for coincident hits that are merged after sorting. Not
             // bvh::MAX_HITS: each access to the kernel's hit array costs in proportion to its
@@ -232,11 +229,18 @@ impl SplatVariant {
         k.extend([
             "splat/splat_project.comp",
             "splat/splat_scan.comp",
+            "splat/splat_walks.comp",
             "splat/splat_bin.comp",
             "splat/splat_order.comp",
             "splat/splat_raster.comp",
         ]);
         k
+    }
+
+    /// Words of `splat_raster`'s state per tile of a band: per invocation a tag, the walk's
+    /// position (three words) and its pixels' registers.
+    pub fn raster_tile_words(&self) -> u64 {
+        u64::from(self.group) * (4 + u64::from(self.pixels * RASTER_PIXEL_WORDS))
     }
 
     /// Human-readable name for `--stats`.
@@ -288,6 +292,7 @@ pub struct SplatPipelines {
     variant: SplatVariant,
     pub(super) project: ComputePipeline,
     pub(super) scan: [ComputePipeline; 3],
+    pub(super) walks: ComputePipeline,
     /// `splat_plan`, compiled for recorded frames only (`SplatPipelines::with_plan`).
     pub(super) plan: Option<ComputePipeline>,
     pub(super) bin: ComputePipeline,
@@ -337,6 +342,7 @@ impl SplatPipelines {
             SPLAT_LIST,
             IMAGE,
             SPLAT_STATS,
+            SPLAT_RASTER_STATE,
         ];
         if post {
             raster.extend([TRANSFER, TRANSFER_TEXELS]);
@@ -373,6 +379,12 @@ impl SplatPipelines {
                 scan(1, &SCAN_BINDINGS[..3])?,
                 scan(2, &SCAN_BINDINGS)?,
             ],
+            walks: make(
+                "splat/splat_walks.comp",
+                &[],
+                &[BUCKET_OFFSETS, SPLAT_STATS],
+                push(std::mem::size_of::<WalkPush>()),
+            )?,
             bin: make(
                 "splat/splat_bin.comp",
                 &[],
@@ -445,6 +457,8 @@ pub struct SplatTargets {
     pub(super) image: Buffer,
     pub(super) stats: Buffer,
     pub(super) list: Option<Buffer>,
+    /// `splat_raster`'s walks between passes, for one band (`reserve_raster_state`).
+    pub(super) raster_state: Option<Buffer>,
     pub(super) segments: Option<Buffer>,
     /// The camera whose pixels' hull segments `segments` holds (post-shaded over a hull): a
     /// frame of that camera skips `splat_segments`. `None`: none yet, or being rewritten.
@@ -518,6 +532,12 @@ impl SplatTargets {
             .ok_or_else(|| VkError::Usage("pixel hull segments missing".into()))
     }
 
+    pub(super) fn raster_state(&self) -> Result<&Buffer, VkError> {
+        self.raster_state
+            .as_ref()
+            .ok_or_else(|| VkError::Usage("splat raster state missing".into()))
+    }
+
     /// Whether these buffers fit a setup.
     pub fn fits(&self, setup: &SplatSetup, kernels: &GpuKernels) -> bool {
         self.key == Self::key(setup, kernels) && setup.buckets() <= self.bucket_capacity
@@ -556,6 +576,33 @@ impl SplatTargets {
         Ok(())
     }
 
+    /// Makes room for the walks of one band of `variant`'s `splat_raster` between its passes
+    /// (`RASTER_BAND_ROWS` tile rows of `tiles_x` tiles).
+    pub fn reserve_raster_state(
+        &mut self,
+        ctx: &Context,
+        variant: &SplatVariant,
+        tiles_x: u32,
+    ) -> Result<(), VkError> {
+        let words = variant.raster_tile_words()
+            * u64::from(tiles_x)
+            * u64::from(super::plan::RASTER_BAND_ROWS);
+        if self
+            .raster_state
+            .as_ref()
+            .is_none_or(|b| b.size() < 4 * words)
+        {
+            self.raster_state = None;
+            self.raster_state = Some(Buffer::new(
+                ctx,
+                "splat raster state",
+                4 * words,
+                BufferUsage::Storage,
+            )?);
+        }
+        Ok(())
+    }
+
     /// Allocates the buffers of a setup.
     pub fn new(ctx: &Context, setup: &SplatSetup, kernels: &GpuKernels) -> Result<Self, VkError> {
         let (w, h) = (
@@ -580,8 +627,12 @@ impl SplatTargets {
             cursors: storage("bucket cursors", 4 * buckets)?,
             sums: storage("scan block sums", 4 * blocks)?,
             image: storage("splat image", 16 * pixels)?,
-            stats: storage("splat counters", 4 * STATS as u64)?,
+            stats: storage(
+                "splat counters",
+                4 * (STATS as u64 + u64::from(super::plan::raster_bands(setup))),
+            )?,
             list: None,
+            raster_state: None,
             segments: if setup.hull && setup.shading == Shading::Post {
                 Some(storage(
                     "pixel hull segments",

@@ -34,6 +34,7 @@
 //!   boundary).
 pub mod frame;
 pub mod gpu;
+pub mod plan;
 pub mod project;
 pub mod raster;
 pub mod surface;
@@ -184,6 +185,10 @@ pub struct SplatSetup {
     /// the whole image and every sheet, but in a brick's frame only those whose rays and
     /// midpoints can meet its cell ([`brick_window`]).
     pub window: ([i32; 4], [u32; 2]),
+    /// The walk cost of a pass of `splat_raster` per tile; None: [`plan::RASTER_CHUNK`]. It
+    /// changes nothing in the image, only how the walks are split among passes (tests force
+    /// small ones with it).
+    pub raster_chunk: Option<u32>,
 }
 
 impl SplatSetup {
@@ -411,6 +416,7 @@ impl SplatSetup {
             lighting: *lighting,
             cell: field.clip().map(|clip| brick_cell(clip, (box_lo, box_hi))),
             window: ([0; 4], [0; 2]),
+            raster_chunk: None,
         };
         let apron = if post && !setup.isosurfaces.is_empty() {
             (2, [2, 3])
@@ -509,6 +515,13 @@ impl SplatSetup {
     /// sheet for their gradients, so a tile also splats the ring of pixels around it.
     pub fn apron(&self) -> u32 {
         u32::from(self.shading == Shading::Post && !self.isosurfaces.is_empty())
+    }
+
+    /// Pixels per `splat_raster` invocation, a column of them (each splat record an
+    /// invocation loads serves them all): one where the apron's lateral exchange needs a
+    /// pixel per invocation, else four (every tile size is a multiple).
+    pub fn raster_pixels(&self) -> u32 {
+        if self.apron() > 0 { 1 } else { 4 }
     }
 
     /// Invocations of one `splat_raster` workgroup: the tile and its apron.
@@ -659,6 +672,9 @@ pub struct SplatCounts {
     /// Buckets of more entries than `splat_order`'s insertion sort takes, heapsorted by its
     /// second pass (0 on the CPU twin).
     pub large_buckets: u64,
+    /// Tile walks continued in a later pass of `splat_raster` (a tile of more entries than a
+    /// dispatch may loop over on llvmpipe), per pass; 0 on the CPU twin.
+    pub resumed: u64,
 }
 
 impl SplatCounts {

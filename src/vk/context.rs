@@ -49,8 +49,8 @@ pub struct DeviceInfo {
     /// Nanoseconds per timestamp tick; `None` when the queue has no timestamps.
     pub timestamp_period_ns: Option<f64>,
     /// Invocations per subgroup, and whether compute shaders have the basic, vote and
-    /// arithmetic subgroup operations (`splat_raster` stops subgroups by vote and sums its
-    /// counters with them).
+    /// arithmetic subgroup operations (`splat_raster` stops subgroups by vote, sums its
+    /// counters with them and makes a continued walk's position the subgroup's).
     pub subgroup_size: u32,
     pub subgroup_ops: bool,
     /// The texel-view formats vmls binds (`BindingKind::texel`) that this device supports as

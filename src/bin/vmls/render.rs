@@ -176,6 +176,7 @@ pub fn run_render(
                 "footprint_pixels_contributing": r.counts.contributions,
                 "buckets_unordered": r.counts.unordered,
                 "buckets_heapsorted": r.counts.large_buckets,
+                "tile_walks_resumed": r.counts.resumed,
                 "gpu_ms_per_kernel": {
                     "splat_project": r.stage_ms[0] / r.counts.projected.max(1) as f64,
                     "splat_sort": r.stage_ms[1] / r.counts.kept().max(1) as f64,

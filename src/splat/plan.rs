@@ -1,0 +1,392 @@
+//! How a frame's accumulation is divided among dispatches, and the twins of the two stages
+//! that decide it on the GPU in a recorded frame: `splat_walks` ([`band_entries`]: each band's
+//! longest tile walk) and `splat_plan` ([`plan_groups`]: every indirect dispatch's workgroups).
+//!
+//! llvmpipe ends an invocation's loops after 65 535 iterations in a dispatch, and a tile of a
+//! dense point cloud walks more (tile, sheet) entries than that: `splat_raster` runs each band
+//! of [`RASTER_BAND_ROWS`] tile rows in as many passes as its longest walk takes
+//! ([`RasterWalk`]), each continuing, pixels' registers and all, the walks the pass before
+//! left.
+
+use super::{Shading, SplatSetup};
+use crate::field::RenderError;
+use crate::gpu_types::{PlanPush, RasterPush, WalkPush, splat_stat};
+
+/// Tile rows per dispatch of `splat_raster`. Small bands are faster on lavapipe: at 512²
+/// (64 tile rows) two rows a band took 6–9% less GPU and wall time than eight (BENCHMARKS.md,
+/// "Splatting frames recorded"), at 256² 5% less than four. In
+/// [`splat_frame`](super::frame::splat_frame) each band is
+/// also one submission, so that Ctrl-C and the progress bar act within a fraction of a frame.
+pub const RASTER_BAND_ROWS: u32 = 2;
+
+/// Invocations per workgroup of the one-dimensional kernels.
+pub(super) const GROUP: u32 = 64;
+
+/// The walk cost a pass of `splat_raster` spends per tile at most, in loop iterations: 15/16
+/// of the 65 535 llvmpipe allows an invocation in a dispatch, the rest left to the kernel's
+/// other loops (a few per pixel, and the walk loop's last trip).
+pub const RASTER_CHUNK: u32 = 61_440;
+
+/// The largest walk cost a pass may be given ([`crate::renderer::Renderer::set_splat_raster_chunk`]):
+/// the kernel adds it to list positions in 32 bits.
+pub const RASTER_CHUNK_MAX: u32 = 1 << 30;
+
+/// Bands of [`RASTER_BAND_ROWS`] tile rows in a frame of `setup`.
+pub fn raster_bands(setup: &SplatSetup) -> u32 {
+    setup.tiles().1.div_ceil(RASTER_BAND_ROWS)
+}
+
+/// How `splat_raster` splits a tile's walk among passes (the twin of its `cost`, and of the
+/// passes `splat_plan` and `splat_raster` count, `glsl/splat/walks.glsl`). A walk costs one
+/// per entry and `sheet_cost` per sheet, which counts what llvmpipe's limit counts: every
+/// trip of every loop, the last one whose condition fails included (a loop there ends by
+/// masking lanes, then runs its body's end once more), whether or not a lane is active. Per
+/// sheet that is the sheet loop's trip and the entry loop's last; post-shaded also, for each
+/// pixel of an invocation, the transfer function's segment search and the isosurface
+/// crossings' three loops. A pass stops before its cost would pass `chunk`; one stopped
+/// inside a sheet charges that sheet again in the next.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RasterWalk {
+    pub chunk: u32,
+    pub sheet_cost: u32,
+    /// Sheets a walk steps through: the sheets, and post-shaded one more (compositing lags a
+    /// sheet behind).
+    pub steps: u32,
+}
+
+impl RasterWalk {
+    /// The walk of a frame of `setup` whose transfer function has `tf_count` points on the
+    /// GPU; `setup.raster_chunk` overrides [`RASTER_CHUNK`].
+    pub fn new(setup: &SplatSetup, tf_count: u32) -> Result<Self, RenderError> {
+        let post = setup.shading == Shading::Post;
+        let sheet_cost = if post {
+            // The segment search: count - 1 trips and the last; the crossings: the isosurface
+            // loop (n + 1), the insertion of the i-th crossing (at most i + 1), the shading
+            // loop (n + 1).
+            let n = setup.isosurfaces.len() as u32;
+            let crossings = if n > 0 {
+                2 * n + 2 + n * (n + 1) / 2
+            } else {
+                0
+            };
+            2 + setup.raster_pixels() * (tf_count + crossings)
+        } else {
+            2
+        };
+        match setup.raster_chunk {
+            Some(chunk) if !(3 * sheet_cost..=RASTER_CHUNK_MAX).contains(&chunk) => {
+                Err(RenderError::Setting {
+                    key: "splat_raster_chunk",
+                    message: format!(
+                        "{chunk}: expected a walk cost per pass from {} (three sheets of this \
+                         frame) to {RASTER_CHUNK_MAX}",
+                        3 * sheet_cost
+                    ),
+                })
+            }
+            None if RASTER_CHUNK < 3 * sheet_cost => Err(RenderError::Setting {
+                key: "transfer.points",
+                message: format!(
+                    "expected fewer transfer function points for post-shaded splatting: \
+                     compositing one sheet of a tile loops {sheet_cost} times, and one dispatch \
+                     of splat_raster may loop {RASTER_CHUNK} (below llvmpipe's limit)"
+                ),
+            }),
+            chunk => Ok(Self {
+                chunk: chunk.unwrap_or(RASTER_CHUNK),
+                sheet_cost,
+                steps: setup.slabs + u32::from(post),
+            }),
+        }
+    }
+
+    /// The walk of a recorded frame, as `splat_plan` was told it.
+    pub fn of_plan(push: &PlanPush) -> Self {
+        Self {
+            chunk: push.chunk,
+            sheet_cost: push.sheet_cost,
+            steps: push.steps,
+        }
+    }
+
+    /// Passes of a band whose tiles walk at most `entries` entries: one where the whole walk
+    /// fits a pass; else every pass but the last makes more than `chunk − 2·sheet_cost` of
+    /// progress (it stops within a sheet's cost of `chunk`, and may charge the sheet it
+    /// stopped in twice).
+    pub fn passes(&self, entries: u32) -> u32 {
+        let walk = u64::from(entries) + u64::from(self.steps) * u64::from(self.sheet_cost);
+        if walk <= u64::from(self.chunk) {
+            1
+        } else {
+            let progress = u64::from(self.chunk - 2 * self.sheet_cost);
+            u32::try_from(walk.div_ceil(progress)).unwrap_or(u32::MAX)
+        }
+    }
+
+    /// The push constants of pass `pass` of the band at `tile_row`, whose last recorded pass
+    /// is `last_pass`.
+    pub fn push(&self, tile_row: u32, pass: u32, last_pass: u32) -> RasterPush {
+        RasterPush {
+            tile_row,
+            pass,
+            last_pass,
+            chunk: self.chunk,
+            sheet_cost: self.sheet_cost,
+            band: tile_row / RASTER_BAND_ROWS,
+            _pad: [0; 2],
+        }
+    }
+}
+
+/// `splat_walks`' push constants for a frame of `setup`.
+pub fn walk_push(setup: &SplatSetup) -> WalkPush {
+    let (tiles_x, tiles_y) = setup.tiles();
+    WalkPush {
+        tiles: tiles_x * tiles_y,
+        tiles_x,
+        slabs: setup.slabs,
+        band_rows: RASTER_BAND_ROWS,
+    }
+}
+
+/// Stage `splat_walks` (GLSL: `glsl/splat/splat_walks.comp`): the most entries any tile of
+/// each band walks, from the bucket `offsets` (the scan's, with the total after the last).
+pub fn band_entries(push: &WalkPush, offsets: &[u32]) -> Vec<u32> {
+    let (tiles, tiles_x, slabs) = (
+        push.tiles as usize,
+        push.tiles_x as usize,
+        push.slabs as usize,
+    );
+    let rows = push.band_rows.max(1) as usize;
+    let mut bands = vec![0; tiles.div_ceil(tiles_x).div_ceil(rows)];
+    for tile in 0..tiles {
+        let entries = offsets[(tile + 1) * slabs] - offsets[tile * slabs];
+        let band = tile / tiles_x / rows;
+        bands[band] = bands[band].max(entries);
+    }
+    bands
+}
+
+/// Each band's longest walk in entries, as `splat_walks` left it in the counters.
+pub(super) fn stat_band_entries(stats: &[u32], bands: u32) -> impl Iterator<Item = u32> + '_ {
+    (0..bands as usize).map(|b| {
+        stats
+            .get(splat_stat::BAND_ENTRIES + b)
+            .copied()
+            .unwrap_or(0)
+    })
+}
+
+/// Workgroups of `splat_order`'s first pass, one invocation per bucket, and of `splat_walks`,
+/// one per tile: rows of at most 65 535 workgroups (twin of `splat_plan`'s).
+pub fn order_groups(buckets: u32) -> [u32; 3] {
+    let groups = buckets.div_ceil(GROUP).max(1);
+    let x = groups.min(65_535);
+    [x, groups.div_ceil(x), 1]
+}
+
+/// Stage `splat_plan` (GLSL: `glsl/splat/splat_plan.comp`): the workgroup counts of
+/// `splat_bin`, of `splat_order`'s first pass, then of each band of `push.band_rows` tile rows
+/// of `splat_raster`, then of each band's `push.resumes` later passes, in a recorded frame,
+/// from the scan's `total` and the projection's counters `stats` (with the bands' longest
+/// walks): the whole frame, each band's passes as many as it needs ([`RasterWalk::passes`]),
+/// or none (x = 0) where the entries exceed the list or the budget, or a kernel or pixel
+/// overflowed.
+pub fn plan_groups(push: &PlanPush, total: u32, stats: &[u32]) -> Vec<[u32; 3]> {
+    let stat = |i: usize| stats.get(i).copied().unwrap_or(0);
+    let run = total <= push.capacity
+        && total <= push.max_entries
+        && stat(splat_stat::OVERSIZED) == 0
+        && (push.segments == 0 || stat(splat_stat::SEGMENT_OVERFLOW) == 0);
+    let rows = push.band_rows.max(1);
+    let mut groups = if run {
+        vec![[push.bin_groups, 1, 1], order_groups(push.buckets)]
+    } else {
+        vec![[0, 1, 1]; 2]
+    };
+    let band = |row: u32| [push.tiles_x, rows.min(push.tiles_y - row), 1];
+    let rows_of_bands = (0..push.tiles_y).step_by(rows as usize);
+    for row in rows_of_bands.clone() {
+        groups.push(if run { band(row) } else { [0, 1, 1] });
+    }
+    let walk = RasterWalk::of_plan(push);
+    let bands = push.tiles_y.div_ceil(rows);
+    for (row, entries) in rows_of_bands.zip(stat_band_entries(stats, bands)) {
+        let passes = walk.passes(entries);
+        for pass in 1..=push.resumes {
+            groups.push(if run && pass < passes {
+                band(row)
+            } else {
+                [0, 1, 1]
+            });
+        }
+    }
+    groups
+}
+
+/// Bytes of a recorded frame's indirect arguments: `splat_bin`'s, `splat_order`'s, then one
+/// per band, then `resumes` per band.
+pub fn plan_args_bytes(setup: &SplatSetup, resumes: u32) -> u64 {
+    16 * (2 + u64::from(raster_bands(setup)) * (1 + u64::from(resumes)))
+}
+
+/// The passes after each band's first that the longest walks of a frame's bands take, from
+/// its counters.
+pub fn resumes_needed(setup: &SplatSetup, walk: RasterWalk, stats: &[u32]) -> u32 {
+    stat_band_entries(stats, raster_bands(setup))
+        .map(|e| walk.passes(e) - 1)
+        .max()
+        .unwrap_or(0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn order_groups_cover_every_bucket_within_the_dispatch_limit() {
+        for buckets in [1u32, 64, 65, 65_535 * 64, 65_535 * 64 + 1, 1 << 24] {
+            let [x, y, z] = order_groups(buckets);
+            assert!(x <= 65_535 && y <= 65_535 && z == 1);
+            let invocations = u64::from(x) * u64::from(y) * u64::from(GROUP);
+            assert!(invocations >= u64::from(buckets), "{buckets}: {x} × {y}");
+            assert!(
+                invocations < u64::from(buckets) + u64::from(x * GROUP),
+                "{buckets}"
+            );
+        }
+    }
+
+    #[test]
+    fn plan_runs_the_frame_only_where_it_fits() {
+        let push = PlanPush {
+            buckets: 10,
+            capacity: 100,
+            max_entries: 80,
+            bin_groups: 3,
+            tiles_x: 4,
+            tiles_y: 5,
+            segments: 1,
+            band_rows: 2,
+            chunk: 100,
+            sheet_cost: 10,
+            steps: 3,
+            resumes: 0,
+        };
+        let ok = vec![[3, 1, 1], [1, 1, 1], [4, 2, 1], [4, 2, 1], [4, 1, 1]];
+        let none = vec![[0, 1, 1]; 5];
+        let clean = [0u32; splat_stat::BAND_ENTRIES + 3];
+        assert_eq!(plan_groups(&push, 80, &clean), ok);
+        assert_eq!(plan_groups(&push, 81, &clean), none, "over the budget");
+        let roomy = PlanPush {
+            max_entries: u32::MAX,
+            ..push
+        };
+        assert_eq!(plan_groups(&roomy, 100, &clean), ok);
+        assert_eq!(plan_groups(&roomy, 101, &clean), none, "over the list");
+        let mut oversized = clean;
+        oversized[splat_stat::OVERSIZED] = 1;
+        assert_eq!(plan_groups(&push, 1, &oversized), none);
+        let mut segments = clean;
+        segments[splat_stat::SEGMENT_OVERFLOW] = 2;
+        assert_eq!(plan_groups(&push, 1, &segments), none);
+        let no_hull = PlanPush {
+            segments: 0,
+            ..push
+        };
+        assert_eq!(
+            plan_groups(&no_hull, 1, &segments),
+            ok,
+            "no segments kernel ran"
+        );
+        // Two passes recorded after each band's first: band 0 walks 70 entries (100 with its
+        // sheets: one pass), band 1 200 (230, three of 80), band 2 100 (130, two).
+        let resuming = PlanPush { resumes: 2, ..push };
+        let mut walks = clean;
+        walks[splat_stat::BAND_ENTRIES..].copy_from_slice(&[70, 200, 100]);
+        let mut want = ok.clone();
+        want.extend([
+            [0, 1, 1],
+            [0, 1, 1],
+            [4, 2, 1],
+            [4, 2, 1],
+            [4, 1, 1],
+            [0, 1, 1],
+        ]);
+        assert_eq!(plan_groups(&resuming, 80, &walks), want);
+        assert_eq!(
+            plan_groups(&resuming, 81, &walks),
+            vec![[0, 1, 1]; 11],
+            "nothing runs"
+        );
+    }
+
+    /// The walk of one tile as `splat_raster` makes it, sheet by sheet (`entries[k]` in sheet
+    /// k), in passes of `walk.chunk`: the passes it takes.
+    fn walk_passes(walk: &RasterWalk, entries: &[u32]) -> u32 {
+        let steps = walk.steps as usize;
+        let (mut k, mut done_in_sheet, mut passes) = (0usize, 0u32, 1u32);
+        let mut cost = 0u32;
+        while k < steps {
+            if cost + walk.sheet_cost > walk.chunk {
+                passes += 1;
+                cost = 0;
+                continue;
+            }
+            cost += walk.sheet_cost;
+            let n = entries.get(k).copied().unwrap_or(0);
+            let mut cut = false;
+            while done_in_sheet < n {
+                if cost >= walk.chunk {
+                    cut = true;
+                    break;
+                }
+                cost += 1;
+                done_in_sheet += 1;
+            }
+            if cut {
+                passes += 1;
+                cost = 0;
+                continue;
+            }
+            done_in_sheet = 0;
+            k += 1;
+        }
+        passes
+    }
+
+    struct Below<'a>(&'a mut crate::data::random::Lcg);
+
+    impl Below<'_> {
+        fn below(&mut self, n: u32) -> u32 {
+            (self.0.next_f64() * f64::from(n)) as u32
+        }
+    }
+
+    #[test]
+    fn a_walk_takes_at_most_the_passes_counted_for_its_entries() {
+        let mut lcg = crate::data::random::Lcg::new(7);
+        let mut rng = Below(&mut lcg);
+        let mut tight = 0;
+        for _ in 0..2000 {
+            let walk = RasterWalk {
+                chunk: 40 + rng.below(400),
+                sheet_cost: 1 + rng.below(12),
+                steps: 1 + rng.below(60),
+            };
+            let entries: Vec<u32> = (0..walk.steps)
+                .map(|_| match rng.below(4) {
+                    0 => 0,
+                    1 => rng.below(3),
+                    _ => rng.below(2 * walk.chunk),
+                })
+                .collect();
+            let total: u32 = entries.iter().sum();
+            let (took, counted) = (walk_passes(&walk, &entries), walk.passes(total));
+            assert!(took <= counted, "{walk:?}, {entries:?}: {took} > {counted}");
+            tight += u32::from(took == counted);
+        }
+        // The count is an upper bound, not a loose one.
+        assert!(tight > 500, "{tight} of 2000 walks took the passes counted");
+    }
+}
