@@ -429,6 +429,19 @@ fn recorded_splatting_learns_its_entry_count() {
             let field = thin.field_on(Some(ctx.info()), |_| {}).expect("field");
             let mut renderer = Renderer::new(&ctx, field).expect("renderer");
             let target = Target::buffer(buffer, 0, bytes, Access::NONE, Access::HOST_READ);
+            // The target's pixels, through a mapping (after a frame, the queue idle).
+            let read_target = || -> Vec<f32> {
+                let ptr = d
+                    .map_memory(memory, 0, bytes, vk::MemoryMapFlags::empty())
+                    .expect("map");
+                let pixels = bytemuck::cast_slice(std::slice::from_raw_parts(
+                    ptr.cast::<u8>(),
+                    bytes as usize,
+                ))
+                .to_vec();
+                d.unmap_memory(memory);
+                pixels
+            };
             // Records one frame of `view` into `cmd`, submits it, waits and retires it.
             let run = |renderer: &mut Renderer,
                        view: &vmls::view::View<'_>|
@@ -467,13 +480,7 @@ fn recorded_splatting_learns_its_entry_count() {
             assert_eq!(counts.entries, entries);
             assert_eq!(done.evaluations, counts.evaluated);
             assert!(done.dispatches >= 8, "{} dispatches", done.dispatches);
-            let ptr = d
-                .map_memory(memory, 0, bytes, vk::MemoryMapFlags::empty())
-                .expect("map");
-            let got: Vec<f32> =
-                bytemuck::cast_slice(std::slice::from_raw_parts(ptr.cast::<u8>(), bytes as usize))
-                    .to_vec();
-            d.unmap_memory(memory);
+            let got = read_target();
             let want: &[f32] = bytemuck::cast_slice(&rendered.pixels);
             let worst = got
                 .iter()
@@ -509,13 +516,7 @@ fn recorded_splatting_learns_its_entry_count() {
             );
             let done = run(&mut renderer, &thin.view()).expect("the next records enough");
             assert!(done.splat.expect("counts").resumed > 0);
-            let ptr = d
-                .map_memory(memory, 0, bytes, vk::MemoryMapFlags::empty())
-                .expect("map");
-            let split: Vec<f32> =
-                bytemuck::cast_slice(std::slice::from_raw_parts(ptr.cast::<u8>(), bytes as usize))
-                    .to_vec();
-            d.unmap_memory(memory);
+            let split = read_target();
             assert!(split == want, "split walks differ from render()'s frame");
             assert_eq!(ctx.validation_errors(), 0);
         }
