@@ -4,7 +4,7 @@
 //! Both run the same stages on the same buffers: `splat_segments` (post-shaded over a hull),
 //! `splat_project`, the three passes of `splat_scan`, `splat_walks`, `splat_bin`, the two of
 //! `splat_order` and `splat_raster`. `splat_raster` runs in bands of [`RASTER_BAND_ROWS`] tile
-//! rows, each band in as many passes as its longest tile walk takes ([`RasterWalk`](super::plan::RasterWalk): llvmpipe
+//! rows, each band in as many passes as its longest tile walk takes ([`RasterWalk`]: llvmpipe
 //! ends an invocation's loops after 65 535 iterations in a dispatch, and a tile of a dense
 //! point cloud walks more entries than that); a pass leaves the walks it could not finish,
 //! pixels' registers and all, to the next. The two ways differ in how the accumulation learns
@@ -18,7 +18,7 @@
 //!   recorded (from an earlier count), and `splat_plan` reads the total and the counters on the
 //!   GPU and dispatches `splat_bin`, `splat_order`'s first pass and each band of
 //!   `splat_raster` indirectly, or none of them where the entries do not fit or a check fails
-//!   ([`plan_groups`](super::plan::plan_groups), its twin); `splat_order`'s second pass finds nothing to do then. Each
+//!   ([`plan_groups`], its twin); `splat_order`'s second pass finds nothing to do then. Each
 //!   band's later passes are recorded as many times as an earlier count found needed
 //!   (`PlanPush::resumes`), those a band does not need dispatching nothing.
 //!   `Renderer::retire` reads the same numbers and names what stopped the frame.

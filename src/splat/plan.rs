@@ -15,8 +15,8 @@ use crate::gpu_types::{PlanPush, RasterPush, WalkPush, splat_stat};
 /// Tile rows per dispatch of `splat_raster`. Small bands are faster on lavapipe: at 512²
 /// (64 tile rows) two rows a band took 6–9% less GPU and wall time than eight (BENCHMARKS.md,
 /// "Splatting frames recorded"), at 256² 5% less than four. In
-/// [`splat_frame`](super::frame::splat_frame) each band is
-/// also one submission, so that Ctrl-C and the progress bar act within a fraction of a frame.
+/// [`splat_frame`](super::frame::splat_frame) each band is also one submission, so that
+/// Ctrl-C and the progress bar act within a fraction of a frame.
 pub const RASTER_BAND_ROWS: u32 = 2;
 
 /// Invocations per workgroup of the one-dimensional kernels.
@@ -27,8 +27,9 @@ pub(super) const GROUP: u32 = 64;
 /// other loops (a few per pixel, and the walk loop's last trip).
 pub const RASTER_CHUNK: u32 = 61_440;
 
-/// The largest walk cost a pass may be given ([`crate::renderer::Renderer::set_splat_raster_chunk`]):
-/// the kernel adds it to list positions in 32 bits.
+/// The largest walk cost a pass may be given
+/// ([`crate::renderer::Renderer::set_splat_raster_chunk`]): the kernel adds it to list
+/// positions in 32 bits.
 pub const RASTER_CHUNK_MAX: u32 = 1 << 30;
 
 /// Bands of [`RASTER_BAND_ROWS`] tile rows in a frame of `setup`.
