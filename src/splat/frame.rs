@@ -27,8 +27,8 @@ use super::gpu::{
     GpuKernels, ORDER_BINDINGS, ORDER_LARGE_GROUPS, SCAN_BINDINGS, SplatPipelines, SplatTargets,
 };
 use super::plan::{
-    GROUP, RASTER_BAND_ROWS, RasterWalk, order_groups, plan_groups, raster_bands, resumes_needed,
-    stat_band_entries, walk_push,
+    GROUP, RASTER_BAND_ROWS, RasterWalk, args_slot, order_groups, plan_groups, raster_bands,
+    resumes_needed, stat_band_entries, walk_push,
 };
 use super::{Shading, SplatCounts, SplatSetup};
 use crate::field::RenderError;
@@ -210,6 +210,19 @@ impl SplatConstants {
         c.tf.write(ctx, &data.tf)?;
         c.iso.write(ctx, &data.iso)?;
         Ok(c)
+    }
+
+    /// The uploaded constants of a frame of `setup` with `tf` over `kernels`, and how its
+    /// walks split among passes (which the transfer function's length enters).
+    pub fn with_walk(
+        ctx: &Context,
+        setup: &SplatSetup,
+        kernels: &GpuKernels,
+        tf: &TransferFunction,
+    ) -> Result<(Self, RasterWalk), RenderError> {
+        let data = ConstantData::new(setup, kernels, tf);
+        let walk = RasterWalk::new(setup, data.tf_count())?;
+        Ok((Self::upload(ctx, &data)?, walk))
     }
 
     /// Whether `data` fits these buffers.
@@ -663,30 +676,19 @@ impl<'a> SplatRecording<'a> {
             "splat_order",
         )?;
         // Segments, project, three scan passes, walks, plan, bin and two of order, then the
-        // bands.
+        // bands' passes.
         let mut dispatches = u32::from(self.projection.segments.is_some()) + 9;
-        // Band b's first pass's arguments follow splat_bin's and splat_order's, at
-        // 16 (b + 2); its later passes' follow all bands', at 16 (2 + bands + b resumes + r - 1).
         let resumes = self.push.resumes;
         let bands = self.push.tiles_y.div_ceil(self.push.band_rows);
-        for (b, row) in (0..self.push.tiles_y)
-            .step_by(self.push.band_rows as usize)
-            .enumerate()
-        {
-            let b = b as u64;
+        for band in 0..bands {
             for pass in 0..=resumes {
-                let slot = if pass == 0 {
-                    2 + b
-                } else {
-                    2 + u64::from(bands) + b * u64::from(resumes) + u64::from(pass - 1)
-                };
-                let push = self.walk.push(row, pass, resumes);
+                let push = self.walk.push(band * self.push.band_rows, pass, resumes);
                 rec.dispatch_indirect(
                     &pipelines.raster,
                     &self.accumulation.raster,
                     bytemuck::bytes_of(&push),
                     args,
-                    16 * slot,
+                    16 * args_slot(bands, resumes, band, pass) as u64,
                     "splat_raster",
                 )?;
                 dispatches += 1;
@@ -803,9 +805,7 @@ pub fn count_entries(
     if !targets.fits(setup, kernels) {
         return Err(VkError::Usage("splat frame buffers do not fit the setup".into()).into());
     }
-    let data = ConstantData::new(setup, kernels, tf);
-    let walk = RasterWalk::new(setup, data.tf_count())?;
-    let constants = SplatConstants::upload(ctx, &data)?;
+    let (constants, walk) = SplatConstants::with_walk(ctx, setup, kernels, tf)?;
     let (stats, total, _) = project(ctx, pipelines, kernels, targets, &constants, setup, hull)?;
     check_projection(setup, &stats, total, budget, entry_limit(ctx))?;
     Ok((total, resumes_needed(setup, walk, &stats)))
@@ -827,9 +827,7 @@ pub fn splat_frame(
     if !targets.fits(setup, kernels) {
         return Err(VkError::Usage("splat frame buffers do not fit the setup".into()).into());
     }
-    let data = ConstantData::new(setup, kernels, tf);
-    let walk = RasterWalk::new(setup, data.tf_count())?;
-    let constants = SplatConstants::upload(ctx, &data)?;
+    let (constants, walk) = SplatConstants::with_walk(ctx, setup, kernels, tf)?;
     let mut stage_ms = [0.0; 5];
     let (tiles_x, tiles_y) = setup.tiles();
     // The hull segments of this camera, where the last frame of these buffers left them.

@@ -200,35 +200,44 @@ pub fn plan_groups(push: &PlanPush, total: u32, stats: &[u32]) -> Vec<[u32; 3]> 
         && stat(splat_stat::OVERSIZED) == 0
         && (push.segments == 0 || stat(splat_stat::SEGMENT_OVERFLOW) == 0);
     let rows = push.band_rows.max(1);
-    let mut groups = if run {
-        vec![[push.bin_groups, 1, 1], order_groups(push.buckets)]
-    } else {
-        vec![[0, 1, 1]; 2]
-    };
-    let band = |row: u32| [push.tiles_x, rows.min(push.tiles_y - row), 1];
-    let rows_of_bands = (0..push.tiles_y).step_by(rows as usize);
-    for row in rows_of_bands.clone() {
-        groups.push(if run { band(row) } else { [0, 1, 1] });
-    }
-    let walk = RasterWalk::of_plan(push);
     let bands = push.tiles_y.div_ceil(rows);
-    for (row, entries) in rows_of_bands.zip(stat_band_entries(stats, bands)) {
-        let passes = walk.passes(entries);
-        for pass in 1..=push.resumes {
-            groups.push(if run && pass < passes {
-                band(row)
-            } else {
-                [0, 1, 1]
-            });
+    let mut groups = vec![[0, 1, 1]; args_count(bands, push.resumes)];
+    if !run {
+        return groups;
+    }
+    groups[0] = [push.bin_groups, 1, 1];
+    groups[1] = order_groups(push.buckets);
+    let walk = RasterWalk::of_plan(push);
+    for (b, entries) in (0..bands).zip(stat_band_entries(stats, bands)) {
+        let rows_of_band = rows.min(push.tiles_y - b * rows);
+        for pass in 0..walk.passes(entries).min(push.resumes + 1) {
+            groups[args_slot(bands, push.resumes, b, pass)] = [push.tiles_x, rows_of_band, 1];
         }
     }
     groups
 }
 
-/// Bytes of a recorded frame's indirect arguments: `splat_bin`'s, `splat_order`'s, then one
-/// per band, then `resumes` per band.
+/// Where a recorded frame's indirect arguments hold pass `pass` of band `band`, for `bands`
+/// bands of `resumes` passes after their first: after `splat_bin`'s and `splat_order`'s come
+/// every band's first pass, then each band's later passes (twin of `splat_plan`'s layout).
+pub fn args_slot(bands: u32, resumes: u32, band: u32, pass: u32) -> usize {
+    let (bands, resumes) = (bands as usize, resumes as usize);
+    let (band, pass) = (band as usize, pass as usize);
+    if pass == 0 {
+        2 + band
+    } else {
+        2 + bands + band * resumes + pass - 1
+    }
+}
+
+/// The indirect arguments of a recorded frame of `bands` bands and `resumes` later passes.
+pub fn args_count(bands: u32, resumes: u32) -> usize {
+    2 + bands as usize * (1 + resumes as usize)
+}
+
+/// Bytes of a recorded frame's indirect arguments ([`args_slot`]).
 pub fn plan_args_bytes(setup: &SplatSetup, resumes: u32) -> u64 {
-    16 * (2 + u64::from(raster_bands(setup)) * (1 + u64::from(resumes)))
+    16 * args_count(raster_bands(setup), resumes) as u64
 }
 
 /// The passes after each band's first that the longest walks of a frame's bands take, from
