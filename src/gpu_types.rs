@@ -216,6 +216,10 @@ pub mod ray_count {
     pub const EVALUATIONS: u32 = HULL_OVERFLOW - 1;
 }
 
+/// The largest bucket `splat_order`'s first pass sorts (by insertion); larger ones go to its
+/// second pass (GLSL: `SPLAT_ORDER_INSERTION_MAX`; `splat::plan::order_large_groups`).
+pub const ORDER_INSERTION_MAX: u32 = 64;
+
 /// Words of the splatting kernels' counter buffer (`SplatCounts`) that stop a frame before its
 /// accumulation.
 pub mod splat_stat {
@@ -272,6 +276,7 @@ pub fn binding_defines() -> Vec<(String, String)> {
         ("SPLAT_STAT_LARGE_BUCKETS", splat_stat::LARGE_BUCKETS as u32),
         ("SPLAT_STAT_RESUMED", splat_stat::RESUMED as u32),
         ("SPLAT_STAT_BAND_ENTRIES", splat_stat::BAND_ENTRIES as u32),
+        ("SPLAT_ORDER_INSERTION_MAX", ORDER_INSERTION_MAX),
         ("RAY_DONE", ray_count::DONE),
         ("RAY_TRUNCATED", ray_count::TRUNCATED),
         ("RAY_HULL_OVERFLOW", ray_count::HULL_OVERFLOW),
@@ -529,7 +534,7 @@ pub struct PlanPush {
     /// 1 where `splat_segments` ran: a pixel with too many inside segments stops the frame.
     pub segments: u32,
     /// Tile rows per dispatch of `splat_raster`: one set of arguments per band follows
-    /// splat_bin's and splat_order's.
+    /// splat_bin's and splat_order's two passes'.
     pub band_rows: u32,
     /// `RasterPush::chunk` and `sheet_cost`, and the sheets walked (sheets, and one more
     /// post-shaded): with each band's entries (`splat_walks`) they give its passes.

@@ -644,7 +644,7 @@ fn widened_kernels_keep_their_line_integrals() {
 #[test]
 fn splat_walks_and_splat_plan_match_their_cpu_twins() {
     use vmls::gpu_types::{PlanPush, WalkPush, binding, binding_defines, splat_stat};
-    use vmls::splat::plan::{RasterWalk, band_entries, plan_groups};
+    use vmls::splat::plan::{RasterWalk, args_count, args_slot, band_entries, plan_groups};
     use vmls::vk::{BindGroup, Buffer, BufferUsage, ComputePipeline, ShaderSource};
     let (ctx, compiler) = gpu();
     let walk_push = WalkPush {
@@ -692,11 +692,11 @@ fn splat_walks_and_splat_plan_match_their_cpu_twins() {
         BufferUsage::Storage,
     )
     .expect("stats");
-    let resumes = 3;
+    let resumes = 3u32;
     let args = Buffer::new(
         &ctx,
         "args",
-        16 * (2 + 4 * (1 + resumes)),
+        16 * args_count(4, resumes) as u64,
         BufferUsage::Storage,
     )
     .expect("args");
@@ -737,7 +737,7 @@ fn splat_walks_and_splat_plan_match_their_cpu_twins() {
             chunk: walk.chunk,
             sheet_cost: walk.sheet_cost,
             steps: walk.steps,
-            resumes: resumes as u32,
+            resumes,
         };
         ctx.submit(|rec| {
             rec.fill(&stats, 0);
@@ -774,7 +774,8 @@ fn splat_walks_and_splat_plan_match_their_cpu_twins() {
                 passes.contains(&1) && passes.iter().any(|&p| p > 1),
                 "{passes:?}"
             );
-            assert!(got.iter().skip(2).any(|g| g[0] == 0) && got[2][0] == 5);
+            let first_band = args_slot(4, resumes, 0, 0);
+            assert!(got.iter().skip(first_band).any(|g| g[0] == 0) && got[first_band][0] == 5);
         } else {
             assert!(got.iter().all(|g| g[0] == 0), "nothing runs");
         }

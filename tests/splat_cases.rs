@@ -622,18 +622,34 @@ fn splatting_frames_are_the_same_to_the_bit_on_every_run() {
         "camera.height=24",
         "render.method=\"splat-post\"",
     ];
+    // Kernels of 8 spacings' support in sheets of 4: 6.7 M entries, about 20 000 buckets of
+    // 65 to a few hundred entries, all for the second pass (whose fixed grid of 1 024
+    // invocations, before, ran out of loop iterations and left 13 339 of them unordered).
+    let large_kernels = [
+        "volume.resolution=17",
+        "camera.width=512",
+        "camera.height=512",
+        "render.method=\"splat\"",
+        "reconstruction.support=8",
+        "splat.slab=4",
+    ];
     let general = |o: &[&str]| general_scene(&o.iter().map(|s| s.to_string()).collect::<Vec<_>>());
     let mut large = Vec::new();
-    for (name, s) in [
-        ("pre-shaded, Marschner–Lobb 41³ at 96²", scene(&pre)),
-        ("post-shaded, 17³ at 40 × 24", general(&post)),
+    for (name, s, runs) in [
+        ("pre-shaded, Marschner–Lobb 41³ at 96²", scene(&pre), 5),
+        ("post-shaded, 17³ at 40 × 24", general(&post), 5),
+        (
+            "pre-shaded, 17³ of support 8 at 512²",
+            general(&large_kernels),
+            2,
+        ),
     ] {
         let field = s.field(|_| {}).expect("field");
         let mut renderer = Renderer::new(&ctx, field).expect("renderer");
         let (first, report) = gpu_frame(&mut renderer, &s);
         assert_eq!(report.counts.unordered, 0, "{name}: buckets left unordered");
         large.push(report.counts.large_buckets);
-        for run in 1..5 {
+        for run in 1..runs {
             let (again, _) = gpu_frame(&mut renderer, &s);
             let differ = first.iter().zip(&again).filter(|(a, b)| a != b).count();
             assert_eq!(
@@ -643,8 +659,10 @@ fn splatting_frames_are_the_same_to_the_bit_on_every_run() {
         }
     }
 
-    // The post-shaded scene's largest buckets went to the second pass, its heapsort.
+    // The post-shaded scene's largest buckets went to the second pass, its heapsort, and the
+    // third scene's many.
     assert!(large[1] > 0, "no bucket was heapsorted: {large:?}");
+    assert!(large[2] > 10_000, "too few buckets heapsorted: {large:?}");
 
     // One 8 × 8 tile and sheets 400 spacings thick: 4 913 whole kernels in one or two
     // buckets, past what splat_order can sort within llvmpipe's loop limit. Those buckets are

@@ -8,9 +8,10 @@
 // The kernel indices are sorted in place (every entry of a bucket has the same sheet), in two
 // dispatches of this file (ORDER_PASS):
 // 1. one invocation per bucket: insertion sort where the subgroup's largest bucket has at most
-//    INSERTION_MAX entries; a larger bucket's index goes to the bucket cursors (free once
-//    splat_bin is done), counted in stats[SPLAT_STAT_LARGE_BUCKETS];
-// 2. a fixed grid over those buckets: heapsort.
+//    SPLAT_ORDER_INSERTION_MAX entries; a larger bucket's index goes to the bucket cursors
+//    (free once splat_bin is done), counted in stats[SPLAT_STAT_LARGE_BUCKETS];
+// 2. one invocation per bucket the first pass can hand over (order_large_groups in
+//    src/splat/plan.rs: one per SPLAT_ORDER_INSERTION_MAX + 1 entries at most): heapsort.
 // Two passes, because llvmpipe runs every instruction of a kernel whatever its lanes decide:
 // heapsort's code beside the insertion sort made every one of a frame's million buckets pay
 // for what a few need (BENCHMARKS.md). llvmpipe also ends an invocation's loops after 65 535
@@ -35,9 +36,9 @@ layout(std430, binding = BINDING_BUCKET_CURSORS) buffer LargeBuf { uint large[];
 
 // Below llvmpipe's 65 535, with room for the loops' last passes.
 const uint SORT_ITERATIONS = 60000u;
-// The first pass sorts buckets up to this size, within 64 * 63 / 2 + 2 * 64 + 1 = 2 145 loop
-// iterations (see insertion_sort): far below the limit, so it needs no count.
-const uint INSERTION_MAX = 64u;
+// The first pass sorts buckets of up to SPLAT_ORDER_INSERTION_MAX = 64 entries, within
+// 64 * 63 / 2 + 2 * 64 + 1 = 2 145 loop iterations (see insertion_sort): far below the limit,
+// so it needs no count.
 
 uint lo;
 uint sheet;
@@ -76,7 +77,7 @@ void main() {
     bool valid = b < push.buckets;
     lo = valid ? imageLoad(offset_texels, int(b)).x : 0u;
     uint n = valid ? imageLoad(offset_texels, int(b + 1u)).x - lo : 0u;
-    if (n > INSERTION_MAX) {
+    if (n > SPLAT_ORDER_INSERTION_MAX) {
         large[atomicAdd(stats[SPLAT_STAT_LARGE_BUCKETS], 1u)] = b;
         n = 0u;
     }
@@ -141,12 +142,15 @@ void heap_sort(uint n) {
 
 void main() {
     uint count = stats[SPLAT_STAT_LARGE_BUCKETS];
-    uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
-    // Rounds the same in every lane, so that the subgroup can count its iterations.
+    uint stride = gl_NumWorkGroups.x * gl_NumWorkGroups.y * gl_WorkGroupSize.x;
+    uint first = (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * gl_WorkGroupSize.x
+                 + gl_LocalInvocationID.x;
+    // One round where the grid has an invocation per bucket (it is sized so); the same in
+    // every lane, so that the subgroup can count its iterations.
     uint rounds = (count + stride - 1u) / stride;
     uint spent = 0u;
     for (uint r = 0u; r < rounds; ++r) {
-        uint k = gl_GlobalInvocationID.x + r * stride;
+        uint k = first + r * stride;
         uint b = k < count ? large[k] : 0u;
         lo = k < count ? imageLoad(offset_texels, int(b)).x : 0u;
         uint n = k < count ? imageLoad(offset_texels, int(b + 1u)).x - lo : 0u;

@@ -2,9 +2,10 @@
 // Stage splat_plan (twin: plan_groups in src/splat/plan.rs): in a recorded frame, the one
 // decision render() makes on the host between the projection and the accumulation. From the
 // scan's total of binned entries and the projection's counters it writes the workgroup counts
-// of splat_bin, of splat_order's first pass (an invocation per bucket, rows of at most 65 535
-// workgroups), of each band of push.band_rows tile rows of splat_raster, then of each band's
-// push.resumes later passes, which all dispatch indirectly: the whole frame where its
+// of splat_bin, of splat_order's two passes (an invocation per bucket, rows of at most 65 535
+// workgroups; the second's per bucket the first can hand over), of each band of
+// push.band_rows tile rows of splat_raster, then of each band's push.resumes later passes,
+// which all dispatch indirectly: the whole frame where its
 // entries fit the list, the work budget allows them and no kernel or pixel overflowed, each
 // band's passes as many as its longest walk takes (splat_walks; twin RasterWalk::passes);
 // none (x = 0) otherwise, so that nothing writes past the list, and Renderer::retire reads the
@@ -31,15 +32,20 @@ void main() {
     uint groups = max((push.buckets + 63u) / 64u, 1u);
     uint x = min(groups, 65535u);
     args[1] = run ? uvec4(x, (groups + x - 1u) / x, 1u, 0u) : uvec4(0u, 1u, 1u, 0u);
+    // Its second pass: an invocation for every bucket the first can hand over, at most one per
+    // SPLAT_ORDER_INSERTION_MAX + 1 entries.
+    groups = max((min(push.buckets, total / (SPLAT_ORDER_INSERTION_MAX + 1u)) + 63u) / 64u, 1u);
+    x = min(groups, 65535u);
+    args[2] = run ? uvec4(x, (groups + x - 1u) / x, 1u, 0u) : uvec4(0u, 1u, 1u, 0u);
     uint rows = max(push.band_rows, 1u);
     uint bands = (push.tiles_y + rows - 1u) / rows;
     for (uint b = 0u; b < bands; ++b) {
         uint n = min(rows, push.tiles_y - b * rows);
-        args[2u + b] = run ? uvec4(push.tiles_x, n, 1u, 0u) : uvec4(0u, 1u, 1u, 0u);
+        args[3u + b] = run ? uvec4(push.tiles_x, n, 1u, 0u) : uvec4(0u, 1u, 1u, 0u);
         uint passes = raster_passes(stats[SPLAT_STAT_BAND_ENTRIES + b], push.steps, push.chunk,
                                     push.sheet_cost);
         for (uint pass = 1u; pass <= push.resumes; ++pass) {
-            args[2u + bands + b * push.resumes + pass - 1u] =
+            args[3u + bands + b * push.resumes + pass - 1u] =
                 run && pass < passes ? uvec4(push.tiles_x, n, 1u, 0u) : uvec4(0u, 1u, 1u, 0u);
         }
     }

@@ -223,7 +223,7 @@ impl Slot {
 pub(super) struct SplatSlot {
     pub(super) constants: Option<crate::splat::frame::SplatConstants>,
     pub(super) targets: Option<crate::splat::gpu::SplatTargets>,
-    /// `splat_plan`'s indirect arguments: splat_bin's, splat_order's, then each band of
+    /// `splat_plan`'s indirect arguments: splat_bin's, splat_order's two, then each band of
     /// splat_raster's.
     pub(super) args: Option<Buffer>,
     pub(super) setup: Option<crate::splat::SplatSetup>,

@@ -16,19 +16,17 @@
 //!   ([`FrameControl::stop`]) ends the frame within one band.
 //! - A recorded frame has no host between its commands: its entry list is sized before it is
 //!   recorded (from an earlier count), and `splat_plan` reads the total and the counters on the
-//!   GPU and dispatches `splat_bin`, `splat_order`'s first pass and each band of
+//!   GPU and dispatches `splat_bin`, both passes of `splat_order` and each band of
 //!   `splat_raster` indirectly, or none of them where the entries do not fit or a check fails
-//!   ([`plan_groups`], its twin); `splat_order`'s second pass finds nothing to do then. Each
+//!   ([`plan_groups`], its twin). Each
 //!   band's later passes are recorded as many times as an earlier count found needed
 //!   (`PlanPush::resumes`), those a band does not need dispatching nothing.
 //!   `Renderer::retire` reads the same numbers and names what stopped the frame.
 
-use super::gpu::{
-    GpuKernels, ORDER_BINDINGS, ORDER_LARGE_GROUPS, SCAN_BINDINGS, SplatPipelines, SplatTargets,
-};
+use super::gpu::{GpuKernels, ORDER_BINDINGS, SCAN_BINDINGS, SplatPipelines, SplatTargets};
 use super::plan::{
-    GROUP, RASTER_BAND_ROWS, RasterWalk, args_slot, order_groups, plan_groups, raster_bands,
-    resumes_needed, stat_band_entries, walk_push,
+    GROUP, RASTER_BAND_ROWS, RasterWalk, args_slot, order_groups, order_large_groups, plan_groups,
+    raster_bands, resumes_needed, stat_band_entries, walk_push,
 };
 use super::{Shading, SplatCounts, SplatSetup};
 use crate::field::RenderError;
@@ -633,8 +631,8 @@ impl<'a> SplatRecording<'a> {
     }
 
     /// Records the frame: constants, projection, scan, `splat_walks`, `splat_plan`, then
-    /// `splat_bin`, `splat_order`'s first pass and each band's passes of `splat_raster`,
-    /// indirect, and `splat_order`'s second pass. Returns the dispatches recorded.
+    /// `splat_bin`, both passes of `splat_order` and each band's passes of `splat_raster`,
+    /// indirect. Returns the dispatches recorded.
     pub fn record(
         &self,
         rec: &mut Recorder<'_>,
@@ -667,14 +665,7 @@ impl<'a> SplatRecording<'a> {
         let push = bytemuck::bytes_of(&order);
         let [first, second] = &self.accumulation.order;
         rec.dispatch_indirect(&pipelines.order[0], first, push, args, 16, "splat_order")?;
-        // The second pass reads how many buckets the first handed it: none where it did not run.
-        rec.dispatch(
-            &pipelines.order[1],
-            second,
-            push,
-            [ORDER_LARGE_GROUPS, 1, 1],
-            "splat_order",
-        )?;
+        rec.dispatch_indirect(&pipelines.order[1], second, push, args, 32, "splat_order")?;
         // Segments, project, three scan passes, walks, plan, bin and two of order, then the
         // bands' passes.
         let mut dispatches = u32::from(self.projection.segments.is_some()) + 9;
@@ -866,9 +857,10 @@ pub fn splat_frame(
                 )?;
                 let order = order_push(setup);
                 let push = bytemuck::bytes_of(&order);
+                let buckets = setup.buckets() as u32;
                 let groups_of = [
-                    order_groups(setup.buckets() as u32),
-                    [ORDER_LARGE_GROUPS, 1, 1],
+                    order_groups(buckets),
+                    order_large_groups(buckets, u32::try_from(total).unwrap_or(u32::MAX)),
                 ];
                 for ((p, g), n) in pipelines.order.iter().zip(&groups.order).zip(groups_of) {
                     rec.dispatch(p, g, push, n, "splat_order")?;

@@ -26,9 +26,6 @@ pub(super) const ORDER_BINDINGS: [u32; 4] = [
     binding::SPLAT_STATS,
     binding::BUCKET_CURSORS,
 ];
-/// Workgroups of `splat_order`'s second pass, which heapsorts the buckets too large for its
-/// first (a grid-stride loop over them: there are few).
-pub(super) const ORDER_LARGE_GROUPS: u32 = 16;
 /// Hull hits `splat_segments` keeps per pixel (`HULL_MAX_HITS` of its variant).
 pub const SEGMENT_HITS: usize = 2 * super::PIXEL_SEGMENTS + 4;
 

@@ -10,7 +10,7 @@
 
 use super::{Shading, SplatSetup};
 use crate::field::RenderError;
-use crate::gpu_types::{PlanPush, RasterPush, WalkPush, splat_stat};
+use crate::gpu_types::{ORDER_INSERTION_MAX, PlanPush, RasterPush, WalkPush, splat_stat};
 
 /// Tile rows per dispatch of `splat_raster`. Small bands are faster on lavapipe: at 512²
 /// (64 tile rows) two rows a band took 6–9% less GPU and wall time than eight (BENCHMARKS.md,
@@ -186,8 +186,17 @@ pub fn order_groups(buckets: u32) -> [u32; 3] {
     [x, groups.div_ceil(x), 1]
 }
 
+/// Workgroups of `splat_order`'s second pass, one invocation per bucket its first pass could
+/// hand it: at most one per bucket, and one per `ORDER_INSERTION_MAX + 1` of the frame's
+/// `total` entries. (A fixed grid of 1 024 invocations, before, ran out of llvmpipe's loop
+/// limit at about 60 buckets each, and left the rest out of kernel order: 13 339 of 20 051 in
+/// a 512² frame of 4 913 large kernels, 679 705 at 10⁷ points.)
+pub fn order_large_groups(buckets: u32, total: u32) -> [u32; 3] {
+    order_groups(buckets.min(total / (ORDER_INSERTION_MAX + 1)))
+}
+
 /// Stage `splat_plan` (GLSL: `glsl/splat/splat_plan.comp`): the workgroup counts of
-/// `splat_bin`, of `splat_order`'s first pass, then of each band of `push.band_rows` tile rows
+/// `splat_bin`, of `splat_order`'s two passes, then of each band of `push.band_rows` tile rows
 /// of `splat_raster`, then of each band's `push.resumes` later passes, in a recorded frame,
 /// from the scan's `total` and the projection's counters `stats` (with the bands' longest
 /// walks): the whole frame, each band's passes as many as it needs ([`RasterWalk::passes`]),
@@ -207,6 +216,7 @@ pub fn plan_groups(push: &PlanPush, total: u32, stats: &[u32]) -> Vec<[u32; 3]> 
     }
     groups[0] = [push.bin_groups, 1, 1];
     groups[1] = order_groups(push.buckets);
+    groups[2] = order_large_groups(push.buckets, total);
     let walk = RasterWalk::of_plan(push);
     for (b, entries) in (0..bands).zip(stat_band_entries(stats, bands)) {
         let rows_of_band = rows.min(push.tiles_y - b * rows);
@@ -218,21 +228,26 @@ pub fn plan_groups(push: &PlanPush, total: u32, stats: &[u32]) -> Vec<[u32; 3]> 
 }
 
 /// Where a recorded frame's indirect arguments hold pass `pass` of band `band`, for `bands`
-/// bands of `resumes` passes after their first: after `splat_bin`'s and `splat_order`'s come
-/// every band's first pass, then each band's later passes (twin of `splat_plan`'s layout).
+/// bands of `resumes` passes after their first: after `splat_bin`'s and `splat_order`'s two
+/// come every band's first pass, then each band's later passes (twin of `splat_plan`'s
+/// layout).
 pub fn args_slot(bands: u32, resumes: u32, band: u32, pass: u32) -> usize {
     let (bands, resumes) = (bands as usize, resumes as usize);
     let (band, pass) = (band as usize, pass as usize);
     if pass == 0 {
-        2 + band
+        ARGS_BEFORE_BANDS + band
     } else {
-        2 + bands + band * resumes + pass - 1
+        ARGS_BEFORE_BANDS + bands + band * resumes + pass - 1
     }
 }
 
+/// Indirect arguments of a recorded frame before its bands': `splat_bin`, `splat_order`'s
+/// first pass and its second.
+const ARGS_BEFORE_BANDS: usize = 3;
+
 /// The indirect arguments of a recorded frame of `bands` bands and `resumes` later passes.
 pub fn args_count(bands: u32, resumes: u32) -> usize {
-    2 + bands as usize * (1 + resumes as usize)
+    ARGS_BEFORE_BANDS + bands as usize * (1 + resumes as usize)
 }
 
 /// Bytes of a recorded frame's indirect arguments ([`args_slot`]).
@@ -267,6 +282,30 @@ mod tests {
         }
     }
 
+    /// Every bucket the first pass can hand over has an invocation of the second: at most
+    /// one per bucket, and one per `ORDER_INSERTION_MAX + 1` entries.
+    #[test]
+    fn the_second_order_pass_has_an_invocation_for_every_large_bucket() {
+        let large = ORDER_INSERTION_MAX + 1;
+        for (buckets, total) in [
+            (1u32, 0u32),
+            (10, 10 * large),
+            (1_220_608, 596_933),
+            (600_000, 80_900_000),
+            (1 << 24, u32::MAX),
+        ] {
+            let [x, y, z] = order_large_groups(buckets, total);
+            assert!(x <= 65_535 && y <= 65_535 && z == 1);
+            let invocations = u64::from(x) * u64::from(y) * u64::from(GROUP);
+            let most = buckets.min(total / large);
+            assert!(
+                invocations >= u64::from(most),
+                "{buckets}, {total}: {x} × {y}"
+            );
+            assert!(invocations <= u64::from(most) + u64::from(x * GROUP));
+        }
+    }
+
     #[test]
     fn plan_runs_the_frame_only_where_it_fits() {
         let push = PlanPush {
@@ -283,8 +322,15 @@ mod tests {
             steps: 3,
             resumes: 0,
         };
-        let ok = vec![[3, 1, 1], [1, 1, 1], [4, 2, 1], [4, 2, 1], [4, 1, 1]];
-        let none = vec![[0, 1, 1]; 5];
+        let ok = vec![
+            [3, 1, 1],
+            [1, 1, 1],
+            [1, 1, 1],
+            [4, 2, 1],
+            [4, 2, 1],
+            [4, 1, 1],
+        ];
+        let none = vec![[0, 1, 1]; 6];
         let clean = [0u32; splat_stat::BAND_ENTRIES + 3];
         assert_eq!(plan_groups(&push, 80, &clean), ok);
         assert_eq!(plan_groups(&push, 81, &clean), none, "over the budget");
@@ -326,7 +372,7 @@ mod tests {
         assert_eq!(plan_groups(&resuming, 80, &walks), want);
         assert_eq!(
             plan_groups(&resuming, 81, &walks),
-            vec![[0, 1, 1]; 11],
+            vec![[0, 1, 1]; 12],
             "nothing runs"
         );
     }
