@@ -51,6 +51,8 @@ static SOURCES: &[(&str, &str)] = embed![
     "splat/splat.glsl",
     "splat/splat_params.glsl",
     "splat/walks.glsl",
+    "splat/raster_pixel.glsl",
+    "splat/raster_post.glsl",
     "splat/splat_project.comp",
     "splat/splat_scan.comp",
     "splat/splat_walks.comp",

@@ -1,0 +1,103 @@
+// Part of stage splat_raster (glsl/splat/splat_raster.comp, twin: splat_raster in
+// src/splat/raster.rs): post-shaded compositing ([BLUR]). A sheet complete, its mean value is
+// classified over the part of its slab inside the domain, and the isosurfaces crossed since
+// the sheet before are shaded. Included once, post-shaded only, after accumulate.
+#ifndef VMLS_RASTER_POST_GLSL
+#define VMLS_RASTER_POST_GLSL
+
+#if SPLAT_HULL == 1 && SPLAT_SEGMENTS != 4
+#error "the pixel's hull segments are two vec4 registers"
+#endif
+// The length of sheet j's slab inside the domain along a pixel's ray: the box's [t_in,
+// t_out], or the sum over the pixel's hull segments (s01, s23: two each, read once per pixel
+// into registers; a storage-buffer read per sheet is a loop over the lanes on lavapipe).
+float slab_overlap(int j, float t_in, float t_out, vec4 s01, vec4 s23) {
+    float a = params.slab0_world + float(j) * params.slab_world;
+    float b = a + params.slab_world;
+#if SPLAT_HULL == 1
+    return max(min(b, s01.y) - max(a, s01.x), 0.0) + max(min(b, s01.w) - max(a, s01.z), 0.0)
+           + max(min(b, s23.y) - max(a, s23.x), 0.0) + max(min(b, s23.w) - max(a, s23.z), 0.0);
+#else
+    return max(min(b, t_out) - max(a, t_in), 0.0);
+#endif
+}
+
+#if SPLAT_HULL == 1
+#define SEGMENTS(px) px.s01, px.s23
+#else
+#define SEGMENTS(px) vec4(0.0), vec4(0.0)
+#endif
+
+// Sheet k is complete: its mean value, and the next sheet's integral from the ring (`live`
+// ring registers hold something).
+float take_sheet(inout Pixel px, uint live) {
+    float v1 = px.sheet / params.slab_world;
+#if SPLAT_RING > 0
+    px.sheet = px.r0;
+    if (live > 0u) {
+        RING_SHIFT(px)
+    }
+#else
+    px.sheet = 0.0;
+#endif
+    return v1;
+}
+
+// Composites sheet j = k - 1 (value px.v) given sheet k's value v1 and lateral gradient,
+// then shifts the pixel's sheet values.
+void composite_post(inout Pixel px, uint k, float v1, vec2 lat) {
+    float slab = params.slab_world;
+    int j = int(k) - 1;
+    if (pixel_open(px) && px.in_domain && j >= 0 && sheet_owned(px, uint(j))) {
+        float len = slab_overlap(j, px.t_in, px.t_out, SEGMENTS(px));
+#if SPLAT_ISOSURFACES == 1
+        if (j >= 1 && len > 0.0 && slab_overlap(j - 1, px.t_in, px.t_out, SEGMENTS(px)) > 0.0) {
+            float v0 = px.v0, v = px.v;
+            // Crossings in order of their position between the two sheets.
+            float pos[4];
+            uint order[4];
+            uint hits = 0u;
+            for (uint i = 0u; i < params.iso_count; ++i) {
+                float iv = isos[i].value;
+                if ((v0 - iv) * (v - iv) < 0.0 || (v == iv && v0 != iv)) {
+                    float a = (iv - v0) / (v - v0);
+                    uint at = hits;
+                    while (at > 0u && pos[at - 1u] > a) {
+                        pos[at] = pos[at - 1u];
+                        order[at] = order[at - 1u];
+                        --at;
+                    }
+                    pos[at] = a;
+                    order[at] = i;
+                    ++hits;
+                }
+            }
+            if (hits > 0u) {
+                float across = 0.5 / slab;
+                vec3 g0 = px.lat0.x * params.camera.right.xyz + px.lat0.y * params.camera.up.xyz
+                          + (v - px.v_2) * across * px.d;
+                vec3 g1 = px.lat1.x * params.camera.right.xyz + px.lat1.y * params.camera.up.xyz
+                          + (v1 - v0) * across * px.d;
+                for (uint hi = 0u; hi < hits; ++hi) {
+                    IsoSurface iso = isos[order[hi]];
+                    vec3 rgb = shade_surface(iso, mix(g0, g1, pos[hi]), px.d);
+                    px.acc.rgb += (1.0 - px.acc.w) * rgb;
+                    px.acc.w += (1.0 - px.acc.w) * iso.color_opacity.a;
+                }
+            }
+        }
+#endif
+        if (len > 0.0) {
+            vec4 ct = transfer_lookup(px.v, params.tf_count);
+            float alpha = 1.0 - exp_e(-ct.a * len);
+            px.acc.rgb += (1.0 - px.acc.w) * ct.rgb * alpha;
+            px.acc.w += (1.0 - px.acc.w) * alpha;
+        }
+    }
+    px.v_2 = px.v0;
+    px.v0 = px.v;
+    px.v = v1;
+    px.lat0 = px.lat1;
+    px.lat1 = lat;
+}
+#endif
