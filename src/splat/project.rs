@@ -513,16 +513,26 @@ pub fn erfc_pos(x: f64) -> f64 {
     poly * (-x * x).exp()
 }
 
-/// Φ(zb) − Φ(za) for za ≤ zb, written so that both tails keep their precision in f32.
-pub fn phi_between(za: f64, zb: f64) -> f64 {
-    let k = std::f64::consts::FRAC_1_SQRT_2;
+/// The normal distribution's mass beyond |z|: ½·erfc(|z|/√2).
+pub fn normal_tail(z: f64) -> f64 {
+    0.5 * erfc_pos(z.abs() * std::f64::consts::FRAC_1_SQRT_2)
+}
+
+/// Φ(zb) − Φ(za) for za ≤ zb from the tails qa, qb at its ends ([`normal_tail`]): each branch
+/// subtracts tails, so that both keep their precision in f32.
+pub fn phi_from_tails(za: f64, qa: f64, zb: f64, qb: f64) -> f64 {
     if za >= 0.0 {
-        0.5 * (erfc_pos(za * k) - erfc_pos(zb * k))
+        qa - qb
     } else if zb <= 0.0 {
-        0.5 * (erfc_pos(-zb * k) - erfc_pos(-za * k))
+        qb - qa
     } else {
-        1.0 - 0.5 * (erfc_pos(-za * k) + erfc_pos(zb * k))
+        1.0 - qa - qb
     }
+}
+
+/// Φ(zb) − Φ(za) for za ≤ zb, through its two tails as the kernel computes it.
+pub fn phi_between(za: f64, zb: f64) -> f64 {
+    phi_from_tails(za, normal_tail(za), zb, normal_tail(zb))
 }
 
 /// The rays through d′ = (dx, dy, 1) whose Mahalanobis distance to the kernel centre is at most
