@@ -38,6 +38,8 @@ struct Pixel {
     uint p;
     // Premultiplied colour and opacity.
     vec4 acc;
+    // The pixel's ray for the exact footprint (pixel_view).
+    vec3 view;
 #if SPLAT_POST == 0
     // The sheet's optical depth and emission (D, E.rgb), and its surface splats' W, sum q*alpha,
     // C.rgb.
@@ -93,6 +95,11 @@ Pixel pixel_at(int x, int y, bool valid, bool own_tile) {
     px.own = px.inside && own_tile;
     px.p = px.inside ? uint(y * w + x) : 0u;
     px.acc = vec4(0.0);
+#if SPLAT_EXACT == 1
+    px.view = pixel_view(vec2(x, y));
+#else
+    px.view = vec3(0.0);
+#endif
 #if SPLAT_POST == 0
     px.ext = vec4(0.0);
 #if SPLAT_SURFACES == 1

@@ -52,7 +52,17 @@ float phi_between(float za, float zb) {
 // affine footprint (exact for orthographic cameras); else the exact integral along the
 // pixel's own ray (src/splat/project.rs explains both and the word layout).
 // Needs SplatParams params.
-vec3 splat_profile(Splat s, float cutoff, vec2 pixel) {
+// The pixel's ray through the image plane at unit distance, (dx, dy) with up positive, and
+// the length of (dx, dy, 1): the same for every entry of a pixel, so computed once per pixel
+// (splat_raster's pixel_at) and passed to splat_profile, not derived per entry.
+vec3 pixel_view(vec2 pixel) {
+    float f = params.focal;
+    float dx = (pixel.x - params.centre_x) / f;
+    float dy = (params.centre_y - pixel.y) / f;
+    return vec3(dx, dy, sqrt(1.0 + dx * dx + dy * dy));
+}
+
+vec3 splat_profile(Splat s, float cutoff, vec2 pixel, vec3 view) {
 #if SPLAT_EXACT == 0
     vec2 d = pixel - s.footprint0.xy;
     vec4 c = s.footprint1;
@@ -63,9 +73,8 @@ vec3 splat_profile(Splat s, float cutoff, vec2 pixel) {
     float m = s.footprint0.z + dot(s.footprint2.xy, d);
     return vec3(c.w * exp_e(-0.5 * q), m, 1.0 / s.footprint0.w);
 #else
-    float f = params.focal;
-    float dx = (pixel.x - params.centre_x) / f;
-    float dy = (params.centre_y - pixel.y) / f;
+    float dx = view.x;
+    float dy = view.y;
     vec4 q0 = s.footprint0, q1 = s.footprint1, j0 = s.footprint2, j1 = s.footprint3;
     // a' = d'^T Q d', b' = d'^T Q r with d' = (dx, dy, 1).
     vec3 qd = vec3(q0.x * dx + q0.y * dy + q0.w,
@@ -85,7 +94,7 @@ vec3 splat_profile(Splat s, float cutoff, vec2 pixel) {
     if (e > cutoff * cutoff) {
         return vec3(0.0, 0.0, 1.0);
     }
-    float len = sqrt(1.0 + dx * dx + dy * dy);
+    float len = view.z;
     float inv_sqrt_a = inversesqrt(a);
     return vec3(j1.w * len * inv_sqrt_a * exp_e(-0.5 * e), -b * len / a,
                 1.0 / (len * inv_sqrt_a));
@@ -94,8 +103,8 @@ vec3 splat_profile(Splat s, float cutoff, vec2 pixel) {
 
 // The share of a splat's line integral through pixel (x, y) that lies in t in [ta, tb]
 // (SPLAT_SPLIT == 0: the whole integral); zero outside the cutoff.
-float splat_footprint(Splat s, float cutoff, vec2 pixel, float ta, float tb) {
-    vec3 pr = splat_profile(s, cutoff, pixel);
+float splat_footprint(Splat s, float cutoff, vec2 pixel, vec3 view, float ta, float tb) {
+    vec3 pr = splat_profile(s, cutoff, pixel, view);
 #if SPLAT_SPLIT == 1
     if (pr.x == 0.0) {
         return 0.0;

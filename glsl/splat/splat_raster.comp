@@ -155,7 +155,7 @@ void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) 
     px.evaluated += 1u;
 #if SPLAT_RING > 0
     // The lateral footprint once, then its share of each sheet k + d (d < span).
-    vec3 pr = splat_profile(s, cutoff, pixel);
+    vec3 pr = splat_profile(s, cutoff, pixel, px.view);
     if (pr.x == 0.0) {
         return;
     }
@@ -257,7 +257,7 @@ void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) 
 #undef RING_STEP
 #endif
 #else
-    float g = splat_footprint(s, cutoff, pixel, ta, tb);
+    float g = splat_footprint(s, cutoff, pixel, px.view, ta, tb);
     if (g == 0.0) {
         return;
     }
