@@ -40,18 +40,11 @@ float phi_from_tails(float za, float qa, float zb, float qb) {
 
 // Phi(zb) - Phi(za) for za <= zb (twin: phi_between in src/splat/project.rs). Through the two
 // tails: llvmpipe runs every branch, and branches of their own erfc pairs cost six erfc where
-// two serve (a split pre-shaded splat_raster took 15% less time).
+// two serve (a split pre-shaded splat_raster took about 14% less time).
 float phi_between(float za, float zb) {
     return phi_from_tails(za, normal_tail(za), zb, normal_tail(zb));
 }
 
-// The lateral part of a splat's footprint at a pixel: (A, m, inv) with A the whole line
-// integral through the pixel (0 outside the cutoff), m the kernel's mean distance along the
-// pixel's ray and inv the inverse of its standard deviation there, so that the share in
-// t in [ta, tb] is A * phi_between((ta - m) * inv, (tb - m) * inv). SPLAT_EXACT == 0: the
-// affine footprint (exact for orthographic cameras); else the exact integral along the
-// pixel's own ray (src/splat/project.rs explains both and the word layout).
-// Needs SplatParams params.
 // The pixel's ray through the image plane at unit distance, (dx, dy) with up positive, and
 // the length of (dx, dy, 1): the same for every entry of a pixel, so computed once per pixel
 // (splat_raster's pixel_at) and passed to splat_profile, not derived per entry.
@@ -62,6 +55,13 @@ vec3 pixel_view(vec2 pixel) {
     return vec3(dx, dy, sqrt(1.0 + dx * dx + dy * dy));
 }
 
+// The lateral part of a splat's footprint at a pixel: (A, m, inv) with A the whole line
+// integral through the pixel (0 outside the cutoff), m the kernel's mean distance along the
+// pixel's ray and inv the inverse of its standard deviation there, so that the share in
+// t in [ta, tb] is A * phi_between((ta - m) * inv, (tb - m) * inv). SPLAT_EXACT == 0: the
+// affine footprint (exact for orthographic cameras); else the exact integral along the
+// pixel's own ray (src/splat/project.rs explains both and the word layout), `view` the
+// pixel's pixel_view. Needs SplatParams params.
 vec3 splat_profile(Splat s, float cutoff, vec2 pixel, vec3 view) {
 #if SPLAT_EXACT == 0
     vec2 d = pixel - s.footprint0.xy;

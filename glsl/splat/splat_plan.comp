@@ -5,11 +5,11 @@
 // of splat_bin, of splat_order's two passes (an invocation per bucket, rows of at most 65 535
 // workgroups; the second's per bucket the first can hand over), of each band of
 // push.band_rows tile rows of splat_raster, then of each band's push.resumes later passes,
-// which all dispatch indirectly: the whole frame where its
-// entries fit the list, the work budget allows them and no kernel or pixel overflowed, each
-// band's passes as many as its longest walk takes (splat_walks; twin RasterWalk::passes);
-// none (x = 0) otherwise, so that nothing writes past the list, and Renderer::retire reads the
-// same numbers back and names what stopped the frame.
+// which all dispatch indirectly: the whole frame where its entries fit the list, the work
+// budget allows them and no kernel or pixel overflowed, each band's passes as many as its
+// longest walk takes (splat_walks; twin RasterWalk::passes); none (x = 0) otherwise, so that
+// nothing writes past the list, and Renderer::retire reads the same numbers back and names
+// what stopped the frame.
 
 layout(local_size_x = 1) in;
 
@@ -21,22 +21,24 @@ layout(std430, binding = BINDING_SPLAT_STATS) readonly buffer StatsBuf { uint st
 layout(std430, binding = BINDING_DISPATCH_ARGS) writeonly buffer ArgsBuf { uvec4 args[]; };
 layout(push_constant) uniform Push { PlanPush push; };
 
+// Workgroups of 64 (splat_order's local size, GROUP in src/splat/plan.rs) for one invocation
+// per item, in rows of at most 65 535 (twin: order_groups); none where the frame does not run.
+uvec4 order_args(uint items, bool run) {
+    uint groups = max((items + 63u) / 64u, 1u);
+    uint x = min(groups, 65535u);
+    return run ? uvec4(x, (groups + x - 1u) / x, 1u, 0u) : uvec4(0u, 1u, 1u, 0u);
+}
+
 void main() {
     uint total = offsets[push.buckets];
     bool run = total <= push.capacity && total <= push.max_entries
                && stats[SPLAT_STAT_OVERSIZED] == 0u
                && (push.segments == 0u || stats[SPLAT_STAT_SEGMENT_OVERFLOW] == 0u);
     args[0] = run ? uvec4(push.bin_groups, 1u, 1u, 0u) : uvec4(0u, 1u, 1u, 0u);
-    // One invocation per bucket, workgroups of 64 (splat_order's local size, GROUP in
-    // src/splat/gpu.rs).
-    uint groups = max((push.buckets + 63u) / 64u, 1u);
-    uint x = min(groups, 65535u);
-    args[1] = run ? uvec4(x, (groups + x - 1u) / x, 1u, 0u) : uvec4(0u, 1u, 1u, 0u);
-    // Its second pass: an invocation for every bucket the first can hand over, at most one per
-    // SPLAT_ORDER_INSERTION_MAX + 1 entries.
-    groups = max((min(push.buckets, total / (SPLAT_ORDER_INSERTION_MAX + 1u)) + 63u) / 64u, 1u);
-    x = min(groups, 65535u);
-    args[2] = run ? uvec4(x, (groups + x - 1u) / x, 1u, 0u) : uvec4(0u, 1u, 1u, 0u);
+    // splat_order's first pass: one invocation per bucket; its second: one for every bucket
+    // the first can hand over, at most one per SPLAT_ORDER_INSERTION_MAX + 1 entries.
+    args[1] = order_args(push.buckets, run);
+    args[2] = order_args(min(push.buckets, total / (SPLAT_ORDER_INSERTION_MAX + 1u)), run);
     uint rows = max(push.band_rows, 1u);
     uint bands = (push.tiles_y + rows - 1u) / rows;
     for (uint b = 0u; b < bands; ++b) {
