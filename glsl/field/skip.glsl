@@ -17,28 +17,41 @@ int skip_bin(float v, int widen, vec3 header) {
     return clamp(int(b) + widen, 0, int(header.z) - 1);
 }
 
+// What every block lookup of a frame shares, set once per invocation (skip_init): the block's
+// edge in world units, the blocks per axis and the skip table's header (lo, 1/width, bins).
+// Recomputed per lookup they cost three divisions and three gathers each time.
+vec3 skip_size;
+ivec3 skip_blocks_per_axis;
+vec3 skip_header;
+
+void skip_init() {
+    skip_size = float(SKIP_BLOCK) / params.field.grid_inv_spacing.xyz;
+    skip_blocks_per_axis =
+        max((params.field.grid_dims.xyz - 1 + SKIP_BLOCK - 1) / SKIP_BLOCK, ivec3(1));
+    skip_header = vec3(uintBitsToFloat(imageLoad(skip_table, 0).x),
+                       uintBitsToFloat(imageLoad(skip_table, 1).x),
+                       float(imageLoad(skip_table, 2).x));
+}
+
 // Stage `skip_block` (twin of Blocks::lookup): whether the block holding o + t·d (clamped into
-// the grid) is empty, and the ray parameter where the ray leaves it.
+// the grid) is empty, and the ray parameter where the ray leaves it. Needs skip_init.
 bool skip_block(vec3 o, vec3 d, float t, out float t_exit) {
-    vec3 size = float(SKIP_BLOCK) / params.field.grid_inv_spacing.xyz;
-    ivec3 blocks = max((params.field.grid_dims.xyz - 1 + SKIP_BLOCK - 1) / SKIP_BLOCK, ivec3(1));
+    vec3 size = skip_size;
+    ivec3 blocks = skip_blocks_per_axis;
     vec3 g = (o + d * t - params.field.grid_origin.xyz) / size;
     ivec3 b = min(ivec3(max(floor(g), vec3(0.0))), blocks - 1);
     vec3 lo = params.field.grid_origin.xyz + vec3(b) * size;
     vec3 hi = lo + size;
     t_exit = 3.0e38;
+    // The face ahead on each axis the ray moves along: one division where a branch per
+    // direction ran two (llvmpipe runs both).
     [[unroll]] for (int a = 0; a < 3; ++a) {
-        if (d[a] > 0.0) {
-            t_exit = min(t_exit, (hi[a] - o[a]) / d[a]);
-        } else if (d[a] < 0.0) {
-            t_exit = min(t_exit, (lo[a] - o[a]) / d[a]);
-        }
+        float along = ((d[a] > 0.0 ? hi[a] : lo[a]) - o[a]) / d[a];
+        t_exit = d[a] != 0.0 ? min(t_exit, along) : t_exit;
     }
     vec4 r = imageLoad(skip_blocks, b.x + blocks.x * (b.y + blocks.y * b.z));
-    vec3 header = vec3(uintBitsToFloat(imageLoad(skip_table, 0).x),
-                       uintBitsToFloat(imageLoad(skip_table, 1).x), float(imageLoad(skip_table, 2).x));
-    int b0 = skip_bin(r.x, -1, header);
-    int b1 = skip_bin(r.y, 1, header);
+    int b0 = skip_bin(r.x, -1, skip_header);
+    int b1 = skip_bin(r.y, 1, skip_header);
     // min > max: no defined fine point, the fast field is undefined in the whole block.
     return r.x > r.y || imageLoad(skip_table, 3 + b1 + 1).x == imageLoad(skip_table, 3 + b0).x;
 }
@@ -48,7 +61,7 @@ bool skip_block(vec3 o, vec3 d, float t, out float t_exit) {
 // is occupied). Blocks are looked up RUN_NUDGE of an edge past the point, since a point on a
 // face may round into the block just left; a lookup whose exit does not advance ends the run.
 float skip_run(vec3 o, vec3 d, float t, float t_end) {
-    vec3 size = float(SKIP_BLOCK) / params.field.grid_inv_spacing.xyz;
+    vec3 size = skip_size;
     float nudge = float(RUN_NUDGE) * min(size.x, min(size.y, size.z));
     for (uint n = 0u; n < uint(SKIP_RUN); ++n) {
         float t_exit;

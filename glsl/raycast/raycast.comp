@@ -377,6 +377,9 @@ uint segment_steps(float t0, float t1) {
 
 void main() {
     load_params();
+#if SKIP == 1
+    skip_init();
+#endif
 #if MAX_ISO > 0
     load_isos();
 #endif
