@@ -60,12 +60,13 @@ bool skip_block(vec3 o, vec3 d, float t, out float t_exit) {
 // SKIP_RUN of them and no further once past t_end; where the run stops (t when the block at t
 // is occupied). Blocks are looked up RUN_NUDGE of an edge past the point, since a point on a
 // face may round into the block just left; a lookup whose exit does not advance ends the run.
-float skip_run(vec3 o, vec3 d, float t, float t_end) {
+// With `empty` false the run crosses occupied blocks instead (see skip_span).
+float skip_run(vec3 o, vec3 d, float t, float t_end, bool empty) {
     vec3 size = skip_size;
     float nudge = float(RUN_NUDGE) * min(size.x, min(size.y, size.z));
     for (uint n = 0u; n < uint(SKIP_RUN); ++n) {
         float t_exit;
-        if (t >= t_end || !skip_block(o, d, t + nudge, t_exit) || t_exit <= t) {
+        if (t >= t_end || skip_block(o, d, t + nudge, t_exit) != empty || t_exit <= t) {
             break;
         }
         t = t_exit;
@@ -74,12 +75,15 @@ float skip_run(vec3 o, vec3 d, float t, float t_end) {
 }
 
 // Stages skip_block then skip_run (twin of Skip::span): whether the block at t is empty and, if
-// so, where the run of empty blocks from it ends (else the block's exit).
+// so, where the run of empty blocks from it ends. If not, where the run of occupied blocks from
+// it ends: the callers check again there, and no block before it is empty, so every check
+// they skip would have found an occupied block (the twin checks at each block's exit; the
+// images and counts are the same). Both cases are one loop: llvmpipe would run a branch's run
+// either way, and an integrator that left its sample loop at every block's exit paid a round
+// of its own per block (about one per interval at the fast path's blocks).
 bool skip_span(vec3 o, vec3 d, float t, float t_end, out float t_exit) {
     bool empty = skip_block(o, d, t, t_exit);
-    if (empty) {
-        t_exit = skip_run(o, d, t_exit, t_end);
-    }
+    t_exit = skip_run(o, d, t_exit, t_end, empty);
     return empty;
 }
 

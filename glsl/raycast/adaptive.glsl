@@ -221,7 +221,7 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
         bool restart = false;
         if (top_start) {
             float start = t0 + float(k) * l_max;
-            float run = skip_run(o, d, start, t1);
+            float run = skip_run(o, d, start, t1, true);
             uint j = resume_interval(t0, l_max, run, k);
             if (j >= tops) {
                 count_skip(t1 - start, tops - k, 0u);

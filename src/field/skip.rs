@@ -222,21 +222,29 @@ impl Blocks {
         self.ranges[b[0] + self.dims[0] * (b[1] + self.dims[1] * b[2])]
     }
 
-    /// Stage `skip_run`: from t, across consecutive empty blocks, at most [`SKIP_RUN`] of them
-    /// and no further once past `t_end`; the ray parameter where the run stops (t itself when
-    /// the block at t is occupied). Each block is looked up a thousandth of its edge past the
-    /// point (`RUN_NUDGE`), since a point on a face may round into the block just left; a run
-    /// may therefore pass over a sliver that thin of an occupied block's corner. A lookup whose
-    /// exit does not advance ends the run.
-    pub fn run(&self, table: &SkipTable, o: DVec3, d: DVec3, t: f64, t_end: f64) -> f64 {
+    /// Stage `skip_run`: from t, across consecutive empty blocks (with `empty` false:
+    /// occupied ones), at most [`SKIP_RUN`] of them and no further once past `t_end`; the ray
+    /// parameter where the run stops (t itself when the block at t is not of that kind). Each
+    /// block is looked up a thousandth of its edge past the point (`RUN_NUDGE`), since a point
+    /// on a face may round into the block just left; a run may therefore pass over a sliver
+    /// that thin of a block's corner. A lookup whose exit does not advance ends the run.
+    pub fn run(
+        &self,
+        table: &SkipTable,
+        o: DVec3,
+        d: DVec3,
+        t: f64,
+        t_end: f64,
+        empty: bool,
+    ) -> f64 {
         let nudge = RUN_NUDGE * self.size.min_element();
         let mut t = t;
         for _ in 0..SKIP_RUN {
             if t >= t_end {
                 break;
             }
-            let (empty, exit) = self.lookup(table, o, d, t + nudge);
-            if !empty || exit <= t {
+            let (is_empty, exit) = self.lookup(table, o, d, t + nudge);
+            if is_empty != empty || exit <= t {
                 break;
             }
             t = exit;
@@ -295,15 +303,19 @@ mod tests {
         let o = DVec3::new(-1.0, 0.5, 0.5);
         let x = DVec3::X;
         // Entering at x = 0 (t = 1), exactly on faces all the way: the run ends at block 5.
-        assert!((blocks.run(&table, o, x, 1.0, 100.0) - 6.0).abs() < 1e-12);
+        assert!((blocks.run(&table, o, x, 1.0, 100.0, true) - 6.0).abs() < 1e-12);
         // Starting in the occupied block: no run.
-        assert_eq!(blocks.run(&table, o, x, 6.5, 100.0), 6.5);
+        assert_eq!(blocks.run(&table, o, x, 6.5, 100.0, true), 6.5);
         // Past the occupied block the run goes to the grid's end and stops at t_end.
-        let end = blocks.run(&table, o, x, 7.0, 100.0);
+        let end = blocks.run(&table, o, x, 7.0, 100.0, true);
         assert!((end - 9.0).abs() < 1e-12, "{end}");
-        assert!(blocks.run(&table, o, x, 1.0, 2.5) <= 3.0 + 1e-12);
+        assert!(blocks.run(&table, o, x, 1.0, 2.5, true) <= 3.0 + 1e-12);
         // A diagonal ray crossing edges and corners still advances.
         let diag = DVec3::new(1.0, 1e-9, 0.0).normalize();
-        assert!(blocks.run(&table, DVec3::new(0.0, 0.5, 0.5), diag, 0.0, 100.0) > 4.99);
+        assert!(blocks.run(&table, DVec3::new(0.0, 0.5, 0.5), diag, 0.0, 100.0, true) > 4.99);
+        // A run of occupied blocks: the one block 5 from inside it, none from an empty block.
+        let occupied = blocks.run(&table, o, x, 6.5, 100.0, false);
+        assert!((occupied - 7.0).abs() < 1e-12, "{occupied}");
+        assert_eq!(blocks.run(&table, o, x, 1.0, 100.0, false), 1.0);
     }
 }

@@ -308,7 +308,7 @@ fn integrate_hermite(
                 // At a top's start: tops inside a run of empty blocks are skipped, and the
                 // first one reaching past the run starts from a fresh knot.
                 if let Some(skip) = ray.skip.filter(|_| position == 0) {
-                    let run = skip.run(ray.o, ray.d, start, t1);
+                    let run = skip.run(ray.o, ray.d, start, t1, true);
                     let j = resume_interval(t0, setup.l_max_world, run, k);
                     if j >= tops {
                         ray.count_skip(t1 - start, tops - k, 0);

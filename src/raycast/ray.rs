@@ -21,19 +21,18 @@ impl Skip<'_> {
     }
 
     /// Stages `skip_block` then `skip_run` (twin of skip_span): whether the block at t is
-    /// empty and, if so, where the run of empty blocks from it ends (else the block's exit).
+    /// empty and, if so, where the run of empty blocks from it ends; else where the run of
+    /// occupied blocks from it ends, the next place a check can find an empty block (the
+    /// integrators check again there instead of at each occupied block's exit: the same
+    /// decisions, fewer of them).
     pub(super) fn span(&self, o: DVec3, d: DVec3, t: f64, t_end: f64) -> (bool, f64) {
         let (empty, exit) = self.lookup(o, d, t);
-        if empty {
-            (true, self.run(o, d, exit, t_end))
-        } else {
-            (false, exit)
-        }
+        (empty, self.run(o, d, exit, t_end, empty))
     }
 
-    /// Stage `skip_run`.
-    pub(super) fn run(&self, o: DVec3, d: DVec3, t: f64, t_end: f64) -> f64 {
-        self.blocks.run(self.table, o, d, t, t_end)
+    /// Stage `skip_run`: across blocks that are all `empty` or all occupied.
+    pub(super) fn run(&self, o: DVec3, d: DVec3, t: f64, t_end: f64, empty: bool) -> f64 {
+        self.blocks.run(self.table, o, d, t, t_end, empty)
     }
 }
 
