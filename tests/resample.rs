@@ -329,7 +329,7 @@ fn auto_takes_the_fast_path_only_where_it_serves() {
 }
 
 #[test]
-fn auto_skipping_is_compiled_in_only_where_most_ray_length_is_empty() {
+fn auto_skipping_is_compiled_in_only_where_enough_ray_length_is_empty() {
     // ml-emission's two bands: about 40% of the ray length lies in empty blocks, below
     // SKIP_AUTO_FRACTION: compiled out, on the GPU and in the CPU twin.
     let b = both(&scene(&[]));

@@ -14,10 +14,12 @@ use glam::DVec3;
 
 /// `render.skip = "auto"` compiles skipping in where at least this fraction of the frame's ray
 /// length lies in empty blocks ([`skippable_fraction`]). On lavapipe a SIMD row of 8 rays
-/// costs what its busiest ray costs and the block lookups run on every lane, so skipping cost
-/// 2× with nothing to skip (the default scene, 512²), 1.6× with 39% skippable (ml-emission),
-/// and won 17% at 77% skippable (the MRI at step 1; lost 6% at step 2) (BENCHMARKS.md).
-pub const SKIP_AUTO_FRACTION: f64 = 0.75;
+/// costs what its busiest ray costs and the block lookups run on every lane. Since skipping
+/// crosses runs of occupied blocks in one check (`skip_span`), it costs 14% with nothing to
+/// skip (the built-in scene, 512²) and 1–10% at 40% skippable (ml-emission), and wins 6–15% at
+/// 50% (the fire mesh) and 27% at 54% (ml-iso, 256²) (BENCHMARKS.md, "Skipping across occupied
+/// blocks"). It was 0.75 while every occupied block cost a check of its own.
+pub const SKIP_AUTO_FRACTION: f64 = 0.45;
 /// Rays per image axis [`skippable_fraction`] casts.
 const ESTIMATE_RAYS: u32 = 32;
 
