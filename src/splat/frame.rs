@@ -25,8 +25,8 @@
 
 use super::gpu::{GpuKernels, ORDER_BINDINGS, SCAN_BINDINGS, SplatPipelines, SplatTargets};
 use super::plan::{
-    GROUP, RASTER_BAND_ROWS, RasterWalk, args_slot, order_groups, order_large_groups, plan_groups,
-    raster_bands, resumes_needed, stat_band_entries, walk_push,
+    ARGS_BIN, ARGS_ORDER, GROUP, RASTER_BAND_ROWS, RasterWalk, args_slot, order_groups,
+    order_large_groups, plan_groups, raster_bands, resumes_needed, stat_band_entries, walk_push,
 };
 use super::{Shading, SplatCounts, SplatSetup};
 use crate::field::RenderError;
@@ -658,14 +658,19 @@ impl<'a> SplatRecording<'a> {
             &self.accumulation.bin,
             &[],
             args,
-            0,
+            16 * ARGS_BIN as u64,
             "splat_bin",
         )?;
         let order = order_push(setup);
         let push = bytemuck::bytes_of(&order);
-        let [first, second] = &self.accumulation.order;
-        rec.dispatch_indirect(&pipelines.order[0], first, push, args, 16, "splat_order")?;
-        rec.dispatch_indirect(&pipelines.order[1], second, push, args, 32, "splat_order")?;
+        for ((p, g), slot) in pipelines
+            .order
+            .iter()
+            .zip(&self.accumulation.order)
+            .zip(ARGS_ORDER)
+        {
+            rec.dispatch_indirect(p, g, push, args, 16 * slot as u64, "splat_order")?;
+        }
         // Segments, project, three scan passes, walks, plan, bin and two of order, then the
         // bands' passes.
         let mut dispatches = u32::from(self.projection.segments.is_some()) + 9;

@@ -214,9 +214,9 @@ pub fn plan_groups(push: &PlanPush, total: u32, stats: &[u32]) -> Vec<[u32; 3]> 
     if !run {
         return groups;
     }
-    groups[0] = [push.bin_groups, 1, 1];
-    groups[1] = order_groups(push.buckets);
-    groups[2] = order_large_groups(push.buckets, total);
+    groups[ARGS_BIN] = [push.bin_groups, 1, 1];
+    groups[ARGS_ORDER[0]] = order_groups(push.buckets);
+    groups[ARGS_ORDER[1]] = order_large_groups(push.buckets, total);
     let walk = RasterWalk::of_plan(push);
     for (b, entries) in (0..bands).zip(stat_band_entries(stats, bands)) {
         let rows_of_band = rows.min(push.tiles_y - b * rows);
@@ -241,8 +241,11 @@ pub fn args_slot(bands: u32, resumes: u32, band: u32, pass: u32) -> usize {
     }
 }
 
-/// Indirect arguments of a recorded frame before its bands': `splat_bin`, `splat_order`'s
-/// first pass and its second.
+/// Where a recorded frame's indirect arguments hold `splat_bin`'s workgroups.
+pub const ARGS_BIN: usize = 0;
+/// Where they hold `splat_order`'s two passes'.
+pub const ARGS_ORDER: [usize; 2] = [1, 2];
+/// Indirect arguments of a recorded frame before its bands': `splat_bin`'s and `splat_order`'s.
 const ARGS_BEFORE_BANDS: usize = 3;
 
 /// The indirect arguments of a recorded frame of `bands` bands and `resumes` later passes.
