@@ -239,7 +239,7 @@ pub mod splat_stat {
     /// (their registers saved): a workgroup's invocations per tile and pass, fewer where
     /// some of its subgroups had stopped, every pixel opaque.
     pub const RESUMED: usize = 18;
-    /// The first of one word per band of `RASTER_BAND_ROWS` tile rows: the most entries any
+    /// The first of one word per band of `band_rows` tile rows: the most entries any
     /// tile of the band walks (`splat_walks`), from which its passes follow
     /// (`splat::plan::RasterWalk::passes`).
     pub const BAND_ENTRIES: usize = 19;

@@ -723,6 +723,7 @@ fn splat_walks_and_splat_plan_match_their_cpu_twins() {
         chunk: 2000,
         sheet_cost: 7,
         steps: 4,
+        band_rows: 2,
     };
     for capacity in [u32::MAX, 10] {
         let push = PlanPush {

@@ -58,6 +58,7 @@ impl Renderer {
             &self.field,
         )?;
         setup.raster_chunk = self.splat_raster_chunk;
+        setup.fit_device(self.ctx.info().device_type == "cpu");
         if let Some(budget) = self.budget {
             setup.check_budget(0, budget)?;
         }
@@ -306,7 +307,7 @@ impl Renderer {
         let mut reused = false;
         if let Some(t) = s.targets.as_mut() {
             t.reserve_entries(&ctx, reserve, limit)?;
-            t.reserve_raster_state(&ctx, &frame.variant, setup.tiles().0)?;
+            t.reserve_raster_state(&ctx, &frame.variant, setup.tiles().0, setup.band_rows)?;
             reused = t.plan_segments(setup, true);
         }
         let resumes = self.record.splat_resumes;

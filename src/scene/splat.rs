@@ -1,7 +1,7 @@
 //! Scene section `[splat]`: the splatting renderer's settings (`crate::splat::SplatSettings`).
 
 use super::{SceneError, Section};
-use crate::splat::{Antialias, RINGS, SheetShare, SplatSettings, TILE_SIZES};
+use crate::splat::{Antialias, RASTER_PIXELS, RINGS, SheetShare, SplatSettings, TILE_SIZES};
 use toml::Value;
 
 /// Keys of `[splat]`.
@@ -17,6 +17,8 @@ pub(super) const KEYS: &[&str] = &[
     "split",
     "sheet_share",
     "ring",
+    "band_rows",
+    "pixels",
 ];
 
 /// Reads `[splat]`; every key is optional.
@@ -62,6 +64,18 @@ pub(super) fn parse(sec: &Section<'_>) -> Result<SplatSettings, SceneError> {
                 Some(*t as u32)
             }
             Some(v) => return Err(sec.err("tile", "8, 16 or 32 (pixels)", v)),
+        },
+        band_rows: match sec.get("band_rows") {
+            None => d.band_rows,
+            Some(Value::Integer(r)) if (1..=4096).contains(r) => Some(*r as u32),
+            Some(v) => return Err(sec.err("band_rows", "tile rows per dispatch, 1 to 4096", v)),
+        },
+        pixels: match sec.get("pixels") {
+            None => d.pixels,
+            Some(Value::Integer(p)) if RASTER_PIXELS.iter().any(|&x| i64::from(x) == *p) => {
+                Some(*p as u32)
+            }
+            Some(v) => return Err(sec.err("pixels", "1, 2 or 4 (per invocation)", v)),
         },
     })
 }

@@ -3,8 +3,8 @@
 //!
 //! Both run the same stages on the same buffers: `splat_segments` (post-shaded over a hull),
 //! `splat_project`, the three passes of `splat_scan`, `splat_walks`, `splat_bin`, the two of
-//! `splat_order` and `splat_raster`. `splat_raster` runs in bands of [`RASTER_BAND_ROWS`] tile
-//! rows, each band in as many passes as its longest tile walk takes ([`RasterWalk`]: llvmpipe
+//! `splat_order` and `splat_raster`. `splat_raster` runs in bands of tile rows
+//! ([`RASTER_BAND_ROWS`](super::plan::RASTER_BAND_ROWS) on lavapipe, wider on a GPU: `SplatSetup::band_rows`), each band in as many passes as its longest tile walk takes ([`RasterWalk`]: llvmpipe
 //! ends an invocation's loops after 65 535 iterations in a dispatch, and a tile of a dense
 //! point cloud walks more entries than that); a pass leaves the walks it could not finish,
 //! pixels' registers and all, to the next. The two ways differ in how the accumulation learns
@@ -25,8 +25,8 @@
 
 use super::gpu::{GpuKernels, ORDER_BINDINGS, SCAN_BINDINGS, SplatPipelines, SplatTargets};
 use super::plan::{
-    ARGS_BIN, ARGS_ORDER, GROUP, RASTER_BAND_ROWS, RasterWalk, args_slot, order_groups,
-    order_large_groups, plan_groups, raster_bands, resumes_needed, stat_band_entries, walk_push,
+    ARGS_BIN, ARGS_ORDER, GROUP, RasterWalk, args_slot, order_groups, order_large_groups,
+    plan_groups, raster_bands, resumes_needed, stat_band_entries, walk_push,
 };
 use super::{Shading, SplatCounts, SplatSetup};
 use crate::field::RenderError;
@@ -614,7 +614,7 @@ impl<'a> SplatRecording<'a> {
                 tiles_x,
                 tiles_y,
                 segments: u32::from(pipelines.segments.is_some()),
-                band_rows: RASTER_BAND_ROWS,
+                band_rows: walk.band_rows,
                 chunk: walk.chunk,
                 sheet_cost: walk.sheet_cost,
                 steps: walk.steps,
@@ -832,14 +832,14 @@ pub fn splat_frame(
     let (stats, total, timings) =
         project(ctx, pipelines, kernels, targets, &constants, setup, hull)?;
     sum_ms(&timings, &mut stage_ms);
-    let band = RASTER_BAND_ROWS;
+    let band = walk.band_rows;
     let submissions_planned = 1 + tiles_y.div_ceil(band);
     (control.progress)(1.0 / f64::from(submissions_planned));
     control.check_stop()?;
     let limit = entry_limit(ctx);
     check_projection(setup, &stats, total, control.budget, limit)?;
     targets.reserve_entries(ctx, total, limit)?;
-    targets.reserve_raster_state(ctx, pipelines.variant(), tiles_x)?;
+    targets.reserve_raster_state(ctx, pipelines.variant(), tiles_x, band)?;
     let mut band_passes = stat_band_entries(&stats, raster_bands(setup)).map(|e| walk.passes(e));
 
     // Pass 2: the scatter, then the tiles in bands of rows.

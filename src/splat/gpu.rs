@@ -444,7 +444,7 @@ impl SplatPipelines {
 /// (tile, sheet) buckets (a new camera changes the sheet count: a quarter more is allocated);
 /// the entry list grows.
 pub struct SplatTargets {
-    key: (u32, u32, u32, u32, bool),
+    key: (u32, u32, u32, u32, u32, bool),
     bucket_capacity: u64,
     pub(super) splats: Buffer,
     pub(super) counts: Buffer,
@@ -465,12 +465,13 @@ pub struct SplatTargets {
 }
 
 impl SplatTargets {
-    fn key(setup: &SplatSetup, kernels: &GpuKernels) -> (u32, u32, u32, u32, bool) {
+    fn key(setup: &SplatSetup, kernels: &GpuKernels) -> (u32, u32, u32, u32, u32, bool) {
         (
             setup.camera.width,
             setup.camera.height,
             kernels.count,
             setup.tile,
+            setup.band_rows,
             setup.hull && setup.shading == Shading::Post,
         )
     }
@@ -574,16 +575,15 @@ impl SplatTargets {
     }
 
     /// Makes room for the walks of one band of `variant`'s `splat_raster` between its passes
-    /// (`RASTER_BAND_ROWS` tile rows of `tiles_x` tiles).
+    /// (`band_rows` tile rows of `tiles_x` tiles).
     pub fn reserve_raster_state(
         &mut self,
         ctx: &Context,
         variant: &SplatVariant,
         tiles_x: u32,
+        band_rows: u32,
     ) -> Result<(), VkError> {
-        let words = variant.raster_tile_words()
-            * u64::from(tiles_x)
-            * u64::from(super::plan::RASTER_BAND_ROWS);
+        let words = variant.raster_tile_words() * u64::from(tiles_x) * u64::from(band_rows);
         if self
             .raster_state
             .as_ref()

@@ -50,6 +50,15 @@ use glam::DVec3;
 /// pixel (plus a one-pixel apron when post-shaded isosurfaces need gradients; 32² + apron
 /// would pass the 1024 invocations a workgroup may have on lavapipe).
 pub const TILE_SIZES: [u32; 3] = [8, 16, 32];
+/// Pixels per `splat_raster` invocation it may take (`splat.pixels`): a column of them, which
+/// every tile size holds whole.
+pub const RASTER_PIXELS: [u32; 3] = [1, 2, 4];
+/// Tiles a band of `splat_raster` holds at least on a GPU (rows rounded up): a discrete GPU
+/// needs tens of thousands of invocations in flight. In lavapipe's bands of two tile rows a
+/// 512² post-shaded frame of 68 921 points gave an H200 128 workgroups a dispatch and took
+/// 65.4 ms; in one band of 4 096 tiles, 6.89 (BENCHMARKS.md, "Splatting on a GPU needs wide
+/// bands").
+pub const GPU_BAND_TILES: u32 = 4096;
 /// At most this many (tile × sheet) entries per kernel: `splat_project` counts and `splat_bin`
 /// writes them in one invocation's loops, which llvmpipe ends after 65 535 iterations. More is
 /// an error naming `splat.slab` and the image size, never a silently truncated list.
@@ -189,6 +198,12 @@ pub struct SplatSetup {
     /// changes nothing in the image, only how the walks are split among passes (tests force
     /// small ones with it).
     pub raster_chunk: Option<u32>,
+    /// Tile rows per dispatch of `splat_raster` (`splat.band_rows`, else
+    /// [`plan::RASTER_BAND_ROWS`] until [`SplatSetup::fit_device`] widens them for a GPU).
+    pub band_rows: u32,
+    /// Pixels per `splat_raster` invocation where no apron needs one (`splat.pixels`, else 4
+    /// until [`SplatSetup::fit_device`] sets one for a GPU).
+    pub pixels: u32,
 }
 
 impl SplatSetup {
@@ -417,6 +432,8 @@ impl SplatSetup {
             cell: field.clip().map(|clip| brick_cell(clip, (box_lo, box_hi))),
             window: ([0; 4], [0; 2]),
             raster_chunk: None,
+            band_rows: settings.band_rows.unwrap_or(plan::RASTER_BAND_ROWS),
+            pixels: settings.pixels.unwrap_or(4),
         };
         let apron = if post && !setup.isosurfaces.is_empty() {
             (2, [2, 3])
@@ -519,9 +536,30 @@ impl SplatSetup {
 
     /// Pixels per `splat_raster` invocation, a column of them (each splat record an
     /// invocation loads serves them all): one where the apron's lateral exchange needs a
-    /// pixel per invocation, else four (every tile size is a multiple).
+    /// pixel per invocation, else `pixels`.
     pub fn raster_pixels(&self) -> u32 {
-        if self.apron() > 0 { 1 } else { 4 }
+        if self.apron() > 0 { 1 } else { self.pixels }
+    }
+
+    /// Fits `splat_raster`'s dispatches to the device where `splat.band_rows` and
+    /// `splat.pixels` are unset. A CPU device (`cpu`: lavapipe) keeps bands of
+    /// [`plan::RASTER_BAND_ROWS`] rows and four pixels per invocation, which measured fastest
+    /// there; a GPU takes bands of at least [`GPU_BAND_TILES`] tiles and one pixel per
+    /// invocation. On an H200 at 512² that made post-shaded splatting of 68 921 points 28×
+    /// faster than lavapipe's shape (2.34 against 65.4 ms; BENCHMARKS.md, "Splatting on a GPU
+    /// needs wide bands"). Bands change no pixel; pixels per invocation compile another
+    /// variant, equal within f32 rounding (the compiler's fused multiply-adds).
+    pub fn fit_device(&mut self, cpu: bool) {
+        if cpu {
+            return;
+        }
+        if self.settings.band_rows.is_none() {
+            let (tiles_x, tiles_y) = self.tiles();
+            self.band_rows = GPU_BAND_TILES.div_ceil(tiles_x).clamp(1, tiles_y.max(1));
+        }
+        if self.settings.pixels.is_none() {
+            self.pixels = 1;
+        }
     }
 
     /// Invocations of one `splat_raster` workgroup: the tile and its apron.

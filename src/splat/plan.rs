@@ -12,7 +12,8 @@ use super::{Shading, SplatSetup};
 use crate::field::RenderError;
 use crate::gpu_types::{ORDER_INSERTION_MAX, PlanPush, RasterPush, WalkPush, splat_stat};
 
-/// Tile rows per dispatch of `splat_raster`. Small bands are faster on lavapipe: at 512²
+/// Tile rows per dispatch of `splat_raster` on a CPU device (a GPU's are wider:
+/// [`SplatSetup::fit_device`]). Small bands are faster on lavapipe: at 512²
 /// (64 tile rows) two rows a band took 6–9% less GPU and wall time than eight (BENCHMARKS.md,
 /// "Splatting frames recorded"), at 256² 5% less than four. In
 /// [`splat_frame`](super::frame::splat_frame) each band is also one submission, so that
@@ -32,9 +33,9 @@ pub const RASTER_CHUNK: u32 = 61_440;
 /// positions in 32 bits.
 pub const RASTER_CHUNK_MAX: u32 = 1 << 30;
 
-/// Bands of [`RASTER_BAND_ROWS`] tile rows in a frame of `setup`.
+/// Bands of `setup.band_rows` tile rows in a frame of `setup`.
 pub fn raster_bands(setup: &SplatSetup) -> u32 {
-    setup.tiles().1.div_ceil(RASTER_BAND_ROWS)
+    setup.tiles().1.div_ceil(setup.band_rows.max(1))
 }
 
 /// How `splat_raster` splits a tile's walk among passes (the twin of its `cost`, and of the
@@ -53,6 +54,8 @@ pub struct RasterWalk {
     /// Sheets a walk steps through: the sheets, and post-shaded one more (compositing lags a
     /// sheet behind).
     pub steps: u32,
+    /// Tile rows per band.
+    pub band_rows: u32,
 }
 
 impl RasterWalk {
@@ -97,6 +100,7 @@ impl RasterWalk {
                 chunk: chunk.unwrap_or(RASTER_CHUNK),
                 sheet_cost,
                 steps: setup.slabs + u32::from(post),
+                band_rows: setup.band_rows.max(1),
             }),
         }
     }
@@ -107,6 +111,7 @@ impl RasterWalk {
             chunk: push.chunk,
             sheet_cost: push.sheet_cost,
             steps: push.steps,
+            band_rows: push.band_rows.max(1),
         }
     }
 
@@ -133,7 +138,7 @@ impl RasterWalk {
             last_pass,
             chunk: self.chunk,
             sheet_cost: self.sheet_cost,
-            band: tile_row / RASTER_BAND_ROWS,
+            band: tile_row / self.band_rows,
             _pad: [0; 2],
         }
     }
@@ -146,7 +151,7 @@ pub fn walk_push(setup: &SplatSetup) -> WalkPush {
         tiles: tiles_x * tiles_y,
         tiles_x,
         slabs: setup.slabs,
-        band_rows: RASTER_BAND_ROWS,
+        band_rows: setup.band_rows.max(1),
     }
 }
 
@@ -432,6 +437,7 @@ mod tests {
                 chunk: 40 + rng.below(400),
                 sheet_cost: 1 + rng.below(12),
                 steps: 1 + rng.below(60),
+                band_rows: 2,
             };
             let entries: Vec<u32> = (0..walk.steps)
                 .map(|_| match rng.below(4) {

@@ -237,6 +237,14 @@ pub struct SplatSettings {
     pub sheet_share: Option<SheetShare>,
     /// Post-shaded ring size (one of `RINGS`); unset: [`crate::splat::choose_ring`].
     pub ring: Option<u32>,
+    /// Tile rows per dispatch of `splat_raster`; unset: chosen for the device (two on
+    /// lavapipe, at least 4 096 tiles a band on a GPU: [`crate::splat::SplatSetup::fit_device`]).
+    /// Changes no pixel, only the dispatches.
+    pub band_rows: Option<u32>,
+    /// Pixels per `splat_raster` invocation where no isosurface apron needs one (one of
+    /// `RASTER_PIXELS`); unset: four on lavapipe, one on a GPU. The image agrees within f32
+    /// rounding (another compiled variant).
+    pub pixels: Option<u32>,
 }
 
 impl Default for SplatSettings {
@@ -253,6 +261,8 @@ impl Default for SplatSettings {
             split: None,
             sheet_share: None,
             ring: None,
+            band_rows: None,
+            pixels: None,
         }
     }
 }
