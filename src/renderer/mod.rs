@@ -102,6 +102,8 @@ pub struct SplatReport {
     pub tile: u32,
     pub group_size: u32,
     pub invocations: u32,
+    /// Tile rows per `splat_raster` dispatch (`SplatSetup::band_rows`).
+    pub band_rows: u32,
     /// Post-shaded: the ring size (sheet shares per entry and pixel; 0 without) and whether
     /// the shares are the quadrature's.
     pub ring: u32,

@@ -176,6 +176,7 @@ impl Renderer {
                     tile: setup.tile,
                     group_size: setup.group_size(),
                     invocations: variant.group,
+                    band_rows: setup.band_rows,
                     ring: variant.ring,
                     quadrature: variant.quadrature,
                 }),

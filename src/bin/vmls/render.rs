@@ -169,6 +169,8 @@ pub fn run_render(
                 "kernels_culled_empty": r.counts.culled_empty,
                 "kernels_kept": r.counts.kept(),
                 "tile": r.tile,
+                "raster_invocations_per_tile": r.invocations,
+                "raster_band_rows": r.band_rows,
                 "footprints_binned": r.counts.entries,
                 "footprints_skipped_by_occlusion": r.counts.skipped_occluded,
                 "footprints_accumulated": r.counts.accumulated,
