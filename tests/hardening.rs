@@ -405,7 +405,7 @@ fn keys_that_set_work_or_memory_are_range_checked_by_name() {
         ),
         ("camera.width=100000", &["camera.width"]),
         ("splat.band_rows=0", &["splat.band_rows", "1 to 4096"]),
-        ("splat.pixels=3", &["splat.pixels", "1, 2 or 4"]),
+        ("splat.pixels=3", &["splat.pixels", "1, 2, 4 or 8"]),
         ("camera.eye=[1e308, 0, 0]", &["camera.eye", "1e15"]),
         ("camera.target=[0, 0, -1e300]", &["camera.target"]),
         (

@@ -610,23 +610,28 @@ fn walks_split_among_passes_give_the_same_image_to_the_bit() {
 }
 
 /// The dispatch shape a GPU gets (`SplatSetup::fit_device`: whole-image bands, one pixel per
-/// invocation) and any other (`splat.band_rows`, `splat.pixels`) keep the image. Bands are
+/// invocation) and any other (`splat.band_rows`, `splat.pixels`) keep the image, as does
+/// lavapipe's pre-shaded eight pixels against four. Bands are
 /// only dispatches of one compiled kernel: the image is the same to the bit in bands of
 /// three of the four tile rows (the last one short) as in lavapipe's two. Pixels per
 /// invocation compile another variant, whose arithmetic the compiler may contract into fused
 /// multiply-adds differently: within 4e-6 (measured: 1.1e-6 on 774 of the post-shaded
 /// quadrature frame's pixels at one pixel an invocation, the other variants equal to the bit).
 /// The choice itself: a GPU widens the bands to 4 096 tiles and takes one pixel, a CPU device
-/// keeps its shape, and keys set in the scene win on both.
+/// keeps its shape (eight pixels pre-shaded, four post-shaded), and keys set in the scene win
+/// on both.
 #[test]
 fn the_raster_dispatch_shape_changes_no_pixel() {
     let field = scene(&[]).field(|_| {}).expect("field");
-    let fitted = |extra: &[&str], cpu: bool| {
-        let mut st = setup(&scene(extra), &field, Shading::Post);
+    let shaded = |extra: &[&str], cpu: bool, shading: Shading| {
+        let mut st = setup(&scene(extra), &field, shading);
         st.fit_device(cpu);
         (st.band_rows, st.raster_pixels())
     };
+    let fitted = |extra: &[&str], cpu: bool| shaded(extra, cpu, Shading::Post);
     assert_eq!(fitted(&[], true), (2, 4));
+    assert_eq!(shaded(&[], true, Shading::Pre), (2, 8));
+    assert_eq!(shaded(&[], false, Shading::Pre), (4, 1));
     assert_eq!(
         fitted(&[], false),
         (4, 1),
@@ -643,10 +648,12 @@ fn the_raster_dispatch_shape_changes_no_pixel() {
     for (name, extra) in RASTER_VARIANTS {
         let (a, _) = gpu_frame(&mut renderer, &scene(extra));
         assert!(a.iter().any(|p| p[3] > 0.2), "{name}: empty image");
-        let shapes: [(&[&str], f32); 3] = [
+        let shapes: [(&[&str], f32); 5] = [
             (&["splat.band_rows=3"], 0.0),
             (&["splat.band_rows=4", "splat.pixels=1"], 4e-6),
             (&set, 4e-6),
+            (&["splat.pixels=4"], 4e-6),
+            (&["splat.pixels=8"], 4e-6),
         ];
         for (shape, bound) in shapes {
             let (b, _) = gpu_frame(&mut renderer, &scene(&[extra, shape].concat()));

@@ -220,8 +220,10 @@ void load_pixel(inout Pixel px, uint w) {
 #define EACH(F) F(px0) F(px1)
 #elif SPLAT_PIXELS == 4
 #define EACH(F) F(px0) F(px1) F(px2) F(px3)
+#elif SPLAT_PIXELS == 8
+#define EACH(F) F(px0) F(px1) F(px2) F(px3) F(px4) F(px5) F(px6) F(px7)
 #else
-#error "SPLAT_PIXELS is 1, 2 or 4"
+#error "SPLAT_PIXELS is 1, 2, 4 or 8"
 #endif
 #if SPLAT_APRON > 0 && SPLAT_PIXELS != 1
 #error "the apron's lateral exchange takes one pixel per invocation"

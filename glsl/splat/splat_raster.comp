@@ -346,9 +346,15 @@ void main() {
 #if SPLAT_PIXELS >= 2
     Pixel px1 = pixel_at(x, y + 1, valid, OWN(1));
 #endif
-#if SPLAT_PIXELS == 4
+#if SPLAT_PIXELS >= 4
     Pixel px2 = pixel_at(x, y + 2, valid, OWN(2));
     Pixel px3 = pixel_at(x, y + 3, valid, OWN(3));
+#endif
+#if SPLAT_PIXELS == 8
+    Pixel px4 = pixel_at(x, y + 4, valid, OWN(4));
+    Pixel px5 = pixel_at(x, y + 5, valid, OWN(5));
+    Pixel px6 = pixel_at(x, y + 6, valid, OWN(6));
+    Pixel px7 = pixel_at(x, y + 7, valid, OWN(7));
 #endif
 #undef OWN
     float slab = params.slab_world;

@@ -53,31 +53,36 @@ pub(super) fn parse(sec: &Section<'_>) -> Result<SplatSettings, SceneError> {
                 ("quadrature", Some(SheetShare::Quadrature)),
             ],
         )?,
-        ring: match sec.get("ring") {
-            None => d.ring,
-            Some(Value::Integer(r)) if RINGS.iter().any(|&x| i64::from(x) == *r) => Some(*r as u32),
-            Some(v) => return Err(sec.err("ring", "4, 8 or 16 (sheets)", v)),
-        },
-        tile: match sec.get("tile") {
-            None => d.tile,
-            Some(Value::Integer(t)) if TILE_SIZES.iter().any(|&x| i64::from(x) == *t) => {
-                Some(*t as u32)
-            }
-            Some(v) => return Err(sec.err("tile", "8, 16 or 32 (pixels)", v)),
-        },
+        ring: listed(sec, "ring", &RINGS, "4, 8 or 16 (sheets)")?,
+        tile: listed(sec, "tile", &TILE_SIZES, "8, 16 or 32 (pixels)")?,
         band_rows: match sec.get("band_rows") {
             None => d.band_rows,
             Some(Value::Integer(r)) if (1..=4096).contains(r) => Some(*r as u32),
             Some(v) => return Err(sec.err("band_rows", "tile rows per dispatch, 1 to 4096", v)),
         },
-        pixels: match sec.get("pixels") {
-            None => d.pixels,
-            Some(Value::Integer(p)) if RASTER_PIXELS.iter().any(|&x| i64::from(x) == *p) => {
-                Some(*p as u32)
-            }
-            Some(v) => return Err(sec.err("pixels", "1, 2 or 4 (per invocation)", v)),
-        },
+        pixels: listed(
+            sec,
+            "pixels",
+            &RASTER_PIXELS,
+            "1, 2, 4 or 8 (per invocation)",
+        )?,
     })
+}
+
+/// An optional integer key that takes one of `allowed` (unset: None, as every such default).
+fn listed(
+    sec: &Section<'_>,
+    key: &str,
+    allowed: &[u32],
+    expected: &str,
+) -> Result<Option<u32>, SceneError> {
+    match sec.get(key) {
+        None => Ok(None),
+        Some(Value::Integer(v)) if allowed.iter().any(|&x| i64::from(x) == *v) => {
+            Ok(Some(*v as u32))
+        }
+        Some(v) => Err(sec.err(key, expected, v)),
+    }
 }
 
 fn flag(sec: &Section<'_>, key: &str, default: bool) -> Result<bool, SceneError> {

@@ -52,7 +52,7 @@ use glam::DVec3;
 pub const TILE_SIZES: [u32; 3] = [8, 16, 32];
 /// Pixels per `splat_raster` invocation it may take (`splat.pixels`): a column of them, which
 /// every tile size holds whole.
-pub const RASTER_PIXELS: [u32; 3] = [1, 2, 4];
+pub const RASTER_PIXELS: [u32; 4] = [1, 2, 4, 8];
 /// Tiles a band of `splat_raster` holds at least on a GPU (rows rounded up): a discrete GPU
 /// needs tens of thousands of invocations in flight. In lavapipe's bands of two tile rows a
 /// 512² post-shaded frame of 68 921 points gave an H200 128 workgroups a dispatch and took
@@ -201,8 +201,9 @@ pub struct SplatSetup {
     /// Tile rows per dispatch of `splat_raster` (`splat.band_rows`, else
     /// [`plan::RASTER_BAND_ROWS`] until [`SplatSetup::fit_device`] widens them for a GPU).
     pub band_rows: u32,
-    /// Pixels per `splat_raster` invocation where no apron needs one (`splat.pixels`, else 4
-    /// until [`SplatSetup::fit_device`] sets one for a GPU).
+    /// Pixels per `splat_raster` invocation where no apron needs one (`splat.pixels`, else
+    /// lavapipe's: 4 post-shaded, 8 pre-shaded, until [`SplatSetup::fit_device`] sets one for a
+    /// GPU).
     pub pixels: u32,
 }
 
@@ -433,7 +434,7 @@ impl SplatSetup {
             window: ([0; 4], [0; 2]),
             raster_chunk: None,
             band_rows: settings.band_rows.unwrap_or(plan::RASTER_BAND_ROWS),
-            pixels: settings.pixels.unwrap_or(4),
+            pixels: settings.pixels.unwrap_or(if post { 4 } else { 8 }),
         };
         let apron = if post && !setup.isosurfaces.is_empty() {
             (2, [2, 3])
@@ -543,8 +544,9 @@ impl SplatSetup {
 
     /// Fits `splat_raster`'s dispatches to the device where `splat.band_rows` and
     /// `splat.pixels` are unset. A CPU device (`cpu`: lavapipe) keeps bands of
-    /// [`plan::RASTER_BAND_ROWS`] rows and four pixels per invocation, which measured fastest
-    /// there; a GPU takes bands of at least [`GPU_BAND_TILES`] tiles and one pixel per
+    /// [`plan::RASTER_BAND_ROWS`] rows and four pixels per invocation post-shaded, eight
+    /// pre-shaded (a tile's column each: 8–12% faster there than four, post-shaded 12% slower),
+    /// which measured fastest there; a GPU takes bands of at least [`GPU_BAND_TILES`] tiles and one pixel per
     /// invocation. On an H200 at 512² that made post-shaded splatting of 68 921 points 28×
     /// faster than lavapipe's shape (2.34 against 65.4 ms; BENCHMARKS.md, "Splatting on a GPU
     /// needs wide bands"). Bands change no pixel; pixels per invocation compile another

@@ -242,7 +242,7 @@ pub struct SplatSettings {
     /// Changes no pixel, only the dispatches.
     pub band_rows: Option<u32>,
     /// Pixels per `splat_raster` invocation where no isosurface apron needs one (one of
-    /// `RASTER_PIXELS`); unset: four on lavapipe, one on a GPU. The image agrees within f32
+    /// `RASTER_PIXELS`); unset: on lavapipe four post-shaded and eight pre-shaded, one on a GPU. The image agrees within f32
     /// rounding (another compiled variant).
     pub pixels: Option<u32>,
 }
