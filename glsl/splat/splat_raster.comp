@@ -139,7 +139,11 @@ uvec2 next_entry(uint at, uint at_end, uint steps) {
 
 #include "splat/raster_pixel.glsl"
 
-// Adds entry (s, covering sheets k .. k + span - 1 of the splat's) to the pixel.
+// Adds entry (s, covering sheets k .. k + span - 1 of the splat's) to the pixel. Branch-free:
+// a pixel outside the entry's box, or outside its cutoff, adds exact zeros (its footprint is
+// 0 and every share a finite multiple of it). On lavapipe an early `return` here cost about
+// 30% of a post-shaded splat_raster: every statement after it, the ring's registers
+// included, became a masked write (BENCHMARKS.md, "Branch-free accumulation").
 void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) {
     // (Padding invocations past the tile's rows have no pixel.)
     bool in_box = px.inside && all(greaterThanEqual(ivec2(px.x, px.y), s.bbox.xy))
@@ -147,19 +151,14 @@ void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) 
 #if SPLAT_POST == 0 && SPLAT_OCCLUSION == 1
     in_box = in_box && !(px.acc.w > params.early_termination);
 #endif
-    if (!in_box) {
-        return;
-    }
     float cutoff = params.cutoff;
     vec2 pixel = vec2(px.x, px.y);
-    px.evaluated += 1u;
+    px.evaluated += in_box ? 1u : 0u;
 #if SPLAT_RING > 0
     // The lateral footprint once, then its share of each sheet k + d (d < span).
     vec3 pr = splat_profile(s, cutoff, pixel, px.view);
-    if (pr.x == 0.0) {
-        return;
-    }
-    px.contributions += 1u;
+    pr.x = in_box ? pr.x : 0.0;
+    px.contributions += pr.x != 0.0 ? 1u : 0u;
     float slab = params.slab_world;
 #if SPLAT_QUADRATURE == 1
     // The Hermite-Simpson rule on each sheet (twin: sheet_share), h deviations thick: with
@@ -238,14 +237,14 @@ void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) 
     float zb = (tb - pr.y) * pr.z;
     float qb = normal_tail(zb);
     px.sheet += pr.x * phi_from_tails(za, qa, zb, qb);
+    // Every step runs (as lavapipe would run it under a mask anyway); past the entry's span
+    // it adds zero.
 #define RING_STEP(d, r) \
-    if (d + 1u < span) { \
-        za = zb; \
-        qa = qb; \
-        zb = (params.slab0_world + float(k + d + 2u) * slab - pr.y) * pr.z; \
-        qb = normal_tail(zb); \
-        px.r += pr.x * phi_from_tails(za, qa, zb, qb); \
-    }
+    za = zb; \
+    qa = qb; \
+    zb = (params.slab0_world + float(k + d + 2u) * slab - pr.y) * pr.z; \
+    qb = normal_tail(zb); \
+    px.r += d + 1u < span ? pr.x * phi_from_tails(za, qa, zb, qb) : 0.0;
     RING_STEP(0u, r0) RING_STEP(1u, r1) RING_STEP(2u, r2)
 #if SPLAT_RING >= 8
     RING_STEP(3u, r3) RING_STEP(4u, r4) RING_STEP(5u, r5) RING_STEP(6u, r6)
@@ -258,20 +257,18 @@ void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) 
 #endif
 #else
     float g = splat_footprint(s, cutoff, pixel, px.view, ta, tb);
-    if (g == 0.0) {
-        return;
-    }
-    px.contributions += 1u;
+    g = in_box ? g : 0.0;
+    px.contributions += g != 0.0 ? 1u : 0u;
 #if SPLAT_POST == 1
     px.sheet += g;
 #elif SPLAT_SURFACES == 1
-    if (s.color.w > 0.0) {
-        px.sw += g;
-        px.sa += g * s.color.w;
-        px.sc += g * s.color.rgb;
-    } else {
-        px.ext += g * vec4(1.0, s.color.rgb);
-    }
+    // A surface splat's g goes to the coverage sums, a volume splat's to the extinction.
+    float gs = s.color.w > 0.0 ? g : 0.0;
+    float gv = g - gs;
+    px.sw += gs;
+    px.sa += gs * s.color.w;
+    px.sc += gs * s.color.rgb;
+    px.ext += gv * vec4(1.0, s.color.rgb);
 #else
     px.ext += g * vec4(1.0, s.color.rgb);
 #endif
@@ -280,23 +277,20 @@ void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) 
 
 #if SPLAT_POST == 0
 // Composites the pixel's sheet k (where the frame owns it) and clears it.
+// Branch-free, like accumulate: a pixel that does not composite adds exact zeros.
 void finish_pre(inout Pixel px, uint k) {
     float done = params.early_termination;
-    if (px.own && !(px.acc.w > done) && sheet_owned(px, k)) {
+    bool on = px.own && !(px.acc.w > done) && sheet_owned(px, k);
 #if SPLAT_SURFACES == 1
-        // Surface splats first: coverage min(W, 1), normalised opacity and colour.
-        if (px.sw > 0.0) {
-            float cover = min(px.sw, 1.0) / px.sw;
-            px.acc.rgb += (1.0 - px.acc.w) * px.sc * cover;
-            px.acc.w += (1.0 - px.acc.w) * px.sa * cover;
-        }
+    // Surface splats first: coverage min(W, 1), normalised opacity and colour.
+    float cover = on && px.sw > 0.0 ? min(px.sw, 1.0) / px.sw : 0.0;
+    px.acc.rgb += (1.0 - px.acc.w) * px.sc * cover;
+    px.acc.w += (1.0 - px.acc.w) * px.sa * cover;
 #endif
-        if (!(px.acc.w > done) && px.ext.x > 0.0) {
-            float alpha = 1.0 - exp_e(-px.ext.x);
-            px.acc.rgb += (1.0 - px.acc.w) * px.ext.yzw / px.ext.x * alpha;
-            px.acc.w += (1.0 - px.acc.w) * alpha;
-        }
-    }
+    bool volume = on && !(px.acc.w > done) && px.ext.x > 0.0;
+    float alpha = volume ? 1.0 - exp_e(-px.ext.x) : 0.0;
+    px.acc.rgb += volume ? (1.0 - px.acc.w) * px.ext.yzw / px.ext.x * alpha : vec3(0.0);
+    px.acc.w += (1.0 - px.acc.w) * alpha;
     px.ext = vec4(0.0);
 #if SPLAT_SURFACES == 1
     px.sw = 0.0;
@@ -494,7 +488,7 @@ void main() {
 #undef FINISH
         k = entry.y;
 #else
-#define TAKE(px) float v1_##px = take_sheet(px, live);
+#define TAKE(px) float v1_##px = take_sheet(px);
         EACH(TAKE)
 #undef TAKE
         live = live > 0u ? live - 1u : 0u;
