@@ -23,8 +23,8 @@
 // iterations in a dispatch; src/splat/plan.rs counts the passes). The split changes nothing
 // in the image, so the CPU twin walks in one go. Variant macros: SPLAT_POST, SPLAT_ORTHO,
 // SPLAT_EXACT, SPLAT_RING (0, or post-shaded: one entry per SPLAT_RING sheets, the sheets ahead
-// in ring registers), SPLAT_QUADRATURE (its sheet shares by the quadrature, else the erfc;
-// SPLAT_WIDEN: kernels thinner than it serves shared as if that thick),
+// in ring registers), SPLAT_QUADRATURE (its sheet shares: 1 the quadrature, 2 the midpoint
+// rule, 0 the erfc; SPLAT_WIDEN: kernels thinner than they serve shared as if that thick),
 // SPLAT_OCCLUSION, SPLAT_ISOSURFACES, SPLAT_SURFACES, SPLAT_HULL, SPLAT_BRICK (a brick's frame:
 // a pixel composites only the sheets whose midpoint on its ray lies in the brick's kd cell,
 // twin SplatSetup::owns), SPLAT_TILE,
@@ -229,6 +229,60 @@ void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) 
 #endif
 #undef SHEET_STEP
 #undef FROM_SEED
+#undef SEED
+#elif SPLAT_QUADRATURE == 2
+    // The midpoint rule (twin: sheet_share): sheet d gets w h g(z_d), z_d its middle in
+    // deviations, h its thickness. The g by the recurrence above at steps of h,
+    // g(z + h) = g(z) rf, rf <- rf e^(-h^2), from seeds at the middles of sheets 4 and 12
+    // (ring 4: sheet 2), each serving up to 4 sheets either side, clamped as above.
+#if SPLAT_WIDEN == 1
+    pr.z = min(pr.z, float(QUADRATURE_MAX_SHEET) / slab);
+#endif
+    float h = slab * pr.z;
+    float c = exp_e(-h * h);
+    float wm = pr.x * 0.3989422804014327 * h;
+    float g, rho, zs, gs, rf, rb;
+#define SEED(j) \
+    zs = clamp((ta + (float(j) + 0.5) * slab - pr.y) * pr.z, -20.0, 20.0); \
+    gs = exp_e(-0.5 * zs * zs); \
+    rf = exp_e(-(zs * h + 0.5 * h * h)); \
+    rb = c / rf;
+#define MID(d, r) r += d < span ? wm * g : 0.0;
+#define STEP(d, r) \
+    g *= rho; \
+    rho *= c; \
+    MID(d, r)
+#if SPLAT_RING == 4
+    SEED(2u)
+    g = gs;
+    MID(2u, px.r1)
+    rho = rb;
+    STEP(1u, px.r0) STEP(0u, px.sheet)
+    g = gs;
+    rho = rf;
+    STEP(3u, px.r2)
+#else
+    SEED(4u)
+    g = gs;
+    MID(4u, px.r3)
+    rho = rb;
+    STEP(3u, px.r2) STEP(2u, px.r1) STEP(1u, px.r0) STEP(0u, px.sheet)
+    g = gs;
+    rho = rf;
+    STEP(5u, px.r4) STEP(6u, px.r5) STEP(7u, px.r6)
+#endif
+#if SPLAT_RING == 16
+    SEED(12u)
+    g = gs;
+    MID(12u, px.r11)
+    rho = rb;
+    STEP(11u, px.r10) STEP(10u, px.r9) STEP(9u, px.r8) STEP(8u, px.r7)
+    g = gs;
+    rho = rf;
+    STEP(13u, px.r12) STEP(14u, px.r13) STEP(15u, px.r14)
+#endif
+#undef STEP
+#undef MID
 #undef SEED
 #else
     // The erfc tails at the sheet boundaries, each boundary's once.

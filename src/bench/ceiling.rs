@@ -125,19 +125,20 @@ pub fn footprint_flops(exact: bool) -> f64 {
 
 /// Flops of one entry at one pixel: a footprint, or with `ring` registers (post-shaded) the
 /// lateral profile (the footprint less its erfc share, 30) and `ring` sheet shares, each 30 by
-/// the erfc or 14 by the quadrature (4 multiplies of the recurrence, 10 for the rule), whose
-/// entries also seed the recurrence: 10 for e^(-dz²), then per seed (one per 8 sheets) 2
-/// exponentials and a division, 35.
-pub fn entry_flops(exact: bool, ring: u32, quadrature: bool) -> f64 {
+/// the erfc, 14 by the quadrature (4 multiplies of the recurrence, 10 for the rule) or 3 by the
+/// midpoint rule (2 multiplies, 1 multiply-add), whose entries also seed the recurrence: 10
+/// for e^(-dz²), then per seed (one per 8 sheets) 2 exponentials and a division, 35.
+pub fn entry_flops(exact: bool, ring: u32, sheet_share: crate::view::SheetShare) -> f64 {
     let footprint = footprint_flops(exact);
     if ring == 0 {
         return footprint;
     }
     let ring = f64::from(ring);
-    if quadrature {
-        footprint - 30.0 + 14.0 * ring + 10.0 + 35.0 * (ring / 8.0).ceil()
-    } else {
-        footprint - 30.0 + 30.0 * ring
+    let seeds = 10.0 + 35.0 * (ring / 8.0).ceil();
+    match sheet_share {
+        crate::view::SheetShare::Quadrature => footprint - 30.0 + 14.0 * ring + seeds,
+        crate::view::SheetShare::Midpoint => footprint - 30.0 + 3.0 * ring + seeds,
+        crate::view::SheetShare::Erfc => footprint - 30.0 + 30.0 * ring,
     }
 }
 
@@ -149,7 +150,8 @@ pub fn splat_shares(
 ) -> (f64, f64) {
     let seconds = report.stage_ms[2] * 1e-3;
     let walked = report.counts.accumulated as f64;
-    let flops = report.counts.evaluated as f64 * entry_flops(exact, report.ring, report.quadrature)
+    let flops = report.counts.evaluated as f64
+        * entry_flops(exact, report.ring, report.sheet_share)
         + walked * 8.0 * f64::from(report.group_size);
     let bytes = walked * 120.0 * f64::from(report.invocations.div_ceil(8));
     (

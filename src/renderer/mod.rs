@@ -104,10 +104,10 @@ pub struct SplatReport {
     pub invocations: u32,
     /// Tile rows per `splat_raster` dispatch (`SplatSetup::band_rows`).
     pub band_rows: u32,
-    /// Post-shaded: the ring size (sheet shares per entry and pixel; 0 without) and whether
-    /// the shares are the quadrature's.
+    /// Post-shaded: the ring size (sheet shares per entry and pixel; 0 without) and the rule
+    /// of its shares.
     pub ring: u32,
-    pub quadrature: bool,
+    pub sheet_share: crate::view::SheetShare,
 }
 
 fn check_tables(setup: &RaySetup, tables: Option<&PreintegrationTables>) -> Result<(), VkError> {

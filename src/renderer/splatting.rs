@@ -178,7 +178,7 @@ impl Renderer {
                     invocations: variant.group,
                     band_rows: setup.band_rows,
                     ring: variant.ring,
-                    quadrature: variant.quadrature,
+                    sheet_share: variant.sheet_share,
                 }),
                 skip: None,
                 error_estimate: None,

@@ -51,6 +51,7 @@ pub(super) fn parse(sec: &Section<'_>) -> Result<SplatSettings, SceneError> {
                 ("auto", None),
                 ("erfc", Some(SheetShare::Erfc)),
                 ("quadrature", Some(SheetShare::Quadrature)),
+                ("midpoint", Some(SheetShare::Midpoint)),
             ],
         )?,
         ring: listed(sec, "ring", &RINGS, "4, 8 or 16 (sheets)")?,

@@ -111,9 +111,8 @@ pub struct SplatVariant {
     pub split: bool,
     /// Post-shaded: ring registers per pixel (`SplatSetup::ring`; 0: none).
     pub ring: u32,
-    /// With ring registers: the quadrature sheet share (`SplatSetup::sheet_share`), else the
-    /// erfc.
-    pub quadrature: bool,
+    /// With ring registers: the sheet-share rule (`SplatSetup::sheet_share`).
+    pub sheet_share: super::SheetShare,
     /// The quadrature widens kernels thinner than it serves (`SplatSetup::widen`).
     pub widen: bool,
     pub occlusion: bool,
@@ -151,7 +150,7 @@ impl SplatVariant {
             exact: setup.exact_footprints(),
             split: setup.split,
             ring: setup.ring,
-            quadrature: setup.sheet_share == super::SheetShare::Quadrature,
+            sheet_share: setup.sheet_share,
             widen: setup.widen,
             occlusion: setup.settings.occlusion,
             isosurfaces: !setup.isosurfaces.is_empty(),
@@ -185,7 +184,15 @@ impl SplatVariant {
             ("SPLAT_EXACT".into(), flag(self.exact)),
             ("SPLAT_SPLIT".into(), flag(self.split)),
             ("SPLAT_RING".into(), self.ring.to_string()),
-            ("SPLAT_QUADRATURE".into(), flag(self.quadrature)),
+            (
+                "SPLAT_QUADRATURE".into(),
+                match self.sheet_share {
+                    super::SheetShare::Erfc => "0",
+                    super::SheetShare::Quadrature => "1",
+                    super::SheetShare::Midpoint => "2",
+                }
+                .into(),
+            ),
             ("SPLAT_WIDEN".into(), flag(self.widen)),
             (
                 "QUADRATURE_MAX_SHEET".into(),
@@ -262,10 +269,12 @@ impl SplatVariant {
             if self.occlusion { " occlusion" } else { "" },
             if self.split { "" } else { " whole-kernels" },
             if self.ring > 0 {
-                let rule = match (self.quadrature, self.widen) {
-                    (true, true) => "quadrature widening-thin-kernels",
-                    (true, false) => "quadrature",
-                    (false, _) => "erfc",
+                let rule = match (self.sheet_share, self.widen) {
+                    (super::SheetShare::Quadrature, true) => "quadrature widening-thin-kernels",
+                    (super::SheetShare::Quadrature, false) => "quadrature",
+                    (super::SheetShare::Midpoint, true) => "midpoint widening-thin-kernels",
+                    (super::SheetShare::Midpoint, false) => "midpoint",
+                    (super::SheetShare::Erfc, _) => "erfc",
                 };
                 format!(" ring {} {rule}", self.ring)
             } else {

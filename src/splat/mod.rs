@@ -91,9 +91,11 @@ pub const RING_SPILL: f64 = 0.2 / 16.0;
 /// they serve). A kernel thinner than that along a pixel's ray is shared out as if it were
 /// that thick ([`SplatSetup::share_deviation`]).
 pub const QUADRATURE_MAX_SHEET: f64 = 1.5;
-/// Unset, `splat.sheet_share` takes the quadrature for post-shaded splatting while at most
-/// this share of the kernels (estimated from the supports' mean radii) is thinner than it
-/// serves, and the erfc beyond. On the 68 921 scattered Marschner–Lobb points at sheets of one
+/// Unset, `splat.sheet_share` takes the midpoint rule for post-shaded splatting (faster than the
+/// quadrature and closer to the Gaussian-sum reference on the ML points and the torus,
+/// BENCHMARKS.md "Branch-free accumulation") while at most this share of the kernels
+/// (estimated from the supports' mean radii) is thinner than it serves, and the erfc beyond.
+/// The figures that follow were measured with the quadrature. On the 68 921 scattered Marschner–Lobb points at sheets of one
 /// spacing (4.9% of the kernels thinner) the widened quadrature took 0.65 of the erfc's time at
 /// the same RMSE to 0.3%; at two spacings (all of them thinner) it doubled the entries and
 /// raised the RMSE from 0.058 to 0.078 (BENCHMARKS.md, "The quadrature for every post-shaded
@@ -382,17 +384,17 @@ impl SplatSetup {
             .count() as f64
             / radii.len().max(1) as f64;
         let sheet_share = match settings.sheet_share {
-            Some(SheetShare::Quadrature) if !post => {
+            Some(rule) if rule.sampled() && !post => {
                 return Err(RenderError::Setting {
                     key: "splat.sheet_share",
-                    message: "\"quadrature\" shares kernels out to the sheets of post-shaded \
-                              splatting (render.method = \"splat-post\"); split pre-shaded \
-                              kernels use \"erfc\""
+                    message: "\"quadrature\" and \"midpoint\" share kernels out to the sheets of \
+                              post-shaded splatting (render.method = \"splat-post\"); split \
+                              pre-shaded kernels use \"erfc\""
                         .into(),
                 });
             }
             Some(rule) => rule,
-            None if post && thin <= WIDEN_MAX_SHARE => SheetShare::Quadrature,
+            None if post && thin <= WIDEN_MAX_SHARE => SheetShare::Midpoint,
             None => SheetShare::Erfc,
         };
         let ring = match (post, settings.ring) {
@@ -425,10 +427,7 @@ impl SplatSetup {
             tile,
             ring,
             sheet_share,
-            widen: post
-                && ring > 0
-                && sheet_share == SheetShare::Quadrature
-                && thickest > QUADRATURE_MAX_SHEET,
+            widen: post && ring > 0 && sheet_share.sampled() && thickest > QUADRATURE_MAX_SHEET,
             lighting: *lighting,
             cell: field.clip().map(|clip| brick_cell(clip, (box_lo, box_hi))),
             window: ([0; 4], [0; 2]),

@@ -648,8 +648,8 @@ pub fn splat_footprint(splat: &Splat, setup: &SplatSetup, x: f64, y: f64, ta: f6
 /// boundaries in units of its deviation along the ray, by `rule`. The quadrature is the
 /// Hermite–Simpson rule with φ′ = −zφ: for h = zb − za,
 /// h/30·(7φ(za) + 16φ(zm) + 7φ(zb)) + h²/60·(zb·φ(zb) − za·φ(za)), exact for quintics; its
-/// error is at most 1.5·10⁻⁴ for h ≤ 1.5 ([`super::QUADRATURE_MAX_SHEET`]). The kernel computes
-/// the φ by a recurrence; here each is direct.
+/// error is at most 1.5·10⁻⁴ for h ≤ 1.5 ([`super::QUADRATURE_MAX_SHEET`]). The midpoint rule is
+/// h·φ(zm). The kernel computes the φ by a recurrence; here each is direct.
 pub fn sheet_share(rule: SheetShare, za: f64, zb: f64) -> f64 {
     match rule {
         SheetShare::Erfc => phi_between(za, zb),
@@ -658,6 +658,9 @@ pub fn sheet_share(rule: SheetShare, za: f64, zb: f64) -> f64 {
             let h = zb - za;
             let (pa, pm, pb) = (phi(za), phi(0.5 * (za + zb)), phi(zb));
             h / 30.0 * (7.0 * (pa + pb) + 16.0 * pm) + h * h / 60.0 * (zb * pb - za * pa)
+        }
+        SheetShare::Midpoint => {
+            (zb - za) * (-0.125 * (za + zb) * (za + zb)).exp() / (2.0 * std::f64::consts::PI).sqrt()
         }
     }
 }

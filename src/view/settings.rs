@@ -200,6 +200,21 @@ pub enum SheetShare {
     /// [`crate::splat::QUADRATURE_MAX_SHEET`] deviations thick: a kernel thinner along a ray
     /// is shared as if it were that thick (`SplatSetup::share_deviation`).
     Quadrature,
+    /// The midpoint rule: each sheet gets h·φ(z_m), the Gaussian at the sheet's middle times
+    /// its thickness h in deviations, by the same recurrence, one multiply-add per sheet. A
+    /// sheet's value is then the field at its middle on the pixel's ray instead of its mean
+    /// over the slab. Widened like the quadrature, a kernel's shares sum to its line integral
+    /// within 3.1·10⁻⁴ (Poisson summation: 2e^(−2π²/h²) at h = 1.5).
+    Midpoint,
+}
+
+impl SheetShare {
+    /// A rule of samples of the Gaussian by the recurrence (the quadrature or the midpoint
+    /// rule), which serves sheets at most [`crate::splat::QUADRATURE_MAX_SHEET`] deviations
+    /// thick and widens thinner kernels; the erfc serves any.
+    pub fn sampled(self) -> bool {
+        self != SheetShare::Erfc
+    }
 }
 
 /// Scene section `[splat]`.
@@ -232,8 +247,9 @@ pub struct SplatSettings {
     /// classification before the sum: BENCHMARKS.md measured the same RMSE both ways, at 13×
     /// the time split).
     pub split: Option<bool>,
-    /// The sheet-share rule of post-shaded splatting; unset: the quadrature where every
-    /// kernel's sheets are thin enough for it (`QUADRATURE_MAX_SHEET`), else the erfc.
+    /// The sheet-share rule of post-shaded splatting; unset: the midpoint rule where at most
+    /// `WIDEN_MAX_SHARE` of the kernels are thinner than it serves (`QUADRATURE_MAX_SHEET`),
+    /// else the erfc.
     pub sheet_share: Option<SheetShare>,
     /// Post-shaded ring size (one of `RINGS`); unset: [`crate::splat::choose_ring`].
     pub ring: Option<u32>,
