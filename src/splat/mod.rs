@@ -28,10 +28,10 @@
 //!   opaque; each pixel is written once. No atomics on pixels, no sheet buffers in memory.
 //!   Post-shaded kernels are one entry per tile and `ring` sheets (4, 8 or 16, fitted to the
 //!   kernels' spans: [`choose_ring`]), the lateral footprint evaluated once per pixel and
-//!   entry and shared out to the sheets ([`SheetShare`]: a Hermite–Simpson quadrature by a
-//!   product recurrence, which widens the few kernels thinner than a sheet allows,
-//!   [`SplatSetup::share_deviation`]; where more are that thin, the erfc at each sheet
-//!   boundary).
+//!   entry and shared out to the sheets ([`SheetShare`]: by default the midpoint rule, the
+//!   Gaussian at each sheet's middle by a product recurrence, which widens the few kernels
+//!   thinner than a sheet allows, [`SplatSetup::share_deviation`]; where more are that thin,
+//!   the erfc at each sheet boundary; a Hermite–Simpson quadrature on request).
 pub mod frame;
 pub mod gpu;
 pub mod plan;
