@@ -269,14 +269,13 @@ impl SplatVariant {
             if self.occlusion { " occlusion" } else { "" },
             if self.split { "" } else { " whole-kernels" },
             if self.ring > 0 {
-                let rule = match (self.sheet_share, self.widen) {
-                    (super::SheetShare::Quadrature, true) => "quadrature widening-thin-kernels",
-                    (super::SheetShare::Quadrature, false) => "quadrature",
-                    (super::SheetShare::Midpoint, true) => "midpoint widening-thin-kernels",
-                    (super::SheetShare::Midpoint, false) => "midpoint",
-                    (super::SheetShare::Erfc, _) => "erfc",
+                // Only the sampled rules widen (SplatSetup::widen).
+                let widen = if self.widen {
+                    " widening-thin-kernels"
+                } else {
+                    ""
                 };
-                format!(" ring {} {rule}", self.ring)
+                format!(" ring {} {}{widen}", self.ring, self.sheet_share.name())
             } else {
                 String::new()
             },

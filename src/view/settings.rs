@@ -215,6 +215,15 @@ impl SheetShare {
     pub fn sampled(self) -> bool {
         self != SheetShare::Erfc
     }
+
+    /// The rule's name, as `splat.sheet_share` spells it.
+    pub fn name(self) -> &'static str {
+        match self {
+            SheetShare::Erfc => "erfc",
+            SheetShare::Quadrature => "quadrature",
+            SheetShare::Midpoint => "midpoint",
+        }
+    }
 }
 
 /// Scene section `[splat]`.
