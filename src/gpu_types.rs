@@ -601,8 +601,11 @@ pub struct SplatParams {
     /// The pixels a frame's kernels are drawn on: x0, y0, x1, y1 (inclusive; all but in a
     /// brick's frame).
     pub pixel_window: [i32; 4],
+    /// Post-shaded intervals between sheet middles: the preintegration table of half a
+    /// sheet (`SplatSetup::table_lengths`; zero without).
+    pub tables: TableBlock,
 }
-const _: () = assert!(std::mem::size_of::<SplatParams>() == 288);
+const _: () = assert!(std::mem::size_of::<SplatParams>() == 320);
 
 /// One projected kernel (splat_project's output). GLSL twin: `Splat`. The footprint words
 /// depend on the projection (`splat::project::Splat` names them):

@@ -191,6 +191,15 @@ fn glsl_and_rust_layouts_agree() {
             cell_min: v(37.0),
             cell_max: v(38.0),
             pixel_window: [39, 40, 41, 42],
+            tables: TableBlock {
+                s_min: 43.0,
+                s_max: 44.0,
+                longest_world: 45.0,
+                resolution: 46,
+                lengths: 47,
+                peak: 48.0,
+                _pad: [49, 50],
+            },
         },
         "SplatParams"
     );

@@ -2,7 +2,7 @@
 //! Stated bound: every checked node within 1e-5 absolute of the reference (the target);
 //! the f32 storage of the tables alone contributes up to 6e-8.
 
-use vmls::raycast::preintegration::{
+use vmls::view::preintegration::{
     PreintegrationTables, direct_quadrature, remainder_levels, segment_integral, table_lengths,
 };
 use vmls::view::transfer::TransferFunction;
@@ -232,9 +232,10 @@ fn any_length_matches_direct_quadrature_to_table_accuracy() {
 #[test]
 fn tables_are_rebuilt_only_when_their_inputs_change() {
     use vmls::field::Field;
-    use vmls::raycast::TableCache;
+    use vmls::field::scalar_range;
     use vmls::scene::Scene;
     use vmls::scene::load_volume;
+    use vmls::view::preintegration::TableCache;
     let set = |extra: &[&str]| {
         let mut o: Vec<String> = [
             "volume.resolution=9",
@@ -258,18 +259,36 @@ fn tables_are_rebuilt_only_when_their_inputs_change() {
     .expect("field");
     let mut cache = TableCache::default();
     let setup = s.ray_setup(&field).expect("setup");
-    assert!(cache.get(&setup, &field, &s.transfer, 16, |_| {}).is_some());
+    assert!(
+        cache
+            .get(
+                &s.transfer,
+                scalar_range(&field),
+                setup.table_lengths(&s.transfer),
+                16,
+                |_| {}
+            )
+            .is_some()
+    );
     // A new camera does not touch the tables.
     let moved = set(&["camera.eye=[4.0, 1.0, 1.0]"]);
     let setup = moved.ray_setup(&field).expect("setup");
-    cache.get(&setup, &field, &moved.transfer, 16, |_| {});
+    cache.get(
+        &moved.transfer,
+        scalar_range(&field),
+        setup.table_lengths(&moved.transfer),
+        16,
+        |_| {},
+    );
     assert_eq!(cache.builds(), 1);
     // A new transfer function, or new lengths, does.
     let tf = set(&["transfer.points=[[0.0, 1, 1, 1, 0.0], [1.0, 1, 1, 1, 2.0]]"]);
     cache.get(
-        &tf.ray_setup(&field).expect("setup"),
-        &field,
         &tf.transfer,
+        scalar_range(&field),
+        tf.ray_setup(&field)
+            .expect("setup")
+            .table_lengths(&tf.transfer),
         16,
         |_| {},
     );
@@ -279,9 +298,12 @@ fn tables_are_rebuilt_only_when_their_inputs_change() {
         "render.l_max=1.3",
     ]);
     cache.get(
-        &lengths.ray_setup(&field).expect("setup"),
-        &field,
         &lengths.transfer,
+        scalar_range(&field),
+        lengths
+            .ray_setup(&field)
+            .expect("setup")
+            .table_lengths(&lengths.transfer),
         16,
         |_| {},
     );

@@ -6,11 +6,11 @@ use common::*;
 use vmls::field::Field;
 use vmls::field::gpu::GpuField;
 use vmls::raycast::build_tables;
-use vmls::raycast::preintegration::PreintegrationTables;
 use vmls::raycast::{PixelResult, raycast_image};
 use vmls::renderer::{GpuImage, render};
 use vmls::scene::Scene;
 use vmls::scene::load_volume;
+use vmls::view::preintegration::PreintegrationTables;
 use vmls::vk::Context;
 
 fn scene(overrides: &[&str]) -> Scene {

@@ -182,6 +182,7 @@ struct SplatParams {
     vec4 cell_min;
     vec4 cell_max;
     ivec4 pixel_window;
+    TableBlock tables;
 };
 
 

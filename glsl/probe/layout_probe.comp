@@ -139,6 +139,14 @@ void main() {
     splat_params.cell_min = v(37.0);
     splat_params.cell_max = v(38.0);
     splat_params.pixel_window = ivec4(39, 40, 41, 42);
+    splat_params.tables.s_min = 43.0;
+    splat_params.tables.s_max = 44.0;
+    splat_params.tables.longest_world = 45.0;
+    splat_params.tables.resolution = 46u;
+    splat_params.tables.lengths = 47u;
+    splat_params.tables.peak = 48.0;
+    splat_params.tables._pad0 = 49u;
+    splat_params.tables._pad1 = 50u;
 
     splat.footprint0 = v(1.0);
     splat.footprint1 = v(2.0);

@@ -31,7 +31,7 @@ layout(push_constant) uniform Push { RayPush band; };
 #include "common/camera.glsl"
 
 #if RAY_METHOD != 0
-#include "raycast/preintegration.glsl"
+#include "common/preintegration.glsl"
 #endif
 
 #if MAX_ISO > 0

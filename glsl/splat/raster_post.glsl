@@ -8,18 +8,22 @@
 #if SPLAT_HULL == 1 && SPLAT_SEGMENTS != 4
 #error "the pixel's hull segments are two vec4 registers"
 #endif
-// The length of sheet j's slab inside the domain along a pixel's ray: the box's [t_in,
+// The length of [a, b] inside the domain along a pixel's ray: the box's [t_in,
 // t_out], or the sum over the pixel's hull segments (s01, s23: two each, read once per pixel
 // into registers; a storage-buffer read per sheet is a loop over the lanes on lavapipe).
-float slab_overlap(int j, float t_in, float t_out, vec4 s01, vec4 s23) {
-    float a = params.slab0_world + float(j) * params.slab_world;
-    float b = a + params.slab_world;
+float span_overlap(float a, float b, float t_in, float t_out, vec4 s01, vec4 s23) {
 #if SPLAT_HULL == 1
     return max(min(b, s01.y) - max(a, s01.x), 0.0) + max(min(b, s01.w) - max(a, s01.z), 0.0)
            + max(min(b, s23.y) - max(a, s23.x), 0.0) + max(min(b, s23.w) - max(a, s23.z), 0.0);
 #else
     return max(min(b, t_out) - max(a, t_in), 0.0);
 #endif
+}
+
+// The length of sheet j's slab inside the domain.
+float slab_overlap(int j, float t_in, float t_out, vec4 s01, vec4 s23) {
+    float a = params.slab0_world + float(j) * params.slab_world;
+    return span_overlap(a, a + params.slab_world, t_in, t_out, s01, s23);
 }
 
 #if SPLAT_HULL == 1
@@ -43,13 +47,49 @@ float take_sheet(inout Pixel px) {
     return v1;
 }
 
+#if SPLAT_INTERVAL > 0
+// Intervals between sheet middles (twin: composite_half): the field from s_f to s_b over
+// [lo, hi], half a sheet (table 0's length), composited over its part inside the domain. A
+// part keeps the half's colour per opacity, its opacity from the half's optical depth scaled
+// by the part's share (exact for a constant field; only halves a boundary clips are scaled).
+// Branch-free: outside the domain (or with `on` 0) the share is 0 and so are its opacity and
+// colour.
+void composite_half(inout Pixel px, float lo, float hi, float on, float s_f, float s_b) {
+    float r = on * span_overlap(lo, hi, px.t_in, px.t_out, SEGMENTS(px));
+    vec4 e = preint_lookup(0u, s_f, s_b);
+    float f = r / (hi - lo);
+    float alpha = f >= 1.0 ? e.a : 1.0 - exp2(f * log2(max(1.0 - e.a, 1e-30)));
+    float scale = e.a > 0.0 ? alpha / e.a : 0.0;
+    px.acc.rgb += (1.0 - px.acc.w) * e.rgb * scale;
+    px.acc.w += (1.0 - px.acc.w) * alpha;
+}
+#endif
+
 // Composites sheet j = k - 1 (value px.v) given sheet k's value v1 and lateral gradient,
-// then shifts the pixel's sheet values.
+// then shifts the pixel's sheet values. With intervals between sheet middles, the interval
+// from sheet j - 1's middle to sheet j's instead, in two halves split at the sheet boundary,
+// the isosurfaces between them; the field at the boundary is the Catmull-Rom cubic's through
+// sheets j - 2 .. j + 1 (Hermite, [MLS] section 4's intervals with central-difference slopes)
+// or the straight line's.
 void composite_post(inout Pixel px, uint k, float v1, vec2 lat) {
     float slab = params.slab_world;
     int j = int(k) - 1;
     if (pixel_open(px) && px.in_domain && j >= 0 && sheet_owned(px, uint(j))) {
         float len = slab_overlap(j, px.t_in, px.t_out, SEGMENTS(px));
+#if SPLAT_INTERVAL > 0
+        float a_j = params.slab0_world + float(j) * slab;
+        float half_sheet = 0.5 * slab;
+        // Before the first sheet nothing is composited, and its value extends backwards (the
+        // sheets may start at the near plane inside the field).
+        float p0 = j == 0 ? px.v : px.v0;
+        float p_2 = j <= 1 ? p0 : px.v_2;
+#if SPLAT_INTERVAL == 2
+        float mid = (9.0 * (p0 + px.v) - p_2 - v1) * (1.0 / 16.0);
+#else
+        float mid = 0.5 * (p0 + px.v);
+#endif
+        composite_half(px, a_j - half_sheet, a_j, j == 0 ? 0.0 : 1.0, p0, mid);
+#endif
 #if SPLAT_ISOSURFACES == 1
         if (j >= 1 && len > 0.0 && slab_overlap(j - 1, px.t_in, px.t_out, SEGMENTS(px)) > 0.0) {
             float v0 = px.v0, v = px.v;
@@ -87,12 +127,16 @@ void composite_post(inout Pixel px, uint k, float v1, vec2 lat) {
             }
         }
 #endif
+#if SPLAT_INTERVAL > 0
+        composite_half(px, a_j, a_j + half_sheet, 1.0, mid, px.v);
+#else
         if (len > 0.0) {
             vec4 ct = transfer_lookup(px.v, params.tf_count);
             float alpha = 1.0 - exp_e(-ct.a * len);
             px.acc.rgb += (1.0 - px.acc.w) * ct.rgb * alpha;
             px.acc.w += (1.0 - px.acc.w) * alpha;
         }
+#endif
     }
     px.v_2 = px.v0;
     px.v0 = px.v;

@@ -25,7 +25,8 @@
 // SPLAT_EXACT, SPLAT_RING (0, or post-shaded: one entry per SPLAT_RING sheets, the sheets ahead
 // in ring registers), SPLAT_QUADRATURE (its sheet shares: 1 the quadrature, 2 the midpoint
 // rule, 0 the erfc; SPLAT_WIDEN: kernels thinner than they serve shared as if that thick),
-// SPLAT_OCCLUSION, SPLAT_ISOSURFACES, SPLAT_SURFACES, SPLAT_HULL, SPLAT_BRICK (a brick's frame:
+// SPLAT_INTERVAL (post-shaded: 0 each sheet's value over its slab, 1 linear and 2 Hermite
+// intervals between sheet middles, preintegrated), SPLAT_OCCLUSION, SPLAT_ISOSURFACES, SPLAT_SURFACES, SPLAT_HULL, SPLAT_BRICK (a brick's frame:
 // a pixel composites only the sheets whose midpoint on its ray lies in the brick's kd cell,
 // twin SplatSetup::owns), SPLAT_TILE,
 // SPLAT_APRON, SPLAT_GROUP (invocations: EDGE² rounded up to whole subgroups),
@@ -73,6 +74,10 @@ layout(std430, binding = BINDING_PIXEL_SEGMENTS) readonly buffer SegBuf { vec2 p
 // Per pixel and sheet: through the texel view (a storage-buffer load is a per-lane loop).
 #define TRANSFER_TEXELS_BOUND 1
 #include "common/transfer.glsl"
+#if SPLAT_INTERVAL > 0
+// Intervals between sheet middles: one table, half a sheet long (SplatSetup::table_lengths).
+#include "common/preintegration.glsl"
+#endif
 #include "common/camera.glsl"
 #if SPLAT_ISOSURFACES == 1
 #include "common/shading.glsl"
@@ -598,7 +603,15 @@ void main() {
         // in the ring, every sheet before the next entry's composites nothing: skip to it.
         if (params.zero_extinction == 0.0 && k < entry.y && live == 0u) {
             bool empty = true;
+// Intervals between sheet middles also read the sheets before: linear ones v0, Hermite ones
+// v_2 as well (the skipped composites would have read them).
+#if SPLAT_INTERVAL == 2
+#define EMPTY(px) empty = empty && px.v == 0.0 && px.sheet == 0.0 && px.v0 == 0.0 && px.v_2 == 0.0;
+#elif SPLAT_INTERVAL == 1
+#define EMPTY(px) empty = empty && px.v == 0.0 && px.sheet == 0.0 && px.v0 == 0.0;
+#else
 #define EMPTY(px) empty = empty && px.v == 0.0 && px.sheet == 0.0;
+#endif
             EACH(EMPTY)
 #undef EMPTY
             if (subgroupAll(empty)) {

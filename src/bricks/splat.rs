@@ -28,9 +28,9 @@
 
 use super::Aabb;
 use crate::field::Field;
+use crate::splat::SplatSetup;
 use crate::splat::project::splat_project;
 use crate::splat::raster::kernel;
-use crate::splat::{Shading, SplatSetup};
 use crate::view::View;
 use crate::view::camera::{Camera, Projection};
 use glam::DVec3;
@@ -76,13 +76,8 @@ impl SplatReach {
             view.lighting,
             field,
         )?;
-        let (pixels, sheets) = if shading == Shading::Post && !view.isosurfaces.is_empty() {
-            // Sheet j reads sheets j − 2 ..= j + 1 and its neighbours' j − 1, j; a pixel and
-            // a sheet more for rounding.
-            (2, [2, 3])
-        } else {
-            (1, [1, 1])
-        };
+        // What compositing a sheet reads around it (SplatSetup::reach).
+        let (pixels, sheets) = setup.reach();
         let boxes = (0..n.min(field.samples.len()))
             .into_par_iter()
             .map(|i| {

@@ -8,8 +8,8 @@ use crate::data::dataset::{DataArray, Dataset, Geometry, Location};
 use crate::data::{Volume, marschner_lobb};
 use crate::field::Field;
 use crate::probe::Lcg;
-use crate::raycast::preintegration::{PreintegrationTables, segment_integral};
 use crate::samples::SampleSet;
+use crate::view::preintegration::{PreintegrationTables, segment_integral};
 use crate::view::transfer::TransferFunction;
 use crate::vk::ShaderCompiler;
 

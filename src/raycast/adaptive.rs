@@ -63,8 +63,8 @@ use super::interval::{Knot, bezier_hull, emit_interval, hermite_midpoint, knot, 
 use super::ray::Ray;
 use super::ray::resume_interval;
 use crate::raycast::RaySetup;
-use crate::raycast::preintegration::PreintegrationTables;
 use crate::view::AdaptiveCriterion;
+use crate::view::preintegration::PreintegrationTables;
 use crate::view::transfer::TransferFunction;
 
 /// A pixel's error estimate from its ray's (`ray`, the sum `count_error` kept): plus, where

@@ -11,7 +11,6 @@
 
 use super::adaptive::pixel_estimate;
 use super::gpu::{render_params, table_params};
-use super::preintegration::PreintegrationTables;
 use super::setup::RaySetup;
 use crate::field::Field;
 use crate::field::gpu::GpuField;
@@ -19,6 +18,7 @@ use crate::field::skip::{SkipReport, SkipTable};
 use crate::field::variant::{HullCache, Variant, pipeline_for};
 use crate::gpu_types::{RayPush, binding, params_copies, ray_count};
 use crate::view::Method;
+use crate::view::preintegration::PreintegrationTables;
 use crate::view::shading::iso_buffer_data;
 use crate::view::transfer::TransferFunction;
 use crate::vk::{
@@ -151,10 +151,7 @@ pub(crate) fn frame_pipeline(
 }
 
 /// The tables as the kernel reads them: every length's table, then the zero-length limits.
-pub(crate) fn table_buffer(
-    ctx: &Context,
-    tables: &PreintegrationTables,
-) -> Result<Buffer, VkError> {
+pub fn table_buffer(ctx: &Context, tables: &PreintegrationTables) -> Result<Buffer, VkError> {
     let data: Vec<[f32; 4]> = tables
         .tables
         .iter()

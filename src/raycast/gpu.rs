@@ -2,11 +2,11 @@
 //! (the variant's reconstruction choices, uploads, `pipeline_for`) is [`crate::field::gpu`].
 
 use super::adaptive;
-use super::preintegration::PreintegrationTables;
 use super::setup::RaySetup;
 use crate::field::Field;
 use crate::field::variant::{Variant, field_params, v4};
-use crate::gpu_types::{IntegratorBlock, RenderParams, TableBlock};
+use crate::gpu_types::{IntegratorBlock, RenderParams};
+use crate::view::preintegration::PreintegrationTables;
 use crate::view::transfer::TransferFunction;
 
 /// The ray caster's variant for a field and a ray setup.
@@ -62,13 +62,5 @@ pub fn render_params(field: &Field, setup: &RaySetup, tf_count: u32) -> RenderPa
 /// Adds the tables' description to the kernel constants, with the peak of the transfer
 /// function they were built from.
 pub fn table_params(p: &mut RenderParams, tables: &PreintegrationTables, tf: &TransferFunction) {
-    p.tables = TableBlock {
-        s_min: tables.s_min as f32,
-        s_max: tables.s_max as f32,
-        longest_world: tables.lengths[0] as f32,
-        resolution: tables.resolution as u32,
-        lengths: tables.lengths.len() as u32,
-        peak: tf.peak() as f32,
-        _pad: [0; 2],
-    };
+    p.tables = tables.gpu_block(tf);
 }

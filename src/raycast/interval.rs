@@ -21,7 +21,7 @@
 
 use super::ray::Ray;
 use crate::raycast::RaySetup;
-use crate::raycast::preintegration::PreintegrationTables;
+use crate::view::preintegration::PreintegrationTables;
 use crate::view::shading::shade_surface;
 
 /// Evaluations spent locating one crossing, at most.

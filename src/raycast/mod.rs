@@ -8,7 +8,6 @@ pub mod adaptive;
 pub mod frame;
 pub mod gpu;
 pub(crate) mod interval;
-pub mod preintegration;
 mod ray;
 // The CPU twin of the kernel `raycast` carries the kernel's name, as every stage does.
 #[allow(clippy::module_inception)]
@@ -19,4 +18,4 @@ pub mod tables;
 
 pub use raycast::{PixelResult, raycast_frame, raycast_image, skip_report};
 pub use setup::{F32_STEP_RESOLUTION, RaySetup};
-pub use tables::{TableCache, build_tables, check_table_size};
+pub use tables::{build_tables, check_table_size};

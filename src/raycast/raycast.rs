@@ -14,7 +14,6 @@
 
 use super::adaptive;
 use super::interval::{Knot, emit_crossings, emit_interval, hermite_segment, knot, knot_segment};
-use super::preintegration::PreintegrationTables;
 use super::ray::{Ray, Skip, resume_interval};
 use super::setup::RaySetup;
 use crate::field::Field;
@@ -23,6 +22,7 @@ use crate::recon::ReconError;
 use crate::recon::mls::Neighbours;
 use crate::samples::bvh::Segments;
 use crate::view::camera::clip_box;
+use crate::view::preintegration::PreintegrationTables;
 use crate::view::transfer::TransferFunction;
 use crate::view::{IntervalModel, Method};
 use glam::DVec3;

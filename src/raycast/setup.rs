@@ -1,12 +1,12 @@
 //! Everything a ray needs besides the field: the camera frame, the clip box, the integrator and
 //! compositing, in world units relative to the frame origin.
 
-use super::preintegration;
 use crate::field::gpu::FIRST_HULL_HITS;
 use crate::field::skip::{Blocks, RUN_NUDGE, SkipTable};
 use crate::field::variant::HullCache;
 use crate::field::{Field, RenderError, scalar_range};
 use crate::view::camera::{Camera, Projection, ViewBasis};
+use crate::view::preintegration;
 use crate::view::shading;
 use crate::view::transfer::TransferFunction;
 use crate::view::{AdaptiveCriterion, IntervalModel, Method, RenderSettings, SkipMode};

@@ -1,9 +1,9 @@
-//! Preintegration tables for a ray setup: built, sized against the device, and cached between
-//! frames.
+//! Preintegration tables for a ray setup: built and sized against the device (the cache that
+//! keeps them between frames is [`crate::view::preintegration::TableCache`]).
 
-use super::preintegration::PreintegrationTables;
 use super::setup::RaySetup;
 use crate::field::{Field, RenderError, scalar_range};
+use crate::view::preintegration::PreintegrationTables;
 use crate::view::transfer::TransferFunction;
 
 /// Builds the preintegration tables a setup needs (`None` for the direct methods). The scalar
@@ -51,65 +51,4 @@ pub fn check_table_size(lengths: &[f64], resolution: usize, limit: u64) -> Resul
             bytes(r)
         ),
     })
-}
-
-/// What tables depend on: control points, lengths, resolution, scalar range.
-type TableKey = (Vec<[f64; 5]>, Vec<f64>, usize, (f64, f64));
-
-/// Keeps the last preintegration tables and rebuilds them only when what they depend on changes:
-/// the transfer function, the lengths, the resolution or the scalar range (for applications
-/// that re-render with a new camera, or edit the transfer function interactively).
-#[derive(Debug, Default)]
-pub struct TableCache {
-    key: Option<TableKey>,
-    tables: Option<PreintegrationTables>,
-    builds: usize,
-}
-
-impl TableCache {
-    /// The tables for this setup (`None` for the direct methods), built if needed.
-    pub fn get(
-        &mut self,
-        setup: &RaySetup,
-        field: &Field,
-        tf: &TransferFunction,
-        resolution: usize,
-        progress: impl Fn(f64) + Sync,
-    ) -> Option<&PreintegrationTables> {
-        let lengths = setup.table_lengths(tf);
-        if lengths.is_empty() {
-            return None;
-        }
-        let key = (
-            tf.points().to_vec(),
-            lengths,
-            resolution,
-            scalar_range(field),
-        );
-        if self.key.as_ref() != Some(&key) {
-            // Tables of the same transfer function, resolution and range are reused length by
-            // length; only the new lengths are built.
-            let previous = self
-                .key
-                .as_ref()
-                .filter(|k| k.0 == key.0 && k.2 == key.2 && k.3 == key.3)
-                .and(self.tables.as_ref());
-            self.tables = Some(PreintegrationTables::build_reusing(
-                tf, key.3, &key.1, resolution, previous, progress,
-            ));
-            self.key = Some(key);
-            self.builds += 1;
-        }
-        self.tables.as_ref()
-    }
-
-    /// The tables of the last `get` that needed any.
-    pub fn current(&self) -> Option<&PreintegrationTables> {
-        self.tables.as_ref()
-    }
-
-    /// How many times tables were built.
-    pub fn builds(&self) -> usize {
-        self.builds
-    }
 }

@@ -12,7 +12,7 @@
 use crate::field::gpu::GpuField;
 use crate::field::skip::SkipReport;
 use crate::field::variant::{HullCache, Variant};
-use crate::field::{Field, RenderError};
+use crate::field::{Field, RenderError, scalar_range};
 use crate::raycast::frame::FrameTargets;
 use crate::raycast::frame::{
     Bands, FramePipelines, Readback, frame_bindings, frame_constants, frame_pipeline,
@@ -20,11 +20,12 @@ use crate::raycast::frame::{
 };
 pub use crate::raycast::frame::{default_chunk, outer_steps};
 use crate::raycast::gpu::variant_for_render;
-use crate::raycast::preintegration::PreintegrationTables;
-use crate::raycast::{RaySetup, TableCache, check_table_size};
+use crate::raycast::{RaySetup, check_table_size};
 use crate::splat::SplatCounts;
 use crate::splat::gpu::{GpuKernels, SplatPipelines, SplatTargets};
 use crate::view::View;
+use crate::view::preintegration::PreintegrationTables;
+use crate::view::preintegration::TableCache;
 use crate::view::transfer::TransferFunction;
 use crate::vk::{Buffer, ComputePipeline, Context, ShaderCompiler, VkError};
 use std::sync::Arc;
@@ -467,44 +468,64 @@ impl Renderer {
             self.gpu_field.upload_data(&self.ctx, &self.field)?;
         }
         setup.resolve_skip(self.gpu_field.blocks(), view.transfer, &self.field);
-        if setup.method.preintegrated() {
-            check_table_size(
-                &setup.table_lengths(view.transfer),
-                view.settings.table_resolution,
-                (16 * self.ctx.info().max_texel_buffer_elements)
-                    .min(self.ctx.info().max_heap_bytes),
-            )?;
-        }
-        let builds = self.tables.builds();
-        let table_start = Instant::now();
-        self.tables.get(
-            &setup,
-            &self.field,
-            view.transfer,
-            view.settings.table_resolution,
-            |_| {},
-        );
-        let tables_built = self.tables.builds() != builds;
+        let lengths = if setup.method.preintegrated() {
+            setup.table_lengths(view.transfer)
+        } else {
+            Vec::new()
+        };
+        let range = scalar_range(&self.field);
+        let (tables_built, table_ms) = self.ensure_tables(view, lengths, range)?;
         let tables = self
             .tables
             .current()
             .filter(|_| setup.method.preintegrated());
-        let table_ms = if tables_built {
-            table_start.elapsed().as_secs_f64() * 1e3
-        } else {
-            0.0
-        };
         check_tables(&setup, tables)?;
-        if let Some(t) = tables
-            && self.table_buffer.as_ref().map(|(b, _)| *b) != Some(self.tables.builds())
-        {
-            self.table_buffer = Some((self.tables.builds(), Arc::new(table_buffer(&self.ctx, t)?)));
-        }
         Ok(RayFrame {
             setup,
             tables_built,
             table_ms,
         })
+    }
+
+    /// The preintegration tables of these `lengths` over the scalar `range` for `view`'s
+    /// transfer function (none: no tables), checked against the device, built and uploaded only when what they depend on
+    /// changed (ray casting's and post-shaded splatting's alike): whether they were built now,
+    /// and the milliseconds it took.
+    fn ensure_tables(
+        &mut self,
+        view: &View<'_>,
+        lengths: Vec<f64>,
+        range: (f64, f64),
+    ) -> Result<(bool, f64), RenderError> {
+        if lengths.is_empty() {
+            return Ok((false, 0.0));
+        }
+        check_table_size(
+            &lengths,
+            view.settings.table_resolution,
+            (16 * self.ctx.info().max_texel_buffer_elements).min(self.ctx.info().max_heap_bytes),
+        )?;
+        let builds = self.tables.builds();
+        let table_start = Instant::now();
+        self.tables.get(
+            view.transfer,
+            range,
+            lengths,
+            view.settings.table_resolution,
+            |_| {},
+        );
+        let tables_built = self.tables.builds() != builds;
+        let table_ms = if tables_built {
+            table_start.elapsed().as_secs_f64() * 1e3
+        } else {
+            0.0
+        };
+        if let Some(t) = self.tables.current()
+            && self.table_buffer.as_ref().map(|(b, _)| *b) != Some(self.tables.builds())
+        {
+            self.table_buffer = Some((self.tables.builds(), Arc::new(table_buffer(&self.ctx, t)?)));
+        }
+        Ok((tables_built, table_ms))
     }
 
     /// The pipeline of a ray-caster variant with these bindings (compiled at its first use):

@@ -123,7 +123,7 @@ pub(super) struct Slot {
     /// writes it, so that `retire` can tell a completed frame from one not yet executed.
     pub(super) marker: Buffer,
     /// The tables the frame reads, kept alive while it is in flight.
-    table: Option<Arc<Buffer>>,
+    pub(super) table: Option<Arc<Buffer>>,
     groups: Vec<BindGroup<'static>>,
     pub(super) timer: FrameTimer,
     variant: Option<Variant>,

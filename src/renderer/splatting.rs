@@ -58,6 +58,7 @@ impl Renderer {
             &self.field,
         )?;
         setup.raster_chunk = self.splat_raster_chunk;
+        setup.table_resolution = view.settings.table_resolution;
         setup.fit_device(self.ctx.info().device_type == "cpu");
         if let Some(budget) = self.budget {
             setup.check_budget(0, budget)?;
@@ -132,6 +133,11 @@ impl Renderer {
         progress: &mut dyn FnMut(f64),
     ) -> Result<(GpuImage, FrameStats), RenderError> {
         let frame = self.splat_setup(view, shading, false)?;
+        let (tables_built, table_ms) = self.ensure_tables(
+            view,
+            frame.setup.table_lengths(),
+            frame.setup.table_range(&self.field, view.transfer),
+        )?;
         let targets_allocated = self.splat_targets_for(&frame.setup)?;
         let (Some(kernels), Some(targets)) =
             (self.splat_kernels.as_ref(), self.splat_targets.as_mut())
@@ -139,6 +145,17 @@ impl Renderer {
             return Err(VkError::Usage("splat frame buffers missing".into()).into());
         };
         let setup = &frame.setup;
+        let tables = match (
+            frame.variant.reads_tables(),
+            self.tables.current(),
+            &self.table_buffer,
+        ) {
+            (true, Some(t), Some((_, b))) => Some((t, &**b)),
+            (true, ..) => {
+                return Err(VkError::Usage("post-shaded intervals' table missing".into()).into());
+            }
+            (false, ..) => None,
+        };
         let image = splat_frame(
             &self.ctx,
             &self.splat_pipelines[frame.index],
@@ -146,6 +163,7 @@ impl Renderer {
             targets,
             setup,
             view.transfer,
+            tables,
             &self.gpu_field.hull_bindings(),
             FrameControl {
                 budget: self.budget,
@@ -186,8 +204,8 @@ impl Renderer {
             FrameStats {
                 gpu_ms,
                 wall_ms: start.elapsed().as_secs_f64() * 1e3,
-                tables_built: false,
-                table_ms: 0.0,
+                tables_built,
+                table_ms,
                 pipeline_built: frame.pipeline_built,
                 targets_allocated,
                 bands: image.submissions,
@@ -240,6 +258,11 @@ impl Renderer {
         shading: Shading,
     ) -> Result<(), RenderError> {
         let frame = self.splat_setup(view, shading, true)?;
+        self.ensure_tables(
+            view,
+            frame.setup.table_lengths(),
+            frame.setup.table_range(&self.field, view.transfer),
+        )?;
         self.count_splat_entries(view, &frame)?;
         Ok(())
     }
@@ -253,6 +276,11 @@ impl Renderer {
         shading: Shading,
     ) -> Result<FrameInFlight, RenderError> {
         let frame = self.splat_setup(view, shading, true)?;
+        self.ensure_tables(
+            view,
+            frame.setup.table_lengths(),
+            frame.setup.table_range(&self.field, view.transfer),
+        )?;
         let setup = &frame.setup;
         let (w, h) = (setup.camera.width, setup.camera.height);
         let pixels = u64::from(w) * u64::from(h);
@@ -273,11 +301,22 @@ impl Renderer {
         let Some(kernels) = self.splat_kernels.as_ref() else {
             return Err(VkError::Usage("splat kernels missing".into()).into());
         };
-        let data = ConstantData::new(setup, kernels, view.transfer);
+        let reads_tables = frame.variant.reads_tables();
+        let tables = self.tables.current().filter(|_| reads_tables);
+        let data = ConstantData::new(setup, kernels, view.transfer, tables);
+        let table = match (reads_tables, &self.table_buffer) {
+            (true, Some((_, b))) => Some(b.clone()),
+            (true, None) => {
+                return Err(VkError::Usage("post-shaded intervals' table missing".into()).into());
+            }
+            (false, _) => None,
+        };
         let limit = entry_limit(&self.ctx);
         let ctx = self.ctx.clone();
         let slot: &mut Slot = &mut self.slots[slot_index];
         slot.reset_groups();
+        // Kept alive while the frame is in flight (released at retire).
+        slot.table = table;
         if slot.splat.is_none() {
             slot.splat = Some(SplatSlot {
                 constants: None,
@@ -340,6 +379,7 @@ impl Renderer {
             kernels,
             targets,
             constants,
+            slot.table.as_deref(),
             args,
             &hull,
             setup,

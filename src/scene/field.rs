@@ -259,7 +259,7 @@ impl Scene {
         shading: crate::splat::Shading,
         field: &Field,
     ) -> Result<crate::splat::SplatSetup, RenderError> {
-        crate::splat::SplatSetup::new(
+        let mut setup = crate::splat::SplatSetup::new(
             shading,
             &self.render.splat,
             &self.camera,
@@ -268,7 +268,9 @@ impl Scene {
             &self.isosurfaces,
             &self.lighting,
             field,
-        )
+        )?;
+        setup.table_resolution = self.render.table_resolution;
+        Ok(setup)
     }
 
     /// The ray setup of this scene's camera, integrator, isosurfaces and lighting for a field.

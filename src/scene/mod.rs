@@ -586,7 +586,12 @@ impl Scene {
                 Some(Value::String(a)) if a == "auto" => SkipMode::Auto,
                 Some(v) => return Err(ren.err("skip", "true, false or \"auto\"", v)),
             },
-            table_resolution: ren.int("table_resolution", 512, 2, 4096)? as usize,
+            table_resolution: ren.int(
+                "table_resolution",
+                crate::view::settings::DEFAULT_TABLE_RESOLUTION as i64,
+                2,
+                4096,
+            )? as usize,
             splat: splat::parse(&section("splat"))?,
             tolerance: match ren.get("tolerance") {
                 None => None,

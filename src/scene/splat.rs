@@ -1,7 +1,9 @@
 //! Scene section `[splat]`: the splatting renderer's settings (`crate::splat::SplatSettings`).
 
 use super::{SceneError, Section};
-use crate::splat::{Antialias, RASTER_PIXELS, RINGS, SheetShare, SplatSettings, TILE_SIZES};
+use crate::splat::{
+    Antialias, RASTER_PIXELS, RINGS, SheetInterval, SheetShare, SplatSettings, TILE_SIZES,
+};
 use toml::Value;
 
 /// Keys of `[splat]`.
@@ -16,6 +18,7 @@ pub(super) const KEYS: &[&str] = &[
     "tile",
     "split",
     "sheet_share",
+    "interval",
     "ring",
     "band_rows",
     "pixels",
@@ -52,6 +55,16 @@ pub(super) fn parse(sec: &Section<'_>) -> Result<SplatSettings, SceneError> {
                 ("erfc", Some(SheetShare::Erfc)),
                 ("quadrature", Some(SheetShare::Quadrature)),
                 ("midpoint", Some(SheetShare::Midpoint)),
+            ],
+        )?,
+        interval: sec.choice(
+            "interval",
+            d.interval,
+            &[
+                ("auto", None),
+                ("constant", Some(SheetInterval::Constant)),
+                ("linear", Some(SheetInterval::Linear)),
+                ("hermite", Some(SheetInterval::Hermite)),
             ],
         )?,
         ring: listed(sec, "ring", &RINGS, "4, 8 or 16 (sheets)")?,

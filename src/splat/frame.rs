@@ -31,6 +31,7 @@ use super::plan::{
 use super::{Shading, SplatCounts, SplatSetup};
 use crate::field::RenderError;
 use crate::gpu_types::{PlanPush, ScanPush, SplatParams, binding, params_copies, splat_stat};
+use crate::view::preintegration::PreintegrationTables;
 use crate::view::transfer::TransferFunction;
 use crate::vk::{BindGroup, Buffer, BufferUsage, Context, Recorder, VkError};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -67,12 +68,14 @@ impl SplatGpuImage {
     }
 }
 
-/// The frame's parameters; `tf_count` is the length of `tf`'s GPU table.
+/// The frame's parameters; `tf_count` is the length of `tf`'s GPU table, `tables` the
+/// preintegration table of post-shaded intervals (`SplatSetup::table_lengths`).
 pub(super) fn params(
     setup: &SplatSetup,
     kernels: &GpuKernels,
     tf: &TransferFunction,
     tf_count: u32,
+    tables: Option<&PreintegrationTables>,
 ) -> SplatParams {
     let v = |d: glam::DVec3| [d.x as f32, d.y as f32, d.z as f32, 0.0];
     let l = &setup.lighting;
@@ -111,6 +114,7 @@ pub(super) fn params(
         cell_min: v(setup.cell.map_or(glam::DVec3::NEG_INFINITY, |c| c.0)),
         cell_max: v(setup.cell.map_or(glam::DVec3::INFINITY, |c| c.1)),
         pixel_window: setup.window.0,
+        tables: tables.map_or_else(Default::default, |t| t.gpu_block(tf)),
     }
 }
 
@@ -163,10 +167,16 @@ impl ConstantData {
         (self.tf.len() / std::mem::size_of::<crate::gpu_types::TfPoint>()) as u32
     }
 
-    /// The constants of a setup with `tf` over `kernels`.
-    pub fn new(setup: &SplatSetup, kernels: &GpuKernels, tf: &TransferFunction) -> Self {
+    /// The constants of a setup with `tf` over `kernels`, and the preintegration `tables`
+    /// its intervals read (`SplatSetup::table_lengths`; None for the projection alone).
+    pub fn new(
+        setup: &SplatSetup,
+        kernels: &GpuKernels,
+        tf: &TransferFunction,
+        tables: Option<&PreintegrationTables>,
+    ) -> Self {
         let gpu_tf = tf.to_gpu();
-        let p = params(setup, kernels, tf, gpu_tf.len() as u32);
+        let p = params(setup, kernels, tf, gpu_tf.len() as u32, tables);
         let isos = crate::view::shading::iso_buffer_data(&setup.isosurfaces);
         Self {
             params: bytemuck::cast_slice(&params_copies(p)).to_vec(),
@@ -217,8 +227,9 @@ impl SplatConstants {
         setup: &SplatSetup,
         kernels: &GpuKernels,
         tf: &TransferFunction,
+        tables: Option<&PreintegrationTables>,
     ) -> Result<(Self, RasterWalk), RenderError> {
-        let data = ConstantData::new(setup, kernels, tf);
+        let data = ConstantData::new(setup, kernels, tf, tables);
         let walk = RasterWalk::new(setup, data.tf_count())?;
         Ok((Self::upload(ctx, &data)?, walk))
     }
@@ -408,6 +419,7 @@ impl<'a> AccumulationGroups<'a> {
         pipelines: &SplatPipelines,
         t: &'a SplatTargets,
         constants: &'a SplatConstants,
+        table: Option<&'a Buffer>,
         setup: &SplatSetup,
     ) -> Result<Self, VkError> {
         let Some(list) = t.list.as_ref() else {
@@ -449,6 +461,14 @@ impl<'a> AccumulationGroups<'a> {
         }
         if pipelines.variant().hull {
             raster_bind.push((binding::PIXEL_SEGMENTS, t.segments()?));
+        }
+        if pipelines.variant().reads_tables() {
+            let Some(table) = table else {
+                return Err(VkError::Usage(
+                    "post-shaded intervals need the preintegration table".into(),
+                ));
+            };
+            raster_bind.push((binding::PREINT, table));
         }
         Ok(Self {
             bin,
@@ -573,6 +593,7 @@ impl<'a> SplatRecording<'a> {
         kernels: &'a GpuKernels,
         targets: &'a SplatTargets,
         constants: &'a SplatConstants,
+        table: Option<&'a Buffer>,
         args: &'a Buffer,
         hull: &[(u32, &'a Buffer)],
         setup: &SplatSetup,
@@ -605,7 +626,9 @@ impl<'a> SplatRecording<'a> {
                     (binding::DISPATCH_ARGS, args),
                 ],
             )?,
-            accumulation: AccumulationGroups::new(ctx, pipelines, targets, constants, setup)?,
+            accumulation: AccumulationGroups::new(
+                ctx, pipelines, targets, constants, table, setup,
+            )?,
             push: PlanPush {
                 buckets: u32::try_from(setup.buckets()).unwrap_or(u32::MAX),
                 capacity: u32::try_from(targets.list_capacity()).unwrap_or(u32::MAX),
@@ -801,14 +824,16 @@ pub fn count_entries(
     if !targets.fits(setup, kernels) {
         return Err(VkError::Usage("splat frame buffers do not fit the setup".into()).into());
     }
-    let (constants, walk) = SplatConstants::with_walk(ctx, setup, kernels, tf)?;
+    let (constants, walk) = SplatConstants::with_walk(ctx, setup, kernels, tf, None)?;
     let (stats, total, _) = project(ctx, pipelines, kernels, targets, &constants, setup, hull)?;
     check_projection(setup, &stats, total, budget, entry_limit(ctx))?;
     Ok((total, resumes_needed(setup, walk, &stats)))
 }
 
 /// Renders one frame; `targets` must fit the setup (see [`SplatTargets::fits`]); `hull` are the
-/// field's hull bindings (`GpuField::hull_bindings`), read by post-shaded frames over a hull.
+/// field's hull bindings (`GpuField::hull_bindings`), read by post-shaded frames over a hull;
+/// `tables` the preintegration table of post-shaded intervals and its buffer
+/// (`SplatSetup::table_lengths`, `raycast::frame::table_buffer`'s layout).
 #[allow(clippy::too_many_arguments)]
 pub fn splat_frame(
     ctx: &Context,
@@ -817,13 +842,15 @@ pub fn splat_frame(
     targets: &mut SplatTargets,
     setup: &SplatSetup,
     tf: &TransferFunction,
+    tables: Option<(&PreintegrationTables, &Buffer)>,
     hull: &[(u32, &Buffer)],
     control: FrameControl<'_>,
 ) -> Result<SplatGpuImage, RenderError> {
     if !targets.fits(setup, kernels) {
         return Err(VkError::Usage("splat frame buffers do not fit the setup".into()).into());
     }
-    let (constants, walk) = SplatConstants::with_walk(ctx, setup, kernels, tf)?;
+    let (constants, walk) =
+        SplatConstants::with_walk(ctx, setup, kernels, tf, tables.map(|t| t.0))?;
     let mut stage_ms = [0.0; 5];
     let (tiles_x, tiles_y) = setup.tiles();
     // The hull segments of this camera, where the last frame of these buffers left them.
@@ -844,7 +871,8 @@ pub fn splat_frame(
 
     // Pass 2: the scatter, then the tiles in bands of rows.
     let t = &*targets;
-    let groups = AccumulationGroups::new(ctx, pipelines, t, &constants, setup)?;
+    let groups =
+        AccumulationGroups::new(ctx, pipelines, t, &constants, tables.map(|t| t.1), setup)?;
     let mut submissions = 1;
     let mut row = 0;
     while row < tiles_y {

@@ -115,6 +115,9 @@ pub struct SplatVariant {
     pub sheet_share: super::SheetShare,
     /// The quadrature widens kernels thinner than it serves (`SplatSetup::widen`).
     pub widen: bool,
+    /// Post-shaded: how sheets are classified between their middles (`SplatSetup::interval`;
+    /// not `Constant`: the raster reads the preintegration table).
+    pub interval: super::SheetInterval,
     pub occlusion: bool,
     pub isosurfaces: bool,
     /// Surface splats (pre-shaded isosurfaces).
@@ -152,6 +155,7 @@ impl SplatVariant {
             ring: setup.ring,
             sheet_share: setup.sheet_share,
             widen: setup.widen,
+            interval: setup.interval,
             occlusion: setup.settings.occlusion,
             isosurfaces: !setup.isosurfaces.is_empty(),
             surfaces: setup.settings.surface && !setup.isosurfaces.is_empty(),
@@ -163,6 +167,12 @@ impl SplatVariant {
             group: (setup.group_size() / pixels).next_multiple_of(subgroup.max(8)),
             subgroup_ops: device.subgroup_ops,
         }
+    }
+
+    /// Whether `splat_raster` reads the preintegration table (post-shaded intervals between
+    /// sheet middles).
+    pub fn reads_tables(&self) -> bool {
+        self.shading == Shading::Post && self.interval != super::SheetInterval::Constant
     }
 
     /// shaderc macro definitions.
@@ -194,6 +204,15 @@ impl SplatVariant {
                 .into(),
             ),
             ("SPLAT_WIDEN".into(), flag(self.widen)),
+            (
+                "SPLAT_INTERVAL".into(),
+                match self.interval {
+                    super::SheetInterval::Constant => "0",
+                    super::SheetInterval::Linear => "1",
+                    super::SheetInterval::Hermite => "2",
+                }
+                .into(),
+            ),
             (
                 "QUADRATURE_MAX_SHEET".into(),
                 format!("{:?}", super::QUADRATURE_MAX_SHEET),
@@ -250,7 +269,7 @@ impl SplatVariant {
     /// Human-readable name for `--stats`.
     pub fn name(&self) -> String {
         format!(
-            "splat {} {} {}{}{}{}{} tile {}{}{}",
+            "splat {} {} {}{}{}{}{}{} tile {}{}{}",
             match self.shading {
                 Shading::Pre => "pre-shaded",
                 Shading::Post => "post-shaded",
@@ -276,6 +295,11 @@ impl SplatVariant {
                     ""
                 };
                 format!(" ring {} {}{widen}", self.ring, self.sheet_share.name())
+            } else {
+                String::new()
+            },
+            if self.shading == Shading::Post {
+                format!(" {}-intervals", self.interval.name())
             } else {
                 String::new()
             },
@@ -349,6 +373,9 @@ impl SplatPipelines {
             SPLAT_STATS,
             SPLAT_RASTER_STATE,
         ];
+        if variant.reads_tables() {
+            raster.push(PREINT);
+        }
         if post {
             raster.extend([TRANSFER, TRANSFER_TEXELS]);
             if variant.isosurfaces {

@@ -31,9 +31,10 @@ use super::project::{
     Cull, Kernel, Splat, sheet_share, splat_footprint, splat_profile, splat_project,
 };
 use super::surface::surface_kernels;
-use super::{Shading, SplatCounts, SplatSetup};
+use super::{Shading, SheetInterval, SplatCounts, SplatSetup};
 use crate::field::Field;
 use crate::view::camera::clip_box;
+use crate::view::preintegration::PreintegrationTables;
 use crate::view::shading::shade_surface;
 use crate::view::transfer::TransferFunction;
 use glam::DVec3;
@@ -139,6 +140,7 @@ struct Lane {
 pub fn splat_raster(
     setup: &SplatSetup,
     tf: &TransferFunction,
+    tables: Option<&PreintegrationTables>,
     splats: &[Splat],
     bins: &Bins,
     tile: (u32, u32),
@@ -282,7 +284,7 @@ pub fn splat_raster(
             break;
         }
         if post {
-            composite_post(setup, tf, &mut lanes, edge, k);
+            composite_post(setup, tf, tables, &mut lanes, edge, k);
         } else {
             for l in lanes.iter_mut() {
                 let owned = setup.owns(l.ray, k);
@@ -327,6 +329,7 @@ fn composite_pre(l: &mut Lane, early_termination: f64, owned: bool) {
 fn composite_post(
     setup: &SplatSetup,
     tf: &TransferFunction,
+    tables: Option<&PreintegrationTables>,
     lanes: &mut [Lane],
     edge: i32,
     k: u32,
@@ -376,31 +379,86 @@ fn composite_post(
         let done = 1.0 - l.transmittance > setup.early_termination;
         let owned = j >= 0 && setup.owns(l.ray, j as u32);
         if l.own && owned && !done && !l.inside_segments.is_empty() {
-            composite_sheet(setup, tf, l, j);
+            composite_sheet(setup, tf, tables, l, j);
         }
         l.values = [l.values[1], l.values[2], l.values[3], 0.0];
         l.lateral = [l.lateral[1], l.lateral[2], [0.0; 2]];
     }
 }
 
-/// Post-shaded: composites sheet j (values[2]) into one pixel, with the isosurfaces crossed
-/// since sheet j − 1 (values[1]).
-fn composite_sheet(setup: &SplatSetup, tf: &TransferFunction, l: &mut Lane, j: i64) {
-    let overlap = |j: i64| {
-        let (a, b) = setup.slab_bounds(j as u32);
-        l.inside_segments
-            .iter()
-            .map(|&(t_in, t_out)| (b.min(t_out) - a.max(t_in)).max(0.0))
-            .sum::<f64>()
+/// The length of [a, b] inside the pixel's domain segments.
+fn inside(l: &Lane, a: f64, b: f64) -> f64 {
+    l.inside_segments
+        .iter()
+        .map(|&(t_in, t_out)| (b.min(t_out) - a.max(t_in)).max(0.0))
+        .sum()
+}
+
+/// Post-shaded intervals: the field from `s_f` to `s_b` over [lo, hi], half a sheet (the
+/// table's length), composited over its part inside the domain. A part r of the half keeps
+/// the whole half's colour per opacity and takes its opacity from the half's optical depth
+/// scaled by r over the half's length (exact for a constant field; only halves a domain
+/// boundary clips are scaled).
+fn composite_half(
+    tables: &PreintegrationTables,
+    l: &mut Lane,
+    (lo, hi): (f64, f64),
+    (s_f, s_b): (f64, f64),
+) {
+    let r = inside(l, lo, hi);
+    let e = tables.lookup(&tables.tables[0], s_f, s_b);
+    let f = r / (hi - lo);
+    let alpha = if f >= 1.0 {
+        e[3]
+    } else {
+        1.0 - (1.0 - e[3]).max(1e-30).powf(f)
     };
-    let len = overlap(j);
+    let scale = if e[3] > 0.0 { alpha / e[3] } else { 0.0 };
+    for (acc, c) in l.color.iter_mut().zip(&e[..3]) {
+        *acc += l.transmittance * c * scale;
+    }
+    l.transmittance *= 1.0 - alpha;
+}
+
+/// Post-shaded: composites sheet j (values[2]) into one pixel, with the isosurfaces crossed
+/// since sheet j − 1 (values[1]). With intervals between sheet middles (`tables`), the
+/// interval from sheet j − 1's middle to sheet j's instead, in two halves split at the sheet
+/// boundary, the isosurfaces between them.
+fn composite_sheet(
+    setup: &SplatSetup,
+    tf: &TransferFunction,
+    tables: Option<&PreintegrationTables>,
+    l: &mut Lane,
+    j: i64,
+) {
+    let overlap = |l: &Lane, j: i64| {
+        let (a, b) = setup.slab_bounds(j as u32);
+        inside(l, a, b)
+    };
+    let len = overlap(l, j);
     let [v_2, v0, v, v1] = l.values;
+    // Before the first sheet nothing is composited, and its value extends backwards (the
+    // sheets may start at the near plane inside the field).
+    let p0 = if j == 0 { v } else { v0 };
+    let p_2 = if j <= 1 { p0 } else { v_2 };
+    // The field at the interval's middle (the sheet boundary): the Catmull–Rom cubic through
+    // the four sheet values around it ([MLS] §4's Hermite intervals with central-difference
+    // slopes), or the straight line.
+    let mid = match setup.interval {
+        SheetInterval::Hermite => (9.0 * (p0 + v) - p_2 - v1) / 16.0,
+        _ => 0.5 * (p0 + v),
+    };
+    let (a, _) = setup.slab_bounds(j as u32);
+    let half = 0.5 * setup.slab_world;
+    if let Some(t) = tables.filter(|_| j > 0) {
+        composite_half(t, l, (a - half, a), (p0, mid));
+    }
     let d = l.ray.1;
     let s = setup.basis;
     let gradient = |lateral: [f64; 2], across: f64| {
         lateral[0] * s.right + lateral[1] * s.up + across / (2.0 * setup.slab_world) * d
     };
-    if j >= 1 && len > 0.0 && overlap(j - 1) > 0.0 && !setup.isosurfaces.is_empty() {
+    if j >= 1 && len > 0.0 && overlap(l, j - 1) > 0.0 && !setup.isosurfaces.is_empty() {
         let mut hits = Vec::new();
         for iso in &setup.isosurfaces {
             let crosses =
@@ -423,7 +481,9 @@ fn composite_sheet(setup: &SplatSetup, tf: &TransferFunction, l: &mut Lane, j: i
             l.transmittance *= 1.0 - opacity;
         }
     }
-    if len > 0.0 {
+    if let Some(t) = tables {
+        composite_half(t, l, (a, a + half), (mid, v));
+    } else if len > 0.0 {
         let (c, tau) = tf.lookup(v);
         let alpha = 1.0 - (-tau * len).exp();
         for (acc, ci) in l.color.iter_mut().zip(c) {
@@ -478,6 +538,16 @@ pub fn splat_image(
     }
     let bins = splat_bin(setup, &splats);
     counts.entries = bins.list.len() as u64;
+    let lengths = setup.table_lengths();
+    let tables = (!lengths.is_empty()).then(|| {
+        PreintegrationTables::build(
+            tf,
+            setup.table_range(field, tf),
+            &lengths,
+            setup.table_resolution,
+            |_| {},
+        )
+    });
     let segments = splat_segments(setup, field);
     let (w, h) = (setup.camera.width as usize, setup.camera.height as usize);
     let mut out = vec![([0.0; 3], 1.0); w * h];
@@ -487,6 +557,7 @@ pub fn splat_image(
             splat_raster(
                 setup,
                 tf,
+                tables.as_ref(),
                 &splats,
                 &bins,
                 (x, y),

@@ -6,13 +6,14 @@
 //! kernels) and `data`'s value types, never a field or a renderer.
 
 pub mod camera;
+pub mod preintegration;
 pub mod settings;
 pub mod shading;
 pub mod transfer;
 
 pub use settings::{
     AdaptiveCriterion, Antialias, GivenKeys, IntervalModel, Method, RenderSettings, Shading,
-    SheetShare, SkipMode, SplatSettings,
+    SheetInterval, SheetShare, SkipMode, SplatSettings,
 };
 
 use camera::Camera;

@@ -154,6 +154,9 @@ pub struct GivenKeys {
     pub slab: bool,
 }
 
+/// `render.table_resolution` unset: preintegration table nodes per scalar axis.
+pub const DEFAULT_TABLE_RESOLUTION: usize = 512;
+
 /// `render.skip`: empty-space skipping off, on, or chosen per frame ([`crate::field::skip`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SkipMode {
@@ -226,6 +229,34 @@ impl SheetShare {
     }
 }
 
+/// `splat.interval`: how post-shaded splatting classifies the field between its sheets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SheetInterval {
+    /// Each sheet's value over its whole slab, the transfer function applied to it ([BLUR]'s
+    /// sheets): a Riemann sum along the ray, first order in the sheet thickness.
+    Constant,
+    /// The field linear between consecutive sheet middles, each half sheet preintegrated
+    /// ([MLS] §4's tables, one table of half a sheet's length).
+    Linear,
+    /// As `Linear`, with each interval between sheet middles split at its middle, where the
+    /// cubic through the four nearest sheet values (Catmull–Rom: slopes by central
+    /// differences of the sheets) puts the field: the ray caster's Hermite intervals with
+    /// the sheets' differences for its gradients. No more accumulation than `Constant`, two
+    /// table lookups per sheet and pixel.
+    Hermite,
+}
+
+impl SheetInterval {
+    /// The model's name, as `splat.interval` spells it.
+    pub fn name(self) -> &'static str {
+        match self {
+            SheetInterval::Constant => "constant",
+            SheetInterval::Linear => "linear",
+            SheetInterval::Hermite => "hermite",
+        }
+    }
+}
+
 /// Scene section `[splat]`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SplatSettings {
@@ -260,6 +291,9 @@ pub struct SplatSettings {
     /// `WIDEN_MAX_SHARE` of the kernels are thinner than it serves (`QUADRATURE_MAX_SHEET`),
     /// else the erfc.
     pub sheet_share: Option<SheetShare>,
+    /// How post-shaded splatting classifies the field between sheets; unset: Hermite
+    /// intervals (pre-shaded splatting refuses the key: it classifies kernels, not sheets).
+    pub interval: Option<SheetInterval>,
     /// Post-shaded ring size (one of `RINGS`); unset: [`crate::splat::choose_ring`].
     pub ring: Option<u32>,
     /// Tile rows per dispatch of `splat_raster`; unset: chosen for the device (two on
@@ -285,6 +319,7 @@ impl Default for SplatSettings {
             tile: None,
             split: None,
             sheet_share: None,
+            interval: None,
             ring: None,
             band_rows: None,
             pixels: None,

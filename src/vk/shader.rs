@@ -42,7 +42,7 @@ static SOURCES: &[(&str, &str)] = embed![
     "field/skip.glsl",
     "field/mls_eval.comp",
     "field/recon_resample.comp",
-    "raycast/preintegration.glsl",
+    "common/preintegration.glsl",
     "raycast/interval.glsl",
     "raycast/adaptive.glsl",
     "raycast/raycast.comp",

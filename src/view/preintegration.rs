@@ -482,6 +482,19 @@ pub struct PreintegrationTables {
 }
 
 impl PreintegrationTables {
+    /// The tables as the kernels' `TableBlock` describes them, with `tf`'s peak.
+    pub fn gpu_block(&self, tf: &TransferFunction) -> crate::gpu_types::TableBlock {
+        crate::gpu_types::TableBlock {
+            s_min: self.s_min as f32,
+            s_max: self.s_max as f32,
+            longest_world: self.lengths[0] as f32,
+            resolution: self.resolution as u32,
+            lengths: self.lengths.len() as u32,
+            peak: tf.peak() as f32,
+            _pad: [0; 2],
+        }
+    }
+
     /// Scalar value of node i.
     pub fn node(&self, i: usize) -> f64 {
         self.s_min + (self.s_max - self.s_min) * i as f64 / (self.resolution - 1) as f64
@@ -664,6 +677,63 @@ impl PreintegrationTables {
             add(c.map(|x| x * a), a, &mut alpha);
         }
         (color, alpha)
+    }
+}
+
+/// What tables depend on: control points, lengths, resolution, scalar range.
+type TableKey = (Vec<[f64; 5]>, Vec<f64>, usize, (f64, f64));
+
+/// Keeps the last preintegration tables and rebuilds them only when what they depend on changes:
+/// the transfer function, the lengths, the resolution or the scalar range (for applications
+/// that re-render with a new camera, or edit the transfer function interactively). Shared by
+/// ray casting (its integrators' lengths) and post-shaded splatting (its half sheets).
+#[derive(Debug, Default)]
+pub struct TableCache {
+    key: Option<TableKey>,
+    tables: Option<PreintegrationTables>,
+    builds: usize,
+}
+
+impl TableCache {
+    /// The tables of these `lengths` over the scalar `range` (`None` when no length is
+    /// asked for: the direct methods), built if needed.
+    pub fn get(
+        &mut self,
+        tf: &TransferFunction,
+        range: (f64, f64),
+        lengths: Vec<f64>,
+        resolution: usize,
+        progress: impl Fn(f64) + Sync,
+    ) -> Option<&PreintegrationTables> {
+        if lengths.is_empty() {
+            return None;
+        }
+        let key = (tf.points().to_vec(), lengths, resolution, range);
+        if self.key.as_ref() != Some(&key) {
+            // Tables of the same transfer function, resolution and range are reused length by
+            // length; only the new lengths are built.
+            let previous = self
+                .key
+                .as_ref()
+                .filter(|k| k.0 == key.0 && k.2 == key.2 && k.3 == key.3)
+                .and(self.tables.as_ref());
+            self.tables = Some(PreintegrationTables::build_reusing(
+                tf, key.3, &key.1, resolution, previous, progress,
+            ));
+            self.key = Some(key);
+            self.builds += 1;
+        }
+        self.tables.as_ref()
+    }
+
+    /// The tables of the last `get` that needed any.
+    pub fn current(&self) -> Option<&PreintegrationTables> {
+        self.tables.as_ref()
+    }
+
+    /// How many times tables were built.
+    pub fn builds(&self) -> usize {
+        self.builds
     }
 }
 

@@ -1,5 +1,5 @@
 // Preintegration tables ([MLS] §4): f32 twin of PreintegrationTables::lookup and ::segment in
-// src/raycast/preintegration.rs. Table k (length preint_range.z · 2^−k) holds N² entries
+// src/view/preintegration.rs. Table k (length preint_range.z · 2^−k) holds N² entries
 // (C.rgb, α) at index k·N² + f + N·b; the zero-length limits (mean colour, τ̄) follow the last
 // table. Needs `params` declared by the kernel.
 #ifndef VMLS_PREINT_GLSL
