@@ -478,16 +478,20 @@ fn the_ring_fits_the_kernels_spans() {
     assert!(RINGS.contains(&ring), "{ring}");
 }
 
+/// The view of the sheet-convergence tests: no early termination, no low-pass (the
+/// reference samples pixel centres), footprints to 4 deviations, a small image.
+const CONVERGENCE_VIEW: [&str; 5] = [
+    "render.early_termination=0.99999",
+    "splat.antialias=\"none\"",
+    "splat.cutoff=4.0",
+    "camera.width=32",
+    "camera.height=32",
+];
+
 #[test]
 fn post_shaded_sheets_converge_to_the_ray_cast_gaussian_field() {
-    let common = [
-        "splat.interval=\"constant\"",
-        "render.early_termination=0.99999",
-        "splat.antialias=\"none\"",
-        "splat.cutoff=4.0",
-        "camera.width=32",
-        "camera.height=32",
-    ];
+    let mut common = CONVERGENCE_VIEW.to_vec();
+    common.push("splat.interval=\"constant\"");
     let field = scene(&["reconstruction.method=\"gaussian\""])
         .field(|_| {})
         .expect("field");
@@ -510,14 +514,10 @@ fn post_shaded_sheets_converge_to_the_ray_cast_gaussian_field() {
 fn intervals_between_sheet_middles_beat_constant_sheets() {
     // A narrow, dense band of the transfer function (what preintegration is for): the
     // constant sheets' midpoint rule misses it between sheets.
-    let common = [
+    let mut common = CONVERGENCE_VIEW.to_vec();
+    common.push(
         "transfer.points=[[0.0,0,0,0,0],[0.45,1.0,0.5,0.2,0.0],[0.5,1.0,0.5,0.2,12.0],[0.55,1.0,0.5,0.2,0.0],[1.0,0,0,0,0]]",
-        "render.early_termination=0.99999",
-        "splat.antialias=\"none\"",
-        "splat.cutoff=4.0",
-        "camera.width=32",
-        "camera.height=32",
-    ];
+    );
     let field = scene(&["reconstruction.method=\"gaussian\""])
         .field(|_| {})
         .expect("field");

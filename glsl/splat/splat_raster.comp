@@ -26,8 +26,8 @@
 // in ring registers), SPLAT_QUADRATURE (its sheet shares: 1 the quadrature, 2 the midpoint
 // rule, 0 the erfc; SPLAT_WIDEN: kernels thinner than they serve shared as if that thick),
 // SPLAT_INTERVAL (post-shaded: 0 each sheet's value over its slab, 1 linear and 2 Hermite
-// intervals between sheet middles, preintegrated), SPLAT_OCCLUSION, SPLAT_ISOSURFACES, SPLAT_SURFACES, SPLAT_HULL, SPLAT_BRICK (a brick's frame:
-// a pixel composites only the sheets whose midpoint on its ray lies in the brick's kd cell,
+// intervals between sheet middles, preintegrated), SPLAT_OCCLUSION, SPLAT_ISOSURFACES,
+// SPLAT_SURFACES, SPLAT_HULL, SPLAT_BRICK (a brick's frame: a pixel composites only the sheets whose midpoint on its ray lies in the brick's kd cell,
 // twin SplatSetup::owns), SPLAT_TILE,
 // SPLAT_APRON, SPLAT_GROUP (invocations: EDGE² rounded up to whole subgroups),
 // SPLAT_SUBGROUP_OPS (subgroup votes and sums: each subgroup stops by itself, without
@@ -606,14 +606,16 @@ void main() {
 // Intervals between sheet middles also read the sheets before: linear ones v0, Hermite ones
 // v_2 as well (the skipped composites would have read them).
 #if SPLAT_INTERVAL == 2
-#define EMPTY(px) empty = empty && px.v == 0.0 && px.sheet == 0.0 && px.v0 == 0.0 && px.v_2 == 0.0;
+#define BEFORE(px) px.v0 == 0.0 && px.v_2 == 0.0
 #elif SPLAT_INTERVAL == 1
-#define EMPTY(px) empty = empty && px.v == 0.0 && px.sheet == 0.0 && px.v0 == 0.0;
+#define BEFORE(px) px.v0 == 0.0
 #else
-#define EMPTY(px) empty = empty && px.v == 0.0 && px.sheet == 0.0;
+#define BEFORE(px) true
 #endif
+#define EMPTY(px) empty = empty && px.v == 0.0 && px.sheet == 0.0 && BEFORE(px);
             EACH(EMPTY)
 #undef EMPTY
+#undef BEFORE
             if (subgroupAll(empty)) {
 #define CLEAR(px) px.v_2 = 0.0; px.v0 = 0.0;
                 EACH(CLEAR)
