@@ -488,9 +488,9 @@ impl Renderer {
     }
 
     /// The preintegration tables of these `lengths` over the scalar `range` for `view`'s
-    /// transfer function (none: no tables), checked against the device, built and uploaded only when what they depend on
-    /// changed (ray casting's and post-shaded splatting's alike): whether they were built now,
-    /// and the milliseconds it took.
+    /// transfer function (none: no tables), checked against the device, built and uploaded
+    /// only when what they depend on changed (ray casting's and post-shaded splatting's
+    /// alike): whether they were built now, and the milliseconds it took.
     fn ensure_tables(
         &mut self,
         view: &View<'_>,

@@ -23,8 +23,10 @@ use crate::splat::gpu::{GpuKernels, SplatPipelines, SplatTargets, SplatVariant};
 use crate::splat::plan::{RasterWalk, plan_args_bytes};
 use crate::splat::{Shading, SplatSetup};
 use crate::view::View;
+use crate::view::preintegration::{PreintegrationTables, TableCache};
 use crate::view::shading::Isosurface;
 use crate::vk::{Buffer, BufferUsage, ExternalCommands, Target, TargetFormat, VkError};
+use std::sync::Arc;
 use std::time::Instant;
 
 /// A splatting frame's host half: its setup, with the kernels on the device and the
@@ -107,6 +109,18 @@ impl Renderer {
         })
     }
 
+    /// The preintegration table of `setup`'s post-shaded intervals (none for constant sheets
+    /// and pre-shaded frames), built and uploaded where it changed: whether it was built now,
+    /// and the milliseconds it took.
+    fn ensure_splat_tables(
+        &mut self,
+        view: &View<'_>,
+        setup: &SplatSetup,
+    ) -> Result<(bool, f64), RenderError> {
+        let range = setup.table_range(&self.field, view.transfer);
+        self.ensure_tables(view, setup.table_lengths(), range)
+    }
+
     /// The renderer's own frame buffers (`render()`'s), fitted to `setup`; whether they were
     /// allocated.
     fn splat_targets_for(&mut self, setup: &SplatSetup) -> Result<bool, RenderError> {
@@ -133,11 +147,7 @@ impl Renderer {
         progress: &mut dyn FnMut(f64),
     ) -> Result<(GpuImage, FrameStats), RenderError> {
         let frame = self.splat_setup(view, shading, false)?;
-        let (tables_built, table_ms) = self.ensure_tables(
-            view,
-            frame.setup.table_lengths(),
-            frame.setup.table_range(&self.field, view.transfer),
-        )?;
+        let (tables_built, table_ms) = self.ensure_splat_tables(view, &frame.setup)?;
         let targets_allocated = self.splat_targets_for(&frame.setup)?;
         let (Some(kernels), Some(targets)) =
             (self.splat_kernels.as_ref(), self.splat_targets.as_mut())
@@ -145,17 +155,8 @@ impl Renderer {
             return Err(VkError::Usage("splat frame buffers missing".into()).into());
         };
         let setup = &frame.setup;
-        let tables = match (
-            frame.variant.reads_tables(),
-            self.tables.current(),
-            &self.table_buffer,
-        ) {
-            (true, Some(t), Some((_, b))) => Some((t, &**b)),
-            (true, ..) => {
-                return Err(VkError::Usage("post-shaded intervals' table missing".into()).into());
-            }
-            (false, ..) => None,
-        };
+        let table = splat_table(&self.tables, &self.table_buffer, &frame.variant)?;
+        let tables = table.map(|(t, b)| (t, &**b));
         let image = splat_frame(
             &self.ctx,
             &self.splat_pipelines[frame.index],
@@ -258,11 +259,7 @@ impl Renderer {
         shading: Shading,
     ) -> Result<(), RenderError> {
         let frame = self.splat_setup(view, shading, true)?;
-        self.ensure_tables(
-            view,
-            frame.setup.table_lengths(),
-            frame.setup.table_range(&self.field, view.transfer),
-        )?;
+        self.ensure_splat_tables(view, &frame.setup)?;
         self.count_splat_entries(view, &frame)?;
         Ok(())
     }
@@ -276,11 +273,7 @@ impl Renderer {
         shading: Shading,
     ) -> Result<FrameInFlight, RenderError> {
         let frame = self.splat_setup(view, shading, true)?;
-        self.ensure_tables(
-            view,
-            frame.setup.table_lengths(),
-            frame.setup.table_range(&self.field, view.transfer),
-        )?;
+        self.ensure_splat_tables(view, &frame.setup)?;
         let setup = &frame.setup;
         let (w, h) = (setup.camera.width, setup.camera.height);
         let pixels = u64::from(w) * u64::from(h);
@@ -301,16 +294,9 @@ impl Renderer {
         let Some(kernels) = self.splat_kernels.as_ref() else {
             return Err(VkError::Usage("splat kernels missing".into()).into());
         };
-        let reads_tables = frame.variant.reads_tables();
-        let tables = self.tables.current().filter(|_| reads_tables);
-        let data = ConstantData::new(setup, kernels, view.transfer, tables);
-        let table = match (reads_tables, &self.table_buffer) {
-            (true, Some((_, b))) => Some(b.clone()),
-            (true, None) => {
-                return Err(VkError::Usage("post-shaded intervals' table missing".into()).into());
-            }
-            (false, _) => None,
-        };
+        let table = splat_table(&self.tables, &self.table_buffer, &frame.variant)?;
+        let data = ConstantData::new(setup, kernels, view.transfer, table.map(|t| t.0));
+        let table = table.map(|t| t.1.clone());
         let limit = entry_limit(&self.ctx);
         let ctx = self.ctx.clone();
         let slot: &mut Slot = &mut self.slots[slot_index];
@@ -475,5 +461,22 @@ impl Renderer {
                 )))
             }
         }
+    }
+}
+
+/// The table a frame of `variant` reads and its buffer, from the renderer's `tables` and
+/// `buffer` (`Renderer::ensure_splat_tables` ran before): None where it reads none. A free
+/// function, so that it borrows those two fields only.
+fn splat_table<'a>(
+    tables: &'a TableCache,
+    buffer: &'a Option<(usize, Arc<Buffer>)>,
+    variant: &SplatVariant,
+) -> Result<Option<(&'a PreintegrationTables, &'a Arc<Buffer>)>, RenderError> {
+    if !variant.reads_tables() {
+        return Ok(None);
+    }
+    match (tables.current(), buffer) {
+        (Some(t), Some((_, b))) => Ok(Some((t, b))),
+        _ => Err(VkError::Usage("post-shaded intervals' table missing".into()).into()),
     }
 }
