@@ -169,7 +169,13 @@ fn one_kernel_footprint_is_the_line_integral_of_its_gaussian() {
 #[test]
 fn gpu_splatting_matches_its_cpu_twin_on_a_grid() {
     let (ctx, _) = gpu();
-    let cases: [(&str, &[&str]); 18] = [
+    // The default low-pass is auto; at 40×32 the footprints' minor variances span 0.65–2.5 px²
+    // (anisotropy up to 1.12), so its three regimes (both axes raised, one, none) all run.
+    let cases: [(&str, &[&str]); 19] = [
+        (
+            "pre-shaded, EWA's resampling filter",
+            &["render.method=\"splat\"", "splat.antialias=\"ewa\""],
+        ),
         (
             "post-shaded, constant sheets (no table)",
             &[
@@ -258,11 +264,21 @@ fn gpu_splatting_matches_its_cpu_twin_on_a_grid() {
                 "transfer.isosurfaces=[{value=0.5, color=[1.0,0.8,0.3], opacity=0.9}]",
                 "camera.projection=\"orthographic\"",
                 "camera.view_height=2.4",
+                "splat.antialias=\"ewa\"",
             ],
         ),
         (
             "post-shaded, affine footprints",
-            &["render.method=\"splat-post\"", "splat.footprint=\"affine\""],
+            // EWA's low-pass here and in the case above: under auto, footprints narrower than
+            // the low-pass become exactly 1 px² and their cutoff boxes end on pixel centres
+            // (f32 and f64 disagree on including them), and the orthographic view (where auto
+            // leaves the footprints as they are) has a pixel at the early-termination
+            // threshold; both measured 2.3-2.6e-5, flips at a threshold, not kernel errors.
+            &[
+                "render.method=\"splat-post\"",
+                "splat.footprint=\"affine\"",
+                "splat.antialias=\"ewa\"",
+            ],
         ),
         (
             "pre-shaded, kernels split among sheets, 16-pixel tiles",
@@ -632,9 +648,9 @@ fn post_shaded_edges_are_crisper_than_pre_shaded() {
 
 /// A one-layer sheet of flat kernels seen at 10° elevation through an orthographic camera: along
 /// image x one sample spacing is 2 pixels, along image y 0.35 pixels (strong anisotropic
-/// minification). The field is x-stripes of period 16 px plus y-stripes of period 0.7 px; the
-/// band-limited image keeps the first and removes the second.
-fn zebra(antialias: &str, scale: u32) -> (Vec<[f64; 4]>, u32, u32) {
+/// minification). The field is x-stripes of period 16 px (amplitude `stripes.0`) plus y-stripes
+/// of period 0.7 px (`stripes.1`); the band-limited image keeps the first and removes the second.
+fn zebra(antialias: &str, scale: u32, stripes: (f64, f64)) -> (Vec<[f64; 4]>, u32, u32) {
     let n = 128;
     // Kernels flat in z (a sheet of voxels one 512th thick): isotropic kernels would project to
     // circles at any elevation, and no filter would need to be anisotropic.
@@ -647,7 +663,7 @@ fn zebra(antialias: &str, scale: u32) -> (Vec<[f64; 4]>, u32, u32) {
             let j = ((p[1] + 1.0) * 64.0).round() as i64;
             let sx = if (i / 4) % 2 == 0 { 1.0 } else { -1.0 };
             let sy = if j % 2 == 0 { 1.0 } else { -1.0 };
-            0.5 + 0.3 * sx + 0.2 * sy
+            0.5 + stripes.0 * sx + stripes.1 * sy
         },
     );
     let e = 10f64.to_radians();
@@ -673,12 +689,11 @@ fn zebra(antialias: &str, scale: u32) -> (Vec<[f64; 4]>, u32, u32) {
     (image.pixels, w, h)
 }
 
-#[test]
-fn ewa_beats_no_lowpass_and_swan_on_a_minified_zebra() {
-    // Reference: 4×4 supersampled without any filter, then the same Gaussian low-pass
-    // (variance 1 px², 16 in supersampled pixels) as the resampling filter, sampled at the
-    // pixel centres: the band-limited image the resampling filter approximates.
-    let (fine, fw, fh) = zebra("none", 4);
+/// Each filter's RGB RMSE over the zebra's interior against the band-limited image: the
+/// zebra 4×4 supersampled without any filter, then the same Gaussian low-pass (variance
+/// 1 px², 16 in supersampled pixels) as the resampling filter, sampled at the pixel centres.
+fn zebra_errors<'a>(filters: &[&'a str], stripes: (f64, f64)) -> Vec<(&'a str, f64)> {
+    let (fine, fw, fh) = zebra("none", 4, stripes);
     let (w, h) = (64usize, 32usize);
     let mut reference = vec![[0.0; 4]; w * h];
     for (p, out) in reference.iter_mut().enumerate() {
@@ -714,12 +729,17 @@ fn ewa_beats_no_lowpass_and_swan_on_a_minified_zebra() {
         }
         (s / n).sqrt()
     };
-    let errors: Vec<(&str, f64)> = ["ewa", "none", "swan"]
+    filters
         .iter()
-        .map(|a| (*a, err(&zebra(a, 1).0)))
-        .collect();
+        .map(|a| (*a, err(&zebra(a, 1, stripes).0)))
+        .collect()
+}
+
+#[test]
+fn ewa_beats_no_lowpass_and_swan_on_a_minified_zebra() {
+    let errors = zebra_errors(&["ewa", "none", "swan"], (0.3, 0.2));
     eprintln!("zebra RMSE against the band-limited supersampled image: {errors:?}");
-    // Measured: EWA 4.4e-4, none 1.5e-2 (aliasing of the y-stripes), SWAN 7.8e-2 (the x-stripes
+    // Measured: EWA 9.6e-4, none 1.5e-2 (aliasing of the y-stripes), SWAN 7.8e-2 (the x-stripes
     // blurred away). A factor 4 keeps the orderings meaningful.
     assert!(
         4.0 * errors[0].1 < errors[1].1,
@@ -728,6 +748,41 @@ fn ewa_beats_no_lowpass_and_swan_on_a_minified_zebra() {
     assert!(
         4.0 * errors[0].1 < errors[2].1,
         "EWA must blur less than SWAN: {errors:?}"
+    );
+}
+
+#[test]
+fn the_auto_lowpass_removes_the_zebras_aliasing_and_keeps_wide_footprints_sharp() {
+    // The y-stripes alone: the band-limited image is flat, so what differs from it is aliasing
+    // (and the x-blur of the reference's filter does not count). The auto low-pass raises the
+    // 0.35 px y-spacing's footprints to the low-pass, as EWA does: it must alias as little.
+    let aliasing = zebra_errors(&["auto", "ewa", "none"], (0.0, 0.2));
+    eprintln!("y-stripes only, RMSE against the band-limited image: {aliasing:?}");
+    assert!(
+        4.0 * aliasing[0].1 < aliasing[2].1 && aliasing[0].1 < 2.0 * aliasing[1].1 + 1e-4,
+        "auto must alias as little as EWA and less than no low-pass: {aliasing:?}"
+    );
+    // Wide footprints: the same sheet seen face-on from close by, every footprint several
+    // pixels wide. Auto leaves them as they are (the image of no low-pass, to rounding); EWA
+    // blurs them by its full low-pass.
+    let wide = |aa: &str| {
+        let s = scene(&[
+            "render.method=\"splat-post\"",
+            "camera.width=64",
+            "camera.height=64",
+            &format!("splat.antialias=\"{aa}\""),
+        ]);
+        let field = s.field(|_| {}).expect("field");
+        splat_image(&setup(&s, &field, Shading::Post), &field, &s.transfer)
+            .expect("CPU twin")
+            .pixels
+    };
+    let (auto, ewa, none) = (wide("auto"), wide("ewa"), wide("none"));
+    let (to_none, ewa_to_none) = (rmse(&auto, &none), rmse(&ewa, &none));
+    eprintln!("wide footprints: auto to none {to_none:.2e}, EWA to none {ewa_to_none:.2e}");
+    assert!(
+        to_none < 1e-3 * ewa_to_none,
+        "auto changed wide footprints: {to_none:.2e} against EWA's {ewa_to_none:.2e}"
     );
 }
 

@@ -67,8 +67,9 @@ a per-fragment Gaussian (standard deviation = scale·ScaleFactor). How the kerne
   keep its integral, the mapper keeps its peak, so each point's peak D_i is scaled by
   s²/(s² + L) with s = f·σ_i/depth its footprint's standard deviation in pixels on the optical
   axis (f = H / (2 tan(fov_y/2))), recomputed whenever the points are sorted. "swan" (scale the
-  footprint until its variance reaches L) is applied to the radius and peak in numpy; "none"
-  adds nothing.
+  footprint until its variance reaches L) is applied to the radius and peak in numpy; "auto"
+  (vmls's default: each footprint axis narrower than L widened to L) is the same for the
+  isotropic footprints drawn here; "none" adds nothing.
 - Cutoff: footprints end at `splat.cutoff` (3.5) standard deviations (SetBoundScale and a
   discard in the shader), as vmls's do.
 - Colour: vtkColorTransferFunction through the transfer points (RGB space, linear, so c(f) as
@@ -325,7 +326,7 @@ def run_points(scene, a, base):
     splat = scene.get("splat", {})
     cutoff = float(splat.get("cutoff", 3.5))
     lowpass = float(splat.get("lowpass", 1.0))
-    antialias = splat.get("antialias", "ewa")
+    antialias = splat.get("antialias", "auto")
 
     pd = vtk.vtkPolyData()
 
@@ -341,7 +342,7 @@ def run_points(scene, a, base):
         var = (focal * sd) ** 2 if ortho else (focal * sd / depth) ** 2
         if antialias == "ewa":
             peak = peak * var / (var + lowpass)
-        elif antialias == "swan":
+        elif antialias in ("swan", "auto"):
             grow = np.maximum(lowpass / var, 1.0)
             sd, peak = sd * np.sqrt(grow), peak / grow
         byte = np.rint(peak / d_max * 255.0)

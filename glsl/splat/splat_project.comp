@@ -3,7 +3,7 @@
 // kernel: ray-space Jacobian, footprint, resampling filter, conic, bounding box, depth and
 // sheet range, culling guards; counts one entry per (image tile, sheet) it touches into the
 // bucket tile * sheets + sheet (splat_scan and splat_bin sort by it).
-// Variant macros: SPLAT_POST (0 pre-shaded, 1 post-shaded), SPLAT_ANTIALIAS (0 ewa, 1 swan,
+// Variant macros: SPLAT_POST (0 pre-shaded, 1 post-shaded), SPLAT_ANTIALIAS (0 ewa, 3 auto, 1 swan,
 // 2 none), SPLAT_ORTHO (0 perspective, 1 orthographic), SPLAT_EXACT (per-pixel ray integrals
 // instead of the affine footprint; perspective only), SPLAT_SURFACES (surface splats of
 // isosurfaces: metric_off.w = 1 + isosurface index, pos_value.w = the metric's scale).
@@ -189,8 +189,21 @@ Splat project(Sample k) {
     float det_hat = vhat.x * vhat.z - vhat.y * vhat.y;
     vec3 vf = vec3(max(vhat.x, MIN_VARIANCE), vhat.y, max(vhat.z, MIN_VARIANCE));
     float lowpass = params.lowpass;
+#if SPLAT_ANTIALIAS == 0 || SPLAT_ANTIALIAS == 3
+    // The screen low-pass added (twin: screen_lowpass): EWA's lowpass I, or auto's
+    // sum of max(lowpass - lambda_i, 0) e_i e_i^T over the eigenpairs of vf.
 #if SPLAT_ANTIALIAS == 0
-    vf += vec3(lowpass, 0.0, lowpass);
+    vec3 dl = vec3(lowpass, 0.0, lowpass);
+#else
+    float mean = 0.5 * (vf.x + vf.z);
+    float r = sqrt(0.25 * (vf.x - vf.z) * (vf.x - vf.z) + vf.y * vf.y);
+    float l2 = mean - r;
+    float d1 = max(lowpass - (mean + r), 0.0);
+    float d2 = max(lowpass - l2, 0.0);
+    float g = r > 0.0 ? (d1 - d2) / (2.0 * r) : 0.0;
+    vec3 dl = vec3(d2 + g * (vf.x - l2), g * vf.y, d2 + g * (vf.z - l2));
+#endif
+    vf += dl;
 #elif SPLAT_ANTIALIAS == 1
     float mean = 0.5 * (vf.x + vf.z);
     float r = sqrt(0.25 * (vf.x - vf.z) * (vf.x - vf.z) + vf.y * vf.y);
@@ -212,9 +225,9 @@ Splat project(Sample k) {
     // Perspective-exact footprint: the filtered covariance in object space ([EWA]'s screen
     // low-pass pulled back through A), its precision and adjugate in the camera frame.
     mat3 a_mat = transpose(at);
-#if SPLAT_ANTIALIAS == 0
+#if SPLAT_ANTIALIAS == 0 || SPLAT_ANTIALIAS == 3
     mat3 ai = inverse(a_mat);
-    mat3 v_f = v_obj + ai * mat3(lowpass, 0.0, 0.0, 0.0, lowpass, 0.0, 0.0, 0.0, 0.0) * transpose(ai);
+    mat3 v_f = v_obj + ai * mat3(dl.x, dl.y, 0.0, dl.y, dl.z, 0.0, 0.0, 0.0, 0.0) * transpose(ai);
 #elif SPLAT_ANTIALIAS == 1
     mat3 v_f = v_obj * (vf.x / max(vhat.x, MIN_VARIANCE));
 #else

@@ -36,6 +36,7 @@ pub(super) fn parse(sec: &Section<'_>) -> Result<SplatSettings, SceneError> {
             d.antialias,
             &[
                 ("ewa", Antialias::Ewa),
+                ("auto", Antialias::Auto),
                 ("swan", Antialias::Swan),
                 ("none", Antialias::None),
             ],

@@ -187,6 +187,7 @@ impl SplatVariant {
                     Antialias::Ewa => "0",
                     Antialias::Swan => "1",
                     Antialias::None => "2",
+                    Antialias::Auto => "3",
                 }
                 .into(),
             ),
@@ -278,6 +279,7 @@ impl SplatVariant {
                 Antialias::Ewa => "ewa",
                 Antialias::Swan => "swan",
                 Antialias::None => "no-lowpass",
+                Antialias::Auto => "auto-lowpass",
             },
             if self.orthographic {
                 "orthographic"

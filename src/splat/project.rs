@@ -225,12 +225,16 @@ pub fn ray_space(setup: &SplatSetup, u: DVec3) -> ([f64; 2], f64, [[f64; 3]; 3])
     (centre, t, mul(&j, &w))
 }
 
-/// The footprint variance after `splat.antialias`: EWA adds the low-pass, SWAN scales it
-/// uniformly so its smaller eigenvalue reaches the low-pass, none leaves it.
+/// The footprint variance after `splat.antialias`: EWA and auto add their screen low-pass
+/// ([`screen_lowpass`]), SWAN scales it uniformly so its smaller eigenvalue reaches the
+/// low-pass, none leaves it.
 pub fn filtered(v: [f64; 3], antialias: Antialias, lowpass: f64) -> [f64; 3] {
     let v = [v[0].max(MIN_VARIANCE), v[1], v[2].max(MIN_VARIANCE)];
     match antialias {
-        Antialias::Ewa => [v[0] + lowpass, v[1], v[2] + lowpass],
+        Antialias::Ewa | Antialias::Auto => {
+            let d = screen_lowpass(v, antialias, lowpass);
+            [v[0] + d[0], v[1] + d[1], v[2] + d[2]]
+        }
         Antialias::None => v,
         Antialias::Swan => {
             let mean = 0.5 * (v[0] + v[2]);
@@ -239,6 +243,27 @@ pub fn filtered(v: [f64; 3], antialias: Antialias, lowpass: f64) -> [f64; 3] {
             let k = (lowpass / minor).max(1.0);
             [v[0] * k, v[1] * k, v[2] * k]
         }
+    }
+}
+
+/// The screen-space variance (xx, xy, yy, px²) that `splat.antialias` adds to the 2×2
+/// footprint variance `v`: [EWA]'s resampling filter adds the low-pass `lowpass · I`; auto
+/// adds `Σ max(lowpass − λ_i, 0) e_i e_iᵀ` over v's eigenpairs, so that v + Δ has the
+/// eigenvalues max(λ_i, lowpass). With λ₁ ≥ λ₂, d_i = max(lowpass − λ_i, 0) and the
+/// projector P₁ = (v − λ₂ I)/(λ₁ − λ₂): Δ = d₂ I + (d₁ − d₂) P₁, where (d₁ − d₂)/(λ₁ − λ₂)
+/// lies in [−1, 0] and the P₁ term vanishes with λ₁ = λ₂. SWAN and none add nothing.
+pub fn screen_lowpass(v: [f64; 3], antialias: Antialias, lowpass: f64) -> [f64; 3] {
+    match antialias {
+        Antialias::Ewa => [lowpass, 0.0, lowpass],
+        Antialias::Auto => {
+            let mean = 0.5 * (v[0] + v[2]);
+            let r = (0.25 * (v[0] - v[2]) * (v[0] - v[2]) + v[1] * v[1]).sqrt();
+            let (l1, l2) = (mean + r, mean - r);
+            let (d1, d2) = ((lowpass - l1).max(0.0), (lowpass - l2).max(0.0));
+            let g = if r > 0.0 { (d1 - d2) / (2.0 * r) } else { 0.0 };
+            [d2 + g * (v[0] - l2), g * v[1], d2 + g * (v[2] - l2)]
+        }
+        Antialias::Swan | Antialias::None => [0.0; 3],
     }
 }
 
@@ -262,15 +287,23 @@ fn exact_footprint(
     u: DVec3,
     weight: f64,
 ) -> Option<Exact> {
-    // The object-space filtered covariance: [EWA]'s screen low-pass pulled back through A.
+    // The object-space filtered covariance: the screen low-pass ([EWA]'s, or auto's) pulled
+    // back through A.
     let lowpass = setup.settings.lowpass;
     let v_f = match setup.settings.antialias {
-        Antialias::Ewa => {
+        Antialias::Ewa | Antialias::Auto => {
+            let clamped = [
+                vhat[0].max(MIN_VARIANCE),
+                vhat[1],
+                vhat[2].max(MIN_VARIANCE),
+            ];
+            let d = screen_lowpass(clamped, setup.settings.antialias, lowpass);
             let ai = inverse(a)?;
             let mut lp = [[0.0; 3]; 3];
             for (i, row) in lp.iter_mut().enumerate() {
                 for (j, x) in row.iter_mut().enumerate() {
-                    *x = lowpass * (ai[i][0] * ai[j][0] + ai[i][1] * ai[j][1]);
+                    *x = ai[i][0] * (d[0] * ai[j][0] + d[1] * ai[j][1])
+                        + ai[i][1] * (d[1] * ai[j][0] + d[2] * ai[j][1]);
                 }
             }
             add(v_obj, &lp)
@@ -667,7 +700,70 @@ pub fn sheet_share(rule: SheetShare, za: f64, zb: f64) -> f64 {
 
 #[cfg(test)]
 mod tests {
-    use super::{erfc_pos, phi_between};
+    use super::{Antialias, erfc_pos, phi_between, screen_lowpass};
+
+    /// The eigenvalues (larger first) of the symmetric 2×2 [[a, b], [b, c]].
+    fn eigen(v: [f64; 3]) -> (f64, f64) {
+        let mean = 0.5 * (v[0] + v[2]);
+        let r = (0.25 * (v[0] - v[2]).powi(2) + v[1] * v[1]).sqrt();
+        (mean + r, mean - r)
+    }
+
+    #[test]
+    fn the_auto_lowpass_raises_each_footprint_axis_to_the_lowpass_and_no_further() {
+        // Footprints (xx, xy, yy) from wide to needle-thin, isotropic and rotated, against a
+        // low-pass of 1 px²: v + Δ must keep v's eigenvectors (Δ commutes with v), have the
+        // eigenvalues max(λ, 1), and Δ must be positive semi-definite.
+        let lp = 1.0;
+        let mut cases = vec![[3.0, 0.0, 3.0], [0.2, 0.0, 0.2], [1.0, 0.0, 1.0]];
+        for (l1, l2) in [
+            (25.0, 4.0),
+            (25.0, 0.3),
+            (0.9, 0.01),
+            (1.0 + 1e-9, 1.0),
+            (4.0, 1.0),
+        ] {
+            for angle in [0.0, 0.4, 1.3, 2.9] {
+                let (c, s) = (f64::cos(angle), f64::sin(angle));
+                cases.push([
+                    l1 * c * c + l2 * s * s,
+                    (l1 - l2) * c * s,
+                    l1 * s * s + l2 * c * c,
+                ]);
+            }
+        }
+        for v in cases {
+            let d = screen_lowpass(v, Antialias::Auto, lp);
+            let f = [v[0] + d[0], v[1] + d[1], v[2] + d[2]];
+            let ((a1, a2), (b1, b2)) = (eigen(v), eigen(f));
+            let scale = a1.max(lp);
+            assert!(
+                (b1 - a1.max(lp)).abs() <= 1e-12 * scale,
+                "{v:?}: {b1} vs max({a1}, 1)"
+            );
+            assert!(
+                (b2 - a2.max(lp)).abs() <= 1e-12 * scale,
+                "{v:?}: {b2} vs max({a2}, 1)"
+            );
+            let (e1, e2) = eigen(d);
+            assert!(e2 >= -1e-12 * scale && e1 <= lp + 1e-12, "{v:?}: Δ {d:?}");
+            // Commuting: (vΔ)_xy = (Δv)_xy for symmetric 2×2 matrices.
+            let comm = v[0] * d[1] + v[1] * d[2] - (d[0] * v[1] + d[1] * v[2]);
+            assert!(
+                comm.abs() <= 1e-12 * scale * scale,
+                "{v:?}: vΔ ≠ Δv by {comm:e}"
+            );
+        }
+        // EWA adds the whole low-pass whatever the footprint.
+        assert_eq!(
+            screen_lowpass([25.0, 0.0, 25.0], Antialias::Ewa, lp),
+            [1.0, 0.0, 1.0]
+        );
+        assert_eq!(
+            screen_lowpass([25.0, 0.0, 25.0], Antialias::Auto, lp),
+            [0.0; 3]
+        );
+    }
 
     /// erfc(x) = 2/√π ∫ₓ^∞ e^{−t²} dt by composite Simpson on [x, x + 9] (the rest is below
     /// e^{−81}), 20 000 intervals: about 1e-13, independent of the A&S polynomial.

@@ -186,6 +186,12 @@ pub enum Antialias {
     Ewa,
     /// [SWAN]: the footprint scaled uniformly until its minor variance reaches the low-pass's.
     Swan,
+    /// The smallest widening that gives every footprint at least the low-pass variance in
+    /// every direction: the low-pass is added only along the footprint's eigenvectors whose
+    /// variance is below it, up to it (a footprint wider than the low-pass everywhere is
+    /// unchanged; one narrower everywhere becomes the low-pass). Band-limited like
+    /// [`Antialias::Ewa`], without its blur of footprints that are already wide.
+    Auto,
     /// No low-pass filter (aliases under minification).
     None,
 }
@@ -312,7 +318,7 @@ impl Default for SplatSettings {
             slab_spacings: 0.5,
             cutoff: 3.5,
             lowpass: 1.0,
-            antialias: Antialias::Ewa,
+            antialias: Antialias::Auto,
             occlusion: true,
             surface: false,
             exact: true,
