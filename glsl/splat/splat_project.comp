@@ -3,8 +3,8 @@
 // kernel: ray-space Jacobian, footprint, resampling filter, conic, bounding box, depth and
 // sheet range, culling guards; counts one entry per (image tile, sheet) it touches into the
 // bucket tile * sheets + sheet (splat_scan and splat_bin sort by it).
-// Variant macros: SPLAT_POST (0 pre-shaded, 1 post-shaded), SPLAT_ANTIALIAS (0 ewa, 3 auto, 1 swan,
-// 2 none), SPLAT_ORTHO (0 perspective, 1 orthographic), SPLAT_EXACT (per-pixel ray integrals
+// Variant macros: SPLAT_POST (0 pre-shaded, 1 post-shaded), SPLAT_ANTIALIAS (0 ewa, 1 swan,
+// 2 none, 3 auto), SPLAT_ORTHO (0 perspective, 1 orthographic), SPLAT_EXACT (per-pixel ray integrals
 // instead of the affine footprint; perspective only), SPLAT_SURFACES (surface splats of
 // isosurfaces: metric_off.w = 1 + isosurface index, pos_value.w = the metric's scale).
 #extension GL_EXT_control_flow_attributes : enable
@@ -222,8 +222,8 @@ Splat project(Sample k) {
     float checks_exact = 0.0;
     vec4 box = vec4(centre, cutoff * sqrt(vf.x), cutoff * sqrt(vf.z));
 #else
-    // Perspective-exact footprint: the filtered covariance in object space ([EWA]'s screen
-    // low-pass pulled back through A), its precision and adjugate in the camera frame.
+    // Perspective-exact footprint: the filtered covariance in object space (the screen
+    // low-pass dl pulled back through A), its precision and adjugate in the camera frame.
     mat3 a_mat = transpose(at);
 #if SPLAT_ANTIALIAS == 0 || SPLAT_ANTIALIAS == 3
     mat3 ai = inverse(a_mat);

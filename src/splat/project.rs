@@ -237,8 +237,7 @@ pub fn filtered(v: [f64; 3], antialias: Antialias, lowpass: f64) -> [f64; 3] {
         }
         Antialias::None => v,
         Antialias::Swan => {
-            let mean = 0.5 * (v[0] + v[2]);
-            let r = (0.25 * (v[0] - v[2]) * (v[0] - v[2]) + v[1] * v[1]).sqrt();
+            let (mean, r) = mean_and_radius(v);
             let minor = (mean - r).max(MIN_VARIANCE);
             let k = (lowpass / minor).max(1.0);
             [v[0] * k, v[1] * k, v[2] * k]
@@ -256,8 +255,7 @@ pub fn screen_lowpass(v: [f64; 3], antialias: Antialias, lowpass: f64) -> [f64; 
     match antialias {
         Antialias::Ewa => [lowpass, 0.0, lowpass],
         Antialias::Auto => {
-            let mean = 0.5 * (v[0] + v[2]);
-            let r = (0.25 * (v[0] - v[2]) * (v[0] - v[2]) + v[1] * v[1]).sqrt();
+            let (mean, r) = mean_and_radius(v);
             let (l1, l2) = (mean + r, mean - r);
             let (d1, d2) = ((lowpass - l1).max(0.0), (lowpass - l2).max(0.0));
             let g = if r > 0.0 { (d1 - d2) / (2.0 * r) } else { 0.0 };
@@ -265,6 +263,15 @@ pub fn screen_lowpass(v: [f64; 3], antialias: Antialias, lowpass: f64) -> [f64; 
         }
         Antialias::Swan | Antialias::None => [0.0; 3],
     }
+}
+
+/// The symmetric 2×2 (xx, xy, yy)'s eigenvalues as mean ± radius.
+fn mean_and_radius(v: [f64; 3]) -> (f64, f64) {
+    let mean = 0.5 * (v[0] + v[2]);
+    (
+        mean,
+        (0.25 * (v[0] - v[2]) * (v[0] - v[2]) + v[1] * v[1]).sqrt(),
+    )
 }
 
 /// The per-pixel ray integral's constants (`Splat::precision` … `ray_amplitude`) and a
