@@ -1,7 +1,8 @@
 //! EWA splatting: one kernel's footprint against the analytic line integral of its Gaussian,
 //! GPU kernels against their f64 CPU twins, convergence of post-shaded sheets to the ray-cast
 //! Gaussian-sum field as the sheets thin, crisp post-shaded edges and the antialiasing
-//! comparison of [EWA] (EWA against no low-pass and [SWAN]). Hard cases: tests/splat_cases.rs.
+//! comparison of [EWA] (EWA against no low-pass and [SWAN], and the auto low-pass). Hard
+//! cases: tests/splat_cases.rs.
 mod common;
 
 use common::splat::*;
@@ -762,8 +763,8 @@ fn the_auto_lowpass_removes_the_zebras_aliasing_and_keeps_wide_footprints_sharp(
         4.0 * aliasing[0].1 < aliasing[2].1 && aliasing[0].1 < 2.0 * aliasing[1].1 + 1e-4,
         "auto must alias as little as EWA and less than no low-pass: {aliasing:?}"
     );
-    // Wide footprints: the same sheet seen face-on from close by, every footprint several
-    // pixels wide. Auto leaves them as they are (the image of no low-pass, to rounding); EWA
+    // Wide footprints: the 13³ test grid at 64², where every footprint's minor variance is
+    // 2.6–10 px². Auto leaves them as they are (the image of no low-pass, to rounding); EWA
     // blurs them by its full low-pass.
     let wide = |aa: &str| {
         let s = scene(&[
