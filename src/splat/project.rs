@@ -225,24 +225,24 @@ pub fn ray_space(setup: &SplatSetup, u: DVec3) -> ([f64; 2], f64, [[f64; 3]; 3])
     (centre, t, mul(&j, &w))
 }
 
-/// The footprint variance after `splat.antialias`: EWA and auto add their screen low-pass
-/// ([`screen_lowpass`]), SWAN scales it uniformly so its smaller eigenvalue reaches the
-/// low-pass, none leaves it.
-pub fn filtered(v: [f64; 3], antialias: Antialias, lowpass: f64) -> [f64; 3] {
+/// The footprint variance after `splat.antialias`, and the screen low-pass it added: EWA and
+/// auto add theirs ([`screen_lowpass`]), SWAN scales the variance uniformly so its smaller
+/// eigenvalue reaches the low-pass, none leaves it (both add none).
+pub fn filtered(v: [f64; 3], antialias: Antialias, lowpass: f64) -> ([f64; 3], [f64; 3]) {
     let v = [v[0].max(MIN_VARIANCE), v[1], v[2].max(MIN_VARIANCE)];
-    match antialias {
-        Antialias::Ewa | Antialias::Auto => {
-            let d = screen_lowpass(v, antialias, lowpass);
+    let d = screen_lowpass(v, antialias, lowpass);
+    let vf = match antialias {
+        Antialias::Ewa | Antialias::Auto | Antialias::None => {
             [v[0] + d[0], v[1] + d[1], v[2] + d[2]]
         }
-        Antialias::None => v,
         Antialias::Swan => {
             let (mean, r) = mean_and_radius(v);
             let minor = (mean - r).max(MIN_VARIANCE);
             let k = (lowpass / minor).max(1.0);
             [v[0] * k, v[1] * k, v[2] * k]
         }
-    }
+    };
+    (vf, d)
 }
 
 /// The screen-space variance (xx, xy, yy, px²) that `splat.antialias` adds to the 2×2
@@ -290,21 +290,14 @@ fn exact_footprint(
     a: &[[f64; 3]; 3],
     v_obj: &[[f64; 3]; 3],
     vhat: [f64; 3],
-    vf: [f64; 3],
+    (vf, d): ([f64; 3], [f64; 3]),
     u: DVec3,
     weight: f64,
 ) -> Option<Exact> {
-    // The object-space filtered covariance: the screen low-pass ([EWA]'s, or auto's) pulled
+    // The object-space filtered covariance: the screen low-pass d ([EWA]'s, or auto's) pulled
     // back through A.
-    let lowpass = setup.settings.lowpass;
     let v_f = match setup.settings.antialias {
         Antialias::Ewa | Antialias::Auto => {
-            let clamped = [
-                vhat[0].max(MIN_VARIANCE),
-                vhat[1],
-                vhat[2].max(MIN_VARIANCE),
-            ];
-            let d = screen_lowpass(clamped, setup.settings.antialias, lowpass);
             let ai = inverse(a)?;
             let mut lp = [[0.0; 3]; 3];
             for (i, row) in lp.iter_mut().enumerate() {
@@ -420,7 +413,7 @@ pub fn splat_project(
     let vxt = [v[0][2], v[1][2]];
     let vtt = v[2][2];
     let det_hat = vhat[0] * vhat[2] - vhat[1] * vhat[1];
-    let vf = filtered(vhat, setup.settings.antialias, setup.settings.lowpass);
+    let (vf, lowpass_added) = filtered(vhat, setup.settings.antialias, setup.settings.lowpass);
     let det_f = vf[0] * vf[2] - vf[1] * vf[1];
     if det_hat <= 0.0 || det_f <= 0.0 || !det_f.is_finite() {
         return Err(Cull::Degenerate);
@@ -429,9 +422,10 @@ pub fn splat_project(
         (vhat[2] * vxt[0] - vhat[1] * vxt[1]) / det_hat,
         (vhat[0] * vxt[1] - vhat[1] * vxt[0]) / det_hat,
     ];
-    let exact = setup
-        .exact_footprints()
-        .then(|| exact_footprint(setup, &a, &v_obj, vhat, vf, u, weight).ok_or(Cull::Degenerate));
+    let exact = setup.exact_footprints().then(|| {
+        exact_footprint(setup, &a, &v_obj, vhat, (vf, lowpass_added), u, weight)
+            .ok_or(Cull::Degenerate)
+    });
     let exact = exact.transpose()?;
     let cond = (vtt - slope[0] * vxt[0] - slope[1] * vxt[1]).max(1e-12 * vtt);
     let amplitude = weight * det3(&a).abs() / (2.0 * std::f64::consts::PI * det_f.sqrt());
