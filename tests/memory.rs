@@ -29,7 +29,7 @@ fn rss() -> Option<u64> {
     Some(pages * 4096)
 }
 
-/// Renders `frames` frames after a 100-frame warm-up; returns (RSS, live buffers, allocator
+/// Renders `frames` frames after `warm` warm-up frames; returns (RSS, live buffers, allocator
 /// bytes) after the warm-up and at the end.
 fn measure(
     ctx: &Context,
@@ -97,6 +97,10 @@ fn a_thousand_frames_keep_memory_flat() {
 /// (glsl/common/params.glsl): lavapipe compiled and kept a new copy of the kernel each time,
 /// about 0.3 MB a dispatch (the ray caster runs one a frame at this size: 60 MB over 200 frames;
 /// splatting dozens). Splatting on a 17³ grid keeps each frame under a tenth of a second.
+///
+/// The warm-up is one whole orbit (36 views, whose entry counts and tile walks differ): after a
+/// warm-up of 10 views CI measured 11–17 pages of growth over the next 60 frames; here the
+/// first orbit grew RSS and the eight after it not by one page.
 #[test]
 fn the_general_path_and_splatting_keep_memory_flat() {
     let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
@@ -104,10 +108,10 @@ fn the_general_path_and_splatting_keep_memory_flat() {
     let splat = |method| ["volume.resolution=17", method];
     for (extra, frames) in [
         (&["reconstruction.resample=0"][..], 200),
-        (&splat("render.method=\"splat\"")[..], 60),
-        (&splat("render.method=\"splat-post\"")[..], 60),
+        (&splat("render.method=\"splat\"")[..], 72),
+        (&splat("render.method=\"splat-post\"")[..], 72),
     ] {
-        let [(rss0, live0, gpu0), (rss1, live1, gpu1)] = measure(&ctx, extra, 10, frames);
+        let [(rss0, live0, gpu0), (rss1, live1, gpu1)] = measure(&ctx, extra, 36, frames);
         assert_eq!(live1, live0, "{extra:?}: buffers grew with the frame count");
         assert_eq!(gpu1, gpu0, "{extra:?}: gpu-allocator's bytes grew");
         if let (Some(a), Some(b)) = (rss0, rss1) {
