@@ -338,6 +338,17 @@ fn gpu_splatting_matches_its_cpu_twin_on_a_grid() {
             (k.projected, k.culled_near, k.culled_empty, k.entries),
             "{name}: counters"
         );
+        // Pre-shaded, the GPU leaves transparent volume kernels out before projection: some
+        // of those the twin culls as empty, never more (the rest are surface splats, zero
+        // volumes or values at the transfer function's edges), and the image stays the twin's.
+        assert!(c.left_out <= k.culled_empty, "{name}: {c:?}");
+        if shading == Shading::Pre && k.culled_empty > 0 {
+            assert!(
+                c.left_out > 0,
+                "{name}: none left out of {}",
+                k.culled_empty
+            );
+        }
         // The work counters behind `vmls bench`'s ceiling shares: f32 and f64 may disagree on
         // a footprint's zero at its cutoff edge, and on a pixel's opacity at the threshold
         // (surface splats: 1.1% of updates measured).

@@ -443,6 +443,49 @@ fn a_new_camera_reuses_the_splatting_kernels_pipelines_and_buffers() {
     finish(ctx);
 }
 
+/// Pre-shaded frames draw only the kernels their transfer function does not make transparent:
+/// a frame of another function uploads them again, classified by it, and each frame equals its
+/// CPU twin (which projects every kernel and culls the transparent ones), the first function's
+/// frame the same to the bit when it comes back.
+#[test]
+fn pre_shaded_kernels_are_left_out_by_each_frames_transfer_function() {
+    let (ctx, _) = gpu();
+    let upper = "transfer.points=[[0.0,0,0,0,0],[0.5,0,0,0,0],[0.6,1,0.5,0.2,8],[1,1,0.5,0.2,8]]";
+    let lower = "transfer.points=[[0.0,0.2,0.5,1,8],[0.4,0.2,0.5,1,8],[0.5,0,0,0,0],[1,0,0,0,0]]";
+    let scenes = [upper, lower, upper].map(|tf| scene(&["render.method=\"splat\"", tf]));
+    let field = scenes[0].field(|_| {}).expect("field");
+    let mut renderer = Renderer::new(&ctx, field.clone()).expect("renderer");
+    let mut frames = Vec::new();
+    for s in &scenes {
+        let (gpu, report) = gpu_frame(&mut renderer, s);
+        let cpu =
+            splat_image(&setup(s, &field, Shading::Pre), &field, &s.transfer).expect("CPU twin");
+        let diff = max_diff(&gpu, &cpu.pixels);
+        let (c, k) = (report.counts, cpu.counts);
+        eprintln!(
+            "left out {} of {} ({} culled empty by the twin): {diff:.2e}",
+            c.left_out, c.projected, k.culled_empty
+        );
+        assert!(diff < GPU_TOLERANCE, "GPU vs CPU {diff:.3e}");
+        assert_eq!(
+            (c.projected, c.culled_empty, c.kept()),
+            (k.projected, k.culled_empty, k.kept())
+        );
+        assert!(
+            c.left_out > c.projected / 4 && c.left_out <= k.culled_empty,
+            "{c:?}"
+        );
+        frames.push((gpu, c.left_out));
+    }
+    assert_ne!(
+        frames[0].1, frames[1].1,
+        "the two functions leave out other kernels"
+    );
+    assert_eq!(frames[0], frames[2], "the first function's frame again");
+    drop(renderer);
+    finish(ctx);
+}
+
 #[test]
 fn negative_data_and_oversized_kernels() {
     // Post-shaded weights carry the data's sign: a field of −0.6 is classified at −0.6, not
@@ -780,7 +823,7 @@ fn the_variant_without_subgroup_operations_draws_the_same_image() {
     use vmls::view::preintegration::PreintegrationTables;
     let (ctx, compiler) = gpu();
     let field = scene(&[]).field(|_| {}).expect("field");
-    let kernels = GpuKernels::upload(&ctx, &field, &[], Vec::new()).expect("kernels");
+    let kernels = GpuKernels::upload(&ctx, &field, &[], Vec::new(), None).expect("kernels");
     let mut renderer = Renderer::new(&ctx, field.clone()).expect("renderer");
     for (name, extra) in [
         (

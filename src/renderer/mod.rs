@@ -236,7 +236,7 @@ pub struct Renderer {
     targets: Option<FrameTargets>,
     /// Splatting: the kernels (uploaded at the first splatting frame), compiled variants and
     /// frame buffers.
-    splat_kernels: Option<GpuKernels>,
+    splat_kernels: Option<Arc<GpuKernels>>,
     splat_pipelines: Vec<SplatPipelines>,
     splat_targets: Option<SplatTargets>,
     /// Set from elsewhere (a Ctrl-C handler) to end a frame after its current submission with

@@ -64,6 +64,7 @@ use crate::raycast::frame::{
     outer_steps, skip_report,
 };
 use crate::raycast::gpu::variant_for_render;
+use crate::splat::gpu::GpuKernels;
 use crate::view::View;
 use crate::vk::{
     BindGroup, Buffer, BufferUsage, ComputePipeline, Context, ExternalCommands, FrameTimer,
@@ -124,6 +125,9 @@ pub(super) struct Slot {
     pub(super) marker: Buffer,
     /// The tables the frame reads, kept alive while it is in flight.
     pub(super) table: Option<Arc<Buffer>>,
+    /// The splat kernels a splatting frame reads, kept alive while it is in flight (a later
+    /// frame of another transfer function uploads others).
+    pub(super) kernels: Option<Arc<GpuKernels>>,
     groups: Vec<BindGroup<'static>>,
     pub(super) timer: FrameTimer,
     variant: Option<Variant>,
@@ -148,6 +152,7 @@ impl Slot {
             args: None,
             marker: Buffer::new(ctx, "frame completion", 4, BufferUsage::Storage)?,
             table: None,
+            kernels: None,
             groups: Vec::new(),
             timer: FrameTimer::new(ctx)?,
             variant: None,
@@ -231,6 +236,8 @@ pub(super) struct SplatSlot {
     pub(super) budget: Option<f64>,
     pub(super) variant: String,
     pub(super) invocations: u32,
+    /// Kernels the frame's upload left out as transparent (`SplatCounts::left_out`).
+    pub(super) left_out: u64,
 }
 
 /// What the renderer learnt from retired frames, applied to the next recordings.
@@ -546,6 +553,7 @@ impl Renderer {
         slot.in_flight = false;
         slot.groups.clear();
         slot.table = None;
+        slot.kernels = None;
         if slot.splatting {
             return self.retire_splat(frame.slot, gpu_ms);
         }

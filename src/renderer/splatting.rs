@@ -70,19 +70,23 @@ impl Renderer {
         } else {
             &[]
         };
+        // Pre-shaded frames draw only the kernels their transfer function does not make
+        // transparent; a recorded frame in flight keeps the kernels it reads.
+        let classify = (shading == Shading::Pre).then_some(view.transfer);
         if !self
             .splat_kernels
             .as_ref()
-            .is_some_and(|k| k.has_surfaces_of(surfaces))
+            .is_some_and(|k| k.serve(surfaces, classify))
         {
             self.splat_kernels = None;
             let kernels = crate::splat::surface::surface_kernels(&self.field, surfaces)?;
-            self.splat_kernels = Some(GpuKernels::upload(
+            self.splat_kernels = Some(Arc::new(GpuKernels::upload(
                 &self.ctx,
                 &self.field,
                 surfaces,
                 kernels,
-            )?);
+                classify,
+            )?));
         }
         let variant = SplatVariant::of(&setup, self.ctx.info());
         let cached = self
@@ -303,6 +307,7 @@ impl Renderer {
         slot.reset_groups();
         // Kept alive while the frame is in flight (released at retire).
         slot.table = table;
+        slot.kernels = Some(kernels.clone());
         if slot.splat.is_none() {
             slot.splat = Some(SplatSlot {
                 constants: None,
@@ -313,6 +318,7 @@ impl Renderer {
                 budget: None,
                 variant: String::new(),
                 invocations: 1,
+                left_out: 0,
             });
         }
         slot.ensure_packed(&ctx, pack.map(|_| pixels * format.bytes()))?;
@@ -399,6 +405,7 @@ impl Renderer {
         s.budget = self.budget;
         s.variant = frame.variant.name();
         s.invocations = frame.variant.group;
+        s.left_out = kernels.left_out();
         let mut groups = recording.detach();
         groups.extend(pack_group.map(|g| g.detach()));
         slot.keep_groups(groups);
@@ -421,13 +428,15 @@ impl Renderer {
             budget,
             variant,
             invocations,
+            left_out,
             ..
         }) = slot.splat.as_mut()
         else {
             return Err(VkError::Usage("retire: the frame's buffers are missing".into()).into());
         };
         match retired_counts(&ctx, targets, setup, plan, *budget, *invocations)? {
-            Retired::Counts(counts) => {
+            Retired::Counts(mut counts) => {
+                counts.add_left_out(*left_out);
                 let hull_segments = targets.retire_segments().map(HullSegments::of);
                 Ok(RecordedFrame {
                     gpu_ms,

@@ -554,6 +554,7 @@ fn frame_counts(stats: &[u32], total: u64, invocations: u32) -> SplatCounts {
         culled_outside: s(2),
         culled_degenerate: s(3),
         culled_empty: s(4),
+        left_out: 0,
         entries: total,
         skipped_occluded: per_group(s(6) | s(13) << 32),
         accumulated: per_group(s(7) | s(14) << 32),
@@ -932,7 +933,11 @@ pub fn splat_frame(
         .collect();
     Ok(SplatGpuImage {
         pixels,
-        counts: frame_counts(&stats, total, pipelines.variant().group),
+        counts: {
+            let mut c = frame_counts(&stats, total, pipelines.variant().group);
+            c.add_left_out(kernels.left_out());
+            c
+        },
         stage_ms,
         submissions,
         variant: pipelines.variant().name(),

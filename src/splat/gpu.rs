@@ -6,6 +6,7 @@ use super::project::KernelKind;
 use super::{Antialias, SCAN_BLOCK, Shading, SplatSetup};
 use crate::field::Field;
 use crate::gpu_types::{CameraBlock, RasterPush, ScanPush, Splat, WalkPush, binding, splat_stat};
+use crate::view::transfer::TransferFunction;
 use crate::vk::{
     Buffer, BufferUsage, ComputePipeline, Context, ShaderCompiler, ShaderSource, VkError,
 };
@@ -47,6 +48,23 @@ pub struct GpuKernels {
     pub(super) count: u32,
     /// The isosurface values whose surface splats follow the volume kernels.
     surface_values: Vec<f64>,
+    /// Pre-shaded: the transfer function whose transparent kernels were left out.
+    classified_by: Option<TransferFunction>,
+    left_out: u64,
+}
+
+/// Whether a volume kernel of value `v` is transparent under `tf` with room to spare: τ is zero
+/// within a relative 1e-5 of v (of the function's scale), so that `splat_project`'s f32 lookup of
+/// the f32 value, whichever segment its rounding picks, gives τ = 0 and culls it as empty.
+pub fn transparent_kernel(tf: &TransferFunction, v: f64) -> bool {
+    let p = tf.points();
+    let scale = v
+        .abs()
+        .max(p[0][0].abs())
+        .max(p[p.len() - 1][0].abs())
+        .max(1e-30);
+    let margin = 1e-5 * scale;
+    v.is_finite() && tf.transparent_on(v - margin, v + margin)
 }
 
 impl GpuKernels {
@@ -54,13 +72,25 @@ impl GpuKernels {
     /// splats of `isosurfaces` (`surface::surface_kernels`; none: no surface splats). A surface
     /// splat keeps its metric's scale in `pos_value.w` and 1 + its isosurface index in
     /// `metric_off.w` (0 for volume kernels).
+    ///
+    /// With `classify` (pre-shaded frames), the volume kernels that transfer function makes
+    /// transparent ([`transparent_kernel`]) are left out: `splat_project` would cull each as
+    /// empty, after paying for it in every SIMD lane (llvmpipe runs both sides of a branch).
+    /// The frame is the same to the bit, since the kept kernels keep their order.
     pub fn upload(
         ctx: &Context,
         field: &Field,
         isosurfaces: &[crate::view::shading::Isosurface],
         surfaces: Vec<super::project::Kernel>,
+        classify: Option<&TransferFunction>,
     ) -> Result<Self, VkError> {
+        let mut left_out = 0u64;
         let data: Vec<crate::gpu_types::Sample> = super::raster::kernels(field)
+            .filter(|k| {
+                let out = classify.is_some_and(|tf| transparent_kernel(tf, k.value));
+                left_out += u64::from(out);
+                !out
+            })
             .chain(surfaces)
             .map(|k| {
                 let m = k.metric.map(|v| v as f32);
@@ -78,19 +108,36 @@ impl GpuKernels {
             .collect();
         let count = u32::try_from(data.len())
             .map_err(|_| VkError::Usage(format!("{} kernels exceed 2³² − 1", data.len())))?;
+        // A buffer of at least one kernel: every kernel may be transparent.
         let bytes: &[u8] = bytemuck::cast_slice(&data);
-        let buffer = Buffer::new(ctx, "splat kernels", bytes.len() as u64, BufferUsage::Texel)?;
-        buffer.write(ctx, bytes)?;
+        let size = (bytes.len() as u64).max(std::mem::size_of::<crate::gpu_types::Sample>() as u64);
+        let buffer = Buffer::new(ctx, "splat kernels", size, BufferUsage::Texel)?;
+        if !bytes.is_empty() {
+            buffer.write(ctx, bytes)?;
+        }
         Ok(Self {
             buffer,
             count,
             surface_values: isosurfaces.iter().map(|i| i.value).collect(),
+            classified_by: classify.cloned(),
+            left_out,
         })
     }
 
-    /// Whether these kernels carry the surface splats of exactly these isosurfaces.
-    pub fn has_surfaces_of(&self, isosurfaces: &[crate::view::shading::Isosurface]) -> bool {
-        self.surface_values.len() == isosurfaces.len()
+    /// Volume kernels left out as transparent.
+    pub fn left_out(&self) -> u64 {
+        self.left_out
+    }
+
+    /// Whether these kernels carry the surface splats of exactly these isosurfaces and were
+    /// classified by `classify` (or not at all, for `None`).
+    pub fn serve(
+        &self,
+        isosurfaces: &[crate::view::shading::Isosurface],
+        classify: Option<&TransferFunction>,
+    ) -> bool {
+        self.classified_by.as_ref() == classify
+            && self.surface_values.len() == isosurfaces.len()
             && self
                 .surface_values
                 .iter()

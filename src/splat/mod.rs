@@ -12,10 +12,11 @@
 //!   sheets: slabs of thickness Δs = `splat.slab` × spacing in the distance t from the eye
 //!   (spherical shells for a perspective camera, planes for an orthographic one), so that every
 //!   pixel's ray is cut at the same t as a ray caster with step Δs would cut it;
-//! - `splat_project` ([`project`]): per kernel, the ray-space Jacobian, footprint, conic,
-//!   resampling filter, bounding box, depth and sheet range, with the culling guards; counts
-//!   one entry per (image tile, sheet) the kernel touches into the bucket `tile · sheets +
-//!   sheet`;
+//! - `splat_project` ([`project`]): per kernel (pre-shaded on the GPU: per kernel its
+//!   transfer function does not make transparent, `gpu::GpuKernels::upload`), the ray-space
+//!   Jacobian, footprint, conic, resampling filter, bounding box, depth and sheet range, with
+//!   the culling guards; counts one entry per (image tile, sheet) the kernel touches into the
+//!   bucket `tile · sheets + sheet`;
 //! - `splat_scan`, `splat_bin` and `splat_order` ([`raster::splat_bin`]): a counting sort of
 //!   the entries by bucket, all on the GPU (an exclusive scan of the bucket counts, a scatter,
 //!   then each bucket in kernel order: frames are the same to the bit on every run), so that
@@ -779,8 +780,13 @@ pub struct SplatCounts {
     pub culled_outside: u64,
     /// Culled: degenerate covariance (det ≤ 0 after the guards).
     pub culled_degenerate: u64,
-    /// Culled: zero weight (transparent or zero-valued).
+    /// Culled: zero weight (transparent or zero-valued), including those left out.
     pub culled_empty: u64,
+    /// Pre-shaded on the GPU: volume kernels the transfer function makes transparent, left out
+    /// before projection (`GpuKernels::upload`). Counted in `projected` and `culled_empty` too,
+    /// so that those keep their meaning (every kernel; every transparent one); 0 on the CPU
+    /// twin, which projects and culls them.
+    pub left_out: u64,
     /// Binned entries (kernel × image tile × sheet).
     pub entries: u64,
     /// Entries never walked: their tile had stopped, every pixel in it opaque.
@@ -808,6 +814,13 @@ pub struct SplatCounts {
 }
 
 impl SplatCounts {
+    /// Counts `n` kernels left out as transparent ([`SplatCounts::left_out`]).
+    pub fn add_left_out(&mut self, n: u64) {
+        self.left_out += n;
+        self.projected += n;
+        self.culled_empty += n;
+    }
+
     /// Kernels that survived projection.
     pub fn kept(&self) -> u64 {
         self.projected

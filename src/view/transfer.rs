@@ -114,6 +114,17 @@ impl TransferFunction {
         ([m(1), m(2), m(3)], m(4))
     }
 
+    /// Whether τ is zero everywhere on [lo, hi] (both one-sided limits at each end, and every
+    /// point between): a piecewise-linear τ ≥ 0 is largest at one of them.
+    pub fn transparent_on(&self, lo: f64, hi: f64) -> bool {
+        let tau = |s: f64, right: bool| self.limit(s, right).1;
+        lo <= hi
+            && [tau(lo, false), tau(lo, true), tau(hi, false), tau(hi, true)]
+                .iter()
+                .all(|&t| t == 0.0)
+            && self.points[self.inside(lo, hi)].iter().all(|p| p[4] == 0.0)
+    }
+
     /// The indices of the points strictly inside (lo, hi), as a range into [`Self::points`].
     pub fn inside(&self, lo: f64, hi: f64) -> std::ops::Range<usize> {
         let p = &self.points;
@@ -187,6 +198,42 @@ mod tests {
         );
         assert_eq!(tf.lookup(-3.0), ([0.0; 3], 0.0));
         assert_eq!(tf.lookup(7.0), ([1.0, 0.5, 0.0], 8.0));
+    }
+
+    #[test]
+    fn transparent_on_finds_exactly_the_ranges_without_extinction() {
+        // τ: 0 up to 0.2, a ramp to 4 at 0.4, 0 from a step at 0.6, 0 beyond; 1 at and past 0.9.
+        let tf = TransferFunction::new(vec![
+            [0.2, 1.0, 0.0, 0.0, 0.0],
+            [0.4, 1.0, 0.0, 0.0, 4.0],
+            [0.6, 1.0, 0.0, 0.0, 4.0],
+            [0.6, 1.0, 0.0, 0.0, 0.0],
+            [0.8, 1.0, 0.0, 0.0, 0.0],
+            [0.9, 1.0, 0.0, 0.0, 1.0],
+        ]);
+        assert!(tf.transparent_on(-5.0, 0.2));
+        assert!(!tf.transparent_on(-5.0, 0.2000001));
+        // The step's lower side has τ = 4 at s = 0.6 itself.
+        assert!(!tf.transparent_on(0.6, 0.7));
+        assert!(tf.transparent_on(0.6000001, 0.8));
+        assert!(!tf.transparent_on(0.7, 0.85));
+        assert!(!tf.transparent_on(0.95, 3.0));
+        assert!(
+            !tf.transparent_on(0.3, 0.1),
+            "an empty range is not vouched for"
+        );
+        // Sampled: wherever it says transparent, τ is 0 at every sample of the range.
+        for i in 0..120 {
+            for w in [0.0, 0.003, 0.05] {
+                let lo = -0.1 + f64::from(i) / 100.0;
+                if tf.transparent_on(lo, lo + w) {
+                    for k in 0..=50 {
+                        let s = lo + w * f64::from(k) / 50.0;
+                        assert_eq!(tf.lookup(s).1, 0.0, "[{lo}, {}] at {s}", lo + w);
+                    }
+                }
+            }
+        }
     }
 
     #[test]

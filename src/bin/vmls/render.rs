@@ -167,6 +167,7 @@ pub fn run_render(
                 "kernels_culled_outside": r.counts.culled_outside,
                 "kernels_culled_degenerate": r.counts.culled_degenerate,
                 "kernels_culled_empty": r.counts.culled_empty,
+                "kernels_left_out_transparent": r.counts.left_out,
                 "kernels_kept": r.counts.kept(),
                 "tile": r.tile,
                 "raster_invocations_per_tile": r.invocations,
@@ -180,7 +181,8 @@ pub fn run_render(
                 "buckets_heapsorted": r.counts.large_buckets,
                 "tile_walks_resumed": r.counts.resumed,
                 "gpu_ms_per_kernel": {
-                    "splat_project": r.stage_ms[0] / r.counts.projected.max(1) as f64,
+                    "splat_project": r.stage_ms[0]
+                        / (r.counts.projected - r.counts.left_out).max(1) as f64,
                     "splat_sort": r.stage_ms[1] / r.counts.kept().max(1) as f64,
                     "splat_raster": r.stage_ms[2] / r.counts.kept().max(1) as f64,
                 },
