@@ -148,3 +148,27 @@ fn gpu_ray_casting_of_the_gaussian_field_matches_the_cpu_reference() {
     drop(renderer);
     finish(ctx);
 }
+
+/// The volumes a pre-shaded frame's first upload computes for its kept kernels alone are the
+/// field's own to the bit; the next request computes every volume and keeps them.
+#[test]
+fn kernel_volumes_of_kept_samples_equal_the_fields() {
+    let field = scattered_field();
+    let fresh = field.clone();
+    let all = field.kernel_volumes();
+    let keep = |i: usize| i.is_multiple_of(3);
+    let partial = fresh.kernel_volumes_where(&keep);
+    assert!(
+        matches!(partial, std::borrow::Cow::Owned(_)),
+        "computed alone"
+    );
+    for i in (0..field.samples.len()).filter(|&i| keep(i)) {
+        assert_eq!(partial.get(i).to_bits(), all.get(i).to_bits(), "sample {i}");
+    }
+    let again = fresh.kernel_volumes_where(&keep);
+    assert!(
+        matches!(again, std::borrow::Cow::Borrowed(_)),
+        "kept the second time"
+    );
+    assert_eq!(*again, *all);
+}

@@ -78,6 +78,8 @@ pub struct Field {
     full_metric: bool,
     /// Gaussian kernel volumes, computed at first use (Gaussian field, splatting).
     volumes: std::sync::OnceLock<KernelVolumes>,
+    /// Set once [`Field::kernel_volumes_where`] computed some volumes alone.
+    partial_volumes: std::sync::OnceLock<()>,
     /// Box of every sample's support (frame-relative): where kernels can reach.
     support_box: (DVec3, DVec3),
     /// [`SampleSet::thinnest_support`], computed at first use (post-shaded splatting's
@@ -215,6 +217,7 @@ impl Field {
             range: frame.range,
             full_metric,
             volumes: std::sync::OnceLock::new(),
+            partial_volumes: std::sync::OnceLock::new(),
             support_box,
             thinnest,
             radii,
@@ -388,20 +391,47 @@ impl Field {
     /// The volume each sample's Gaussian kernel stands for ([`KernelVolumes`]), computed once.
     pub fn kernel_volumes(&self) -> &KernelVolumes {
         self.volumes.get_or_init(|| {
-            // The octree where it was built; a deferred one is not built for this (a kd-tree
-            // per class of support radii finds the same kernels in O(n) memory).
-            let neighbours: Box<dyn Neighbours + Sync + '_> =
-                match (self.octree_if_built(), self.grid()) {
-                    (Some(o), _) => Box::new(o),
-                    (None, Some(g)) => Box::new(g),
-                    (None, None) => Box::new(SupportIndex::new(&self.samples)),
-                };
             KernelVolumes::compute(
                 &self.samples,
-                neighbours.as_ref(),
+                self.volume_neighbours().as_ref(),
                 self.reconstruction.sigma,
             )
         })
+    }
+
+    /// The kernel volumes of the samples `keep` accepts, each the value
+    /// [`Field::kernel_volumes`] holds (the others may be 0): a pre-shaded frame uploads only
+    /// the kernels its transfer function does not make transparent, and its first frame need
+    /// not estimate the others' (about a third of a 10⁶-point cloud's first frame). Computed
+    /// for those alone the first time, not kept; from the second call on, every volume is
+    /// computed once and kept, so that later transfer functions read them.
+    pub fn kernel_volumes_where(
+        &self,
+        keep: &(dyn Fn(usize) -> bool + Sync),
+    ) -> std::borrow::Cow<'_, KernelVolumes> {
+        if let Some(v) = self.volumes.get() {
+            return std::borrow::Cow::Borrowed(v);
+        }
+        if self.partial_volumes.set(()).is_err() {
+            return std::borrow::Cow::Borrowed(self.kernel_volumes());
+        }
+        std::borrow::Cow::Owned(KernelVolumes::compute_where(
+            &self.samples,
+            self.volume_neighbours().as_ref(),
+            self.reconstruction.sigma,
+            keep,
+        ))
+    }
+
+    /// What the kernel volumes are estimated with: the octree where it was built; a deferred
+    /// one is not built for this (a kd-tree per class of support radii finds the same kernels
+    /// in O(n) memory).
+    fn volume_neighbours(&self) -> Box<dyn Neighbours + Sync + '_> {
+        match (self.octree_if_built(), self.grid()) {
+            (Some(o), _) => Box::new(o),
+            (None, Some(g)) => Box::new(g),
+            (None, None) => Box::new(SupportIndex::new(&self.samples)),
+        }
     }
 
     /// The reconstructed field and its gradient at x (frame-relative), by the scene's method;

@@ -17,7 +17,7 @@
 //! and adapts to clustered or graded ones.
 
 use super::mls::{MlsValue, Neighbours};
-use crate::samples::supports::in_spatial_order;
+use crate::samples::supports::in_spatial_order_where;
 use crate::samples::{Metric, Positions, SampleSet, metric_apply, metric_rho2};
 
 /// Default σ as a fraction of the support radius.
@@ -79,6 +79,17 @@ impl KernelVolumes {
     /// Computes the volumes of a sample set; `neighbours` must list, for any x, every sample
     /// whose support contains x (the field's octree or grid).
     pub fn compute(samples: &SampleSet, neighbours: &(dyn Neighbours + Sync), sigma: f64) -> Self {
+        Self::compute_where(samples, neighbours, sigma, &|_| true)
+    }
+
+    /// [`KernelVolumes::compute`] for the samples `keep` accepts only, the others' volumes
+    /// left 0: not a field's volumes, but each kept one is the value `compute` gives it.
+    pub fn compute_where(
+        samples: &SampleSet,
+        neighbours: &(dyn Neighbours + Sync),
+        sigma: f64,
+        keep: &(dyn Fn(usize) -> bool + Sync),
+    ) -> Self {
         let positions = match &samples.positions {
             Positions::Grid { spacing, .. } => {
                 return KernelVolumes::Uniform(spacing[0] * spacing[1] * spacing[2]);
@@ -95,7 +106,7 @@ impl KernelVolumes {
             // The sample's own kernel always counts, so density > 0.
             1.0 / density.max(f64::MIN_POSITIVE)
         };
-        KernelVolumes::PerSample(in_spatial_order(positions, volume))
+        KernelVolumes::PerSample(in_spatial_order_where(positions, keep, volume))
     }
 }
 

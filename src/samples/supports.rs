@@ -247,8 +247,22 @@ where
     T: Send + Default + Clone,
     F: Fn(usize) -> T + Sync,
 {
+    in_spatial_order_where(positions, &|_| true, f)
+}
+
+/// [`in_spatial_order`] for the samples `keep` accepts; the others get `T::default()`.
+pub fn in_spatial_order_where<T, F>(
+    positions: &[[f64; 3]],
+    keep: &(dyn Fn(usize) -> bool + Sync),
+    f: F,
+) -> Vec<T>
+where
+    T: Send + Default + Clone,
+    F: Fn(usize) -> T + Sync,
+{
     let computed: Vec<(u32, T)> = morton_order(positions)
         .into_par_iter()
+        .filter(|&i| keep(i as usize))
         .map(|i| (i, f(i as usize)))
         .collect();
     let mut out = vec![T::default(); positions.len()];

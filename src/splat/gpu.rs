@@ -84,13 +84,20 @@ impl GpuKernels {
         surfaces: Vec<super::project::Kernel>,
         classify: Option<&TransferFunction>,
     ) -> Result<Self, VkError> {
-        let mut left_out = 0u64;
-        let data: Vec<crate::gpu_types::Sample> = super::raster::kernels(field)
-            .filter(|k| {
-                let out = classify.is_some_and(|tf| transparent_kernel(tf, k.value));
-                left_out += u64::from(out);
-                !out
-            })
+        let values = &field.samples.values;
+        let keep =
+            |i: usize| classify.is_none_or(|tf| !transparent_kernel(tf, f64::from(values.get(i))));
+        // Only the kept kernels' volumes are needed (all of them without `classify`).
+        let volumes = match classify {
+            Some(_) => field.kernel_volumes_where(&keep),
+            None => std::borrow::Cow::Borrowed(field.kernel_volumes()),
+        };
+        let n = field.samples.len();
+        let kept: Vec<usize> = (0..n).filter(|&i| keep(i)).collect();
+        let left_out = (n - kept.len()) as u64;
+        let data: Vec<crate::gpu_types::Sample> = kept
+            .into_iter()
+            .map(|i| super::raster::kernel_of_volume(field, i, volumes.get(i)))
             .chain(surfaces)
             .map(|k| {
                 let m = k.metric.map(|v| v as f32);

@@ -49,12 +49,17 @@ pub fn kernels(field: &Field) -> impl Iterator<Item = Kernel> + '_ {
 
 /// Sample i's kernel, frame-relative.
 pub fn kernel(field: &Field, i: usize) -> Kernel {
+    kernel_of_volume(field, i, field.kernel_volumes().get(i))
+}
+
+/// Sample i's kernel with its volume given.
+pub fn kernel_of_volume(field: &Field, i: usize, volume: f64) -> Kernel {
     let s = &field.samples;
     Kernel {
         position: s.position(i),
         value: f64::from(s.values.get(i)),
         metric: s.metric(i),
-        volume: field.kernel_volumes().get(i),
+        volume,
         kind: KernelKind::Volume,
     }
 }
