@@ -236,8 +236,6 @@ pub(super) struct SplatSlot {
     pub(super) budget: Option<f64>,
     pub(super) variant: String,
     pub(super) invocations: u32,
-    /// Kernels the frame's upload left out as transparent (`SplatCounts::left_out`).
-    pub(super) left_out: u64,
 }
 
 /// What the renderer learnt from retired frames, applied to the next recordings.
@@ -553,9 +551,10 @@ impl Renderer {
         slot.in_flight = false;
         slot.groups.clear();
         slot.table = None;
-        slot.kernels = None;
+        let kernels = slot.kernels.take();
         if slot.splatting {
-            return self.retire_splat(frame.slot, gpu_ms);
+            let left_out = kernels.map_or(0, |k| k.left_out());
+            return self.retire_splat(frame.slot, gpu_ms, left_out);
         }
         if let Some(t) = slot.targets.as_mut() {
             retire_segments(t);

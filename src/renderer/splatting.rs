@@ -318,7 +318,6 @@ impl Renderer {
                 budget: None,
                 variant: String::new(),
                 invocations: 1,
-                left_out: 0,
             });
         }
         slot.ensure_packed(&ctx, pack.map(|_| pixels * format.bytes()))?;
@@ -405,18 +404,19 @@ impl Renderer {
         s.budget = self.budget;
         s.variant = frame.variant.name();
         s.invocations = frame.variant.group;
-        s.left_out = kernels.left_out();
         let mut groups = recording.detach();
         groups.extend(pack_group.map(|g| g.detach()));
         slot.keep_groups(groups);
         Ok(slot.begin(slot_index, generation, dispatches, true, self.id))
     }
 
-    /// [`Renderer::retire`] for a slot whose frame splatted, once it completed.
+    /// [`Renderer::retire`] for a slot whose frame splatted, once it completed; `left_out` is
+    /// what its kernels' upload left out as transparent (`SplatCounts::left_out`).
     pub(super) fn retire_splat(
         &mut self,
         slot: usize,
         gpu_ms: Option<f64>,
+        left_out: u64,
     ) -> Result<RecordedFrame, RenderError> {
         let ctx = self.ctx.clone();
         let slot = &mut self.slots[slot];
@@ -428,7 +428,6 @@ impl Renderer {
             budget,
             variant,
             invocations,
-            left_out,
             ..
         }) = slot.splat.as_mut()
         else {
@@ -436,7 +435,7 @@ impl Renderer {
         };
         match retired_counts(&ctx, targets, setup, plan, *budget, *invocations)? {
             Retired::Counts(mut counts) => {
-                counts.add_left_out(*left_out);
+                counts.add_left_out(left_out);
                 let hull_segments = targets.retire_segments().map(HullSegments::of);
                 Ok(RecordedFrame {
                     gpu_ms,

@@ -85,16 +85,24 @@ impl GpuKernels {
         classify: Option<&TransferFunction>,
     ) -> Result<Self, VkError> {
         let values = &field.samples.values;
-        let keep =
-            |i: usize| classify.is_none_or(|tf| !transparent_kernel(tf, f64::from(values.get(i))));
+        let n = field.samples.len();
+        let kept: Vec<usize> = (0..n)
+            .filter(|&i| {
+                classify.is_none_or(|tf| !transparent_kernel(tf, f64::from(values.get(i))))
+            })
+            .collect();
+        let left_out = (n - kept.len()) as u64;
         // Only the kept kernels' volumes are needed (all of them without `classify`).
         let volumes = match classify {
-            Some(_) => field.kernel_volumes_where(&keep),
+            Some(_) => {
+                let mut keep = vec![false; n];
+                for &i in &kept {
+                    keep[i] = true;
+                }
+                field.kernel_volumes_where(&|i| keep[i])
+            }
             None => std::borrow::Cow::Borrowed(field.kernel_volumes()),
         };
-        let n = field.samples.len();
-        let kept: Vec<usize> = (0..n).filter(|&i| keep(i)).collect();
-        let left_out = (n - kept.len()) as u64;
         let data: Vec<crate::gpu_types::Sample> = kept
             .into_iter()
             .map(|i| super::raster::kernel_of_volume(field, i, volumes.get(i)))
