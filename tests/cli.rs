@@ -476,13 +476,11 @@ fn splatting_from_the_command_line() {
     bad.extend(["--set", "render.method=\"splat\""]);
     assert_fails(&vmls(&bad), &["--eval-map", "splat"], &map);
 
-    // The f64 CPU twins: the Gaussian field's reference image.
+    // The f64 CPU twins: the Gaussian field's reference image, and the twin's evaluations in
+    // --stats, which the midpoint rule makes equal to the kernel's.
     let cpu = d.join("ref.png");
-    let mut args = vec![
-        "render",
-        "--cpu",
-        "-o",
-        s(&cpu),
+    let cpu_stats = d.join("ref.json");
+    let twin = [
         "--set",
         "reconstruction.method=\"gaussian\"",
         "--set",
@@ -490,6 +488,8 @@ fn splatting_from_the_command_line() {
         "--set",
         "volume.resolution=9",
     ];
+    let mut args = vec!["render", "--cpu", "-o", s(&cpu), "--stats", s(&cpu_stats)];
+    args.extend(twin);
     args.extend(size);
     let out = vmls(&args);
     assert!(
@@ -501,6 +501,21 @@ fn splatting_from_the_command_line() {
         image::open(&cpu).expect("png").to_rgba8().dimensions(),
         (24, 16)
     );
+    let gpu_stats = d.join("gpu.json");
+    let mut args = vec!["render", "-o", s(&img), "--stats", s(&gpu_stats)];
+    args.extend(twin);
+    args.extend(size);
+    assert!(vmls(&args).status.success());
+    let read = |p: &std::path::Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(p).expect("stats")).expect("json")
+    };
+    let (c, g) = (read(&cpu_stats), read(&gpu_stats));
+    assert_eq!(c["device"], "cpu (f64 reference twins)");
+    let twin_evaluations = c["function_evaluations"]
+        .as_u64()
+        .expect("twin's evaluations");
+    assert!(twin_evaluations > 0);
+    assert_eq!(Some(twin_evaluations), g["function_evaluations"].as_u64());
 }
 
 #[cfg(unix)]

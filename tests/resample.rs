@@ -177,7 +177,7 @@ fn gpu_fast_path_images_match_the_cpu_twin_with_and_without_skipping() {
         let mut cpus = Vec::new();
         let mut saved = Vec::new();
         for skip in ["render.skip=false", "render.skip=true"] {
-            // The adaptive integrator skips with the Hermite criterion, whole tops at a time.
+            // The adaptive integrator skips with the Hermite criterion, at tops' starts.
             let s = scene(&[&m, skip, "render.adaptive=\"hermite\"", "render.l_max=1"]);
             let b = both(&s);
             let w = worst(&b.gpu, &b.cpu);

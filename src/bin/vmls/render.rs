@@ -312,6 +312,7 @@ pub fn run_render_cpu(
     )?;
     let field = scene.field(|_| {})?;
     let mut estimates = None;
+    let mut evaluations = None;
     let (pixels, splat, skip): (Vec<[f64; 4]>, _, _) = match scene.render.method.splat_shading() {
         Some(shading) => {
             let setup = scene.splat_setup(shading, &field)?;
@@ -334,6 +335,7 @@ pub fn run_render_cpu(
             )
             .map_err(RenderError::from)?;
             let skip = setup.skip.then(|| vmls::raycast::skip_report(&image));
+            evaluations = Some(image.iter().map(|p| u64::from(p.evaluations)).sum::<u64>());
             if scene.render.method == vmls::view::Method::Adaptive {
                 estimates = Some(
                     image
@@ -365,6 +367,7 @@ pub fn run_render_cpu(
                 "footprints_skipped_by_occlusion": c.skipped_occluded,
                 "footprints_accumulated": c.accumulated,
             })),
+            "function_evaluations": evaluations,
             "skip": skip.as_ref().map(skip_json),
             "error_estimate": estimates.as_deref().map(estimate_json),
         });
