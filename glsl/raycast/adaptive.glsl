@@ -64,6 +64,10 @@ float hermite_error(vec4 a, vec4 e, float transmittance, out vec4 mid) {
 }
 #endif
 
+// A knot's w is 1 (defined) or 0 (undefined); this marks a chunk's knot as not evaluated, the
+// ray inside a run of empty blocks that passed the chunk's end.
+#define PENDING (-1.0)
+
 #if ADAPTIVE_CRITERION == 1
 // The stack lives in registers: constant-trip loops, unrolled by NIR into selects, stand in for
 // dynamic indexing (LAVAPIPE.md: a dynamically indexed local array in divergent code ran at
@@ -227,8 +231,11 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
         // At a top's start, outside the inner loop (whose `if` bodies every lane pays): tops
         // inside a run of empty blocks are skipped, and the integration resumes from a fresh
         // knot at the last unit before the run's end (twin of the skip in integrate_hermite).
-        // A run past this chunk resumes at the next chunk's first top, which looks again.
+        // A run past this chunk leaves the knot pending (PENDING) instead of evaluating one at
+        // the chunk's end: the next chunk's first top looks again and resumes, whether or not
+        // the run reaches past that top's start, with the one knot the twin evaluates.
         bool restart = false;
+        bool defer = false;
         if (top_start) {
             float start = t0 + float(k) * l_max;
             float run = skip_run(o, d, start, t1, true);
@@ -237,16 +244,21 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
                 count_skip(t1 - start, tops - k, 0u);
                 return CHUNK_FINISHED;
             }
-            if (j > k) {
+            if (j > k || a.w == PENDING) {
                 restart = true;
+                defer = j >= last;
                 uint to = min(j, last);
                 float resume = t0 + float(to) * l_max;
-                position = j < last ? resume_position(resume, t1, l_max, units, run) : 0u;
+                position = defer ? 0u : resume_position(resume, t1, l_max, units, run);
                 float into = l_max * (float(position) / float(units));
-                count_skip(float(to - k) * l_max + into, to - k, 1u);
+                count_skip(float(to - k) * l_max + into, to - k, defer ? 0u : 1u);
                 k = to;
                 t_eval = resume + into;
             }
+        }
+        if (defer) {
+            a.w = PENDING;
+            break;
         }
 #endif
         // The one evaluation of this iteration.
@@ -267,6 +279,12 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
         sp += 1;
     }
     if (tail) {
+#if SKIP == 1
+        // A run that passed the chunk before ended in the last top, short of its first unit.
+        if (a.w == PENDING) {
+            a = knot(o, d, t0 + float(k) * l_max, evaluations);
+        }
+#endif
         // From the last covered unit to t1, clipped, without a test: once per chunk.
         float len = t1 - a.x;
         if (len > 0.0) {
@@ -369,15 +387,18 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
 #endif
 
 // The chunk state is the knot `a` with the controller's depth folded into w:
-// ±(predicted + 1), negative when f is undefined at a.
+// ±(predicted + 1), negative when f is undefined at a, plus PENDING_STATE when the knot is
+// pending (PENDING).
+#define PENDING_STATE 1024.0
 uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, inout vec4 state,
                inout vec3 color, inout float transmittance, inout uint evaluations) {
-    uint predicted = uint(abs(state.w));
+    bool pending = abs(state.w) > PENDING_STATE;
+    uint predicted = uint(abs(state.w) - (pending ? PENDING_STATE : 0.0));
     predicted = predicted > 0u ? predicted - 1u : 0u;
-    vec4 a = vec4(state.xyz, state.w > 0.0 ? 1.0 : 0.0);
+    vec4 a = vec4(state.xyz, pending ? PENDING : (state.w > 0.0 ? 1.0 : 0.0));
     uint outcome = integrate_adaptive(o, d, t0, t1, first, last_step, a, predicted, color,
                                       transmittance, evaluations);
-    float packed = float(predicted + 1u);
+    float packed = float(predicted + 1u) + (a.w == PENDING ? PENDING_STATE : 0.0);
     state = vec4(a.xyz, a.w > 0.0 ? packed : -packed);
     return outcome;
 }
