@@ -411,34 +411,11 @@ fn adaptive_skipping_across_chunks_evaluates_what_the_twin_does() {
     )
     .expect("scene");
     let field = s.field(|_| {}).expect("field");
-    let mut setup = s.ray_setup(&field).expect("setup");
-    let tables = vmls::raycast::build_tables(
-        &setup,
-        &field,
-        &s.transfer,
-        s.render.table_resolution,
-        |_| {},
-    );
-    let cpu = vmls::raycast::raycast_image(&setup, &field, &s.transfer, tables.as_ref())
-        .expect("CPU twin");
+    let (images, cpu) = gpu_frames_in_chunks_and_cpu(&field, &s, &[None, Some(1)]);
     let cpu_evals: u64 = cpu.iter().map(|p| u64::from(p.evaluations)).sum();
     let cpu_rgba: Vec<[f64; 4]> = cpu.iter().map(|p| p.rgba).collect();
     assert!(vmls::raycast::skip_report(&cpu).evaluations_saved > 0);
-    let (ctx, compiler) = gpu();
-    let gf = vmls::field::gpu::GpuField::upload(&ctx, &field).expect("upload");
-    for chunk in [None, Some(1)] {
-        setup.chunk = chunk;
-        let image = vmls::renderer::render(
-            &ctx,
-            &compiler,
-            &field,
-            &gf,
-            &s.transfer,
-            tables.as_ref(),
-            &setup,
-            |_| {},
-        )
-        .expect("render");
+    for (image, chunk) in images.iter().zip([None, Some(1)]) {
         assert!(image.variant.contains("-skip"), "{}", image.variant);
         let gpu_evals: u64 = image
             .counts
@@ -456,6 +433,4 @@ fn adaptive_skipping_across_chunks_evaluates_what_the_twin_does() {
         let w = worst(&image.pixels, &cpu_rgba);
         assert!(w < 1e-4, "chunk {chunk:?}: GPU vs CPU {w:.2e}");
     }
-    drop(gf);
-    finish(ctx);
 }

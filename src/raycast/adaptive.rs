@@ -316,11 +316,11 @@ fn integrate_hermite(
                         return;
                     }
                     if j > k {
-                        let start = t0 + j as f64 * setup.l_max_world;
-                        let p = resume_position(start, t1, setup.l_max_world, units, run);
+                        let resume = t0 + j as f64 * setup.l_max_world;
+                        let p = resume_position(resume, t1, setup.l_max_world, units, run);
                         let into = setup.l_max_world * (p as f64 / units as f64);
                         ray.count_skip((j - k) as f64 * setup.l_max_world + into, j - k, 1);
-                        break (start + into, 0, Next::Restart(j, p));
+                        break (resume + into, 0, Next::Restart(j, p));
                     }
                 }
                 // A new end at the controller's depth, or deeper until the interval is aligned

@@ -85,26 +85,17 @@ impl GpuKernels {
         classify: Option<&TransferFunction>,
     ) -> Result<Self, VkError> {
         let values = &field.samples.values;
-        let n = field.samples.len();
-        let kept: Vec<usize> = (0..n)
-            .filter(|&i| {
-                classify.is_none_or(|tf| !transparent_kernel(tf, f64::from(values.get(i))))
-            })
+        let keep: Vec<bool> = (0..field.samples.len())
+            .map(|i| classify.is_none_or(|tf| !transparent_kernel(tf, f64::from(values.get(i)))))
             .collect();
-        let left_out = (n - kept.len()) as u64;
+        let left_out = keep.iter().filter(|&&k| !k).count() as u64;
         // Only the kept kernels' volumes are needed (all of them without `classify`).
         let volumes = match classify {
-            Some(_) => {
-                let mut keep = vec![false; n];
-                for &i in &kept {
-                    keep[i] = true;
-                }
-                field.kernel_volumes_where(&|i| keep[i])
-            }
+            Some(_) => field.kernel_volumes_where(&|i| keep[i]),
             None => std::borrow::Cow::Borrowed(field.kernel_volumes()),
         };
-        let data: Vec<crate::gpu_types::Sample> = kept
-            .into_iter()
+        let data: Vec<crate::gpu_types::Sample> = (0..keep.len())
+            .filter(|&i| keep[i])
             .map(|i| super::raster::kernel_of_volume(field, i, volumes.get(i)))
             .chain(surfaces)
             .map(|k| {

@@ -192,24 +192,44 @@ pub fn gpu_and_cpu_frames(
     field: &Field,
     scene: &Scene,
 ) -> (vmls::renderer::GpuImage, Vec<vmls::raycast::PixelResult>) {
-    let setup = scene.ray_setup(field).expect("setup");
+    let (mut images, cpu) = gpu_frames_in_chunks_and_cpu(field, scene, &[None]);
+    (images.remove(0), cpu)
+}
+
+/// [`gpu_and_cpu_frames`] with the GPU frame rendered once per entry of `chunks` (outer steps
+/// per dispatch, `RaySetup::chunk`; None: the default).
+pub fn gpu_frames_in_chunks_and_cpu(
+    field: &Field,
+    scene: &Scene,
+    chunks: &[Option<u32>],
+) -> (
+    Vec<vmls::renderer::GpuImage>,
+    Vec<vmls::raycast::PixelResult>,
+) {
+    let mut setup = scene.ray_setup(field).expect("setup");
     let tables = vmls::raycast::build_tables(&setup, field, &scene.transfer, 128, |_| {});
     let cpu = vmls::raycast::raycast_image(&setup, field, &scene.transfer, tables.as_ref())
         .expect("CPU twin");
     let (ctx, compiler) = gpu();
     let gf = vmls::field::gpu::GpuField::upload(&ctx, field).expect("upload");
-    let img = vmls::renderer::render(
-        &ctx,
-        &compiler,
-        field,
-        &gf,
-        &scene.transfer,
-        tables.as_ref(),
-        &setup,
-        |_| {},
-    )
-    .expect("render");
+    let images = chunks
+        .iter()
+        .map(|&chunk| {
+            setup.chunk = chunk;
+            vmls::renderer::render(
+                &ctx,
+                &compiler,
+                field,
+                &gf,
+                &scene.transfer,
+                tables.as_ref(),
+                &setup,
+                |_| {},
+            )
+            .expect("render")
+        })
+        .collect();
     drop(gf);
     finish(ctx);
-    (img, cpu)
+    (images, cpu)
 }
