@@ -1,6 +1,7 @@
 //! The persistent renderer: a new camera reuses tables, pipeline and buffers and gives exactly
 //! the one-shot image; a new transfer function rebuilds only the tables, an isosurface only the
-//! pipeline, a new size only the buffers, and each of those frames equals a fresh renderer's.
+//! pipeline, a new size only the buffers, coarser tables only the tables (in the last ones'
+//! buffer), and each of those frames equals a fresh renderer's.
 mod common;
 
 use common::*;
@@ -88,6 +89,18 @@ fn later_frames_rebuild_only_what_changed() {
     assert!(!fifth.tables_built && !fifth.pipeline_built && fifth.targets_allocated);
     assert_eq!(image.pixels.len(), 32 * 16);
     let once = fresh(&iso, &wide);
+    assert_eq!((image.pixels, image.counts), (once.pixels, once.counts));
+
+    // Coarser tables: rebuilt, and written into the larger buffer of the last ones (56² of
+    // 64² entries), whose tail the kernel must not read.
+    let coarse = scene(&[
+        "transfer.points=[[0.0, 0.0, 0.0, 0.0, 0.0], [1.0, 1.0, 0.2, 0.1, 5.0]]",
+        "transfer.isosurfaces=[{ value = 0.5, color = [1.0, 1.0, 1.0], opacity = 1.0 }]",
+        "render.table_resolution=56",
+    ]);
+    let (image, sixth) = frame(&mut renderer, &coarse, &wide);
+    assert!(sixth.tables_built && !sixth.pipeline_built && !sixth.targets_allocated);
+    let once = fresh(&coarse, &wide);
     assert_eq!((image.pixels, image.counts), (once.pixels, once.counts));
     drop(renderer);
     finish(ctx);

@@ -152,16 +152,38 @@ pub(crate) fn frame_pipeline(
 
 /// The tables as the kernel reads them: every length's table, then the zero-length limits.
 pub fn table_buffer(ctx: &Context, tables: &PreintegrationTables) -> Result<Buffer, VkError> {
-    let data: Vec<[f32; 4]> = tables
-        .tables
-        .iter()
-        .flatten()
-        .chain(&tables.limits)
-        .copied()
-        .collect();
     // Read through a texel view only: bounded by maxTexelBufferElements (128 M on lavapipe),
     // not by the 128 MiB of maxStorageBufferRange, which held 9 tables to 965² entries.
-    Buffer::from_slice_as(ctx, "preintegration tables", &data, BufferUsage::Texel)
+    let buffer = Buffer::new(
+        ctx,
+        "preintegration tables",
+        table_bytes(tables),
+        BufferUsage::Texel,
+    )?;
+    write_tables(ctx, &buffer, tables)?;
+    Ok(buffer)
+}
+
+/// Bytes of [`table_buffer`]'s contents.
+pub fn table_bytes(tables: &PreintegrationTables) -> u64 {
+    let entries: usize = tables.tables.iter().map(Vec::len).sum::<usize>() + tables.limits.len();
+    (entries * std::mem::size_of::<[f32; 4]>()) as u64
+}
+
+/// Writes the tables to the start of `buffer` ([`table_buffer`]'s layout), one part per table
+/// and no concatenation on the host (hundreds of MiB at 2048² entries).
+pub fn write_tables(
+    ctx: &Context,
+    buffer: &Buffer,
+    tables: &PreintegrationTables,
+) -> Result<(), VkError> {
+    let parts: Vec<&[u8]> = tables
+        .tables
+        .iter()
+        .chain(std::iter::once(&tables.limits))
+        .map(|t| bytemuck::cast_slice(t))
+        .collect();
+    buffer.write_parts(ctx, &parts)
 }
 
 /// Per-frame constants: kernel parameters, transfer function, isosurfaces, skip table.

@@ -16,7 +16,7 @@ use crate::field::{Field, RenderError, scalar_range};
 use crate::raycast::frame::FrameTargets;
 use crate::raycast::frame::{
     Bands, FramePipelines, Readback, frame_bindings, frame_constants, frame_pipeline,
-    frame_targets, next_pipeline, read_image, run_bands, table_buffer,
+    frame_targets, next_pipeline, read_image, run_bands, table_buffer, table_bytes, write_tables,
 };
 pub use crate::raycast::frame::{default_chunk, outer_steps};
 use crate::raycast::gpu::variant_for_render;
@@ -523,7 +523,26 @@ impl Renderer {
         if let Some(t) = self.tables.current()
             && self.table_buffer.as_ref().map(|(b, _)| *b) != Some(self.tables.builds())
         {
-            self.table_buffer = Some((self.tables.builds(), Arc::new(table_buffer(&self.ctx, t)?)));
+            let bytes = table_bytes(t);
+            // New tables go into the last ones' buffer where no recorded frame holds it and
+            // it is large enough without wasting half: on lavapipe a fresh buffer is fresh
+            // pages, and faulting in hundreds of MiB took a third of a tolerance's pilots.
+            let reusable = self
+                .table_buffer
+                .as_mut()
+                .and_then(|(_, b)| Arc::get_mut(b))
+                .filter(|b| (bytes..=2 * bytes).contains(&b.size()));
+            match reusable {
+                Some(buffer) => write_tables(&self.ctx, buffer, t)?,
+                None => {
+                    // The old buffer goes first, so that the two are never held together.
+                    self.table_buffer = None;
+                    self.table_buffer = Some((0, Arc::new(table_buffer(&self.ctx, t)?)));
+                }
+            }
+            if let Some((built, _)) = &mut self.table_buffer {
+                *built = self.tables.builds();
+            }
         }
         Ok((tables_built, table_ms))
     }

@@ -523,25 +523,26 @@ impl PreintegrationTables {
     /// (built by this function for the same transfer function, range and resolution, which
     /// the caller guarantees) instead of building it again: a table depends on nothing else,
     /// so it is the same to the bit. A step ladder that halves its step shares all lengths but
-    /// one with the rung before (`renderer::tolerance`).
+    /// one with the rung before (`renderer::tolerance`). The tables are moved, not copied: at
+    /// 2048² a table is 64 MiB, and a copy into fresh pages cost more than building one.
     pub fn build_reusing(
         tf: &TransferFunction,
         s_range: (f64, f64),
         lengths: &[f64],
         resolution: usize,
-        previous: Option<&PreintegrationTables>,
+        previous: Option<PreintegrationTables>,
         progress: impl Fn(f64) + Sync,
     ) -> Self {
         let n = resolution.max(2);
-        let reuse = |l: f64| {
+        let mut previous = previous
+            .filter(|p| p.resolution == n && p.tables.len() == p.lengths.len())
+            .map(|p| p.lengths.into_iter().zip(p.tables).collect::<Vec<_>>())
+            .unwrap_or_default();
+        let mut reuse = |l: f64| {
             previous
-                .filter(|p| p.resolution == n && p.tables.len() == p.lengths.len())
-                .and_then(|p| {
-                    p.lengths
-                        .iter()
-                        .position(|&pl| pl.to_bits() == l.to_bits())
-                        .map(|i| p.tables[i].clone())
-                })
+                .iter()
+                .position(|(pl, _)| pl.to_bits() == l.to_bits())
+                .map(|i| previous.swap_remove(i).1)
         };
         let (s_min, s_max) = table_range(s_range);
         let mut tables = Self {
@@ -712,11 +713,11 @@ impl TableCache {
         if self.key.as_ref() != Some(&key) {
             // Tables of the same transfer function, resolution and range are reused length by
             // length; only the new lengths are built.
-            let previous = self
+            let same = self
                 .key
                 .as_ref()
-                .filter(|k| k.0 == key.0 && k.2 == key.2 && k.3 == key.3)
-                .and(self.tables.as_ref());
+                .is_some_and(|k| k.0 == key.0 && k.2 == key.2 && k.3 == key.3);
+            let previous = self.tables.take().filter(|_| same);
             self.tables = Some(PreintegrationTables::build_reusing(
                 tf, key.3, &key.1, resolution, previous, progress,
             ));
@@ -756,7 +757,7 @@ mod tests {
             (0.0, 1.0),
             &lengths,
             24,
-            Some(&first),
+            Some(first.clone()),
             |_| {},
         );
         let fresh = PreintegrationTables::build(&tf, (0.0, 1.0), &lengths, 24, |_| {});
@@ -767,8 +768,14 @@ mod tests {
             "the shared length was taken over"
         );
         // Another resolution is never taken over.
-        let other =
-            PreintegrationTables::build_reusing(&tf, (0.0, 1.0), &[0.25], 16, Some(&first), |_| {});
+        let other = PreintegrationTables::build_reusing(
+            &tf,
+            (0.0, 1.0),
+            &[0.25],
+            16,
+            Some(first.clone()),
+            |_| {},
+        );
         assert_eq!(other.tables[0].len(), 16 * 16);
     }
 
