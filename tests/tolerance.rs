@@ -325,3 +325,38 @@ fn the_error_estimate_matches_its_cpu_twin() {
     }
     finish(ctx);
 }
+
+/// `reconstruction.resample = "auto"` counts a tolerance's pilot frames in the first frame's
+/// cost: the built-in 41³ scene at 64², adaptive, declines the fast path alone (81³ = 531 441
+/// fine points, each a solve, against about 1.2e5 solves in the frame) and takes it under a
+/// tolerance (six pilots and the frame, each at least the ladder's first level: about 8.3e5).
+/// An explicit `render.table_resolution` leaves two of the pilots (3.6e5), and the general
+/// path.
+#[test]
+fn auto_counts_a_tolerance_s_pilots_in_the_first_frame() {
+    let factor = |extra: &[&str]| {
+        let mut o: Vec<String> = [
+            "camera.width=64",
+            "camera.height=64",
+            "render.method=\"adaptive\"",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+        o.extend(extra.iter().map(|s| s.to_string()));
+        let scene = Scene::load(None, &o).expect("scene");
+        let field = scene.field(|_| {}).expect("field");
+        field.fast_path()["factor"].as_u64().expect("factor")
+    };
+    assert_eq!(factor(&[]), 0, "no tolerance: one frame");
+    assert_eq!(
+        factor(&["render.tolerance=3e-3"]),
+        2,
+        "a tolerance's pilots"
+    );
+    assert_eq!(
+        factor(&["render.tolerance=3e-3", "render.table_resolution=1024"]),
+        0,
+        "two pilots"
+    );
+}

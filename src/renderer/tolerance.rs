@@ -53,6 +53,7 @@
 
 use super::Renderer;
 use crate::field::RenderError;
+use crate::view::camera::Camera;
 use crate::view::{AdaptiveCriterion, Method, RenderSettings, View, ViewKey};
 use std::time::Instant;
 
@@ -193,6 +194,49 @@ fn at_level(base: &RenderSettings, k: f64) -> (RenderSettings, f64) {
     (s, value)
 }
 
+/// A pilot frame's pixels for a frame of `camera` (module documentation). Splatting pilots at
+/// the frame's size: a smaller image costs it little less (its projection and sort are per
+/// kernel) and would pack more entries into each tile.
+pub fn pilot_size(camera: &Camera, method: Method) -> (u32, u32) {
+    let scale = f64::from(PILOT_EDGE) / f64::from(camera.width.max(camera.height));
+    if scale < 1.0 && method.splat_shading().is_none() {
+        let shrink = |n: u32| ((f64::from(n) * scale).round() as u32).max(1);
+        (shrink(camera.width), shrink(camera.height))
+    } else {
+        (camera.width, camera.height)
+    }
+}
+
+/// The fewest pilot frames a tolerance renders before its frame for these settings (none
+/// without one), each costing at least the ladder's first level ([`first_level`]): two there
+/// to check the tables, that level and the next, and two at the level chosen to check the
+/// tables again; fewer where the scene gives the ladder's key or the tables' resolution. What
+/// the first frame of a scene under a tolerance costs beyond its own (`reconstruction.resample
+/// = "auto"` counts them, `Scene::frame_evaluations`).
+pub fn fewest_pilots(settings: &RenderSettings) -> u32 {
+    if settings.tolerance.is_none() {
+        return 0;
+    }
+    let (_, key_given) = ladder_key(settings);
+    let tables = settings.method.preintegrated() && !settings.given.table_resolution;
+    let ladder = if key_given { 0 } else { 2 };
+    let table_checks = match (tables, key_given) {
+        (false, _) => 0,
+        (true, true) => 2,
+        (true, false) => 4,
+    };
+    ladder + table_checks
+}
+
+/// The settings of a tolerance's first level, the coarsest it renders (`settings` themselves
+/// without a tolerance or where the scene gives the ladder's key).
+pub fn first_level(settings: &RenderSettings) -> RenderSettings {
+    if settings.tolerance.is_none() || ladder_key(settings).1 {
+        return settings.clone();
+    }
+    at_level(settings, 0.0).0
+}
+
 /// Level 0's step or sheet thickness, in sample spacings.
 const START_STEP: f64 = 1.0;
 /// Level 0's ε, in multiples of the criterion's default.
@@ -280,13 +324,7 @@ impl Renderer {
             }
         }
         let mut camera = *view.camera;
-        let scale = f64::from(PILOT_EDGE) / f64::from(camera.width.max(camera.height));
-        // Splatting pilots at the frame's size: a smaller image costs it little less (its
-        // projection and sort are per kernel) and would pack more entries into each tile.
-        if scale < 1.0 && view.settings.method.splat_shading().is_none() {
-            camera.width = ((f64::from(camera.width) * scale).round() as u32).max(1);
-            camera.height = ((f64::from(camera.height) * scale).round() as u32).max(1);
-        }
+        (camera.width, camera.height) = pilot_size(&camera, view.settings.method);
         let mut pilots = 0u32;
         let mut pilot_gpu_ms = 0.0;
         let mut pilot = |r: &mut Renderer, s: &RenderSettings| -> Result<Image, RenderError> {

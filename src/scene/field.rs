@@ -214,17 +214,22 @@ impl Scene {
     /// Solves a first ray-cast frame of this scene would make on the general path, estimated
     /// from 32 × 32 camera rays clipped to the field's box, stepping `render.step` (adaptive:
     /// the geometric mean of `l_min` and `l_max`; early termination and a mesh's hull ignored,
-    /// so an upper estimate), scaled to the image's pixels. `None` for a degenerate camera.
+    /// so an upper estimate), scaled to the image's pixels. Under `render.tolerance` the first
+    /// frame is also its pilots: the fewest it renders, at the ladder's first level and the
+    /// pilots' size, and the frame at that level
+    /// ([`crate::renderer::tolerance::fewest_pilots`]; the ladder only refines from there, so
+    /// that part is a lower estimate). `None` for a degenerate camera.
     pub fn frame_evaluations(&self, field: &Field) -> Option<u64> {
         const RAYS: u32 = 32;
         let basis = self.camera.basis().ok()?;
         let (lo, hi) = field.bounds();
-        let spacings = match self.render.method {
+        let settings = crate::renderer::tolerance::first_level(&self.render);
+        let spacings = match settings.method {
             crate::view::Method::Adaptive => {
-                (self.render.l_min_spacings * self.render.l_max_spacings).sqrt()
+                (settings.l_min_spacings * settings.l_max_spacings).sqrt()
             }
-            crate::view::Method::Reference => self.render.reference_step_spacings,
-            _ => self.render.step_spacings,
+            crate::view::Method::Reference => settings.reference_step_spacings,
+            _ => settings.step_spacings,
         };
         let step = spacings * field.min_spacing();
         let length: f64 = self
@@ -233,7 +238,13 @@ impl Scene {
             .filter_map(|(o, d)| crate::view::camera::clip_box(o, d, lo, hi))
             .map(|(t0, t1)| t1 - t0)
             .sum();
-        let pixels = f64::from(self.camera.width.max(1)) * f64::from(self.camera.height.max(1));
+        let area = |(w, h): (u32, u32)| f64::from(w.max(1)) * f64::from(h.max(1));
+        let pilot = area(crate::renderer::tolerance::pilot_size(
+            &self.camera,
+            settings.method,
+        ));
+        let pixels = area((self.camera.width, self.camera.height))
+            + f64::from(crate::renderer::tolerance::fewest_pilots(&self.render)) * pilot;
         Some((length / step * pixels / f64::from(RAYS * RAYS)).min(u64::MAX as f64) as u64)
     }
 
