@@ -157,17 +157,11 @@ pub fn table_buffer(ctx: &Context, tables: &PreintegrationTables) -> Result<Buff
     let buffer = Buffer::new(
         ctx,
         "preintegration tables",
-        table_bytes(tables),
+        tables.bytes(),
         BufferUsage::Texel,
     )?;
     write_tables(ctx, &buffer, tables)?;
     Ok(buffer)
-}
-
-/// Bytes of [`table_buffer`]'s contents.
-pub fn table_bytes(tables: &PreintegrationTables) -> u64 {
-    let entries: usize = tables.tables.iter().map(Vec::len).sum::<usize>() + tables.limits.len();
-    (entries * std::mem::size_of::<[f32; 4]>()) as u64
 }
 
 /// Writes the tables to the start of `buffer` ([`table_buffer`]'s layout), one part per table

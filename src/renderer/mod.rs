@@ -16,7 +16,7 @@ use crate::field::{Field, RenderError, scalar_range};
 use crate::raycast::frame::FrameTargets;
 use crate::raycast::frame::{
     Bands, FramePipelines, Readback, frame_bindings, frame_constants, frame_pipeline,
-    frame_targets, next_pipeline, read_image, run_bands, table_buffer, table_bytes, write_tables,
+    frame_targets, next_pipeline, read_image, run_bands, table_buffer, write_tables,
 };
 pub use crate::raycast::frame::{default_chunk, outer_steps};
 use crate::raycast::gpu::variant_for_render;
@@ -523,7 +523,7 @@ impl Renderer {
         if let Some(t) = self.tables.current()
             && self.table_buffer.as_ref().map(|(b, _)| *b) != Some(self.tables.builds())
         {
-            let bytes = table_bytes(t);
+            let bytes = t.bytes();
             // New tables go into the last ones' buffer where no recorded frame holds it and
             // it is large enough without wasting half: on lavapipe a fresh buffer is fresh
             // pages, and faulting in hundreds of MiB took a third of a tolerance's pilots.

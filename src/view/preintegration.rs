@@ -516,33 +516,30 @@ impl PreintegrationTables {
         resolution: usize,
         progress: impl Fn(f64) + Sync,
     ) -> Self {
-        Self::build_reusing(tf, s_range, lengths, resolution, None, progress)
+        Self::build_reusing(tf, s_range, lengths, resolution, &mut Vec::new(), progress)
     }
 
-    /// [`PreintegrationTables::build`], taking the table of any length that `previous` holds
-    /// (built by this function for the same transfer function, range and resolution, which
-    /// the caller guarantees) instead of building it again: a table depends on nothing else,
-    /// so it is the same to the bit. A step ladder that halves its step shares all lengths but
-    /// one with the rung before (`renderer::tolerance`). The tables are moved, not copied: at
-    /// 2048² a table is 64 MiB, and a copy into fresh pages cost more than building one.
+    /// [`PreintegrationTables::build`], taking from `spare` each table of `lengths` at this
+    /// resolution that it holds (built by this function for the same transfer function and
+    /// range, which the caller guarantees) instead of building it again: a table depends on
+    /// nothing else, so it is the same to the bit. A step ladder that halves its step shares all
+    /// lengths but one with the rung before, and a tolerance's checks of finer tables return to
+    /// the coarser ones (`renderer::tolerance`). The tables are moved, not copied: at 2048² a
+    /// table is 64 MiB, and a copy into fresh pages cost more than building one.
     pub fn build_reusing(
         tf: &TransferFunction,
         s_range: (f64, f64),
         lengths: &[f64],
         resolution: usize,
-        previous: Option<PreintegrationTables>,
+        spare: &mut Vec<SpareTable>,
         progress: impl Fn(f64) + Sync,
     ) -> Self {
         let n = resolution.max(2);
-        let mut previous = previous
-            .filter(|p| p.resolution == n && p.tables.len() == p.lengths.len())
-            .map(|p| p.lengths.into_iter().zip(p.tables).collect::<Vec<_>>())
-            .unwrap_or_default();
         let mut reuse = |l: f64| {
-            previous
+            spare
                 .iter()
-                .position(|(pl, _)| pl.to_bits() == l.to_bits())
-                .map(|i| previous.swap_remove(i).1)
+                .position(|t| t.resolution == n && t.length.to_bits() == l.to_bits())
+                .map(|i| spare.remove(i).entries)
         };
         let (s_min, s_max) = table_range(s_range);
         let mut tables = Self {
@@ -616,6 +613,26 @@ impl PreintegrationTables {
         tables
     }
 
+    /// Bytes of the tables and the limits.
+    pub fn bytes(&self) -> u64 {
+        let entries = self.tables.iter().map(Vec::len).sum::<usize>() + self.limits.len();
+        (entries * std::mem::size_of::<[f32; 4]>()) as u64
+    }
+
+    /// The tables, each with its length and the resolution, for a later
+    /// [`PreintegrationTables::build_reusing`].
+    pub fn into_spares(self) -> impl Iterator<Item = SpareTable> {
+        let resolution = self.resolution;
+        self.lengths
+            .into_iter()
+            .zip(self.tables)
+            .map(move |(length, entries)| SpareTable {
+                resolution,
+                length,
+                entries,
+            })
+    }
+
     /// Bilinear lookup of `table` at (s_f, s_b), clamped to the table's range.
     pub fn lookup(&self, table: &[[f32; 4]], s_f: f64, s_b: f64) -> [f64; 4] {
         let n = self.resolution;
@@ -684,15 +701,35 @@ impl PreintegrationTables {
 /// What tables depend on: control points, lengths, resolution, scalar range.
 type TableKey = (Vec<[f64; 5]>, Vec<f64>, usize, (f64, f64));
 
+/// One table of an earlier build, kept for the next ([`PreintegrationTables::build_reusing`]).
+#[derive(Debug, Clone)]
+pub struct SpareTable {
+    pub resolution: usize,
+    /// World units.
+    pub length: f64,
+    pub entries: Vec<[f32; 4]>,
+}
+
+/// The spare tables a [`TableCache`] keeps whatever the current tables' size.
+const SPARE_FLOOR_BYTES: u64 = 64 << 20;
+
 /// Keeps the last preintegration tables and rebuilds them only when what they depend on changes:
 /// the transfer function, the lengths, the resolution or the scalar range (for applications
 /// that re-render with a new camera, or edit the transfer function interactively). Shared by
 /// ray casting (its integrators' lengths) and post-shaded splatting (its half sheets).
+///
+/// Tables of earlier builds of the same transfer function and range are kept as spares, newest
+/// last, up to half the current tables' bytes (at least [`SPARE_FLOOR_BYTES`]), and a new build
+/// takes every length it needs from them: a tolerance's pilots go back and forth between
+/// resolutions and levels (`renderer::tolerance`). A new transfer function or range drops
+/// them.
 #[derive(Debug, Default)]
 pub struct TableCache {
     key: Option<TableKey>,
     tables: Option<PreintegrationTables>,
+    spare: Vec<SpareTable>,
     builds: usize,
+    reused: usize,
 }
 
 impl TableCache {
@@ -711,16 +748,37 @@ impl TableCache {
         }
         let key = (tf.points().to_vec(), lengths, resolution, range);
         if self.key.as_ref() != Some(&key) {
-            // Tables of the same transfer function, resolution and range are reused length by
-            // length; only the new lengths are built.
-            let same = self
+            let same_function = self
                 .key
                 .as_ref()
-                .is_some_and(|k| k.0 == key.0 && k.2 == key.2 && k.3 == key.3);
-            let previous = self.tables.take().filter(|_| same);
-            self.tables = Some(PreintegrationTables::build_reusing(
-                tf, key.3, &key.1, resolution, previous, progress,
-            ));
+                .is_some_and(|k| k.0 == key.0 && k.3 == key.3);
+            let old = self.tables.take();
+            if same_function {
+                self.spare
+                    .extend(old.into_iter().flat_map(|t| t.into_spares()));
+            } else {
+                self.spare.clear();
+            }
+            let before = self.spare.len();
+            let tables = PreintegrationTables::build_reusing(
+                tf,
+                key.3,
+                &key.1,
+                resolution,
+                &mut self.spare,
+                progress,
+            );
+            self.reused += before - self.spare.len();
+            let budget = (tables.bytes() / 2).max(SPARE_FLOOR_BYTES);
+            let bytes = |t: &SpareTable| (t.entries.len() * std::mem::size_of::<[f32; 4]>()) as u64;
+            let mut kept: u64 = self.spare.iter().map(bytes).sum();
+            let mut oldest = 0;
+            while kept > budget {
+                kept -= bytes(&self.spare[oldest]);
+                oldest += 1;
+            }
+            self.spare.drain(..oldest);
+            self.tables = Some(tables);
             self.key = Some(key);
             self.builds += 1;
         }
@@ -735,6 +793,11 @@ impl TableCache {
     /// How many times tables were built.
     pub fn builds(&self) -> usize {
         self.builds
+    }
+
+    /// How many tables builds took from earlier ones instead of building them.
+    pub fn reused(&self) -> usize {
+        self.reused
     }
 }
 
@@ -752,14 +815,9 @@ mod tests {
         let first = PreintegrationTables::build(&tf, (0.0, 1.0), &[0.5, 0.25], 24, |_| {});
         // The next rung of a halving ladder: one length shared, one new.
         let lengths = [0.25, 0.125];
-        let reused = PreintegrationTables::build_reusing(
-            &tf,
-            (0.0, 1.0),
-            &lengths,
-            24,
-            Some(first.clone()),
-            |_| {},
-        );
+        let mut spare: Vec<SpareTable> = first.clone().into_spares().collect();
+        let reused =
+            PreintegrationTables::build_reusing(&tf, (0.0, 1.0), &lengths, 24, &mut spare, |_| {});
         let fresh = PreintegrationTables::build(&tf, (0.0, 1.0), &lengths, 24, |_| {});
         assert_eq!(reused.tables, fresh.tables);
         assert_eq!(reused.limits, fresh.limits);
@@ -767,16 +825,43 @@ mod tests {
             reused.tables[0], first.tables[1],
             "the shared length was taken over"
         );
+        assert_eq!(spare.len(), 1, "the table taken is no longer spare");
+        assert_eq!(spare[0].length, 0.5);
         // Another resolution is never taken over.
-        let other = PreintegrationTables::build_reusing(
-            &tf,
-            (0.0, 1.0),
-            &[0.25],
-            16,
-            Some(first.clone()),
-            |_| {},
-        );
+        let mut spare: Vec<SpareTable> = first.clone().into_spares().collect();
+        let other =
+            PreintegrationTables::build_reusing(&tf, (0.0, 1.0), &[0.25], 16, &mut spare, |_| {});
+        assert_eq!(spare.len(), 2);
         assert_eq!(other.tables[0].len(), 16 * 16);
+    }
+
+    #[test]
+    fn the_cache_takes_back_tables_of_an_earlier_resolution() {
+        let tf = TransferFunction::new(vec![[0.0, 1.0, 0.5, 0.2, 0.0], [1.0, 0.2, 0.5, 1.0, 4.0]]);
+        let mut cache = TableCache::default();
+        let lengths = vec![0.5, 0.25];
+        let get = |cache: &mut TableCache, r: usize| {
+            cache
+                .get(&tf, (0.0, 1.0), lengths.clone(), r, |_| {})
+                .cloned()
+                .expect("tables")
+        };
+        let coarse = get(&mut cache, 24);
+        let fine = get(&mut cache, 32);
+        assert_eq!((cache.builds(), cache.reused()), (2, 0));
+        // Back to the coarse tables, as a tolerance does after checking finer ones: both
+        // lengths come from the spares, to the bit.
+        let again = get(&mut cache, 24);
+        assert_eq!((cache.builds(), cache.reused()), (3, 2));
+        assert_eq!(again.tables, coarse.tables);
+        assert_eq!(get(&mut cache, 32).tables, fine.tables);
+        assert_eq!(cache.reused(), 4);
+        // Another transfer function drops the spares.
+        let other =
+            TransferFunction::new(vec![[0.0, 1.0, 0.5, 0.2, 1.0], [1.0, 0.2, 0.5, 1.0, 4.0]]);
+        cache.get(&other, (0.0, 1.0), lengths.clone(), 24, |_| {});
+        cache.get(&tf, (0.0, 1.0), lengths.clone(), 24, |_| {});
+        assert_eq!((cache.builds(), cache.reused()), (6, 4));
     }
 
     #[test]
