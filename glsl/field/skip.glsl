@@ -88,6 +88,13 @@ bool skip_span(vec3 o, vec3 d, float t, float t_end, out float t_exit) {
     return empty;
 }
 
+// Stage skip_reaches_end (twin of Blocks::reaches_end): whether a run of empty blocks that
+// stopped at t_exit covers the ray up to t_end (past it, or at the grid's far face up to a
+// nudge): the ray's rest is left out instead of costing a knot to resume and one to close it.
+bool skip_reaches_end(float t_exit, float t_end) {
+    return t_exit >= t_end - float(RUN_NUDGE) * min(skip_size.x, min(skip_size.y, skip_size.z));
+}
+
 // Twin of skip::resume_interval: the first interval of length l from t0 that reaches past
 // `t_exit`, no earlier than `next`.
 uint resume_interval(float t0, float l, float t_exit, uint next) {

@@ -64,9 +64,6 @@ float hermite_error(vec4 a, vec4 e, float transmittance, out vec4 mid) {
 }
 #endif
 
-// A knot's w is 1 (defined) or 0 (undefined); this marks a chunk's knot as not evaluated, the
-// ray inside a run of empty blocks that passed the chunk's end.
-#define PENDING (-1.0)
 
 #if ADAPTIVE_CRITERION == 1
 // The stack lives in registers: constant-trip loops, unrolled by NIR into selects, stand in for
@@ -120,7 +117,18 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
     uint units = 1u << uint(ADAPTIVE_LEVELS - 1);
     uint tops = uint(ceil((t1 - t0) / l_max));
     if (first == 0u) {
+#if SKIP == 1
+        // Pending (counted as saved) unless at a brick's face: the first top's start looks for
+        // a run of empty blocks and resumes from a fresh knot (twin of the pending first knot).
+        if (CLIP_START(t0) == t0) {
+            a = vec4(t0, 0.0, 0.0, PENDING);
+            count_skip(0.0, 1u, 0u);
+        } else {
+            a = knot(o, d, CLIP_START(t0), evaluations);
+        }
+#else
         a = knot(o, d, CLIP_START(t0), evaluations);
+#endif
         predicted = 0u;
     }
     vec4 stack[ADAPTIVE_LEVELS];
@@ -240,7 +248,7 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
             float start = t0 + float(k) * l_max;
             float run = skip_run(o, d, start, t1, true);
             uint j = resume_interval(t0, l_max, run, k);
-            if (j >= tops) {
+            if (j >= tops || skip_reaches_end(run, t1)) {
                 count_skip(t1 - start, tops - k, 0u);
                 return CHUNK_FINISHED;
             }
@@ -283,6 +291,7 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
         // A run that passed the chunk before ended in the last top, short of its first unit.
         if (a.w == PENDING) {
             a = knot(o, d, t0 + float(k) * l_max, evaluations);
+            count_skip(0.0, 0u, 1u);
         }
 #endif
         // From the last covered unit to t1, clipped, without a test: once per chunk.

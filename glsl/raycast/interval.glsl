@@ -6,6 +6,10 @@
 #ifndef VMLS_INTERVAL_GLSL
 #define VMLS_INTERVAL_GLSL
 
+// A knot's w is 1 (defined) or 0 (undefined); PENDING marks a knot not evaluated yet, the ray
+// inside a run of empty blocks (at its start, or past a chunk's end).
+#define PENDING (-1.0)
+
 // A point on the ray: (t, s, ∇f·d, defined ? 1 : 0); its gradient is returned separately.
 vec4 knot_gradient(vec3 o, vec3 d, float t, inout uint evaluations, out vec3 gradient) {
     MlsResult m = mls_evaluate(o + d * t);

@@ -235,12 +235,27 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
 // needs more: one crossing an isosurface or possibly touching one (needs_surfaces), or one
 // past the last skip lookup. The round around it does that work, once per round for the lanes
 // that stopped, and the ray's last interval follows, once per chunk.
+//
+// With skipping, a knot that starts the ray or resumes it after a run of empty blocks is left
+// pending (w = PENDING) until an interval needs it: a ray that starts in an empty run, or whose
+// run is cut at SKIP_RUN blocks or at a chunk's end, does not evaluate where it would only
+// skip again (twin of the pending knot in integrate_fixed). Every pending knot counts as saved
+// until it is evaluated.
 uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, inout vec4 prev,
                inout vec3 color, inout float transmittance, inout uint evaluations) {
     float l = params.integrator.step_world;
     uint steps = uint(ceil((t1 - t0) / l));
     if (first == 0u) {
+#if SKIP == 1
+        if (CLIP_START(t0) == t0) {
+            prev = vec4(t0, 0.0, 0.0, PENDING);
+            count_skip(0.0, 1u, 0u);
+        } else {
+            prev = knot(o, d, CLIP_START(t0), evaluations);
+        }
+#else
         prev = knot(o, d, CLIP_START(t0), evaluations);
+#endif
     }
     uint last = min(last_step, steps);
     uint full_end = min(last, steps - 1u);
@@ -289,19 +304,23 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
             checked = i;
             if (skip_span(o, d, ts, t1, t_exit)) {
                 uint j = min(resume_interval(t0, l, t_exit, i), last);
-                if (j >= steps) {
+                if (j >= steps || skip_reaches_end(t_exit, t1)) {
                     count_skip(t1 - ts, steps - i, 0u);
                     return CHUNK_FINISHED;
                 }
                 if (j > i) {
-                    count_skip(float(j - i) * l, j - i, 1u);
-                    prev = knot(o, d, t0 + float(j) * l, evaluations);
+                    count_skip(float(j - i) * l, j - i, 0u);
+                    prev.w = PENDING;
                     i = j;
                     continue;
                 }
             } else {
                 occupied_until = t_exit;
             }
+        }
+        if (prev.w == PENDING && i < full_end) {
+            prev = knot(o, d, CLIP_START(t0 + float(i) * l), evaluations);
+            count_skip(0.0, 0u, 1u);
         }
 #endif
         for (; i < full_end; ++i) {
@@ -339,10 +358,15 @@ uint integrate(vec3 o, vec3 d, float t0, float t1, uint first, uint last_step, i
 #if SKIP == 1
         if (ta >= occupied_until) {
             float t_exit;
-            if (skip_span(o, d, ta, t1, t_exit) && resume_interval(t0, l, t_exit, i) >= steps) {
+            if (skip_span(o, d, ta, t1, t_exit)
+                && (resume_interval(t0, l, t_exit, i) >= steps || skip_reaches_end(t_exit, t1))) {
                 count_skip(t1 - ta, 1u, 0u);
                 return CHUNK_FINISHED;
             }
+        }
+        if (prev.w == PENDING) {
+            prev = knot(o, d, ta, evaluations);
+            count_skip(0.0, 0u, 1u);
         }
 #endif
         next = knot(o, d, tb, evaluations);

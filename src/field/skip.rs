@@ -22,7 +22,11 @@
 //! lies inside [t, end of the run] is skipped and the integration resumes at the first one that
 //! reaches past it, with one evaluation for its start knot. Following the run matters when
 //! blocks are about one step long (a 1 mm MRI at step 1–2: resuming after each block cost the
-//! evaluation it saved). Midpoint steps in an empty block add
+//! evaluation it saved). A run that reaches the ray's end (stage `skip_reaches_end`) ends the
+//! ray, and with preintegration the start knot, the ray's first included, is pending until an
+//! interval needs it: a ray that meets no occupied block evaluates nothing (it used to pay its
+//! first knot, one to resume at its last interval and one to close it, which was more than half
+//! of a fixed step's evaluations on a thin shell). Midpoint steps in an empty block add
 //! nothing, so the midpoint rule gives the same image with and without skipping; preintegrated
 //! intervals inside an empty block would add the table's value for a straight line between their
 //! end values, which may cross extinction the field never reaches, so skipping changes those
@@ -223,6 +227,20 @@ impl Blocks {
         self.ranges[b[0] + self.dims[0] * (b[1] + self.dims[1] * b[2])]
     }
 
+    /// [`RUN_NUDGE`] in world units.
+    fn nudge(&self) -> f64 {
+        RUN_NUDGE * self.size.min_element()
+    }
+
+    /// Stage `skip_reaches_end`: whether a run of empty blocks that stopped at `exit` covers
+    /// the ray up to `t_end`. A run stops past `t_end`, or at the grid's far face, which a box
+    /// clipped to the grid ends on up to rounding (a nudge's margin): the rest of the ray is
+    /// empty and its last interval is left out, as every interval inside the run is, instead
+    /// of costing a knot to resume and one to close it.
+    pub fn reaches_end(&self, exit: f64, t_end: f64) -> bool {
+        exit >= t_end - self.nudge()
+    }
+
     /// Stage `skip_run`: from t, across consecutive empty blocks (with `empty` false:
     /// occupied ones), at most [`SKIP_RUN`] of them and no further once past `t_end`; the ray
     /// parameter where the run stops (t itself when the block at t is not of that kind). Each
@@ -238,7 +256,7 @@ impl Blocks {
         t_end: f64,
         empty: bool,
     ) -> f64 {
-        let nudge = RUN_NUDGE * self.size.min_element();
+        let nudge = self.nudge();
         let mut t = t;
         for _ in 0..SKIP_RUN {
             if t >= t_end {

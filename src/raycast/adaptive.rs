@@ -269,7 +269,20 @@ fn integrate_hermite(
     let peak = tf.peak();
     let mut stack: Vec<(Knot, usize)> = Vec::with_capacity(levels);
     let tops = ((t1 - t0) / setup.l_max_world).ceil() as u64;
-    let mut a = knot(ray, head);
+    // With skipping the first knot (unless at a brick's face) is pending, counted as saved: the
+    // first top's start looks for a run of empty blocks and resumes from a fresh knot, at the
+    // start itself where its block is occupied (the kernel's PENDING).
+    let mut pending = ray.skip.is_some() && head <= t0;
+    let mut a = if pending {
+        ray.count_skip(0.0, 1, 0);
+        Knot {
+            t: head,
+            s: None,
+            gradient: [0.0; 3],
+        }
+    } else {
+        knot(ray, head)
+    };
     let mut predicted = 0;
     let (mut k, mut position) = (0u64, 0u64);
     if head > t0 {
@@ -311,11 +324,11 @@ fn integrate_hermite(
                 if let Some(skip) = ray.skip.filter(|_| position == 0) {
                     let run = skip.run(ray.o, ray.d, start, t1, true);
                     let j = resume_interval(t0, setup.l_max_world, run, k);
-                    if j >= tops {
+                    if j >= tops || skip.reaches_end(run, t1) {
                         ray.count_skip(t1 - start, tops - k, 0);
                         return;
                     }
-                    if j > k {
+                    if j > k || pending {
                         let resume = t0 + j as f64 * setup.l_max_world;
                         let p = resume_position(resume, t1, setup.l_max_world, units, run);
                         let into = setup.l_max_world * (p as f64 / units as f64);
@@ -370,12 +383,18 @@ fn integrate_hermite(
             Next::Split => push_half(&mut stack, m, depth),
             Next::Restart(j, p) => {
                 a = m;
+                pending = false;
                 k = j;
                 position = p;
             }
         }
     }
-    // The tail: from the last covered unit to t1, clipped, without a test.
+    // The tail: from the last covered unit to t1, clipped, without a test (a ray shorter
+    // than one unit is all tail, its first knot still pending).
+    if pending && k + 1 == tops {
+        ray.count_skip(0.0, 0, 1);
+        a = knot(ray, t0 + k as f64 * setup.l_max_world);
+    }
     let len = t1 - a.t;
     if k + 1 == tops && len > 0.0 {
         let e = knot(ray, t1);

@@ -31,6 +31,12 @@ impl Skip<'_> {
         (empty, self.run(o, d, exit, t_end, empty))
     }
 
+    /// Stage `skip_reaches_end`: a run of empty blocks ending at `exit` covers the ray to
+    /// `t_end`.
+    pub(super) fn reaches_end(&self, exit: f64, t_end: f64) -> bool {
+        self.blocks.reaches_end(exit, t_end)
+    }
+
     /// Stage `skip_run`: across blocks that are all `empty` or all occupied.
     pub(super) fn run(&self, o: DVec3, d: DVec3, t: f64, t_end: f64, empty: bool) -> f64 {
         self.blocks.run(self.table, o, d, t, t_end, empty)
@@ -59,7 +65,8 @@ impl Ray<'_> {
     /// anyway (twin of count_skip).
     pub(super) fn count_skip(&mut self, len: f64, steps: u64, restart: u64) {
         self.skipped += len;
-        self.saved += (steps - restart) as u32;
+        // A pending knot counted as saved comes back as a restart without steps.
+        self.saved = (u64::from(self.saved) + steps - restart) as u32;
     }
 
     /// Stage `count_error`: adds an accepted interval of `len` whose criterion estimated

@@ -112,7 +112,10 @@ fn integrate_riemann(
 
 /// Preintegration with a constant step l (`fixed`): s at interval ends, one lookup of the
 /// l-table per interval; the last, shorter interval uses the clipped composite, and so does the
-/// first where it starts at `head` > t0 (a brick's face, [`anchored`]).
+/// first where it starts at `head` > t0 (a brick's face, [`anchored`]). With skipping, the knot
+/// that starts the ray (unless at a brick's face) or resumes it after a run of empty blocks is
+/// pending until an interval needs it, counted as saved until then: a ray that starts inside
+/// an empty run does not evaluate where it only skips.
 fn integrate_fixed(
     ray: &mut Ray<'_>,
     setup: &RaySetup,
@@ -121,7 +124,12 @@ fn integrate_fixed(
 ) {
     let l = setup.step_world;
     let steps = ((t1 - t0) / l).ceil() as u64;
-    let mut prev = knot(ray, head);
+    let mut prev = if ray.skip.is_some() && head <= t0 {
+        ray.count_skip(0.0, 1, 0);
+        None
+    } else {
+        Some(knot(ray, head))
+    };
     let mut occupied_until = f64::NEG_INFINITY;
     let mut i = 0;
     while i < steps {
@@ -136,13 +144,13 @@ fn integrate_fixed(
             let (empty, exit) = skip.span(ray.o, ray.d, ta, t1);
             if empty {
                 let j = resume_interval(t0, l, exit, i);
-                if j >= steps {
+                if j >= steps || skip.reaches_end(exit, t1) {
                     ray.count_skip(t1 - ta, steps - i, 0);
                     break;
                 }
                 if j > i {
-                    ray.count_skip((j - i) as f64 * l, j - i, 1);
-                    prev = knot(ray, t0 + j as f64 * l);
+                    ray.count_skip((j - i) as f64 * l, j - i, 0);
+                    prev = None;
                     i = j;
                     continue;
                 }
@@ -150,15 +158,22 @@ fn integrate_fixed(
                 occupied_until = exit;
             }
         }
+        let prev_knot = match prev {
+            Some(p) => p,
+            None => {
+                ray.count_skip(0.0, 0, 1);
+                knot(ray, ta)
+            }
+        };
         let next = knot(ray, tb);
         let full = i + 1 < steps && !(i == 0 && head > t0);
         let hermite = (full && setup.interval == IntervalModel::Hermite)
-            .then(|| hermite_segment(ray, setup, tables, &prev, &next, 0))
+            .then(|| hermite_segment(ray, setup, tables, &prev_knot, &next, 0))
             .flatten();
         let plain = hermite
-            .unwrap_or_else(|| knot_segment(tables, &prev, &next, tb - ta, full.then_some(0)));
-        emit_interval(ray, setup, tables, &prev, &next, tb - ta, plain);
-        prev = next;
+            .unwrap_or_else(|| knot_segment(tables, &prev_knot, &next, tb - ta, full.then_some(0)));
+        emit_interval(ray, setup, tables, &prev_knot, &next, tb - ta, plain);
+        prev = Some(next);
         if 1.0 - ray.transmittance > setup.early_termination {
             break;
         }
