@@ -331,10 +331,44 @@ fn eval_map_is_a_heat_map_with_a_legend() {
     let stats: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&st).expect("stats")).expect("json");
     assert!(stats["evaluations_per_ray"].as_f64().expect("mean") > 0.0);
+    // The counts themselves to an EXR: they sum to the frame's evaluations, and a ray that
+    // misses the volume counts 0.
+    let counts = d.join("evals.exr");
+    let out = vmls(&[
+        "render",
+        "-o",
+        s(&img),
+        "--eval-map",
+        s(&counts),
+        "--stats",
+        s(&st),
+        "--set",
+        "camera.width=32",
+        "--set",
+        "camera.height=24",
+        "--set",
+        "render.method=\"adaptive\"",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let c = image::open(&counts).expect("counts").to_rgba32f();
+    assert_eq!(c.dimensions(), (32, 24));
+    assert_eq!(c.get_pixel(0, 0).0, [0.0, 0.0, 0.0, 1.0]);
+    let sum: f64 = c.pixels().map(|p| f64::from(p.0[0])).sum();
+    let stats: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&st).expect("stats")).expect("json");
+    assert_eq!(
+        sum,
+        stats["function_evaluations"].as_f64().expect("evaluations")
+    );
+    assert!(sum > 0.0 && c.pixels().all(|p| p.0[0].fract() == 0.0));
     let bad = d.join("evals.jpg");
     assert_fails(
         &vmls(&["render", "-o", s(&img), "--eval-map", s(&bad)]),
-        &["evals.jpg", ".png"],
+        &["evals.jpg", ".png", ".exr"],
         &bad,
     );
 }

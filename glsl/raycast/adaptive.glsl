@@ -64,7 +64,6 @@ float hermite_error(vec4 a, vec4 e, float transmittance, out vec4 mid) {
 }
 #endif
 
-
 #if ADAPTIVE_CRITERION == 1
 // The stack lives in registers: constant-trip loops, unrolled by NIR into selects, stand in for
 // dynamic indexing (LAVAPIPE.md: a dynamically indexed local array in divergent code ran at

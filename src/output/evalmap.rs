@@ -1,7 +1,8 @@
 //! `--eval-map`: the per-pixel count of MLS evaluations as a heat map (a viridis-like ramp from
 //! 0 to the largest count), with a legend strip below the image: the colour bar and its end
 //! values, drawn by plotters with the DejaVu Sans font embedded in the binary (no font file on
-//! the machine is needed).
+//! the machine is needed). To a `.exr` file the counts themselves are written instead (R = G = B
+//! = count, A = 1, exact below 2^24), for tools that count where evaluations went.
 
 use super::RenderError;
 use std::path::Path;
@@ -46,19 +47,38 @@ fn draw_legend(img: &mut image::RgbImage, top: u32, max: u32) -> Result<(), Stri
     root.present().map_err(e)
 }
 
-/// Checks that `path` names a PNG file (the only format of the map).
+/// Checks that `path` names a PNG file (the heat map) or an EXR file (the counts).
 pub fn check_path(path: &Path) -> Result<(), RenderError> {
     if path
         .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+        .is_some_and(|e| e.eq_ignore_ascii_case("png") || e.eq_ignore_ascii_case("exr"))
     {
         Ok(())
     } else {
         Err(RenderError::Output {
             path: path.display().to_string(),
-            message: "the evaluation map is a PNG: expected a .png file name".into(),
+            message: "the evaluation map is a PNG heat map or an EXR of the counts: expected a \
+                      .png or .exr file name"
+                .into(),
         })
     }
+}
+
+/// Whether `path` asks for the counts themselves (an EXR) rather than the heat map.
+pub fn wants_counts(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+}
+
+/// The counts as RGBA pixels for an EXR (R = G = B = count, A = 1).
+pub fn count_pixels(counts: &[u32]) -> Vec<[f32; 4]> {
+    counts
+        .iter()
+        .map(|&c| {
+            let v = c as f32;
+            [v, v, v, 1.0]
+        })
+        .collect()
 }
 
 /// The heat map of `counts` (row 0 at the top) with its legend below, as an image.
@@ -89,13 +109,22 @@ pub fn eval_map_image(
     Ok(img)
 }
 
-/// Writes the heat map of `counts` to a PNG file (see [`eval_map_image`]).
+/// Writes the heat map of `counts` to a PNG file (see [`eval_map_image`]), or the counts to an
+/// EXR file ([`count_pixels`]).
 pub fn write_eval_map(
     path: &Path,
     width: u32,
     height: u32,
     counts: &[u32],
 ) -> Result<(), RenderError> {
+    check_path(path)?;
+    if wants_counts(path) {
+        let pixels = count_pixels(counts);
+        crate::files::write_output("--eval-map", path, &[], |w| {
+            super::encode_image(w, path, width, height, &pixels)
+        })?;
+        return Ok(());
+    }
     let img = eval_map_image(path, width, height, counts)?;
     crate::files::write_output("--eval-map", path, &[], |w| {
         img.write_to(w, image::ImageFormat::Png)

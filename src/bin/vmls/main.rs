@@ -59,7 +59,8 @@ enum Command {
         /// Write statistics as JSON.
         #[arg(long)]
         stats: Option<PathBuf>,
-        /// Write the per-pixel count of MLS evaluations as a heat map with a legend (.png).
+        /// Write the per-pixel count of MLS evaluations as a heat map with a legend (.png), or
+        /// the counts themselves (.exr: R = G = B = count).
         #[arg(long)]
         eval_map: Option<PathBuf>,
         /// Override a scene key: section.key=value (repeatable).

@@ -9,7 +9,7 @@ use std::time::Instant;
 use vmls::data::dataset::Location;
 use vmls::field::RenderError;
 use vmls::field::skip::SkipReport;
-use vmls::output::evalmap::{check_path, eval_map_image};
+use vmls::output::evalmap::{check_path, count_pixels, eval_map_image, wants_counts};
 use vmls::output::{check_finite, encode_image, format_of};
 use vmls::renderer::Renderer;
 use vmls::renderer::tolerance::p99_of;
@@ -113,7 +113,10 @@ pub fn run_render(
     outputs.write(output, |w| {
         encode_image(w, output, width, height, &image.pixels)
     })?;
-    if let Some(map) = eval_map {
+    if let Some(map) = eval_map.filter(|m| wants_counts(m)) {
+        let pixels = count_pixels(&image.counts);
+        outputs.write(map, |w| encode_image(w, map, width, height, &pixels))?;
+    } else if let Some(map) = eval_map {
         let img = eval_map_image(map, width, height, &image.counts)?;
         outputs.write(map, |w| {
             img.write_to(w, image::ImageFormat::Png)
