@@ -303,63 +303,46 @@ fn compare_reports_rmse_and_rejects_size_mismatch() {
 fn eval_map_is_a_heat_map_with_a_legend() {
     let d = dir("evalmap");
     let (img, map, st) = (d.join("i.png"), d.join("evals.png"), d.join("s.json"));
-    let out = vmls(&[
-        "render",
-        "-o",
-        s(&img),
-        "--eval-map",
-        s(&map),
-        "--stats",
-        s(&st),
-        "--set",
-        "camera.width=32",
-        "--set",
-        "camera.height=24",
-        "--set",
-        "render.method=\"adaptive\"",
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let render = |map: &std::path::Path| {
+        let out = vmls(&[
+            "render",
+            "-o",
+            s(&img),
+            "--eval-map",
+            s(map),
+            "--stats",
+            s(&st),
+            "--set",
+            "camera.width=32",
+            "--set",
+            "camera.height=24",
+            "--set",
+            "render.method=\"adaptive\"",
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let stats: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&st).expect("stats")).expect("json");
+        stats
+    };
+    let stats = render(&map);
     let m = image::open(&map).expect("map").to_rgb8();
     // The image plus a 22-pixel legend strip.
     assert_eq!(m.dimensions(), (32, 24 + 22));
     // Rays that miss the volume cost nothing: the darkest ramp colour in the corner.
     assert_eq!(m.get_pixel(0, 0).0, [68, 1, 84]);
-    let stats: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&st).expect("stats")).expect("json");
     assert!(stats["evaluations_per_ray"].as_f64().expect("mean") > 0.0);
     // The counts themselves to an EXR: they sum to the frame's evaluations, and a ray that
     // misses the volume counts 0.
     let counts = d.join("evals.exr");
-    let out = vmls(&[
-        "render",
-        "-o",
-        s(&img),
-        "--eval-map",
-        s(&counts),
-        "--stats",
-        s(&st),
-        "--set",
-        "camera.width=32",
-        "--set",
-        "camera.height=24",
-        "--set",
-        "render.method=\"adaptive\"",
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let stats = render(&counts);
     let c = image::open(&counts).expect("counts").to_rgba32f();
     assert_eq!(c.dimensions(), (32, 24));
     assert_eq!(c.get_pixel(0, 0).0, [0.0, 0.0, 0.0, 1.0]);
     let sum: f64 = c.pixels().map(|p| f64::from(p.0[0])).sum();
-    let stats: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&st).expect("stats")).expect("json");
     assert_eq!(
         sum,
         stats["function_evaluations"].as_f64().expect("evaluations")
