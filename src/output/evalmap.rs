@@ -64,21 +64,48 @@ pub fn check_path(path: &Path) -> Result<(), RenderError> {
     }
 }
 
-/// Whether `path` asks for the counts themselves (an EXR) rather than the heat map.
-pub fn wants_counts(path: &Path) -> bool {
-    path.extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+/// An evaluation map ready to encode: the heat map (PNG) or the counts (EXR).
+pub enum EvalMap {
+    Heat(image::RgbImage),
+    /// R = G = B = count, A = 1.
+    Counts(Vec<[f32; 4]>),
 }
 
-/// The counts as RGBA pixels for an EXR (R = G = B = count, A = 1).
-pub fn count_pixels(counts: &[u32]) -> Vec<[f32; 4]> {
-    counts
-        .iter()
-        .map(|&c| {
-            let v = c as f32;
-            [v, v, v, 1.0]
-        })
-        .collect()
+/// The map of `counts` that `path` asks for: the counts themselves to a `.exr`, else the heat
+/// map ([`eval_map_image`]).
+pub fn eval_map(
+    path: &Path,
+    width: u32,
+    height: u32,
+    counts: &[u32],
+) -> Result<EvalMap, RenderError> {
+    check_path(path)?;
+    if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+    {
+        let pixels = counts.iter().map(|&c| c as f32).map(|v| [v, v, v, 1.0]);
+        return Ok(EvalMap::Counts(pixels.collect()));
+    }
+    eval_map_image(path, width, height, counts).map(EvalMap::Heat)
+}
+
+impl EvalMap {
+    /// Encodes the map to `out` (`path` names its format, as [`eval_map`] chose it).
+    pub fn encode(
+        &self,
+        out: &mut (impl std::io::Write + std::io::Seek),
+        path: &Path,
+        width: u32,
+        height: u32,
+    ) -> std::io::Result<()> {
+        match self {
+            EvalMap::Heat(img) => img
+                .write_to(out, image::ImageFormat::Png)
+                .map_err(std::io::Error::other),
+            EvalMap::Counts(pixels) => super::encode_image(out, path, width, height, pixels),
+        }
+    }
 }
 
 /// The heat map of `counts` (row 0 at the top) with its legend below, as an image.
@@ -109,26 +136,16 @@ pub fn eval_map_image(
     Ok(img)
 }
 
-/// Writes the heat map of `counts` to a PNG file (see [`eval_map_image`]), or the counts to an
-/// EXR file ([`count_pixels`]).
+/// Writes the map of `counts` that `path` asks for ([`eval_map`]).
 pub fn write_eval_map(
     path: &Path,
     width: u32,
     height: u32,
     counts: &[u32],
 ) -> Result<(), RenderError> {
-    check_path(path)?;
-    if wants_counts(path) {
-        let pixels = count_pixels(counts);
-        crate::files::write_output("--eval-map", path, &[], |w| {
-            super::encode_image(w, path, width, height, &pixels)
-        })?;
-        return Ok(());
-    }
-    let img = eval_map_image(path, width, height, counts)?;
+    let map = eval_map(path, width, height, counts)?;
     crate::files::write_output("--eval-map", path, &[], |w| {
-        img.write_to(w, image::ImageFormat::Png)
-            .map_err(std::io::Error::other)
+        map.encode(w, path, width, height)
     })?;
     Ok(())
 }

@@ -616,7 +616,7 @@ impl PreintegrationTables {
     /// Bytes of the tables and the limits.
     pub fn bytes(&self) -> u64 {
         let entries = self.tables.iter().map(Vec::len).sum::<usize>() + self.limits.len();
-        (entries * std::mem::size_of::<[f32; 4]>()) as u64
+        entry_bytes(entries)
     }
 
     /// The tables, each with its length and the resolution, for a later
@@ -702,12 +702,23 @@ impl PreintegrationTables {
 type TableKey = (Vec<[f64; 5]>, Vec<f64>, usize, (f64, f64));
 
 /// One table of an earlier build, kept for the next ([`PreintegrationTables::build_reusing`]).
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct SpareTable {
     pub resolution: usize,
     /// World units.
     pub length: f64,
     pub entries: Vec<[f32; 4]>,
+}
+
+impl SpareTable {
+    fn bytes(&self) -> u64 {
+        entry_bytes(self.entries.len())
+    }
+}
+
+/// Bytes of `n` RGBA f32 table entries.
+fn entry_bytes(n: usize) -> u64 {
+    (n * std::mem::size_of::<[f32; 4]>()) as u64
 }
 
 /// The spare tables a [`TableCache`] keeps whatever the current tables' size.
@@ -770,11 +781,10 @@ impl TableCache {
             );
             self.reused += before - self.spare.len();
             let budget = (tables.bytes() / 2).max(SPARE_FLOOR_BYTES);
-            let bytes = |t: &SpareTable| (t.entries.len() * std::mem::size_of::<[f32; 4]>()) as u64;
-            let mut kept: u64 = self.spare.iter().map(bytes).sum();
+            let mut kept: u64 = self.spare.iter().map(SpareTable::bytes).sum();
             let mut oldest = 0;
             while kept > budget {
-                kept -= bytes(&self.spare[oldest]);
+                kept -= self.spare[oldest].bytes();
                 oldest += 1;
             }
             self.spare.drain(..oldest);

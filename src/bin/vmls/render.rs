@@ -9,7 +9,7 @@ use std::time::Instant;
 use vmls::data::dataset::Location;
 use vmls::field::RenderError;
 use vmls::field::skip::SkipReport;
-use vmls::output::evalmap::{check_path, count_pixels, eval_map_image, wants_counts};
+use vmls::output::evalmap::{self, check_path};
 use vmls::output::{check_finite, encode_image, format_of};
 use vmls::renderer::Renderer;
 use vmls::renderer::tolerance::p99_of;
@@ -113,15 +113,9 @@ pub fn run_render(
     outputs.write(output, |w| {
         encode_image(w, output, width, height, &image.pixels)
     })?;
-    if let Some(map) = eval_map.filter(|m| wants_counts(m)) {
-        let pixels = count_pixels(&image.counts);
-        outputs.write(map, |w| encode_image(w, map, width, height, &pixels))?;
-    } else if let Some(map) = eval_map {
-        let img = eval_map_image(map, width, height, &image.counts)?;
-        outputs.write(map, |w| {
-            img.write_to(w, image::ImageFormat::Png)
-                .map_err(std::io::Error::other)
-        })?;
+    if let Some(map) = eval_map {
+        let m = evalmap::eval_map(map, width, height, &image.counts)?;
+        outputs.write(map, |w| m.encode(w, map, width, height))?;
     }
     if let Some(stats) = stats {
         let evaluations: u64 = image.counts.iter().map(|&c| u64::from(c)).sum();
