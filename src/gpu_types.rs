@@ -382,7 +382,10 @@ pub struct TableBlock {
     ///
     /// [`TransferFunction::peak`]: crate::view::transfer::TransferFunction::peak
     pub peak: f32,
-    pub _pad: [u32; 2],
+    /// Table 0's occupied bins, bit i of word i / 32 for bin i % 32 of
+    /// [`OCCUPANCY_BINS`](crate::view::preintegration::OCCUPANCY_BINS)
+    /// ([`PreintegrationTables::occupied`](crate::view::preintegration::PreintegrationTables::occupied)).
+    pub occupied: [u32; 2],
 }
 const _: () = assert!(std::mem::size_of::<TableBlock>() == 32);
 

@@ -86,7 +86,7 @@ fn glsl_and_rust_layouts_agree() {
             resolution: 39,
             lengths: 40,
             peak: 41.0,
-            _pad: [42, 43],
+            occupied: [42, 43],
         },
         lighting: v(44.0),
     };
@@ -198,7 +198,7 @@ fn glsl_and_rust_layouts_agree() {
                 resolution: 46,
                 lengths: 47,
                 peak: 48.0,
-                _pad: [49, 50],
+                occupied: [49, 50],
             },
         },
         "SplatParams"

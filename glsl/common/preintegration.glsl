@@ -27,6 +27,32 @@ vec4 preint_lookup(uint k, float s_f, float s_b) {
     return mix(a, b, fy);
 }
 
+// Bits lo .. hi (inclusive, 0 <= lo, hi < 64) of word w (bits 32 w .. 32 w + 31) of a mask.
+uint bin_bits(uint lo, uint hi, uint w) {
+    int a = max(int(lo) - int(32u * w), 0);
+    int b = min(int(hi) - int(32u * w), 31);
+    return a > b ? 0u : (0xffffffffu >> uint(31 - b)) & (0xffffffffu << uint(a));
+}
+
+// Whether every entry preint_lookup(0, s_f, s_b) interpolates is zero (twin:
+// PreintegrationTables::clear): the bins of table 0's nodes from one below the lower
+// lookup's to one above the higher's upper node hold no nonzero entry
+// (params.tables.occupied0/1, bins of OCCUPANCY_BINS = 64 nodes' shares).
+bool preint_clear(float s_f, float s_b) {
+    uint n = params.tables.resolution;
+    float n1 = float(n - 1u);
+    float scale = n1 / (params.tables.s_max - params.tables.s_min);
+    uint x = uint(clamp((s_f - params.tables.s_min) * scale, 0.0, n1));
+    uint y = uint(clamp((s_b - params.tables.s_min) * scale, 0.0, n1));
+    uint lo = min(min(x, y), n - 2u);
+    lo = lo > 0u ? lo - 1u : 0u;
+    uint hi = min(min(max(x, y), n - 2u) + 2u, n - 1u);
+    uint b0 = lo * 64u / n;
+    uint b1 = hi * 64u / n;
+    return (params.tables.occupied0 & bin_bits(b0, b1, 0u)) == 0u
+           && (params.tables.occupied1 & bin_bits(b0, b1, 1u)) == 0u;
+}
+
 // 1 − e^{−x} without cancellation for small x.
 float one_minus_exp(float x) {
     return x < 1e-3 ? x * (1.0 - 0.5 * x) : 1.0 - exp(-x);

@@ -59,8 +59,9 @@ struct TableBlock {
     uint resolution;
     uint lengths;
     float peak;
-    uint _pad0;
-    uint _pad1;
+    // Table 0's occupied bins (bits 0-31, 32-63; preint_clear).
+    uint occupied0;
+    uint occupied1;
 };
 
 struct RenderParams {

@@ -68,8 +68,8 @@ void main() {
     render_params.tables.resolution = 39u;
     render_params.tables.lengths = 40u;
     render_params.tables.peak = 41.0;
-    render_params.tables._pad0 = 42u;
-    render_params.tables._pad1 = 43u;
+    render_params.tables.occupied0 = 42u;
+    render_params.tables.occupied1 = 43u;
     render_params.lighting = v(44.0);
 
     iso_surface.color_opacity = v(1.0);
@@ -145,8 +145,8 @@ void main() {
     splat_params.tables.resolution = 46u;
     splat_params.tables.lengths = 47u;
     splat_params.tables.peak = 48.0;
-    splat_params.tables._pad0 = 49u;
-    splat_params.tables._pad1 = 50u;
+    splat_params.tables.occupied0 = 49u;
+    splat_params.tables.occupied1 = 50u;
 
     splat.footprint0 = v(1.0);
     splat.footprint1 = v(2.0);

@@ -52,9 +52,17 @@ float take_sheet(inout Pixel px) {
 // [lo, hi], half a sheet (table 0's length), composited over its part inside the domain. A
 // part keeps the half's colour per opacity, its opacity from the half's optical depth scaled
 // by the part's share (exact for a constant field; only halves a boundary clips are scaled).
-// Branch-free: outside the domain (or with `on` 0) the share is 0 and so are its opacity and
-// colour.
+// Branch-free (but for SPLAT_CLEAR_SKIP's skip of all-zero entries): outside the domain (or with
+// `on` 0) the share is 0 and so are its opacity and colour.
 void composite_half(inout Pixel px, float lo, float hi, float on, float s_f, float s_b) {
+#if SPLAT_CLEAR_SKIP == 1
+    // A half whose table entries are all zero composites nothing (alpha 0, colour 0): on a
+    // GPU the lanes that find it so skip both lookups (compiled where the transfer function
+    // has a transparent run: SplatSetup::fit_transfer).
+    if (preint_clear(s_f, s_b)) {
+        return;
+    }
+#endif
     float r = on * span_overlap(lo, hi, px.t_in, px.t_out, SEGMENTS(px));
     vec4 e = preint_lookup(0u, s_f, s_b);
     float f = r / (hi - lo);

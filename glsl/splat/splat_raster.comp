@@ -31,7 +31,10 @@
 // twin SplatSetup::owns), SPLAT_TILE,
 // SPLAT_APRON, SPLAT_GROUP (invocations: EDGE² rounded up to whole subgroups),
 // SPLAT_SUBGROUP_OPS (subgroup votes and sums: each subgroup stops by itself, without
-// barriers, which cost lavapipe a coroutine switch per subgroup). A pixel's registers and
+// barriers, which cost lavapipe a coroutine switch per subgroup), SPLAT_BRANCHES and
+// SPLAT_CLEAR_SKIP (post-shaded: branch around the shares of pixels outside a footprint, and
+// around lookups of all-zero table entries, which add exact zeros; on a GPU only: lavapipe
+// runs both sides of a branch). A pixel's registers and
 // their saving between passes are in splat/raster_pixel.glsl, post-shaded compositing in
 // splat/raster_post.glsl.
 #extension GL_EXT_control_flow_attributes : enable
@@ -164,6 +167,13 @@ void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) 
     vec3 pr = splat_profile(s, cutoff, pixel, px.view);
     pr.x = in_box ? pr.x : 0.0;
     px.contributions += pr.x != 0.0 ? 1u : 0u;
+#if SPLAT_BRANCHES == 1
+    // Outside the footprint every share below adds an exact zero: on a GPU the lanes skip
+    // them (a warp runs the steps only while some lane's pixel is inside).
+    if (pr.x == 0.0) {
+        return;
+    }
+#endif
     float slab = params.slab_world;
 #if SPLAT_QUADRATURE == 1
     // The Hermite-Simpson rule on each sheet (twin: sheet_share), h deviations thick: with

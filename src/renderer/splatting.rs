@@ -62,6 +62,7 @@ impl Renderer {
         setup.raster_chunk = self.splat_raster_chunk;
         setup.table_resolution = view.settings.table_resolution;
         setup.fit_device(self.ctx.info().device_type == "cpu");
+        setup.fit_transfer(&self.field, view.transfer);
         if let Some(budget) = self.budget {
             setup.check_budget(0, budget)?;
         }

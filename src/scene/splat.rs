@@ -22,6 +22,7 @@ pub(super) const KEYS: &[&str] = &[
     "ring",
     "band_rows",
     "pixels",
+    "branches",
 ];
 
 /// Reads `[splat]`; every key is optional.
@@ -81,6 +82,10 @@ pub(super) fn parse(sec: &Section<'_>) -> Result<SplatSettings, SceneError> {
             &RASTER_PIXELS,
             "1, 2, 4 or 8 (per invocation)",
         )?,
+        branches: match sec.get("branches") {
+            None => d.branches,
+            Some(_) => Some(flag(sec, "branches", true)?),
+        },
     })
 }
 

@@ -192,6 +192,10 @@ pub struct SplatVariant {
     /// The device has the subgroup operations `DeviceInfo::subgroup_ops` names: a subgroup
     /// stops by itself once its pixels are opaque (a vote, no barrier) and sums its counters.
     pub subgroup_ops: bool,
+    /// Post-shaded: branches around exact zeros, the shares of pixels outside a footprint
+    /// (`SplatSetup::branches`) and lookups of all-zero table entries (`SplatSetup::clear_skip`).
+    pub branches: bool,
+    pub clear_skip: bool,
 }
 
 impl SplatVariant {
@@ -219,6 +223,8 @@ impl SplatVariant {
             pixels,
             group: (setup.group_size() / pixels).next_multiple_of(subgroup.max(8)),
             subgroup_ops: device.subgroup_ops,
+            branches: setup.branches,
+            clear_skip: setup.clear_skip,
         }
     }
 
@@ -281,6 +287,8 @@ impl SplatVariant {
             ("SPLAT_GROUP".into(), self.group.to_string()),
             ("SPLAT_PIXELS".into(), self.pixels.to_string()),
             ("SPLAT_SUBGROUP_OPS".into(), flag(self.subgroup_ops)),
+            ("SPLAT_BRANCHES".into(), flag(self.branches)),
+            ("SPLAT_CLEAR_SKIP".into(), flag(self.clear_skip)),
             ("SPLAT_SCAN_BLOCK".into(), SCAN_BLOCK.to_string()),
             (
                 "SPLAT_MAX_KERNEL_ENTRIES".into(),
@@ -323,7 +331,7 @@ impl SplatVariant {
     /// Human-readable name for `--stats`.
     pub fn name(&self) -> String {
         format!(
-            "splat {} {} {}{}{}{}{}{} tile {}{}{}",
+            "splat {} {} {}{}{}{}{}{} tile {}{}{}{}{}",
             match self.shading {
                 Shading::Pre => "pre-shaded",
                 Shading::Post => "post-shaded",
@@ -367,6 +375,8 @@ impl SplatVariant {
                 ""
             },
             if self.brick { " brick" } else { "" },
+            if self.branches { " branches" } else { "" },
+            if self.clear_skip { " clear-skip" } else { "" },
         )
     }
 }

@@ -221,6 +221,14 @@ pub struct SplatSetup {
     /// lavapipe's: 4 post-shaded, 8 pre-shaded, until [`SplatSetup::fit_device`] sets one for a
     /// GPU).
     pub pixels: u32,
+    /// Post-shaded `splat_raster` returns early from the sheet shares of a pixel outside a
+    /// kernel's footprint (`splat.branches`, else none until [`SplatSetup::fit_device`] takes
+    /// it on a GPU with rings of 16 sheets).
+    pub branches: bool,
+    /// Post-shaded `splat_raster` skips the lookups of all-zero table entries (`splat.branches`,
+    /// else none until [`SplatSetup::fit_device`] allows it on a GPU), where the frame's table
+    /// has some ([`SplatSetup::fit_transfer`]).
+    pub clear_skip: bool,
 }
 
 impl SplatSetup {
@@ -474,6 +482,8 @@ impl SplatSetup {
             raster_chunk: None,
             band_rows: settings.band_rows.unwrap_or(plan::RASTER_BAND_ROWS),
             pixels: settings.pixels.unwrap_or(if post { 4 } else { 8 }),
+            branches: post && settings.branches.unwrap_or(false),
+            clear_skip: post && settings.branches.unwrap_or(false),
         };
         let window = brick_window(&setup, (lo, hi), setup.reach());
         Ok(Self { window, ..setup })
@@ -638,10 +648,16 @@ impl SplatSetup {
     /// [`plan::RASTER_BAND_ROWS`] rows and four pixels per invocation post-shaded, eight
     /// pre-shaded (a tile's column each: 8–12% faster there than four, post-shaded 12% slower),
     /// which measured fastest there; a GPU takes bands of at least [`GPU_BAND_TILES`] tiles and one pixel per
-    /// invocation. On an H200 at 512² that made post-shaded splatting of 68 921 points 28×
-    /// faster than lavapipe's shape (2.34 against 65.4 ms; BENCHMARKS.md, "Splatting on a GPU
-    /// needs wide bands"). Bands change no pixel; pixels per invocation compile another
-    /// variant, equal within f32 rounding (the compiler's fused multiply-adds).
+    /// invocation post-shaded, two pre-shaded, and post-shaded it branches around exact zeros:
+    /// the skip of all-zero table lookups ([`SplatSetup::clear_skip`], kept where the table has
+    /// some by [`SplatSetup::fit_transfer`]) and, with rings of 16 sheets, the early return
+    /// from a footprint's shares ([`SplatSetup::branches`]). On an H200 at 512² the bands made
+    /// post-shaded splatting of 68 921 points 28× faster than lavapipe's shape (2.34 against
+    /// 65.4 ms; BENCHMARKS.md, "Splatting on a GPU needs wide bands"). There ("The H200 a
+    /// third time"), two pixels pre-shaded took 20–27% off its frames; the branches 14% off
+    /// the post-shaded points' (ring 16), and the early return alone 8%, while on the torus
+    /// (ring 8) it cost 2–3%. Bands change no pixel; pixels per invocation and branches compile
+    /// another variant, equal within f32 rounding (the compiler's fused multiply-adds).
     pub fn fit_device(&mut self, cpu: bool) {
         if cpu {
             return;
@@ -650,9 +666,29 @@ impl SplatSetup {
             let (tiles_x, tiles_y) = self.tiles();
             self.band_rows = GPU_BAND_TILES.div_ceil(tiles_x).clamp(1, tiles_y.max(1));
         }
+        let post = self.shading == Shading::Post;
         if self.settings.pixels.is_none() {
-            self.pixels = 1;
+            self.pixels = if post { 1 } else { 2 };
         }
+        if self.settings.branches.is_none() {
+            self.branches = post && self.ring == 16;
+            self.clear_skip = post;
+        }
+    }
+
+    /// Keeps the skip of all-zero table entries ([`SplatSetup::clear_skip`]) where it can
+    /// fire: intervals read from the table, and some lookup of the frame's table clear
+    /// ([`crate::view::preintegration::clear_somewhere`]). Its test costs where it never
+    /// fires: on an H200 it took 4.5% more time on the torus, whose function has extinction
+    /// everywhere, and 9% less on the ML points (BENCHMARKS.md, "The H200 a third time").
+    pub fn fit_transfer(&mut self, field: &Field, tf: &TransferFunction) {
+        self.clear_skip = self.clear_skip
+            && self.interval != SheetInterval::Constant
+            && crate::view::preintegration::clear_somewhere(
+                tf,
+                self.table_range(field, tf),
+                self.table_resolution,
+            );
     }
 
     /// Invocations of one `splat_raster` workgroup: the tile and its apron.

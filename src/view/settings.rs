@@ -307,9 +307,17 @@ pub struct SplatSettings {
     /// Changes no pixel, only the dispatches.
     pub band_rows: Option<u32>,
     /// Pixels per `splat_raster` invocation where no isosurface apron needs one (one of
-    /// `RASTER_PIXELS`); unset: on lavapipe four post-shaded and eight pre-shaded, one on a GPU. The image agrees within f32
+    /// `RASTER_PIXELS`); unset: on lavapipe four post-shaded and eight pre-shaded, on a GPU one
+    /// post-shaded and two pre-shaded. The image agrees within f32
     /// rounding (another compiled variant).
     pub pixels: Option<u32>,
+    /// Post-shaded: `splat_raster` branches around work that adds exact zeros (a pixel outside
+    /// a kernel's footprint skips its sheet shares; an interval whose table entries are all
+    /// zero skips its lookups). Unset: on a GPU the lookups' skip where the frame's table has
+    /// all-zero entries, and the shares' with rings of 16 sheets; not on lavapipe, where a
+    /// branch runs both sides under a mask and measured slower. The image is the same within
+    /// f32 rounding (the early return changes how a compiler fuses the shares' multiply-adds).
+    pub branches: Option<bool>,
 }
 
 impl Default for SplatSettings {
@@ -329,6 +337,7 @@ impl Default for SplatSettings {
             ring: None,
             band_rows: None,
             pixels: None,
+            branches: None,
         }
     }
 }
