@@ -612,6 +612,14 @@ const RASTER_VARIANTS: [(&str, &[&str]); 5] = [
     ),
 ];
 
+/// The largest difference of any channel between two images.
+fn max_abs_diff(a: &[[f32; 4]], b: &[[f32; 4]]) -> f32 {
+    a.iter()
+        .zip(b)
+        .flat_map(|(p, q)| (0..4).map(move |c| (p[c] - q[c]).abs()))
+        .fold(0.0f32, f32::max)
+}
+
 /// Pixels of two images that differ (a difference of any size).
 fn differing(a: &[[f32; 4]], b: &[[f32; 4]]) -> usize {
     a.iter().zip(b).filter(|(p, q)| p != q).count()
@@ -705,11 +713,7 @@ fn the_raster_dispatch_shape_changes_no_pixel() {
         ];
         for (shape, bound) in shapes {
             let (b, _) = gpu_frame(&mut renderer, &scene(&[extra, shape].concat()));
-            let diff = a
-                .iter()
-                .zip(&b)
-                .flat_map(|(p, q)| (0..4).map(move |c| (p[c] - q[c]).abs()))
-                .fold(0.0f32, f32::max);
+            let diff = max_abs_diff(&a, &b);
             eprintln!(
                 "{name}, {shape:?}: {} pixels differ, by {diff:.2e}",
                 differing(&a, &b)
@@ -792,11 +796,7 @@ fn post_shaded_branches_change_no_pixel() {
             &mut renderer,
             &scene(&[&base[..], &["splat.branches=true"]].concat()),
         );
-        let diff = a
-            .iter()
-            .zip(&b)
-            .flat_map(|(p, q)| (0..4).map(move |c| (p[c] - q[c]).abs()))
-            .fold(0.0f32, f32::max);
+        let diff = max_abs_diff(&a, &b);
         eprintln!(
             "{extra:?}: {} pixels differ, by {diff:.2e}",
             differing(&a, &b)
