@@ -153,9 +153,14 @@ impl<'a> Recorder<'a> {
         // bind group was made for a pipeline with this set layout); push size was checked.
         unsafe {
             if let Some(pool) = timed {
+                // The start is latched once every earlier command has completed (bottom of
+                // pipe), not when the command is reached (top of pipe): the barrier above does
+                // not order a top-of-pipe write, so on a GPU that runs ahead the interval
+                // could include the previous dispatch's tail, and the frame's sum count it
+                // twice. The barrier keeps this dispatch from starting before that point.
                 device.cmd_write_timestamp(
                     self.cmd,
-                    vk::PipelineStageFlags::TOP_OF_PIPE,
+                    vk::PipelineStageFlags::BOTTOM_OF_PIPE,
                     pool,
                     2 * index,
                 );
