@@ -479,7 +479,7 @@ pub struct PreintegrationTables {
     pub tables: Vec<Vec<[f32; 4]>>,
     /// Zero-length limits `[mean colour rgb, τ̄]` ([`segment_limits`]), same indexing.
     pub limits: Vec<[f32; 4]>,
-    /// Per length, the bins of nodes ([`OCCUPANCY_BINS`]) that a nonzero entry reaches
+    /// Per length, the bins of nodes ([`OCCUPANCY_BINS`]) that touch a cell with extinction
     /// ([`PreintegrationTables::occupied`]).
     pub occupied: Vec<u64>,
 }
