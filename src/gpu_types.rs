@@ -239,10 +239,14 @@ pub mod splat_stat {
     /// (their registers saved): a workgroup's invocations per tile and pass, fewer where
     /// some of its subgroups had stopped, every pixel opaque.
     pub const RESUMED: usize = 18;
+    /// Interval halves whose table lookups `splat_raster` skipped, their entries all zero
+    /// (`SPLAT_CLEAR_SKIP`): low and high word.
+    pub const CLEAR_SKIPPED: usize = 19;
+    pub const CLEAR_SKIPPED_HIGH: usize = 20;
     /// The first of one word per band of `band_rows` tile rows: the most entries any
     /// tile of the band walks (`splat_walks`), from which its passes follow
     /// (`splat::plan::RasterWalk::passes`).
-    pub const BAND_ENTRIES: usize = 19;
+    pub const BAND_ENTRIES: usize = 21;
 }
 
 /// `#define BINDING_* n` for every binding (and `GRID_PAD`, the `RAY_*` count flags), to pass
@@ -275,6 +279,11 @@ pub fn binding_defines() -> Vec<(String, String)> {
         ("SPLAT_STAT_UNORDERED", splat_stat::UNORDERED as u32),
         ("SPLAT_STAT_LARGE_BUCKETS", splat_stat::LARGE_BUCKETS as u32),
         ("SPLAT_STAT_RESUMED", splat_stat::RESUMED as u32),
+        ("SPLAT_STAT_CLEAR_SKIPPED", splat_stat::CLEAR_SKIPPED as u32),
+        (
+            "SPLAT_STAT_CLEAR_SKIPPED_HIGH",
+            splat_stat::CLEAR_SKIPPED_HIGH as u32,
+        ),
         ("SPLAT_STAT_BAND_ENTRIES", splat_stat::BAND_ENTRIES as u32),
         ("SPLAT_ORDER_INSERTION_MAX", ORDER_INSERTION_MAX),
         ("RAY_DONE", ray_count::DONE),
@@ -365,9 +374,10 @@ pub struct IntegratorBlock {
 }
 const _: () = assert!(std::mem::size_of::<IntegratorBlock>() == 112);
 
-/// The preintegration tables. GLSL twin: `TableBlock`.
+/// The preintegration tables. GLSL twin: `TableBlock`. Its default (no tables) marks every bin
+/// occupied, so that no lookup could be skipped as clear.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct TableBlock {
     /// s of the first and last table node.
     pub s_min: f32,
@@ -388,6 +398,15 @@ pub struct TableBlock {
     pub occupied: [u32; 2],
 }
 const _: () = assert!(std::mem::size_of::<TableBlock>() == 32);
+
+impl Default for TableBlock {
+    fn default() -> Self {
+        Self {
+            occupied: [u32::MAX; 2],
+            ..Zeroable::zeroed()
+        }
+    }
+}
 
 /// Constants of the ray caster and the field's kernels, in named blocks. GLSL twin:
 /// `RenderParams`.

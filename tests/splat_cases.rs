@@ -732,8 +732,9 @@ fn the_raster_dispatch_shape_changes_no_pixel() {
 /// post-shaded variant renders the same image with and without them within f32 rounding, the
 /// bound of other compiled variants: on lavapipe the footprint's early return changes how the
 /// ring's multiply-adds are fused (471 pixels by up to 1.7e-6 measured; the table skip alone
-/// was equal to the bit in all four variants). The fit takes them on a GPU only, post-shaded
-/// only, and the table's skip only where the transfer function has a transparent run.
+/// was equal to the bit in all four variants). The lookups' skip fires (its counter) with
+/// branches and never without. The fit takes them on a GPU only, post-shaded only, and the
+/// table's skip only where some lookup can be clear.
 #[test]
 fn post_shaded_branches_change_no_pixel() {
     let band = "transfer.points=[[0.0,0.2,0.5,1.0,0.0],[0.35,0.2,0.5,1.0,0.0],[0.5,1.0,0.5,0.2,5.0],\
@@ -790,12 +791,16 @@ fn post_shaded_branches_change_no_pixel() {
     ];
     for extra in variants {
         let base = [&["render.method=\"splat-post\"", band][..], extra].concat();
-        let (a, _) = gpu_frame(&mut renderer, &scene(&base));
+        let (a, ra) = gpu_frame(&mut renderer, &scene(&base));
         assert!(a.iter().any(|p| p[3] > 0.1), "{extra:?}: empty image");
-        let (b, _) = gpu_frame(
+        let (b, rb) = gpu_frame(
             &mut renderer,
             &scene(&[&base[..], &["splat.branches=true"]].concat()),
         );
+        // The lookups' skip fired, and only with branches.
+        assert_eq!(ra.counts.clear_skipped, 0, "{extra:?}");
+        assert!(rb.counts.clear_skipped > 0, "{extra:?}: no half skipped");
+        eprintln!("{extra:?}: {} halves skipped", rb.counts.clear_skipped);
         let diff = max_abs_diff(&a, &b);
         eprintln!(
             "{extra:?}: {} pixels differ, by {diff:.2e}",

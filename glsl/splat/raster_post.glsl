@@ -48,6 +48,10 @@ float take_sheet(inout Pixel px) {
 }
 
 #if SPLAT_INTERVAL > 0
+#if SPLAT_CLEAR_SKIP == 1
+// Halves this invocation's pixels skipped (splat_stat::CLEAR_SKIPPED, added once per pass).
+uint clear_halves = 0u;
+#endif
 // Intervals between sheet middles (twin: composite_half): the field from s_f to s_b over
 // [lo, hi], half a sheet (table 0's length), composited over its part inside the domain. A
 // part keeps the half's colour per opacity, its opacity from the half's optical depth scaled
@@ -60,6 +64,7 @@ void composite_half(inout Pixel px, float lo, float hi, float on, float s_f, flo
     // GPU the lanes that find it so skip both lookups (compiled where the transfer function
     // has a transparent run: SplatSetup::fit_transfer).
     if (preint_clear(s_f, s_b)) {
+        clear_halves += 1u;
         return;
     }
 #endif

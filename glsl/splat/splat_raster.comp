@@ -679,4 +679,14 @@ void main() {
     EACH(WRITE)
 #undef WRITE
     add_counts(uvec4(footprints, walked));
+#if SPLAT_POST == 1 && SPLAT_INTERVAL > 0 && SPLAT_CLEAR_SKIP == 1
+#if SPLAT_SUBGROUP_OPS == 1
+    uint skipped = subgroupAdd(clear_halves);
+    if (subgroupElect()) {
+        stat_add64(SPLAT_STAT_CLEAR_SKIPPED, SPLAT_STAT_CLEAR_SKIPPED_HIGH, skipped);
+    }
+#else
+    stat_add64(SPLAT_STAT_CLEAR_SKIPPED, SPLAT_STAT_CLEAR_SKIPPED_HIGH, clear_halves);
+#endif
+#endif
 }

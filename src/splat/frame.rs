@@ -564,6 +564,7 @@ fn frame_counts(stats: &[u32], total: u64, invocations: u32) -> SplatCounts {
         unordered: s(splat_stat::UNORDERED),
         large_buckets: s(splat_stat::LARGE_BUCKETS),
         resumed: per_group(s(splat_stat::RESUMED)),
+        clear_skipped: s(splat_stat::CLEAR_SKIPPED) | s(splat_stat::CLEAR_SKIPPED_HIGH) << 32,
     }
 }
 

@@ -38,7 +38,8 @@ const RASTER_PIXEL_WORDS: u32 = 28;
 /// 6 and 7 with high words 13 and 14; 15 the tiles cut short (`splat_stat::RASTER_TRUNCATED`);
 /// 16 the buckets left out of kernel order (`splat_stat::UNORDERED`), 17 those handed to
 /// `splat_order`'s second pass (`splat_stat::LARGE_BUCKETS`), 18 the walks resumed
-/// (`splat_stat::RESUMED`); then one word per band, its tiles' most entries
+/// (`splat_stat::RESUMED`), 19 and 20 (64-bit) the interval halves whose lookups were skipped
+/// (`splat_stat::CLEAR_SKIPPED`); then one word per band, its tiles' most entries
 /// (`splat_stat::BAND_ENTRIES`).
 const STATS: usize = splat_stat::BAND_ENTRIES;
 

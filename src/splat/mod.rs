@@ -847,6 +847,10 @@ pub struct SplatCounts {
     /// Tile walks continued in a later pass of `splat_raster` (a tile of more entries than a
     /// dispatch may loop over on llvmpipe), per pass; 0 on the CPU twin.
     pub resumed: u64,
+    /// Post-shaded interval halves whose table lookups `splat_raster` skipped, every entry
+    /// they read zero (`splat.branches`, [`SplatSetup::clear_skip`]); 0 on the CPU twin, which
+    /// looks every half up.
+    pub clear_skipped: u64,
 }
 
 impl SplatCounts {

@@ -157,7 +157,9 @@ impl<'a> Recorder<'a> {
                 // pipe), not when the command is reached (top of pipe): the barrier above does
                 // not order a top-of-pipe write, so on a GPU that runs ahead the interval
                 // could include the previous dispatch's tail, and the frame's sum count it
-                // twice. The barrier keeps this dispatch from starting before that point.
+                // twice. The barrier keeps this dispatch from starting before that point (the
+                // first of a command buffer has none: it may overlap earlier submissions, and
+                // its interval then leaves out the overlap).
                 device.cmd_write_timestamp(
                     self.cmd,
                     vk::PipelineStageFlags::BOTTOM_OF_PIPE,

@@ -177,6 +177,7 @@ pub fn run_render(
                 "buckets_unordered": r.counts.unordered,
                 "buckets_heapsorted": r.counts.large_buckets,
                 "tile_walks_resumed": r.counts.resumed,
+                "interval_halves_skipped_clear": r.counts.clear_skipped,
                 "gpu_ms_per_kernel": {
                     "splat_project": r.stage_ms[0]
                         / (r.counts.projected - r.counts.left_out).max(1) as f64,
