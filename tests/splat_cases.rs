@@ -815,6 +815,48 @@ fn post_shaded_branches_change_no_pixel() {
     finish(ctx);
 }
 
+/// A post-shaded walk stops where every pixel of its subgroup has left the domain (pixel_live):
+/// under a transfer function too faint for any pixel to reach the early termination, the
+/// frame with occlusion on (which stops there) equals the one with it off (which walks every
+/// sheet) to the bit, and the walks skipped entries past the box's exit, which they did not
+/// before; a pixel whose ray misses the box is done from the start.
+#[test]
+fn post_shaded_walks_stop_past_the_domain_exit() {
+    let faint = "transfer.points=[[0.0,0.2,0.5,1.0,0.0],[1.0,1.0,0.5,0.2,0.4]]";
+    let field = scene(&[]).field(|_| {}).expect("field");
+    let (ctx, _) = gpu();
+    let mut renderer = Renderer::new(&ctx, field.clone()).expect("renderer");
+    for extra in [&[][..], &["splat.interval=\"constant\""][..]] {
+        let base = [&["render.method=\"splat-post\"", faint][..], extra].concat();
+        let (on, r_on) = gpu_frame(&mut renderer, &scene(&base));
+        let (off, r_off) = gpu_frame(
+            &mut renderer,
+            &scene(&[&base[..], &["splat.occlusion=false"]].concat()),
+        );
+        let alpha = on.iter().map(|p| p[3]).fold(0.0f32, f32::max);
+        assert!(
+            alpha > 0.05 && alpha < 0.9,
+            "{extra:?}: the premise, largest alpha {alpha}"
+        );
+        assert_eq!(
+            differing(&on, &off),
+            0,
+            "{extra:?}: the stop changed pixels"
+        );
+        assert_eq!(r_off.counts.skipped_occluded, 0, "{extra:?}");
+        assert!(
+            r_on.counts.skipped_occluded > 0,
+            "{extra:?}: no walk stopped past the exit"
+        );
+        eprintln!(
+            "{extra:?}: {} of {} entries skipped past the exit",
+            r_on.counts.skipped_occluded, r_on.counts.entries
+        );
+    }
+    drop(renderer);
+    finish(ctx);
+}
+
 /// Frames of one camera rendered again are the same to the bit: splat_bin's atomic cursors fill
 /// a (tile, sheet) bucket in whatever order lavapipe's threads reach it, and splat_order puts
 /// each bucket in kernel order (the CPU twin's), so every run sums each sheet in one order.

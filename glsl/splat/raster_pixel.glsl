@@ -168,6 +168,26 @@ bool pixel_open(Pixel px) {
     return px.own && !(px.acc.w > params.early_termination);
 }
 
+// A pixel the walk must still serve at sheet k (twin: the lane test of splat_raster's stop in
+// src/splat/raster.rs): open, and post-shaded its ray not past the domain's exit (the box's,
+// or the end of its last hull segment). Every interval composited from sheet k on starts at
+// slab0 + (k - 1.5) slabs or later, so a pixel whose exit lies before slab0 + (k - 2) slabs
+// adds nothing more: its composites would be exact zeros. A ray that misses the domain is done
+// from the start. Where a tile's rays leave the domain before the sheets end (a torus's hole
+// and silhouette), its walk stops there.
+bool pixel_live(Pixel px, uint k) {
+#if SPLAT_POST == 1
+    float exit_t = px.t_out;
+#if SPLAT_HULL == 1
+    exit_t = max(max(px.s01.y, px.s01.w), max(px.s23.y, px.s23.w));
+#endif
+    return pixel_open(px) && px.in_domain
+           && params.slab0_world + (float(k) - 2.0) * params.slab_world < exit_t;
+#else
+    return pixel_open(px);
+#endif
+}
+
 // The registers a pixel carries from one pass to the next, each through F (twin of the word
 // count: RASTER_PIXEL_WORDS in src/splat/gpu.rs, which this must not exceed).
 #if SPLAT_POST == 0

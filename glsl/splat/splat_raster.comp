@@ -16,7 +16,8 @@
 //   through shared memory) and across sheets (registers).
 // Empty sheets cost nothing: pre-shaded they composite nothing, post-shaded they are skipped
 // once the sheets behind them hold no value and value 0 has no extinction. With
-// SPLAT_OCCLUSION the tile stops once every pixel of it is opaque. No atomics on pixels, no
+// SPLAT_OCCLUSION the tile stops once every pixel of it is opaque or, post-shaded, past its
+// ray's exit from the domain (pixel_live). No atomics on pixels, no
 // sheet buffers; each pixel is written once. A band runs in passes (push.pass): a walk whose
 // cost would pass push.chunk loop iterations stops and saves its position and registers,
 // and the next pass goes on from there (llvmpipe ends an invocation's loops after 65 535
@@ -498,16 +499,16 @@ void main() {
         uint slot = trip % 3u;
         trip += 1u;
         bool open = false;
-#define OPEN(px) open = open || pixel_open(px);
+#define OPEN(px) open = open || pixel_live(px, k);
         EACH(OPEN)
 #undef OPEN
 #if VOTE == 1
-        // This subgroup stops once all its pixels are opaque.
+        // This subgroup stops once all its pixels are opaque or past the domain's exit.
         if (subgroupAll(!open)) {
             break;
         }
 #elif VOTE == 3
-        // The workgroup stops once all its pixels are opaque: three slots, one per trip in
+        // The workgroup stops once all its pixels are done (pixel_live): three slots, one per trip in
         // turn, so that one barrier per trip separates each slot's reset, its writes and its
         // reads.
         if (open) {
@@ -574,7 +575,7 @@ void main() {
 #endif
         barrier();
 #if VOTE == 2
-        // Every pixel is opaque: sheet k - 1 and later change nothing.
+        // Every pixel is done: sheet k - 1 and later change nothing.
         if (open_slots[slot] == 0u) {
             break;
         }
@@ -640,7 +641,7 @@ void main() {
     // silently: a walk that stopped before the last sheet with a pixel still open was cut
     // short, and the host refuses the frame rather than show it.
     bool open_at_end = false;
-#define OPEN(px) open_at_end = open_at_end || pixel_open(px);
+#define OPEN(px) open_at_end = open_at_end || pixel_live(px, k);
     EACH(OPEN)
 #undef OPEN
     // A walk the chunk cut is left to the band's next pass, if there is one: the band's last

@@ -200,6 +200,19 @@ pub fn splat_raster(
         })
         .collect();
     let done = |l: &Lane| 1.0 - l.transmittance > setup.early_termination;
+    // Post-shaded, a lane whose ray left the domain before sheet k's intervals start (slab0 +
+    // (k - 1.5) slabs; a sheet's margin) composites nothing more (twin of pixel_live in
+    // glsl/splat/raster_pixel.glsl); a ray that misses the domain never does.
+    let past_exit = |l: &Lane, k: u32| {
+        post && {
+            let exit = l
+                .inside_segments
+                .iter()
+                .map(|s| s.1)
+                .fold(f64::NEG_INFINITY, f64::max);
+            setup.slab0 + (f64::from(k) - 2.0) * setup.slab_world >= exit
+        }
+    };
     let (tiles_x, _) = setup.tiles();
     let first_bucket = (tile.1 * tiles_x + tile.0) as usize * setup.slabs as usize;
     let steps = setup.slabs + u32::from(post);
@@ -208,7 +221,11 @@ pub fn splat_raster(
     let vote_late = setup.apron() > 0;
     let end = first_bucket + setup.slabs as usize;
     for k in 0..steps {
-        let opaque = setup.settings.occlusion && lanes.iter().filter(|l| l.own).all(done);
+        let opaque = setup.settings.occlusion
+            && lanes
+                .iter()
+                .filter(|l| l.own)
+                .all(|l| done(l) || past_exit(l, k));
         if opaque && !vote_late {
             let from = first_bucket + (k as usize).min(setup.slabs as usize);
             counts.skipped_occluded += u64::from(bins.offsets[end] - bins.offsets[from]);

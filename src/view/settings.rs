@@ -274,7 +274,8 @@ pub struct SplatSettings {
     pub lowpass: f64,
     pub antialias: Antialias,
     /// Early splat elimination: a tile stops walking its sheets once every pixel in it is
-    /// opaque.
+    /// opaque or, post-shaded, past its ray's exit from the domain (the box's, or its last hull
+    /// segment's), where nothing more is composited.
     pub occlusion: bool,
     /// Isosurfaces as surface splats (pre-shaded splatting).
     pub surface: bool,
