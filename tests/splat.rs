@@ -1,7 +1,8 @@
 //! EWA splatting: one kernel's footprint against the analytic line integral of its Gaussian,
 //! GPU kernels against their f64 CPU twins, convergence of post-shaded sheets to the ray-cast
 //! Gaussian-sum field as the sheets thin and crisp post-shaded edges. The antialiasing
-//! comparison of [EWA]: tests/splat_antialias.rs; hard cases: tests/splat_cases.rs.
+//! comparison of [EWA]: tests/splat_antialias.rs; hard cases: tests/splat_cases.rs; the tile
+//! walk's passes, shapes and variants: tests/splat_raster.rs.
 mod common;
 
 use common::splat::*;

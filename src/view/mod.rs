@@ -9,6 +9,7 @@ pub mod camera;
 pub mod preintegration;
 pub mod settings;
 pub mod shading;
+pub mod table_occupancy;
 pub mod transfer;
 
 pub use settings::{

@@ -1,4 +1,4 @@
-//! Helpers of the splatting tests (tests/splat.rs, tests/splat_cases.rs).
+//! Helpers of the splatting tests (tests/splat.rs, tests/splat_cases.rs, tests/splat_raster.rs).
 #![allow(dead_code)]
 
 use glam::DVec3;
