@@ -393,8 +393,8 @@ pub struct TableBlock {
     /// [`TransferFunction::peak`]: crate::view::transfer::TransferFunction::peak
     pub peak: f32,
     /// Table 0's occupied bins, bit i of word i / 32 for bin i % 32 of
-    /// [`OCCUPANCY_BINS`](crate::view::preintegration::OCCUPANCY_BINS)
-    /// ([`PreintegrationTables::occupied`](crate::view::preintegration::PreintegrationTables::occupied)).
+    /// [`OCCUPANCY_BINS`](crate::view::table_occupancy::OCCUPANCY_BINS)
+    /// (`PreintegrationTables::occupied`).
     pub occupied: [u32; 2],
 }
 const _: () = assert!(std::mem::size_of::<TableBlock>() == 32);

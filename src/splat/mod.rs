@@ -678,13 +678,13 @@ impl SplatSetup {
 
     /// Keeps the skip of all-zero table entries ([`SplatSetup::clear_skip`]) where it can
     /// fire: intervals read from the table, and some lookup of the frame's table clear
-    /// ([`crate::view::preintegration::clear_somewhere`]). Its test costs where it never
+    /// ([`crate::view::table_occupancy::clear_somewhere`]). Its test costs where it never
     /// fires: on an H200 it took 4.5% more time on the torus, whose function has extinction
     /// everywhere, and 9% less on the ML points (BENCHMARKS.md, "The H200 a third time").
     pub fn fit_transfer(&mut self, field: &Field, tf: &TransferFunction) {
         self.clear_skip = self.clear_skip
             && self.interval != SheetInterval::Constant
-            && crate::view::preintegration::clear_somewhere(
+            && crate::view::table_occupancy::clear_somewhere(
                 tf,
                 self.table_range(field, tf),
                 self.table_resolution,

@@ -479,12 +479,10 @@ pub struct PreintegrationTables {
     pub tables: Vec<Vec<[f32; 4]>>,
     /// Zero-length limits `[mean colour rgb, τ̄]` ([`segment_limits`]), same indexing.
     pub limits: Vec<[f32; 4]>,
-    /// Per length, the bins of nodes ([`OCCUPANCY_BINS`]) that touch a cell with extinction
-    /// ([`PreintegrationTables::occupied`]).
+    /// Per length, the bins of nodes that touch a cell with extinction (`occupied`, in
+    /// `view::table_occupancy`, which computes them after each build).
     pub occupied: Vec<u64>,
 }
-
-pub use super::table_occupancy::{OCCUPANCY_BINS, clear_somewhere};
 
 impl PreintegrationTables {
     /// The tables as the kernels' `TableBlock` describes them, with `tf`'s peak.
