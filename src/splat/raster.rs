@@ -137,6 +137,8 @@ struct Lane {
     /// Post-shaded, and in a brick's frame: the pixel's ray. Post-shaded: its inside segments.
     ray: (DVec3, DVec3),
     inside_segments: Vec<(f64, f64)>,
+    /// Where the ray leaves the domain: its last inside segment's end (-∞: it never enters).
+    exit: f64,
 }
 
 /// `splat_raster` of one tile: writes the tile's pixels as (premultiplied colour,
@@ -184,6 +186,10 @@ pub fn splat_raster(
                     .into_iter()
                     .collect(),
             };
+            let exit = inside_segments
+                .iter()
+                .map(|s| s.1)
+                .fold(f64::NEG_INFINITY, f64::max);
             Lane {
                 x,
                 y,
@@ -196,6 +202,7 @@ pub fn splat_raster(
                 lateral: [[0.0; 2]; 3],
                 ray,
                 inside_segments,
+                exit,
             }
         })
         .collect();
@@ -203,16 +210,8 @@ pub fn splat_raster(
     // Post-shaded, a lane whose ray left the domain before sheet k's intervals start (slab0 +
     // (k - 1.5) slabs; a sheet's margin) composites nothing more (twin of pixel_live in
     // glsl/splat/raster_pixel.glsl); a ray that misses the domain never does.
-    let past_exit = |l: &Lane, k: u32| {
-        post && {
-            let exit = l
-                .inside_segments
-                .iter()
-                .map(|s| s.1)
-                .fold(f64::NEG_INFINITY, f64::max);
-            setup.slab0 + (f64::from(k) - 2.0) * setup.slab_world >= exit
-        }
-    };
+    let past_exit =
+        |l: &Lane, k: u32| post && setup.slab0 + (f64::from(k) - 2.0) * setup.slab_world >= l.exit;
     let (tiles_x, _) = setup.tiles();
     let first_bucket = (tile.1 * tiles_x + tile.0) as usize * setup.slabs as usize;
     let steps = setup.slabs + u32::from(post);

@@ -641,12 +641,16 @@ impl PreintegrationTables {
             })
     }
 
+    /// The position of scalar `s` among the nodes (node i at i), clamped to the table.
+    pub fn grid(&self, s: f64) -> f64 {
+        let n1 = (self.resolution - 1) as f64;
+        ((s - self.s_min) * (n1 / (self.s_max - self.s_min))).clamp(0.0, n1)
+    }
+
     /// Bilinear lookup of `table` at (s_f, s_b), clamped to the table's range.
     pub fn lookup(&self, table: &[[f32; 4]], s_f: f64, s_b: f64) -> [f64; 4] {
         let n = self.resolution;
-        let scale = (n - 1) as f64 / (self.s_max - self.s_min);
-        let grid = |s: f64| ((s - self.s_min) * scale).clamp(0.0, (n - 1) as f64);
-        let (x, y) = (grid(s_f), grid(s_b));
+        let (x, y) = (self.grid(s_f), self.grid(s_b));
         let (x0, y0) = ((x as usize).min(n - 2), (y as usize).min(n - 2));
         let (fx, fy) = (x - x0 as f64, y - y0 as f64);
         let at = |i: usize, j: usize| table[i + n * j].map(f64::from);

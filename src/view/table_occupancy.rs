@@ -11,69 +11,67 @@ use super::transfer::TransferFunction;
 /// i · 64 / resolution, so that the kernels' mask is two words (`TableBlock::occupied`).
 pub const OCCUPANCY_BINS: usize = 64;
 
+/// The bin of node `i` of a table of `n` nodes.
+fn bin(i: usize, n: usize) -> usize {
+    i * OCCUPANCY_BINS / n
+}
+
+/// The bins of a table's nodes that touch an occupied cell (cell c lies between nodes c and
+/// c + 1, and sets the bins of both).
+fn cell_bins(n: usize, occupied: impl Fn(usize) -> bool) -> u64 {
+    (0..n - 1)
+        .filter(|&c| occupied(c))
+        .fold(0, |bins, c| bins | 1 << bin(c, n) | 1 << bin(c + 1, n))
+}
+
+/// The bins of a lookup's window: from one node below the lower of its grid nodes `x`, `y`
+/// (floors of their positions) to one above the higher's upper node. The node either side is a
+/// margin for a kernel's f32 grid position, which may round to the next node where the
+/// host's f64 does not.
+fn window_bins(x: usize, y: usize, n: usize) -> u64 {
+    let lo = x.min(y).min(n - 2).saturating_sub(1);
+    let hi = (x.max(y).min(n - 2) + 2).min(n - 1);
+    (bin(lo, n)..=bin(hi, n)).fold(0, |m, i| m | 1 << i)
+}
+
 /// Whether some lookup of the tables of `tf` over `s_range` at `resolution` nodes will be
 /// [`PreintegrationTables::clear`], decided before they are built (so that a kernel compiles
 /// the skip only where it can fire): the bins [`PreintegrationTables::occupied`] would mark,
-/// from the cells on which τ is not zero everywhere, leave some node's lookup window (a node
-/// below to two above) clear. Where the quadrature rounds a cell's entries to zero this
-/// counts it occupied: it may say no where a skip could fire, never yes where none can.
+/// from the cells on which τ is not zero everywhere, leave some node's lookup window clear.
+/// Where the quadrature rounds a cell's entries to zero this counts it occupied: it may say no
+/// where a skip could fire, never yes where none can.
 pub fn clear_somewhere(tf: &TransferFunction, s_range: (f64, f64), resolution: usize) -> bool {
     let n = resolution.max(2);
     let (lo, hi) = table_range(s_range);
     let node = |i: usize| lo + (hi - lo) * i as f64 / (n - 1) as f64;
-    let bin = |i: usize| i * OCCUPANCY_BINS / n;
-    let occupied = (0..n - 1)
-        .filter(|&c| !tf.transparent_on(node(c), node(c + 1)))
-        .fold(0u64, |m, c| m | 1 << bin(c) | 1 << bin(c + 1));
-    (0..n).any(|i| {
-        let (a, b) = (
-            i.min(n - 2).saturating_sub(1),
-            (i.min(n - 2) + 2).min(n - 1),
-        );
-        (bin(a)..=bin(b)).all(|k| occupied & 1 << k == 0)
-    })
+    let occupied = cell_bins(n, |c| !tf.transparent_on(node(c), node(c + 1)));
+    (0..n).any(|i| occupied & window_bins(i, i, n) == 0)
 }
 
 impl PreintegrationTables {
-    /// The bin of node `i` in [`PreintegrationTables::occupied`].
-    pub fn bin(&self, i: usize) -> usize {
-        i * OCCUPANCY_BINS / self.resolution
-    }
-
-    /// The bins of `table`'s nodes that touch a cell with extinction: cell c, between nodes c
-    /// and c + 1, is occupied where its one-cell entries (c → c + 1, c + 1 → c) or its nodes'
-    /// zero-length entries are nonzero, and sets the bins of both nodes. Entry (f, b) is the
-    /// composite of the cells between its nodes ([`PreintegrationTables::build`]), and a cell
-    /// without extinction adds exact zeros to any window of them: where a lookup's nodes all lie
-    /// in clear bins, every entry it interpolates is zero, and [`PreintegrationTables::clear`]
-    /// skips it exactly. Read from the entries, not the transfer function, so that it holds
-    /// whatever the quadrature made of each cell (a cell whose extinction rounds away at one
-    /// length and not at another counts as occupied).
+    /// The bins of `table`'s nodes that touch a cell with extinction: cell c is occupied where
+    /// its one-cell entries (c → c + 1, c + 1 → c) or its nodes' zero-length entries are
+    /// nonzero. Entry (f, b) is the composite of the cells between its nodes
+    /// ([`PreintegrationTables::build`]), and a cell without extinction adds exact zeros to any
+    /// window of them: where a lookup's nodes all lie in clear bins, every entry it
+    /// interpolates is zero, and [`PreintegrationTables::clear`] skips it exactly. Read from the
+    /// entries, not the transfer function, so that it holds whatever the quadrature made of
+    /// each cell (a cell whose extinction rounds away at one length and not at another counts
+    /// as occupied).
     pub fn occupied(&self, table: &[[f32; 4]]) -> u64 {
         let n = self.resolution;
         let nonzero = |f: usize, b: usize| table[f + n * b].iter().any(|&x| x != 0.0);
-        (0..n - 1)
-            .filter(|&c| {
-                nonzero(c, c + 1) || nonzero(c + 1, c) || nonzero(c, c) || nonzero(c + 1, c + 1)
-            })
-            .fold(0, |bins, c| bins | 1 << self.bin(c) | 1 << self.bin(c + 1))
+        cell_bins(n, |c| {
+            nonzero(c, c + 1) || nonzero(c + 1, c) || nonzero(c, c) || nonzero(c + 1, c + 1)
+        })
     }
 
     /// Whether every entry of table `k` that [`PreintegrationTables::lookup`] interpolates at
     /// (s_f, s_b) is zero by [`PreintegrationTables::occupied`] (twin: preint_clear in
-    /// glsl/common/preintegration.glsl): the bins from one node below the lower lookup's to one
-    /// above the higher's upper node are clear. The node either side is a margin for the
-    /// kernel's f32 grid position, which may round to the next node where the host's f64 does
-    /// not.
+    /// glsl/common/preintegration.glsl): the bins of the lookup's window are clear.
     pub fn clear(&self, k: usize, s_f: f64, s_b: f64) -> bool {
-        let n = self.resolution;
-        let scale = (n - 1) as f64 / (self.s_max - self.s_min);
-        let grid = |s: f64| ((s - self.s_min) * scale).clamp(0.0, (n - 1) as f64) as usize;
-        let (x, y) = (grid(s_f), grid(s_b));
-        let lo = x.min(y).min(n - 2).saturating_sub(1);
-        let hi = (x.max(y).min(n - 2) + 2).min(n - 1);
-        let range = (self.bin(lo)..=self.bin(hi)).fold(0u64, |m, i| m | 1 << i);
-        self.occupied[k] & range == 0
+        let (x, y) = (self.grid(s_f) as usize, self.grid(s_b) as usize);
+        self.occupied[k] & window_bins(x, y, self.resolution) == 0
     }
 }
 
