@@ -109,7 +109,8 @@ fn differing(a: &[[f32; 4]], b: &[[f32; 4]]) -> usize {
 /// Splitting the walks among passes changes nothing in the image: the registers a pass leaves
 /// are the next one's to the bit, wherever the cut falls (inside a sheet or between sheets).
 /// Each variant of the tile loop is rendered whole and in walks of a few hundred loop
-/// iterations.
+/// iterations, and split again with the walk loading one entry ahead (`splat.prefetch`: the
+/// same loads reordered, reloaded where a pass resumes), which changes nothing either.
 #[test]
 fn walks_split_among_passes_give_the_same_image_to_the_bit() {
     let (ctx, _) = gpu();
@@ -139,6 +140,13 @@ fn walks_split_among_passes_give_the_same_image_to_the_bit() {
             (rb.counts.evaluated, rb.counts.contributions),
             "{name}: footprints"
         );
+        let (c, rc) = gpu_frame(
+            &mut split,
+            &scene(&[extra, &["splat.prefetch=true"]].concat()),
+        );
+        assert!(rc.counts.resumed > 0, "{name}, prefetch: nothing was split");
+        let differ = differing(&a, &c);
+        assert_eq!(differ, 0, "{name}, prefetch: {differ} pixels differ");
         assert!(a.iter().any(|p| p[3] > 0.2), "{name}: empty image");
     }
     drop((whole, split));
@@ -184,8 +192,12 @@ fn the_raster_dispatch_shape_changes_no_pixel() {
     for (name, extra) in RASTER_VARIANTS {
         let (a, _) = gpu_frame(&mut renderer, &scene(extra));
         assert!(a.iter().any(|p| p[3] > 0.2), "{name}: empty image");
-        let shapes: [(&[&str], f32); 6] = [
+        let shapes: [(&[&str], f32); 7] = [
             (&["splat.band_rows=3"], 0.0),
+            (
+                &["splat.prefetch=true", "splat.band_rows=4", "splat.pixels=1"],
+                4e-6,
+            ),
             (&["splat.branches=true"], 4e-6),
             (&["splat.band_rows=4", "splat.pixels=1"], 4e-6),
             (&set, 4e-6),

@@ -24,6 +24,10 @@ EDITS = {
     "skipout": [(POST, "    float r = on * span_overlap(lo, hi, px.t_in, px.t_out, SEGMENTS(px));\n",
                  "    float r = on * span_overlap(lo, hi, px.t_in, px.t_out, SEGMENTS(px));\n"
                  "    if (r == 0.0) {\n        return;\n    }\n")],
+    # With `splat.prefetch`: only the list is read ahead, each record where it is used (one
+    # dependent load a step instead of none, 28 fewer registers held across the step).
+    "prefetchlist": [(RASTER, "            Splat s = ahead;\n            ahead = load_splat(entry1.x);\n",
+                      "            Splat s = load_splat(entry.x);\n")],
     # No interval is looked up or composited. Tells what compositing costs.
     "nocomp": [(POST, "float s_f, float s_b) {\n", "float s_f, float s_b) {\n    return;\n")],
 }

@@ -35,8 +35,8 @@
 // barriers, which cost lavapipe a coroutine switch per subgroup), SPLAT_BRANCHES and
 // SPLAT_CLEAR_SKIP (post-shaded: branch around the shares of pixels outside a footprint, and
 // around lookups of all-zero table entries, which add exact zeros; on a GPU only: lavapipe
-// runs both sides of a branch). A pixel's registers and
-// their saving between passes are in splat/raster_pixel.glsl, post-shaded compositing in
+// runs both sides of a branch), SPLAT_PREFETCH (the walk loads one entry ahead: the same loads,
+// earlier). A pixel's registers and their saving between passes are in splat/raster_pixel.glsl, post-shaded compositing in
 // splat/raster_post.glsl.
 #extension GL_EXT_control_flow_attributes : enable
 #if SPLAT_SUBGROUP_OPS == 1
@@ -481,6 +481,14 @@ void main() {
     uint at_start = at;
     // The next entry: (splat, sheet), past the last the closing sheet.
     uvec2 entry = next_entry(at, at_end, steps);
+#if SPLAT_PREFETCH == 1
+    // Loaded one entry ahead: the record of `entry` and the entry after it, so that a GPU's
+    // loads of the next record overlap the current one's arithmetic instead of stalling the
+    // walk on two dependent loads (list, then record) per entry. Past the list's end the
+    // record read is splat 0's (the buffer holds at least one), never accumulated.
+    Splat ahead = load_splat(entry.x);
+    uvec2 entry1 = next_entry(at + 1u, at_end, steps);
+#endif
     // The walk's cost in this pass, in loop iterations (one per entry, push.sheet_cost per
     // sheet, which counts the loops of compositing it): a pass stops before it would pass
     // push.chunk, below llvmpipe's limit, and leaves the walk to the next (`cut`).
@@ -532,7 +540,13 @@ void main() {
         uint at_sheet = at;
         uint at_limit = at + (push.chunk - cost);
         while (entry.y == k && at < at_limit) {
+#if SPLAT_PREFETCH == 1
+            Splat s = ahead;
+            ahead = load_splat(entry1.x);
+            uvec2 entry2 = next_entry(at + 2u, at_end, steps);
+#else
             Splat s = load_splat(entry.x);
+#endif
 #if SPLAT_RING > 0
             // The entry covers sheets k .. k + span - 1 of the splat's.
             uint span = min(s.slabs.y - k + 1u, uint(SPLAT_RING));
@@ -544,7 +558,12 @@ void main() {
             EACH(ACCUMULATE)
 #undef ACCUMULATE
             at += 1u;
+#if SPLAT_PREFETCH == 1
+            entry = entry1;
+            entry1 = entry2;
+#else
             entry = next_entry(at, at_end, steps);
+#endif
         }
         cost += at - at_sheet;
         if (entry.y == k) {

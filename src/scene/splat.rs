@@ -23,6 +23,7 @@ pub(super) const KEYS: &[&str] = &[
     "band_rows",
     "pixels",
     "branches",
+    "prefetch",
 ];
 
 /// Reads `[splat]`; every key is optional.
@@ -85,6 +86,10 @@ pub(super) fn parse(sec: &Section<'_>) -> Result<SplatSettings, SceneError> {
         branches: match sec.get("branches") {
             None => d.branches,
             Some(_) => Some(flag(sec, "branches", true)?),
+        },
+        prefetch: match sec.get("prefetch") {
+            None => d.prefetch,
+            Some(_) => Some(flag(sec, "prefetch", true)?),
         },
     })
 }

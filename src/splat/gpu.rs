@@ -197,6 +197,8 @@ pub struct SplatVariant {
     /// (`SplatSetup::branches`) and lookups of all-zero table entries (`SplatSetup::clear_skip`).
     pub branches: bool,
     pub clear_skip: bool,
+    /// The walk loads one entry ahead (`SplatSetup::prefetch`).
+    pub prefetch: bool,
 }
 
 impl SplatVariant {
@@ -226,6 +228,7 @@ impl SplatVariant {
             subgroup_ops: device.subgroup_ops,
             branches: setup.branches,
             clear_skip: setup.clear_skip,
+            prefetch: setup.prefetch,
         }
     }
 
@@ -290,6 +293,7 @@ impl SplatVariant {
             ("SPLAT_SUBGROUP_OPS".into(), flag(self.subgroup_ops)),
             ("SPLAT_BRANCHES".into(), flag(self.branches)),
             ("SPLAT_CLEAR_SKIP".into(), flag(self.clear_skip)),
+            ("SPLAT_PREFETCH".into(), flag(self.prefetch)),
             ("SPLAT_SCAN_BLOCK".into(), SCAN_BLOCK.to_string()),
             (
                 "SPLAT_MAX_KERNEL_ENTRIES".into(),
@@ -332,7 +336,7 @@ impl SplatVariant {
     /// Human-readable name for `--stats`.
     pub fn name(&self) -> String {
         format!(
-            "splat {} {} {}{}{}{}{}{} tile {}{}{}{}{}",
+            "splat {} {} {}{}{}{}{}{} tile {}{}{}{}{}{}",
             match self.shading {
                 Shading::Pre => "pre-shaded",
                 Shading::Post => "post-shaded",
@@ -378,6 +382,7 @@ impl SplatVariant {
             if self.brick { " brick" } else { "" },
             if self.branches { " branches" } else { "" },
             if self.clear_skip { " clear-skip" } else { "" },
+            if self.prefetch { " prefetch" } else { "" },
         )
     }
 }

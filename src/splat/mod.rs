@@ -229,6 +229,9 @@ pub struct SplatSetup {
     /// else none until [`SplatSetup::fit_device`] allows it on a GPU), where the frame's table
     /// has some ([`SplatSetup::fit_transfer`]).
     pub clear_skip: bool,
+    /// `splat_raster`'s walk loads one entry ahead (`splat.prefetch`, else
+    /// [`SplatSetup::fit_device`]'s choice).
+    pub prefetch: bool,
 }
 
 impl SplatSetup {
@@ -484,6 +487,7 @@ impl SplatSetup {
             pixels: settings.pixels.unwrap_or(if post { 4 } else { 8 }),
             branches: post && settings.branches.unwrap_or(false),
             clear_skip: post && settings.branches.unwrap_or(false),
+            prefetch: settings.prefetch.unwrap_or(false),
         };
         let window = brick_window(&setup, (lo, hi), setup.reach());
         Ok(Self { window, ..setup })

@@ -319,6 +319,11 @@ pub struct SplatSettings {
     /// branch runs both sides under a mask and measured slower. The image is the same within
     /// f32 rounding (the early return changes how a compiler fuses the shares' multiply-adds).
     pub branches: Option<bool>,
+    /// `splat_raster`'s walk loads each entry's record one entry ahead, so that its loads
+    /// overlap the entry before's arithmetic (the same loads and arithmetic, reordered).
+    /// Unset: none on lavapipe, where loads do not stall a lane; on a GPU, see
+    /// [`crate::splat::SplatSetup::fit_device`]. The image is the same to the bit.
+    pub prefetch: Option<bool>,
 }
 
 impl Default for SplatSettings {
@@ -339,6 +344,7 @@ impl Default for SplatSettings {
             band_rows: None,
             pixels: None,
             branches: None,
+            prefetch: None,
         }
     }
 }
