@@ -8,8 +8,8 @@ use common::splat::*;
 use common::*;
 use vmls::renderer::Renderer;
 use vmls::scene::Scene;
-use vmls::splat::Shading;
 use vmls::splat::raster::splat_image;
+use vmls::splat::{Prefetch, Shading};
 
 /// A 64² post-shaded frame of Marschner–Lobb 41³ in sheets of 1/16 spacing gives each 8² tile
 /// of the volume's middle tens of thousands of (tile, sheet) entries and 1223 sheets to walk,
@@ -109,8 +109,9 @@ fn differing(a: &[[f32; 4]], b: &[[f32; 4]]) -> usize {
 /// Splitting the walks among passes changes nothing in the image: the registers a pass leaves
 /// are the next one's to the bit, wherever the cut falls (inside a sheet or between sheets).
 /// Each variant of the tile loop is rendered whole and in walks of a few hundred loop
-/// iterations, and split again with the walk loading one entry ahead (`splat.prefetch`: the
-/// same loads reordered, reloaded where a pass resumes), which changes nothing either.
+/// iterations, and split again with the walk loading the next entry, and also its record, one
+/// step ahead (`splat.prefetch`: the same loads reordered, reloaded where a pass resumes),
+/// which changes nothing either.
 #[test]
 fn walks_split_among_passes_give_the_same_image_to_the_bit() {
     let (ctx, _) = gpu();
@@ -140,13 +141,15 @@ fn walks_split_among_passes_give_the_same_image_to_the_bit() {
             (rb.counts.evaluated, rb.counts.contributions),
             "{name}: footprints"
         );
-        let (c, rc) = gpu_frame(
-            &mut split,
-            &scene(&[extra, &["splat.prefetch=true"]].concat()),
-        );
-        assert!(rc.counts.resumed > 0, "{name}, prefetch: nothing was split");
-        let differ = differing(&a, &c);
-        assert_eq!(differ, 0, "{name}, prefetch: {differ} pixels differ");
+        for prefetch in ["splat.prefetch=\"list\"", "splat.prefetch=\"records\""] {
+            let (c, rc) = gpu_frame(&mut split, &scene(&[extra, &[prefetch]].concat()));
+            assert!(
+                rc.counts.resumed > 0,
+                "{name}, {prefetch}: nothing was split"
+            );
+            let differ = differing(&a, &c);
+            assert_eq!(differ, 0, "{name}, {prefetch}: {differ} pixels differ");
+        }
         assert!(a.iter().any(|p| p[3] > 0.2), "{name}: empty image");
     }
     drop((whole, split));
@@ -195,7 +198,11 @@ fn the_raster_dispatch_shape_changes_no_pixel() {
         let shapes: [(&[&str], f32); 7] = [
             (&["splat.band_rows=3"], 0.0),
             (
-                &["splat.prefetch=true", "splat.band_rows=4", "splat.pixels=1"],
+                &[
+                    "splat.prefetch=\"records\"",
+                    "splat.band_rows=4",
+                    "splat.pixels=1",
+                ],
                 4e-6,
             ),
             (&["splat.branches=true"], 4e-6),
@@ -227,7 +234,9 @@ fn the_raster_dispatch_shape_changes_no_pixel() {
 /// ring's multiply-adds are fused (471 pixels by up to 1.7e-6 measured; the table skip alone
 /// was equal to the bit in all four variants). The lookups' skip fires (its counter) with
 /// branches and never without. The fit takes them on a GPU only, post-shaded only, and the
-/// table's skip only where some lookup can be clear.
+/// table's skip only where some lookup can be clear. The skip of lookups outside the domain
+/// (a GPU's default where the domain is a hull) is part of the same branches: the box's
+/// outside here, equal within the same bound.
 #[test]
 fn post_shaded_branches_change_no_pixel() {
     let band = "transfer.points=[[0.0,0.2,0.5,1.0,0.0],[0.35,0.2,0.5,1.0,0.0],[0.5,1.0,0.5,0.2,5.0],\
@@ -272,6 +281,50 @@ fn post_shaded_branches_change_no_pixel() {
         fitted(&forced, Shading::Post, true),
         (true, true),
         "set on lavapipe"
+    );
+    // A GPU skips the lookups outside the domain where it is a mesh's hull, and its walk loads
+    // the next entry ahead with rings of 16 sheets, the record too otherwise; lavapipe neither,
+    // and keys set win.
+    let more = |extra: &[&str], shading: Shading, cpu: bool, hull: bool| {
+        let mut st = setup(&scene(extra), &field, shading);
+        st.hull = hull;
+        st.fit_device(cpu);
+        (st.outside_skip, st.prefetch)
+    };
+    let (ring16, ring8) = (["splat.ring=16"], ["splat.ring=8"]);
+    assert_eq!(
+        more(&ring16, Shading::Post, false, false),
+        (false, Prefetch::List)
+    );
+    assert_eq!(
+        more(&ring8, Shading::Post, false, true),
+        (true, Prefetch::Records)
+    );
+    assert_eq!(
+        more(&[], Shading::Pre, false, true),
+        (false, Prefetch::Records)
+    );
+    assert_eq!(
+        more(&ring8, Shading::Post, true, true),
+        (false, Prefetch::None)
+    );
+    let set = [
+        "splat.branches=false",
+        "splat.prefetch=\"none\"",
+        "splat.ring=8",
+    ];
+    assert_eq!(
+        more(&set, Shading::Post, false, true),
+        (false, Prefetch::None)
+    );
+    let set = [
+        "splat.branches=true",
+        "splat.prefetch=\"records\"",
+        "splat.ring=8",
+    ];
+    assert_eq!(
+        more(&set, Shading::Post, true, false),
+        (true, Prefetch::Records)
     );
 
     let (ctx, _) = gpu();

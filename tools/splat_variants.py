@@ -17,17 +17,6 @@ EDITS = {
     # every step between them is gone. Tells what the steps cost.
     "noring": [(RASTER, "#define STEP(d, r) \\\n    g *= rho; \\\n    rho *= c; \\\n    MID(d, r)",
                 "#define STEP(d, r)")],
-    # A candidate for `splat.branches`, not yet measured on a GPU: a half outside the pixel's
-    # part of the domain (r = 0: alpha 0, colour 0) returns before its lookup. Rays spend
-    # many sheets outside a hull or a box corner, and a function with extinction at 0 (the
-    # torus's) has no empty-sheet skip.
-    "skipout": [(POST, "    float r = on * span_overlap(lo, hi, px.t_in, px.t_out, SEGMENTS(px));\n",
-                 "    float r = on * span_overlap(lo, hi, px.t_in, px.t_out, SEGMENTS(px));\n"
-                 "    if (r == 0.0) {\n        return;\n    }\n")],
-    # With `splat.prefetch`: only the list is read ahead, each record where it is used (one
-    # dependent load a step instead of none, 28 fewer registers held across the step).
-    "prefetchlist": [(RASTER, "            Splat s = ahead;\n            ahead = load_splat(entry1.x);\n",
-                      "            Splat s = load_splat(entry.x);\n")],
     # No interval is looked up or composited. Tells what compositing costs.
     "nocomp": [(POST, "float s_f, float s_b) {\n", "float s_f, float s_b) {\n    return;\n")],
 }

@@ -56,8 +56,9 @@ uint clear_halves = 0u;
 // [lo, hi], half a sheet (table 0's length), composited over its part inside the domain. A
 // part keeps the half's colour per opacity, its opacity from the half's optical depth scaled
 // by the part's share (exact for a constant field; only halves a boundary clips are scaled).
-// Branch-free (but for SPLAT_CLEAR_SKIP's skip of all-zero entries): outside the domain (or with
-// `on` 0) the share is 0 and so are its opacity and colour.
+// Branch-free (but for SPLAT_CLEAR_SKIP's skip of all-zero entries and SPLAT_OUTSIDE_SKIP's of
+// halves outside the domain): outside the domain (or with `on` 0) the share is 0 and so are
+// its opacity and colour.
 void composite_half(inout Pixel px, float lo, float hi, float on, float s_f, float s_b) {
 #if SPLAT_CLEAR_SKIP == 1
     // A half whose table entries are all zero composites nothing (alpha 0, colour 0): on a
@@ -69,6 +70,13 @@ void composite_half(inout Pixel px, float lo, float hi, float on, float s_f, flo
     }
 #endif
     float r = on * span_overlap(lo, hi, px.t_in, px.t_out, SEGMENTS(px));
+#if SPLAT_OUTSIDE_SKIP == 1
+    // Outside the pixel's part of the domain the share is 0: on a GPU the lanes whose half is
+    // skip its lookups (a mesh's hole and silhouette; SplatSetup::fit_device).
+    if (r == 0.0) {
+        return;
+    }
+#endif
     vec4 e = preint_lookup(0u, s_f, s_b);
     float f = r / (hi - lo);
     float alpha = f >= 1.0 ? e.a : 1.0 - exp2(f * log2(max(1.0 - e.a, 1e-30)));

@@ -35,8 +35,9 @@
 // barriers, which cost lavapipe a coroutine switch per subgroup), SPLAT_BRANCHES and
 // SPLAT_CLEAR_SKIP (post-shaded: branch around the shares of pixels outside a footprint, and
 // around lookups of all-zero table entries, which add exact zeros; on a GPU only: lavapipe
-// runs both sides of a branch), SPLAT_PREFETCH (the walk loads one entry ahead: the same loads,
-// earlier). A pixel's registers and their saving between passes are in splat/raster_pixel.glsl, post-shaded compositing in
+// runs both sides of a branch), SPLAT_OUTSIDE_SKIP (post-shaded, the same on a GPU: around
+// lookups of halves outside the domain), SPLAT_PREFETCH (the walk loads the next entry, 1, or
+// also its record, 2, one step ahead: the same loads, earlier). A pixel's registers and their saving between passes are in splat/raster_pixel.glsl, post-shaded compositing in
 // splat/raster_post.glsl.
 #extension GL_EXT_control_flow_attributes : enable
 #if SPLAT_SUBGROUP_OPS == 1
@@ -481,12 +482,15 @@ void main() {
     uint at_start = at;
     // The next entry: (splat, sheet), past the last the closing sheet.
     uvec2 entry = next_entry(at, at_end, steps);
-#if SPLAT_PREFETCH == 1
-    // Loaded one entry ahead: the record of `entry` and the entry after it, so that a GPU's
-    // loads of the next record overlap the current one's arithmetic instead of stalling the
-    // walk on two dependent loads (list, then record) per entry. Past the list's end the
-    // record read is splat 0's (the buffer holds at least one), never accumulated.
+    // SPLAT_PREFETCH 1 loads the entry after `entry` one step ahead, so that a step's record
+    // load has its address at hand; 2 also the record of `entry`, so that on a GPU a step
+    // waits on no load of its own (they overlap the step before's arithmetic) at the price of
+    // the record's registers. Past the list's end the record read is splat 0's (the buffer
+    // holds at least one), never accumulated.
+#if SPLAT_PREFETCH == 2
     Splat ahead = load_splat(entry.x);
+#endif
+#if SPLAT_PREFETCH >= 1
     uvec2 entry1 = next_entry(at + 1u, at_end, steps);
 #endif
     // The walk's cost in this pass, in loop iterations (one per entry, push.sheet_cost per
@@ -540,12 +544,14 @@ void main() {
         uint at_sheet = at;
         uint at_limit = at + (push.chunk - cost);
         while (entry.y == k && at < at_limit) {
-#if SPLAT_PREFETCH == 1
+#if SPLAT_PREFETCH == 2
             Splat s = ahead;
             ahead = load_splat(entry1.x);
-            uvec2 entry2 = next_entry(at + 2u, at_end, steps);
 #else
             Splat s = load_splat(entry.x);
+#endif
+#if SPLAT_PREFETCH >= 1
+            uvec2 entry2 = next_entry(at + 2u, at_end, steps);
 #endif
 #if SPLAT_RING > 0
             // The entry covers sheets k .. k + span - 1 of the splat's.
@@ -558,7 +564,7 @@ void main() {
             EACH(ACCUMULATE)
 #undef ACCUMULATE
             at += 1u;
-#if SPLAT_PREFETCH == 1
+#if SPLAT_PREFETCH >= 1
             entry = entry1;
             entry1 = entry2;
 #else

@@ -25,9 +25,9 @@
 //!   (the operations of `splat_footprint`, a transcendental function counted as 10; post-shaded
 //!   entries add their ring's sheet shares, `entry_flops`), plus per
 //!   entry walked 8 per pixel of the tile (the box test and the loop), against `probe_fma`;
-//!   and per entry walked and per 8-invocation subgroup of the tile one broadcast load of the
-//!   120 bytes of its entry and record, against the streaming bandwidth. Both counts come from
-//!   the kernel's own counters.
+//!   and per entry walked and per subgroup of the tile (8 invocations on lavapipe, 32 on an
+//!   NVIDIA GPU) one broadcast load of the 120 bytes of its entry and record, against the
+//!   streaming bandwidth. Both counts come from the kernel's own counters.
 
 use crate::field::Field;
 use crate::probe::Ceilings;
@@ -142,18 +142,20 @@ pub fn entry_flops(exact: bool, ring: u32, sheet_share: crate::view::SheetShare)
     }
 }
 
-/// (FMA share, broadcast-load share) of a splatting frame's `splat_raster`.
+/// (FMA share, broadcast-load share) of a splatting frame's `splat_raster` on a device of
+/// `subgroup` invocations a subgroup.
 pub fn splat_shares(
     c: &Ceilings,
     report: &crate::renderer::SplatReport,
     exact: bool,
+    subgroup: u32,
 ) -> (f64, f64) {
     let seconds = report.stage_ms[2] * 1e-3;
     let walked = report.counts.accumulated as f64;
     let flops = report.counts.evaluated as f64
         * entry_flops(exact, report.ring, report.sheet_share)
         + walked * 8.0 * f64::from(report.group_size);
-    let bytes = walked * 120.0 * f64::from(report.invocations.div_ceil(8));
+    let bytes = walked * 120.0 * f64::from(report.invocations.div_ceil(subgroup.max(1)));
     (
         flops / seconds / (c.fma_gflops * 1e9),
         bytes / seconds / c.stream_bytes_per_s,

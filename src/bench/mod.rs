@@ -5,8 +5,9 @@
 //! - A configuration is the scene plus one `--methods` entry and one value of every `--sweep`
 //!   (their cartesian product, in the order given). Each gets a fresh [`Renderer`], so its first
 //!   frame shows the whole cost of a new dataset on the device (upload, kernel compilation,
-//!   tables, buffers); then `warmup` frames are rendered and discarded and `repeat` frames are
-//!   timed. Times are GPU timestamp queries (median, smallest, largest) and wall clock.
+//!   tables, buffers); then `warmup` frames (and, where `warmup` > 0, more until the warm-up
+//!   has lasted [`WARMUP_MIN_MS`]) are rendered and discarded and `repeat` frames are timed.
+//!   Times are GPU timestamp queries (median, smallest, largest) and wall clock.
 //! - Every configuration's error is measured against one reference image (see [`reference`]),
 //!   rendered once per run and cached on disk under a key of everything that affects it.
 //! - Results are [`results::Row`]s: `results.csv`, `results.json` (with the run's context:
@@ -28,6 +29,16 @@ use crate::vk::{Context, ShaderCompiler, ShaderSource};
 use reference::{Reference, ReferenceMode, reference_image};
 use results::Row;
 use std::io::Write;
+
+/// The least wall time of a configuration's warm-up frames (where `--warmup` asks for any). A
+/// discrete GPU lowers its clocks after about a second without work and raises them again
+/// only under load: while the bench prepared the next field an H200 fell from 1 980 to 345 MHz
+/// (nvidia-smi, reason "GPU idle"), and the few short frames after it then ran 5× slower than
+/// the same frames back to back (BENCHMARKS.md, "The H200 a fourth time"). Half a second of
+/// frames brings the clocks back; lavapipe's frames are mostly longer than that alone.
+pub const WARMUP_MIN_MS: f64 = 500.0;
+/// The most frames the warm-up adds to `--warmup` to reach [`WARMUP_MIN_MS`].
+const WARMUP_MAX_EXTRA: u32 = 400;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -377,8 +388,15 @@ pub fn run(
         })?;
         let first_wall = first_start.elapsed().as_secs_f64() * 1e3;
         let bytes_first = ctx.bytes_uploaded() - bytes0;
-        for _ in 0..opts.warmup {
+        let warm_start = Instant::now();
+        let mut warm = 0;
+        while warm < opts.warmup
+            || (opts.warmup > 0
+                && warm < opts.warmup + WARMUP_MAX_EXTRA
+                && warm_start.elapsed().as_secs_f64() * 1e3 < WARMUP_MIN_MS)
+        {
             renderer.render(&view, |_| {})?;
+            warm += 1;
         }
         let (mut gpu, mut wall, mut per_kernel) = (Vec::new(), Vec::new(), Vec::new());
         let mut bytes_next = 0;
@@ -464,7 +482,7 @@ pub fn run(
                     .shaders
                     .iter()
                     .any(|(_, d)| d.contains(&("SPLAT_EXACT".into(), "1".into())));
-                let (f, a) = ceiling::splat_shares(c, report, exact);
+                let (f, a) = ceiling::splat_shares(c, report, exact, ctx.info().subgroup_size);
                 Some((f, a, "stream"))
             }
             _ => None,

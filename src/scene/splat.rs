@@ -2,7 +2,7 @@
 
 use super::{SceneError, Section};
 use crate::splat::{
-    Antialias, RASTER_PIXELS, RINGS, SheetInterval, SheetShare, SplatSettings, TILE_SIZES,
+    Antialias, Prefetch, RASTER_PIXELS, RINGS, SheetInterval, SheetShare, SplatSettings, TILE_SIZES,
 };
 use toml::Value;
 
@@ -87,10 +87,16 @@ pub(super) fn parse(sec: &Section<'_>) -> Result<SplatSettings, SceneError> {
             None => d.branches,
             Some(_) => Some(flag(sec, "branches", true)?),
         },
-        prefetch: match sec.get("prefetch") {
-            None => d.prefetch,
-            Some(_) => Some(flag(sec, "prefetch", true)?),
-        },
+        prefetch: sec.choice(
+            "prefetch",
+            d.prefetch,
+            &[
+                ("auto", None),
+                ("none", Some(Prefetch::None)),
+                ("list", Some(Prefetch::List)),
+                ("records", Some(Prefetch::Records)),
+            ],
+        )?,
     })
 }
 

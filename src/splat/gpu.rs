@@ -197,8 +197,10 @@ pub struct SplatVariant {
     /// (`SplatSetup::branches`) and lookups of all-zero table entries (`SplatSetup::clear_skip`).
     pub branches: bool,
     pub clear_skip: bool,
-    /// The walk loads one entry ahead (`SplatSetup::prefetch`).
-    pub prefetch: bool,
+    /// Post-shaded: lookups of halves outside the domain skipped (`SplatSetup::outside_skip`).
+    pub outside_skip: bool,
+    /// What the walk loads one entry ahead (`SplatSetup::prefetch`).
+    pub prefetch: super::Prefetch,
 }
 
 impl SplatVariant {
@@ -228,6 +230,7 @@ impl SplatVariant {
             subgroup_ops: device.subgroup_ops,
             branches: setup.branches,
             clear_skip: setup.clear_skip,
+            outside_skip: setup.outside_skip,
             prefetch: setup.prefetch,
         }
     }
@@ -293,7 +296,16 @@ impl SplatVariant {
             ("SPLAT_SUBGROUP_OPS".into(), flag(self.subgroup_ops)),
             ("SPLAT_BRANCHES".into(), flag(self.branches)),
             ("SPLAT_CLEAR_SKIP".into(), flag(self.clear_skip)),
-            ("SPLAT_PREFETCH".into(), flag(self.prefetch)),
+            ("SPLAT_OUTSIDE_SKIP".into(), flag(self.outside_skip)),
+            (
+                "SPLAT_PREFETCH".into(),
+                match self.prefetch {
+                    super::Prefetch::None => "0",
+                    super::Prefetch::List => "1",
+                    super::Prefetch::Records => "2",
+                }
+                .into(),
+            ),
             ("SPLAT_SCAN_BLOCK".into(), SCAN_BLOCK.to_string()),
             (
                 "SPLAT_MAX_KERNEL_ENTRIES".into(),
@@ -336,7 +348,7 @@ impl SplatVariant {
     /// Human-readable name for `--stats`.
     pub fn name(&self) -> String {
         format!(
-            "splat {} {} {}{}{}{}{}{} tile {}{}{}{}{}{}",
+            "splat {} {} {}{}{}{}{}{} tile {}{}{}{}{}{}{}",
             match self.shading {
                 Shading::Pre => "pre-shaded",
                 Shading::Post => "post-shaded",
@@ -382,7 +394,16 @@ impl SplatVariant {
             if self.brick { " brick" } else { "" },
             if self.branches { " branches" } else { "" },
             if self.clear_skip { " clear-skip" } else { "" },
-            if self.prefetch { " prefetch" } else { "" },
+            if self.outside_skip {
+                " outside-skip"
+            } else {
+                ""
+            },
+            match self.prefetch {
+                super::Prefetch::None => "",
+                super::Prefetch::List => " prefetch-list",
+                super::Prefetch::Records => " prefetch-records",
+            },
         )
     }
 }

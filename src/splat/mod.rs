@@ -45,7 +45,9 @@ pub mod project;
 pub mod raster;
 pub mod surface;
 
-pub use crate::view::settings::{Antialias, Shading, SheetInterval, SheetShare, SplatSettings};
+pub use crate::view::settings::{
+    Antialias, Prefetch, Shading, SheetInterval, SheetShare, SplatSettings,
+};
 
 use crate::field::{Field, RenderError};
 use crate::view::camera::{Camera, Projection, ViewBasis};
@@ -229,9 +231,13 @@ pub struct SplatSetup {
     /// else none until [`SplatSetup::fit_device`] allows it on a GPU), where the frame's table
     /// has some ([`SplatSetup::fit_transfer`]).
     pub clear_skip: bool,
-    /// `splat_raster`'s walk loads one entry ahead (`splat.prefetch`, else
-    /// [`SplatSetup::fit_device`]'s choice).
-    pub prefetch: bool,
+    /// Post-shaded `splat_raster` skips the lookups of interval halves outside the pixel's part
+    /// of the domain (`splat.branches`, else none until [`SplatSetup::fit_device`] takes it on a
+    /// GPU where the domain is a mesh's hull).
+    pub outside_skip: bool,
+    /// What `splat_raster`'s walk loads one entry ahead (`splat.prefetch`, else none until
+    /// [`SplatSetup::fit_device`] chooses for a GPU).
+    pub prefetch: Prefetch,
 }
 
 impl SplatSetup {
@@ -487,7 +493,8 @@ impl SplatSetup {
             pixels: settings.pixels.unwrap_or(if post { 4 } else { 8 }),
             branches: post && settings.branches.unwrap_or(false),
             clear_skip: post && settings.branches.unwrap_or(false),
-            prefetch: settings.prefetch.unwrap_or(false),
+            outside_skip: post && settings.branches.unwrap_or(false),
+            prefetch: settings.prefetch.unwrap_or(Prefetch::None),
         };
         let window = brick_window(&setup, (lo, hi), setup.reach());
         Ok(Self { window, ..setup })
@@ -660,8 +667,14 @@ impl SplatSetup {
     /// 65.4 ms; BENCHMARKS.md, "Splatting on a GPU needs wide bands"). There ("The H200 a
     /// third time"), two pixels pre-shaded took 20–27% off its frames; the branches 14% off
     /// the post-shaded points' (ring 16), and the early return alone 8%, while on the torus
-    /// (ring 8) it cost 2–3%. Bands change no pixel; pixels per invocation and branches compile
-    /// another variant, equal within f32 rounding (the compiler's fused multiply-adds).
+    /// (ring 8) it cost 2–3%; the skip of lookups outside the domain 3.5% off the torus's (a
+    /// hull), none on the points'. The walk loads the next entry and its record one step ahead
+    /// ([`Prefetch::Records`]): 6–13% off pre-shaded frames and 15% off the torus's post-shaded
+    /// ones; with rings of 16 sheets the record's registers cost more than they save (+2% on
+    /// the points) and the next entry alone is loaded ahead ([`Prefetch::List`]: −6%)
+    /// (BENCHMARKS.md, "The H200 a fourth time"). Bands and prefetching change no pixel;
+    /// pixels per invocation and branches compile another variant, equal within f32 rounding
+    /// (the compiler's fused multiply-adds).
     pub fn fit_device(&mut self, cpu: bool) {
         if cpu {
             return;
@@ -677,6 +690,14 @@ impl SplatSetup {
         if self.settings.branches.is_none() {
             self.branches = post && self.ring == 16;
             self.clear_skip = post;
+            self.outside_skip = post && self.hull;
+        }
+        if self.settings.prefetch.is_none() {
+            self.prefetch = if post && self.ring == 16 {
+                Prefetch::List
+            } else {
+                Prefetch::Records
+            };
         }
     }
 

@@ -263,6 +263,30 @@ impl SheetInterval {
     }
 }
 
+/// `splat.prefetch`: what `splat_raster`'s walk loads one entry ahead of its use. The loads
+/// and the arithmetic are the same, in another order: the image is the same to the bit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Prefetch {
+    /// Each entry and its kernel's record where they are used (two dependent loads a step).
+    None,
+    /// The next entry, so that a step's record load has its address at hand (one load a step
+    /// waited on).
+    List,
+    /// The next entry and its record (28 more registers held across a step).
+    Records,
+}
+
+impl Prefetch {
+    /// The level's name, as `splat.prefetch` spells it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Prefetch::None => "none",
+            Prefetch::List => "list",
+            Prefetch::Records => "records",
+        }
+    }
+}
+
 /// Scene section `[splat]`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SplatSettings {
@@ -314,16 +338,16 @@ pub struct SplatSettings {
     pub pixels: Option<u32>,
     /// Post-shaded: `splat_raster` branches around work that adds exact zeros (a pixel outside
     /// a kernel's footprint skips its sheet shares; an interval whose table entries are all
-    /// zero skips its lookups). Unset: on a GPU the lookups' skip where the frame's table has
-    /// all-zero entries, and the shares' with rings of 16 sheets; not on lavapipe, where a
+    /// zero, or that lies outside the domain, skips its lookups). Unset: on a GPU the lookups'
+    /// skips where the frame's table has all-zero entries or the domain is a mesh's hull, and
+    /// the shares' with rings of 16 sheets; not on lavapipe, where a
     /// branch runs both sides under a mask and measured slower. The image is the same within
     /// f32 rounding (the early return changes how a compiler fuses the shares' multiply-adds).
     pub branches: Option<bool>,
-    /// `splat_raster`'s walk loads each entry's record one entry ahead, so that its loads
-    /// overlap the entry before's arithmetic (the same loads and arithmetic, reordered).
-    /// Unset: none on lavapipe, where loads do not stall a lane; on a GPU, see
-    /// [`crate::splat::SplatSetup::fit_device`]. The image is the same to the bit.
-    pub prefetch: Option<bool>,
+    /// What `splat_raster`'s walk loads one entry ahead, so that its loads overlap the entry
+    /// before's arithmetic. Unset: none on lavapipe, where a load does not stall a lane; on a
+    /// GPU [`crate::splat::SplatSetup::fit_device`]'s choice. The image is the same to the bit.
+    pub prefetch: Option<Prefetch>,
 }
 
 impl Default for SplatSettings {
