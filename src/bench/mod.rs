@@ -34,11 +34,12 @@ use std::io::Write;
 /// discrete GPU lowers its clocks after about a second without work and raises them again
 /// only under load: while the bench prepared the next field an H200 fell from 1 980 to 345 MHz
 /// (nvidia-smi, reason "GPU idle"), and the few short frames after it then ran 5× slower than
-/// the same frames back to back (BENCHMARKS.md, "The H200 a fourth time"). Half a second of
-/// frames brings the clocks back; lavapipe's frames are mostly longer than that alone.
-pub const WARMUP_MIN_MS: f64 = 500.0;
+/// the same frames back to back (BENCHMARKS.md, "The H200 a fourth time"). After half a
+/// second of 1.2 ms frames the clocks were still at 1 755 MHz; a second is asked for.
+/// lavapipe's frames are mostly longer than that alone.
+pub const WARMUP_MIN_MS: f64 = 1000.0;
 /// The most frames the warm-up adds to `--warmup` to reach [`WARMUP_MIN_MS`].
-const WARMUP_MAX_EXTRA: u32 = 400;
+const WARMUP_MAX_EXTRA: u32 = 1000;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
