@@ -17,20 +17,6 @@ EDITS = {
     # every step between them is gone. Tells what the steps cost.
     "noring": [(RASTER, "#define STEP(d, r) \\\n    g *= rho; \\\n    rho *= c; \\\n    MID(d, r)",
                 "#define STEP(d, r)")],
-    # Candidates for the GPU: a lane outside the entry's pixel box returns before the
-    # footprint (post-shaded under SPLAT_BRANCHES, pre-shaded always), so that a subgroup wholly
-    # outside skips it; the same image.
-    "boxout": [(RASTER, "    vec3 pr = splat_profile(s, cutoff, pixel, px.view);\n",
-                "#if SPLAT_BRANCHES == 1\n    if (!in_box) {\n        return;\n    }\n#endif\n"
-                "    vec3 pr = splat_profile(s, cutoff, pixel, px.view);\n"),
-               (RASTER, "    float g = splat_footprint(s, cutoff, pixel, px.view, ta, tb);\n",
-                "    if (!in_box) {\n        return;\n    }\n"
-                "    float g = splat_footprint(s, cutoff, pixel, px.view, ta, tb);\n")],
-    # A half wholly inside the domain (most) takes its table opacity without the exp2 and
-    # log2 that scale a clipped half's: a branch instead of a select; the same image.
-    "alphabranch": [(POST, "    float alpha = f >= 1.0 ? e.a : 1.0 - exp2(f * log2(max(1.0 - e.a, 1e-30)));\n",
-                     "    float alpha = e.a;\n    if (f < 1.0) {\n"
-                     "        alpha = 1.0 - exp2(f * log2(max(1.0 - e.a, 1e-30)));\n    }\n")],
     # No interval is looked up or composited. Tells what compositing costs.
     "nocomp": [(POST, "float s_f, float s_b) {\n", "float s_f, float s_b) {\n    return;\n")],
 }
