@@ -304,6 +304,12 @@ fn post_shaded_branches_change_no_pixel() {
         more(&[], Shading::Pre, false, true),
         (false, Prefetch::Records)
     );
+    let constant = ["splat.ring=8", "splat.interval=\"constant\""];
+    assert_eq!(
+        more(&constant, Shading::Post, false, true),
+        (false, Prefetch::Records),
+        "no halves to skip without intervals"
+    );
     assert_eq!(
         more(&ring8, Shading::Post, true, true),
         (false, Prefetch::None)

@@ -71,8 +71,8 @@ void composite_half(inout Pixel px, float lo, float hi, float on, float s_f, flo
 #endif
     float r = on * span_overlap(lo, hi, px.t_in, px.t_out, SEGMENTS(px));
 #if SPLAT_OUTSIDE_SKIP == 1
-    // Outside the pixel's part of the domain the share is 0: on a GPU the lanes whose half is
-    // skip its lookups (a mesh's hole and silhouette; SplatSetup::fit_device).
+    // Outside the pixel's part of the domain the share is 0: on a GPU the lanes whose half lies
+    // there skip its lookups (a mesh's hole and silhouette; SplatSetup::fit_device).
     if (r == 0.0) {
         return;
     }

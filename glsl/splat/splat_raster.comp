@@ -37,7 +37,8 @@
 // around lookups of all-zero table entries, which add exact zeros; on a GPU only: lavapipe
 // runs both sides of a branch), SPLAT_OUTSIDE_SKIP (post-shaded, the same on a GPU: around
 // lookups of halves outside the domain), SPLAT_PREFETCH (the walk loads the next entry, 1, or
-// also its record, 2, one step ahead: the same loads, earlier). A pixel's registers and their saving between passes are in splat/raster_pixel.glsl, post-shaded compositing in
+// also its record, 2, one step ahead: the same loads earlier, and at most two entries and one
+// record past a pass's last, never used). A pixel's registers and their saving between passes are in splat/raster_pixel.glsl, post-shaded compositing in
 // splat/raster_post.glsl.
 #extension GL_EXT_control_flow_attributes : enable
 #if SPLAT_SUBGROUP_OPS == 1

@@ -29,19 +29,20 @@ use crate::vk::{Context, ShaderCompiler, ShaderSource};
 use reference::{Reference, ReferenceMode, reference_image};
 use results::Row;
 use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
 
-/// The least wall time of a configuration's warm-up frames (where `--warmup` asks for any). A
-/// discrete GPU lowers its clocks after about a second without work and raises them again
-/// only under load: while the bench prepared the next field an H200 fell from 1 980 to 345 MHz
-/// (nvidia-smi, reason "GPU idle"), and the few short frames after it then ran 5× slower than
-/// the same frames back to back (BENCHMARKS.md, "The H200 a fourth time"). After half a
-/// second of 1.2 ms frames the clocks were still at 1 755 MHz; a second is asked for.
-/// lavapipe's frames are mostly longer than that alone.
+/// The least wall time of a configuration's warm-up frames on a device that is not the CPU
+/// (where `--warmup` asks for any). A discrete GPU lowers its clocks after about a second
+/// without work and raises them again only under load: while the bench prepared the next
+/// field an H200 fell from 1 980 to 345 MHz (nvidia-smi, reason "GPU idle"), and the few short
+/// frames after it then ran 5× slower than the same frames back to back (BENCHMARKS.md, "The
+/// H200 a fourth time"). After half a second of 1.2 ms frames the clocks were still at
+/// 1 755 MHz; a second is asked for. lavapipe runs on the cores that prepare the field, which
+/// are never idle meanwhile: it keeps `--warmup` as given.
 pub const WARMUP_MIN_MS: f64 = 1000.0;
 /// The most frames the warm-up adds to `--warmup` to reach [`WARMUP_MIN_MS`].
 const WARMUP_MAX_EXTRA: u32 = 1000;
-use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 /// What a bench run can fail with.
 #[derive(Debug, thiserror::Error)]
@@ -390,11 +391,15 @@ pub fn run(
         let first_wall = first_start.elapsed().as_secs_f64() * 1e3;
         let bytes_first = ctx.bytes_uploaded() - bytes0;
         let warm_start = Instant::now();
+        let warm_ms = if opts.warmup > 0 && ctx.info().device_type != "cpu" {
+            WARMUP_MIN_MS
+        } else {
+            0.0
+        };
         let mut warm = 0;
         while warm < opts.warmup
-            || (opts.warmup > 0
-                && warm < opts.warmup + WARMUP_MAX_EXTRA
-                && warm_start.elapsed().as_secs_f64() * 1e3 < WARMUP_MIN_MS)
+            || (warm < opts.warmup.saturating_add(WARMUP_MAX_EXTRA)
+                && warm_start.elapsed().as_secs_f64() * 1e3 < warm_ms)
         {
             renderer.render(&view, |_| {})?;
             warm += 1;

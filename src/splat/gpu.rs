@@ -400,9 +400,8 @@ impl SplatVariant {
                 ""
             },
             match self.prefetch {
-                super::Prefetch::None => "",
-                super::Prefetch::List => " prefetch-list",
-                super::Prefetch::Records => " prefetch-records",
+                super::Prefetch::None => String::new(),
+                p => format!(" prefetch-{}", p.name()),
             },
         )
     }

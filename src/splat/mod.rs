@@ -493,7 +493,9 @@ impl SplatSetup {
             pixels: settings.pixels.unwrap_or(if post { 4 } else { 8 }),
             branches: post && settings.branches.unwrap_or(false),
             clear_skip: post && settings.branches.unwrap_or(false),
-            outside_skip: post && settings.branches.unwrap_or(false),
+            outside_skip: post
+                && interval != SheetInterval::Constant
+                && settings.branches.unwrap_or(false),
             prefetch: settings.prefetch.unwrap_or(Prefetch::None),
         };
         let window = brick_window(&setup, (lo, hi), setup.reach());
@@ -690,7 +692,7 @@ impl SplatSetup {
         if self.settings.branches.is_none() {
             self.branches = post && self.ring == 16;
             self.clear_skip = post;
-            self.outside_skip = post && self.hull;
+            self.outside_skip = post && self.hull && self.interval != SheetInterval::Constant;
         }
         if self.settings.prefetch.is_none() {
             self.prefetch = if post && self.ring == 16 {

@@ -43,8 +43,8 @@ pub struct BenchArgs {
     /// Timed frames per configuration.
     #[arg(long, default_value_t = 5)]
     repeat: u32,
-    /// Frames rendered and discarded after the first one, before timing; where at least one,
-    /// more until they have lasted a second (a GPU's clocks come back up from idle).
+    /// Frames rendered and discarded after the first one, before timing; where at least one
+    /// on a GPU, more until they have lasted a second (its clocks come back up from idle).
     #[arg(long, default_value_t = 1)]
     warmup: u32,
     /// Output directory: results.csv, results.json, speed_error.svg/.png, images/.
