@@ -46,10 +46,7 @@ pub(super) fn parse(sec: &Section<'_>) -> Result<SplatSettings, SceneError> {
         occlusion: flag(sec, "occlusion", d.occlusion)?,
         surface: flag(sec, "surface", d.surface)?,
         exact: sec.choice("footprint", d.exact, &[("exact", true), ("affine", false)])?,
-        split: match sec.get("split") {
-            None => d.split,
-            Some(_) => Some(flag(sec, "split", true)?),
-        },
+        split: optional_flag(sec, "split")?,
         sheet_share: sec.choice(
             "sheet_share",
             d.sheet_share,
@@ -83,10 +80,7 @@ pub(super) fn parse(sec: &Section<'_>) -> Result<SplatSettings, SceneError> {
             &RASTER_PIXELS,
             "1, 2, 4 or 8 (per invocation)",
         )?,
-        branches: match sec.get("branches") {
-            None => d.branches,
-            Some(_) => Some(flag(sec, "branches", true)?),
-        },
+        branches: optional_flag(sec, "branches")?,
         prefetch: sec.choice(
             "prefetch",
             d.prefetch,
@@ -113,6 +107,14 @@ fn listed(
             Ok(Some(*v as u32))
         }
         Some(v) => Err(sec.err(key, expected, v)),
+    }
+}
+
+/// An optional true-or-false key (unset: None, chosen later, as every such default).
+fn optional_flag(sec: &Section<'_>, key: &str) -> Result<Option<bool>, SceneError> {
+    match sec.get(key) {
+        None => Ok(None),
+        Some(_) => flag(sec, key, true).map(Some),
     }
 }
 

@@ -98,14 +98,9 @@ mod tests {
         ]);
         let t = PreintegrationTables::build(&tf, (0.0, 1.0), &[0.05, 0.025], 256, |_| {});
         assert_eq!(t.occupied.len(), 2);
-        // A 64-bit linear congruential generator: the same pairs on every run.
-        let mut state = 0x2545_f491_4f6c_dd1du64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        // The same pairs on every run.
+        let mut rng = crate::data::random::Lcg::new(0x2545_f491_4f6c_dd1d);
+        let mut next = || rng.next_f64();
         let (mut cleared, mut inside) = (0, 0);
         for i in 0..100_000 {
             let s_f = t.s_min + (t.s_max - t.s_min) * next();
