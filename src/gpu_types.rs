@@ -422,8 +422,25 @@ pub struct RenderParams {
     pub tables: TableBlock,
     /// Blinn–Phong ambient, diffuse, specular, shininess.
     pub lighting: [f32; 4],
+    pub tf: TfBlock,
 }
-const _: () = assert!(std::mem::size_of::<RenderParams>() == 352);
+const _: () = assert!(std::mem::size_of::<RenderParams>() == 608);
+
+/// Points of a transfer function the exact opacity's scan reads from the parameters
+/// ([`TfBlock`]) instead of the texel view.
+pub const TF_BLOCK_POINTS: usize = 32;
+
+/// The transfer function's (s, τ), two points a vec4 ((s₀, τ₀, s₁, τ₁), …), for the exact
+/// opacity's scan (`transfer_mean_tau` with `PREINT_TF_POINTS`): in the parameters, which the
+/// kernels copy into registers, an unrolled scan reads them at constant offsets instead of one
+/// gather a point from the texel view. Zero past the function's points, and unused where it
+/// has more than [`TF_BLOCK_POINTS`]. GLSL twin: `TfBlock`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct TfBlock {
+    pub s_tau: [[f32; 4]; TF_BLOCK_POINTS / 2],
+}
+const _: () = assert!(std::mem::size_of::<TfBlock>() == 256);
 
 /// One isosurface. GLSL twin: `IsoSurface`.
 #[repr(C)]
@@ -445,7 +462,9 @@ pub struct TfPoint {
     pub color_tau: [f32; 4],
     /// Scalar value of the point.
     pub s: f32,
-    pub _pad: [f32; 3],
+    /// τ again, beside s: the exact opacity's scan (`transfer_mean_tau`) reads one texel a point.
+    pub tau: f32,
+    pub _pad: [f32; 2],
 }
 const _: () = assert!(std::mem::size_of::<TfPoint>() == 32);
 

@@ -89,6 +89,9 @@ fn glsl_and_rust_layouts_agree() {
             occupied: [42, 43],
         },
         lighting: v(44.0),
+        tf: TfBlock {
+            s_tau: std::array::from_fn(|i| v(45.0 + i as f32)),
+        },
     };
     assert_eq!(*p, expected, "RenderParams");
 
@@ -98,7 +101,8 @@ fn glsl_and_rust_layouts_agree() {
         TfPoint {
             color_tau: v(1.0),
             s: 2.0,
-            _pad: [3.0, 4.0, 5.0]
+            tau: 3.0,
+            _pad: [4.0, 5.0]
         },
         "TfPoint"
     );

@@ -235,7 +235,7 @@ fn tables_are_rebuilt_only_when_their_inputs_change() {
     use vmls::field::scalar_range;
     use vmls::scene::Scene;
     use vmls::scene::load_volume;
-    use vmls::view::preintegration::TableCache;
+    use vmls::view::table_cache::TableCache;
     let set = |extra: &[&str]| {
         let mut o: Vec<String> = [
             "volume.resolution=9",
@@ -266,6 +266,7 @@ fn tables_are_rebuilt_only_when_their_inputs_change() {
                 scalar_range(&field),
                 setup.table_lengths(&s.transfer),
                 16,
+                false,
                 |_| {}
             )
             .is_some()
@@ -278,6 +279,7 @@ fn tables_are_rebuilt_only_when_their_inputs_change() {
         scalar_range(&field),
         setup.table_lengths(&moved.transfer),
         16,
+        false,
         |_| {},
     );
     assert_eq!(cache.builds(), 1);
@@ -290,6 +292,7 @@ fn tables_are_rebuilt_only_when_their_inputs_change() {
             .expect("setup")
             .table_lengths(&tf.transfer),
         16,
+        false,
         |_| {},
     );
     assert_eq!(cache.builds(), 2);
@@ -305,7 +308,122 @@ fn tables_are_rebuilt_only_when_their_inputs_change() {
             .expect("setup")
             .table_lengths(&lengths.transfer),
         16,
+        false,
         |_| {},
     );
     assert_eq!(cache.builds(), 3);
+}
+
+/// Issue 29's thinnest peak (`tests/scenes/ml-peak-0.002.toml`): half-width 0.002 at 0.5, τ up to
+/// 100, with a colour `ramp` (0: constant) across the whole range.
+fn thin_peak(ramp: f64) -> TransferFunction {
+    let point = |s: f64, tau: f64| [s, 1.0 - ramp * s, 0.6, 0.2 + ramp * s, tau];
+    TransferFunction::new(vec![
+        point(0.0, 0.0),
+        point(0.498, 0.0),
+        point(0.5, 100.0),
+        point(0.502, 0.0),
+        point(1.0, 0.0),
+    ])
+}
+
+/// Largest RGBA difference of `t.entry` from the direct integral over pairs drawn near and
+/// across the peak, at every length.
+fn entry_error(t: &PreintegrationTables, tf: &TransferFunction) -> f64 {
+    let mut rng = vmls::data::random::Lcg::new(29);
+    let mut worst: f64 = 0.0;
+    for _ in 0..4000 {
+        let near = |r: &mut vmls::data::random::Lcg| 0.49 + 0.02 * r.next_f64();
+        let s_f = near(&mut rng);
+        let s_b = if rng.next_f64() < 0.5 {
+            near(&mut rng)
+        } else {
+            rng.next_f64()
+        };
+        for (k, &l) in t.lengths.iter().enumerate() {
+            let (c, a) = segment_integral(tf, s_f, s_b, l);
+            let e = t.entry(k, s_f, s_b);
+            let d = (0..3)
+                .map(|i| (e[i] - c[i]).abs())
+                .fold((e[3] - a).abs(), f64::max);
+            worst = worst.max(d);
+        }
+    }
+    worst
+}
+
+#[test]
+fn exact_opacity_holds_a_peak_the_tables_cannot_resolve() {
+    // 64 nodes over [0, 1]: the peak is a quarter of a cell wide. The tables' bilinear entries
+    // miss it by tens of percent; the exact opacity with the tables' C/α is exact for a constant
+    // colour (f32 storage aside) and, for a colour that changes across the range, errs by how
+    // much the colour changes over a cell.
+    for (ramp, bound) in [(0.0, 1e-6), (0.5, 2e-3)] {
+        let tf = thin_peak(ramp);
+        let mut t = PreintegrationTables::build(&tf, (0.0, 1.0), &[0.05, 0.025], 64, |_| {});
+        let tables = entry_error(&t, &tf);
+        t.set_exact_opacity(Some(&tf));
+        let exact = entry_error(&t, &tf);
+        eprintln!("ramp {ramp}: tables {tables:.2e}, exact opacity {exact:.2e}");
+        assert!(tables > 0.1, "ramp {ramp}: tables err by only {tables:.2e}");
+        assert!(
+            exact < bound,
+            "ramp {ramp}: exact opacity errs by {exact:.2e}"
+        );
+    }
+}
+
+#[test]
+fn transfer_mean_tau_integrates_the_clamped_function_exactly() {
+    // Steps, a zero-width range, ranges reversed and past both ends, against a midpoint rule
+    // on each piece between the points (exact for a linear τ).
+    let tf = TransferFunction::new(vec![
+        [0.2, 1.0, 0.0, 0.5, 0.0],
+        [0.4, 0.0, 1.0, 0.5, 4.0],
+        [0.6, 0.5, 0.5, 0.0, 4.0],
+        [0.6, 0.5, 0.5, 0.0, 1.0],
+        [0.9, 0.2, 0.1, 1.0, 9.0],
+    ]);
+    let quadrature = |lo: f64, hi: f64| {
+        let mut cuts = vec![lo, hi];
+        cuts.extend(
+            tf.points()
+                .iter()
+                .map(|p| p[0])
+                .filter(|&s| lo < s && s < hi),
+        );
+        cuts.sort_by(f64::total_cmp);
+        let mut tau = 0.0;
+        for piece in cuts.windows(2) {
+            let n = 1000;
+            let h = (piece[1] - piece[0]) / f64::from(n);
+            for i in 0..n {
+                tau += tf.limit(piece[0] + (f64::from(i) + 0.5) * h, true).1 * h;
+            }
+        }
+        tau / (hi - lo)
+    };
+    for (a, b) in [
+        (0.3, 0.7),
+        (0.7, 0.3),
+        (-1.0, 0.25),
+        (0.5, 2.0),
+        (-3.0, 3.0),
+        (0.61, 0.62),
+    ] {
+        let (m, _) = tf.mean_tau(a, b, 0.0);
+        let tau = quadrature(a.min(b), a.max(b));
+        assert!(
+            (m - tau).abs() < 1e-9 * tau.max(1.0),
+            "[{a}, {b}]: τ̄ {m} vs {tau}"
+        );
+    }
+    // The point nearest the largest share: the plateau's (τ = 4) over [0.3, 0.7], the clamped
+    // ends' past both ends.
+    assert_eq!(tf.mean_tau(0.3, 0.7, 0.0).1, 2);
+    assert_eq!(tf.mean_tau(0.95, 3.0, 0.0).1, 4);
+    assert_eq!(tf.mean_tau(-3.0, 0.1, 0.0), (0.0, 0));
+    // Zero width takes τ just above: at the step, the lower τ; on the plateau, 4.
+    assert!((tf.mean_tau(0.6, 0.6, 1e-9).0 - 1.0).abs() < 1e-6);
+    assert!((tf.mean_tau(0.5, 0.5, 1e-9).0 - 4.0).abs() < 1e-6);
 }

@@ -166,6 +166,22 @@ fn constant_field_matches_the_analytic_integral() {
 
 #[test]
 fn gpu_image_matches_cpu_reference() {
+    // More points than the exact opacity's unrolled scan takes (TF_BLOCK_POINTS): the scan
+    // reads the texel view. A comb of 40 points with a thin tooth every fifth.
+    let comb = format!(
+        "transfer.points=[{}]",
+        (0..40)
+            .map(|i| {
+                let tau = if i % 5 == 2 { 30.0 } else { 0.5 };
+                format!(
+                    "[{},1.0,{},0.3,{tau}]",
+                    f64::from(i) / 39.0,
+                    f64::from(i % 7) / 7.0
+                )
+            })
+            .collect::<Vec<_>>()
+            .join(",")
+    );
     for extra in [
         vec![],
         vec!["reconstruction.neighbours=\"octree\""],
@@ -225,6 +241,28 @@ fn gpu_image_matches_cpu_reference() {
         vec!["render.interval=\"hermite\""],
         vec!["render.interval=\"hermite\"", "render.step=1.5"],
         vec!["render.interval=\"hermite\"", "camera.eye=[0.1, 0.2, 0.3]"],
+        // The exact opacity (PREINT_EXACT_OPACITY): fixed steps, Hermite intervals, the
+        // adaptive controller, clipped intervals (the eye inside), and issue 29's thinnest
+        // peak, a quarter of a table cell wide here.
+        vec!["render.exact_opacity=true"],
+        vec!["render.exact_opacity=true", "render.interval=\"hermite\""],
+        vec![
+            "render.exact_opacity=true",
+            "render.method=\"adaptive\"",
+            "render.adaptive=\"hermite\"",
+        ],
+        vec![
+            "render.exact_opacity=true",
+            "render.method=\"adaptive\"",
+            "camera.eye=[0.1, 0.2, 0.3]",
+        ],
+        vec![
+            "render.exact_opacity=true",
+            "render.method=\"adaptive\"",
+            "render.adaptive=\"hermite\"",
+            "transfer.points=[[0.0,1.0,0.6,0.2,0.0],[0.498,1.0,0.6,0.2,0.0],[0.5,0.2,0.6,1.0,100],[0.502,1.0,0.6,0.2,0.0],[1.0,1.0,0.6,0.2,0.0]]",
+        ],
+        vec!["render.exact_opacity=true", comb.as_str()],
     ] {
         let mut o = SMALL.to_vec();
         o.extend(extra.iter().copied());
@@ -255,9 +293,13 @@ fn gpu_image_matches_cpu_reference() {
              with other step counts"
         );
         // f32 vs f64 through ~100 compositing steps of a dense transfer function. Measured on
-        // lavapipe: 9.4e-7 to 7.6e-6 for every case here, adaptive included.
+        // lavapipe: 9.4e-7 to 7.6e-6 for every case here, adaptive included, except the thin
+        // peak: there τ changes by 5e4 per unit of s, and the f32 scalar (6e-8 of the range)
+        // moves the exact opacity by more (measured 3.9e-5).
+        let thin = extra.iter().any(|e| e.contains("0.498"));
+        let bound = if thin { 1e-4 } else { 3e-5 };
         assert!(
-            max_same < 3e-5,
+            max_same < bound,
             "{extra:?}: max pixel difference {max_same:.2e} on rays with equal steps"
         );
         if extra.iter().any(|e| e.contains("adaptive")) {
@@ -270,7 +312,7 @@ fn gpu_image_matches_cpu_reference() {
             );
             assert!(max < 2e-3, "{extra:?}: max pixel difference {max:.2e}");
         } else {
-            assert!(max < 3e-5, "{extra:?}: max pixel difference {max:.2e}");
+            assert!(max < bound, "{extra:?}: max pixel difference {max:.2e}");
             assert!(
                 decisions <= g.counts.len() / 50,
                 "{extra:?}: {decisions} rays took a different number of steps"

@@ -3,7 +3,7 @@
 // of loops and compiles a storage-buffer read in divergent code as a loop over the SIMD lanes,
 // even at a uniform address; a uniform-block read costs less but is still repeated at every use.
 // Copying the block once measured fastest (BENCHMARKS.md, "Two lavapipe costs"). std140 and
-// std430 agree on RenderParams, which has no arrays.
+// std430 agree on RenderParams, whose one array (TfBlock) is of vec4.
 // The block is an array of PARAMS_COPIES indexed by gl_WorkGroupID.z, which is 0 in every
 // dispatch (all are one workgroup deep): a load at a constant offset that feeds a branch or a
 // loop bound is an "inlinable uniform" to lavapipe (Mesa 22.3, lvp_execute.c), which then

@@ -10,6 +10,11 @@
 layout(binding = BINDING_PREINT, rgba32f) uniform readonly imageBuffer preint;
 #define preint_at(i) imageLoad(preint, int(i))
 
+// 1 − e^{−x} without cancellation for small x.
+float one_minus_exp(float x) {
+    return x < 1e-3 ? x * (1.0 - 0.5 * x) : 1.0 - exp(-x);
+}
+
 // Bilinear lookup of table k at (s_f, s_b), clamped to the table's scalar range.
 vec4 preint_lookup(uint k, float s_f, float s_b) {
     uint n = params.tables.resolution;
@@ -24,7 +29,23 @@ vec4 preint_lookup(uint k, float s_f, float s_b) {
     uint base = k * n * n + x0 + n * y0;
     vec4 a = mix(preint_at(base), preint_at(base + 1u), fx);
     vec4 b = mix(preint_at(base + n), preint_at(base + n + 1u), fx);
-    return mix(a, b, fy);
+    vec4 e = mix(a, b, fy);
+#if defined(PREINT_EXACT_OPACITY) && PREINT_EXACT_OPACITY == 1
+    // A length table's α from the transfer function's integral, its colour scaled to keep
+    // C/α (twin: PreintegrationTables::entry, stage preint_lookup; [LUM], DESIGN §4). The
+    // zero-length limits (k == lengths) are returned as read. Needs TF_COUNT from the kernel.
+    float lo = params.tables.s_min;
+    float hi = params.tables.s_max;
+    vec2 mean = transfer_mean_tau(clamp(s_f, lo, hi), clamp(s_b, lo, hi),
+                                  (hi - lo) * PREINT_MIN_WIDTH, TF_COUNT);
+    float len = params.tables.longest_world * exp2(-float(k));
+    float alpha = one_minus_exp(len * mean.x);
+    vec3 fallback = imageLoad(tf_texels, 2 * int(mean.y)).rgb;
+    vec3 colour = e.a > PREINT_MIN_ALPHA ? e.rgb / e.a : fallback;
+    return k < params.tables.lengths ? vec4(colour * alpha, alpha) : e;
+#else
+    return e;
+#endif
 }
 
 // Bits lo .. hi (inclusive, 0 <= lo, hi < 64) of word w (bits 32 w .. 32 w + 31) of a mask.
@@ -51,11 +72,6 @@ bool preint_clear(float s_f, float s_b) {
     uint b1 = hi * 64u / n;
     return (params.tables.occupied0 & bin_bits(b0, b1, 0u)) == 0u
            && (params.tables.occupied1 & bin_bits(b0, b1, 1u)) == 0u;
-}
-
-// 1 − e^{−x} without cancellation for small x.
-float one_minus_exp(float x) {
-    return x < 1e-3 ? x * (1.0 - 0.5 * x) : 1.0 - exp(-x);
 }
 
 // (C, α) of a segment of any length r in (0, longest table]: binary decomposition over the

@@ -34,7 +34,56 @@ vec4 transfer_lookup(float s, uint count) {
     float sb = imageLoad(tf_texels, a + 3).x;
     return mix(imageLoad(tf_texels, a), imageLoad(tf_texels, a + 2), (s - sa) / (sb - sa));
 }
+#if defined(PREINT_EXACT_OPACITY) && PREINT_EXACT_OPACITY == 1
+#if PREINT_TF_POINTS > 0
+// Up to TF_BLOCK_POINTS points: (s, τ) of point i from the parameters' TfBlock, which the kernel
+// copied into registers; the scan's trip count is then a constant, NIR unrolls it and every
+// read is at a constant offset (no gather).
+#define TF_S_TAU(i) (((i) & 1u) == 0u ? params.tf.s_tau[(i) >> 1u].xy : params.tf.s_tau[(i) >> 1u].zw)
+#define TF_SCAN_POINTS uint(PREINT_TF_POINTS)
 #else
+// More points: one texel a point from the view (the same texel in every lane).
+#define TF_S_TAU(i) imageLoad(tf_texels, int(2u * (i) + 1u)).xy
+#define TF_SCAN_POINTS count
+#endif
+// x = the mean extinction ∫τ ds / |b − a| over [a, b] (either order) of the clamped
+// piecewise-linear function, y = the point nearest the largest share of that integral (twin:
+// TransferFunction::mean_tau, stage transfer_mean_tau): per piece its overlap times τ at the
+// overlap's middle; below the first point and above the last the end values. A range narrower
+// than min_width is widened upwards to it. Every piece is computed and weighted by its overlap
+// (0 outside), so no lane branches.
+vec2 transfer_mean_tau(float a, float b, float min_width, uint count) {
+    float lo = min(a, b);
+    float hi = max(max(a, b), lo + min_width);
+    vec2 pa = TF_S_TAU(0u);
+    float below = max(min(hi, pa.x) - lo, 0.0) * pa.y;
+    float sum = below;
+    float best = below;
+    uint at = 0u;
+    for (uint i = 1u; i < TF_SCAN_POINTS; ++i) {
+        vec2 pb = TF_S_TAU(i);
+        float u = max(lo, pa.x);
+        float v = min(hi, pb.x);
+        float w = max(v - u, 0.0);
+        // Zero overlap (and a step, pb.x == pa.x) weighs 0: the division's result is not used.
+        float t = w > 0.0 ? (0.5 * (u + v) - pa.x) / (pb.x - pa.x) : 0.0;
+        float d = w * mix(pa.y, pb.y, t);
+        sum += d;
+        bool more = d > best;
+        best = more ? d : best;
+        at = more ? (pb.y >= pa.y ? i : i - 1u) : at;
+        pa = pb;
+    }
+    float above = max(hi - max(lo, pa.x), 0.0) * pa.y;
+    sum += above;
+    at = above > best ? TF_SCAN_POINTS - 1u : at;
+    return vec2(sum / (hi - lo), float(at));
+}
+#endif
+#else
+#if defined(PREINT_EXACT_OPACITY) && PREINT_EXACT_OPACITY == 1
+#error "the exact opacity (PREINT_EXACT_OPACITY) reads the transfer function's texel view"
+#endif
 // rgb = emitted colour, a = extinction τ per world unit.
 vec4 transfer_lookup(float s, uint count) {
     if (s <= tf[0].s) {

@@ -64,12 +64,19 @@ struct TableBlock {
     uint occupied1;
 };
 
+// The transfer function's (s, τ), two points a vec4, for the exact opacity's unrolled scan
+// (twin: TfBlock).
+struct TfBlock {
+    vec4 s_tau[16];
+};
+
 struct RenderParams {
     CameraBlock camera;
     FieldBlock field;
     IntegratorBlock integrator;
     TableBlock tables;
     vec4 lighting;  // Blinn-Phong ambient, diffuse, specular, shininess
+    TfBlock tf;
 };
 
 
@@ -84,7 +91,7 @@ struct IsoSurface {
 struct TfPoint {
     vec4 color_tau;
     float s;
-    float _pad0;
+    float tau;
     float _pad1;
     float _pad2;
 };

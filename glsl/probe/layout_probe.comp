@@ -71,6 +71,9 @@ void main() {
     render_params.tables.occupied0 = 42u;
     render_params.tables.occupied1 = 43u;
     render_params.lighting = v(44.0);
+    for (int i = 0; i < 16; ++i) {
+        render_params.tf.s_tau[i] = v(45.0 + float(i));
+    }
 
     iso_surface.color_opacity = v(1.0);
     iso_surface.value = 2.0;
@@ -80,7 +83,7 @@ void main() {
 
     tf_point.color_tau = v(1.0);
     tf_point.s = 2.0;
-    tf_point._pad0 = 3.0;
+    tf_point.tau = 3.0;
     tf_point._pad1 = 4.0;
     tf_point._pad2 = 5.0;
 

@@ -27,6 +27,8 @@ layout(push_constant) uniform Push { RayPush band; };
 #include "field/neighbours.glsl"
 // The ray caster binds the transfer function's texel view too (frame_bindings).
 #define TRANSFER_TEXELS_BOUND 1
+// The transfer function's point count, for the exact opacity's scan (preintegration.glsl).
+#define TF_COUNT params.integrator.tf_count
 #include "common/transfer.glsl"
 #include "common/camera.glsl"
 

@@ -79,6 +79,7 @@ layout(std430, binding = BINDING_PIXEL_SEGMENTS) readonly buffer SegBuf { vec2 p
 #endif
 // Per pixel and sheet: through the texel view (a storage-buffer load is a per-lane loop).
 #define TRANSFER_TEXELS_BOUND 1
+#define TF_COUNT params.tf_count
 #include "common/transfer.glsl"
 #if SPLAT_INTERVAL > 0
 // Intervals between sheet middles: one table, half a sheet long (SplatSetup::table_lengths).

@@ -33,6 +33,12 @@ pub struct Variant {
     pub adaptive: AdaptiveCriterion,
     /// How the fixed-step integrator composites an interval.
     pub interval: IntervalModel,
+    /// Table lookups take their opacity from the transfer function's integral
+    /// (`PREINT_EXACT_OPACITY`; `render.exact_opacity`).
+    pub exact_opacity: bool,
+    /// With it, the transfer function's point count where its scan is unrolled over the
+    /// parameters' `TfBlock` (`PREINT_TF_POINTS`; 0: read from the texel view).
+    pub tf_points: u32,
     /// Isosurfaces of the scene (0 compiles no isosurface code).
     pub isosurfaces: usize,
     /// Rays are clipped to a boundary hull (else to the domain's box).
@@ -107,6 +113,8 @@ impl Variant {
             adaptive_levels: 1,
             adaptive: AdaptiveCriterion::Mls2008,
             interval: IntervalModel::Linear,
+            exact_opacity: false,
+            tf_points: 0,
             isosurfaces: 0,
             grid: if field.uses_octree() {
                 Storage::F32
@@ -212,6 +220,10 @@ impl Variant {
             "INTERVAL_HERMITE".into(),
             flag(self.interval == IntervalModel::Hermite),
         ));
+        d.extend(crate::view::preintegration::exact_opacity_defines(
+            self.exact_opacity,
+            self.tf_points,
+        ));
         d.push((
             "MAX_ISO".into(),
             self.isosurfaces.min(MAX_ISOSURFACES).to_string(),
@@ -272,6 +284,11 @@ impl Variant {
         } else {
             ""
         } + if self.skip { "-skip" } else { "" }
+            + if self.exact_opacity {
+                "-exactopacity"
+            } else {
+                ""
+            }
             + if self.clip { "-clip" } else { "" }
             + &if self.grid == Storage::F32 {
                 String::new()

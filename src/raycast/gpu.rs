@@ -11,6 +11,7 @@ use crate::view::transfer::TransferFunction;
 
 /// The ray caster's variant for a field and a ray setup.
 pub fn variant_for_render(field: &Field, setup: &RaySetup) -> Variant {
+    let exact_opacity = setup.exact_opacity && setup.method.preintegrated();
     Variant {
         method: Some(setup.method),
         adaptive_levels: adaptive::stack_size(setup.l_max_world, setup.l_min_world),
@@ -21,6 +22,15 @@ pub fn variant_for_render(field: &Field, setup: &RaySetup) -> Variant {
         hull_hits: setup.hull_hits,
         hull_cache: setup.hull_cache,
         skip: setup.skip,
+        exact_opacity,
+        // Only the exact opacity unrolls over the points; without it a new transfer function of
+        // another length must not cost a pipeline.
+        tf_points: if exact_opacity && setup.tf_points as usize <= crate::gpu_types::TF_BLOCK_POINTS
+        {
+            setup.tf_points
+        } else {
+            0
+        },
         clip: setup.clip.is_some(),
         ..Variant::of(field)
     }
@@ -63,4 +73,5 @@ pub fn render_params(field: &Field, setup: &RaySetup, tf_count: u32) -> RenderPa
 /// function they were built from.
 pub fn table_params(p: &mut RenderParams, tables: &PreintegrationTables, tf: &TransferFunction) {
     p.tables = tables.gpu_block(tf);
+    p.tf = tf.gpu_block();
 }

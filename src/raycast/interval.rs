@@ -206,7 +206,7 @@ pub(super) fn knot_segment(
     };
     match level {
         Some(k) => {
-            let v = tables.lookup(&tables.tables[k], sa, se);
+            let v = tables.entry(k, sa, se);
             ([v[0], v[1], v[2]], v[3])
         }
         None => tables.segment(sa, se, len),
@@ -256,9 +256,8 @@ pub(super) fn hermite_segment(
         return None;
     }
     let sm = hermite_midpoint(f0, f1, m0, m1);
-    let half = &tables.tables[level + 1];
-    let c0 = tables.lookup(half, f0, sm);
-    let c1 = tables.lookup(half, sm, f1);
+    let c0 = tables.entry(level + 1, f0, sm);
+    let c1 = tables.entry(level + 1, sm, f1);
     let through = 1.0 - c0[3];
     Some((
         [

@@ -9,7 +9,9 @@ use crate::view::camera::{Camera, Projection, ViewBasis};
 use crate::view::preintegration;
 use crate::view::shading;
 use crate::view::transfer::TransferFunction;
-use crate::view::{AdaptiveCriterion, IntervalModel, Method, RenderSettings, SkipMode};
+use crate::view::{
+    AdaptiveCriterion, ExactOpacity, IntervalModel, Method, RenderSettings, SkipMode,
+};
 use glam::DVec3;
 
 /// `render.skip = "auto"` compiles skipping in where at least this fraction of the frame's ray
@@ -85,6 +87,16 @@ pub struct RaySetup {
     /// How the frame comes by its rays' hull segments ([`super::segments`]): the `Renderer`
     /// keeps or reads them where a mesh's cache fits the device; `Off` walks as without one.
     pub hull_cache: HullCache,
+    /// Table lookups take their opacity from the transfer function's integral
+    /// (`render.exact_opacity`; [`crate::view::preintegration::PreintegrationTables::entry`]):
+    /// `On` as given, and "auto" as [`RaySetup::resolve_exact_opacity`] decides for a frame
+    /// (false until then).
+    pub exact_opacity: bool,
+    pub exact_opacity_auto: bool,
+    /// The transfer function's point count, recorded by [`RaySetup::resolve_exact_opacity`]
+    /// (0 until then): the exact opacity's scan is unrolled for up to
+    /// [`crate::gpu_types::TF_BLOCK_POINTS`] of them.
+    pub tf_points: u32,
     /// The fraction of ray length "auto" found in empty blocks when it decided.
     pub skip_estimate: Option<f64>,
     pub background: [f64; 3],
@@ -183,6 +195,9 @@ impl RaySetup {
                 && field.reconstruction.resample > 0
                 && !mls2008,
             skip_estimate: None,
+            exact_opacity: render.exact_opacity == ExactOpacity::On,
+            exact_opacity_auto: render.exact_opacity == ExactOpacity::Auto,
+            tf_points: 0,
             hull_hits: FIRST_HULL_HITS,
             hull_cache: HullCache::Off,
             background: render.background,
@@ -215,6 +230,19 @@ impl RaySetup {
         let fraction = skippable_fraction(blocks, &table, self);
         self.skip_estimate = Some(fraction);
         self.skip = fraction >= SKIP_AUTO_FRACTION;
+    }
+
+    /// Decides `render.exact_opacity = "auto"` for a frame of `tf` over `field`
+    /// ([`ExactOpacity::resolve`]; the direct methods read no tables and stay off), and records
+    /// `tf`'s point count for the kernel's scan.
+    pub fn resolve_exact_opacity(&mut self, tf: &TransferFunction, field: &Field) {
+        self.tf_points = tf.points().len() as u32;
+        if !self.exact_opacity_auto {
+            return;
+        }
+        self.exact_opacity_auto = false;
+        self.exact_opacity =
+            self.method.preintegrated() && ExactOpacity::Auto.resolve(tf, scalar_range(field));
     }
 
     /// The shortest length, in world units, this setup's method steps by: the step (the

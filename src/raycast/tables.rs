@@ -1,12 +1,13 @@
 //! Preintegration tables for a ray setup: built and sized against the device (the cache that
-//! keeps them between frames is [`crate::view::preintegration::TableCache`]).
+//! keeps them between frames is [`crate::view::table_cache::TableCache`]).
 
 use super::setup::RaySetup;
 use crate::field::{Field, RenderError, scalar_range};
 use crate::view::preintegration::PreintegrationTables;
 use crate::view::transfer::TransferFunction;
 
-/// Builds the preintegration tables a setup needs (`None` for the direct methods). The scalar
+/// Builds the preintegration tables a setup needs (`None` for the direct methods), with the
+/// exact opacity where the setup takes it. The scalar
 /// range covers the data with a 5% margin each side, because MLS may overshoot the samples;
 /// values beyond it are clamped to the range.
 pub fn build_tables(
@@ -20,13 +21,10 @@ pub fn build_tables(
     if lengths.is_empty() {
         return None;
     }
-    Some(PreintegrationTables::build(
-        tf,
-        scalar_range(field),
-        &lengths,
-        resolution,
-        progress,
-    ))
+    let mut tables =
+        PreintegrationTables::build(tf, scalar_range(field), &lengths, resolution, progress);
+    tables.set_exact_opacity(setup.exact_opacity.then_some(tf));
+    Some(tables)
 }
 
 /// Refuses tables the device cannot bind before they are built: `lengths` tables and the

@@ -25,7 +25,7 @@ use crate::splat::SplatCounts;
 use crate::splat::gpu::{GpuKernels, SplatPipelines, SplatTargets};
 use crate::view::View;
 use crate::view::preintegration::PreintegrationTables;
-use crate::view::preintegration::TableCache;
+use crate::view::table_cache::TableCache;
 use crate::view::transfer::TransferFunction;
 use crate::vk::{Buffer, ComputePipeline, Context, ShaderCompiler, VkError};
 use std::sync::Arc;
@@ -140,6 +140,9 @@ pub fn render(
     // Stateless: nothing keeps hull segments for a next frame.
     resolved.hull_cache = HullCache::Off;
     resolved.resolve_skip(gpu_field.blocks(), tf, field);
+    // The exact opacity as the setup has it (the caller's tables follow the same setup), with
+    // the transfer function's point count for its scan.
+    resolved.tf_points = tf.points().len() as u32;
     let tables = tables.filter(|_| resolved.method.preintegrated());
     let table = tables.map(|t| table_buffer(ctx, t)).transpose()?;
     let (w, h) = (resolved.camera.width, resolved.camera.height);
@@ -468,13 +471,15 @@ impl Renderer {
             self.gpu_field.upload_data(&self.ctx, &self.field)?;
         }
         setup.resolve_skip(self.gpu_field.blocks(), view.transfer, &self.field);
+        setup.resolve_exact_opacity(view.transfer, &self.field);
         let lengths = if setup.method.preintegrated() {
             setup.table_lengths(view.transfer)
         } else {
             Vec::new()
         };
         let range = scalar_range(&self.field);
-        let (tables_built, table_ms) = self.ensure_tables(view, lengths, range)?;
+        let (tables_built, table_ms) =
+            self.ensure_tables(view, lengths, range, setup.exact_opacity)?;
         let tables = self
             .tables
             .current()
@@ -496,6 +501,7 @@ impl Renderer {
         view: &View<'_>,
         lengths: Vec<f64>,
         range: (f64, f64),
+        exact_opacity: bool,
     ) -> Result<(bool, f64), RenderError> {
         if lengths.is_empty() {
             return Ok((false, 0.0));
@@ -512,6 +518,7 @@ impl Renderer {
             range,
             lengths,
             view.settings.table_resolution,
+            exact_opacity,
             |_| {},
         );
         let tables_built = self.tables.builds() != builds;

@@ -23,8 +23,9 @@ use crate::splat::gpu::{GpuKernels, SplatPipelines, SplatTargets, SplatVariant};
 use crate::splat::plan::{RasterWalk, plan_args_bytes};
 use crate::splat::{Shading, SplatSetup};
 use crate::view::View;
-use crate::view::preintegration::{PreintegrationTables, TableCache};
+use crate::view::preintegration::PreintegrationTables;
 use crate::view::shading::Isosurface;
+use crate::view::table_cache::TableCache;
 use crate::vk::{Buffer, BufferUsage, ExternalCommands, Target, TargetFormat, VkError};
 use std::sync::Arc;
 use std::time::Instant;
@@ -123,7 +124,7 @@ impl Renderer {
         setup: &SplatSetup,
     ) -> Result<(bool, f64), RenderError> {
         let range = setup.table_range(&self.field, view.transfer);
-        self.ensure_tables(view, setup.table_lengths(), range)
+        self.ensure_tables(view, setup.table_lengths(), range, false)
     }
 
     /// The renderer's own frame buffers (`render()`'s), fitted to `setup`; whether they were

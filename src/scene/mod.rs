@@ -29,7 +29,7 @@ use crate::view::transfer::TransferFunction;
 pub use crate::recon::{NeighbourMode, Reconstruction};
 use crate::samples::SampleSettings;
 pub use crate::view::{
-    AdaptiveCriterion, GivenKeys, IntervalModel, Method, RenderSettings, SkipMode,
+    AdaptiveCriterion, ExactOpacity, GivenKeys, IntervalModel, Method, RenderSettings, SkipMode,
 };
 use std::path::{Path, PathBuf};
 use toml::{Table, Value};
@@ -145,6 +145,7 @@ const KNOWN: &[(&str, &[&str])] = &[
             "epsilon",
             "early_termination",
             "skip",
+            "exact_opacity",
             "table_resolution",
             "tolerance",
         ],
@@ -585,6 +586,13 @@ impl Scene {
                 Some(Value::Boolean(false)) => SkipMode::Off,
                 Some(Value::String(a)) if a == "auto" => SkipMode::Auto,
                 Some(v) => return Err(ren.err("skip", "true, false or \"auto\"", v)),
+            },
+            exact_opacity: match ren.get("exact_opacity") {
+                None => ExactOpacity::Auto,
+                Some(Value::Boolean(true)) => ExactOpacity::On,
+                Some(Value::Boolean(false)) => ExactOpacity::Off,
+                Some(Value::String(a)) if a == "auto" => ExactOpacity::Auto,
+                Some(v) => return Err(ren.err("exact_opacity", "true, false or \"auto\"", v)),
             },
             table_resolution: ren.int(
                 "table_resolution",

@@ -427,7 +427,7 @@ fn composite_half(
     (s_f, s_b): (f64, f64),
 ) {
     let r = inside(l, lo, hi);
-    let e = tables.lookup(&tables.tables[0], s_f, s_b);
+    let e = tables.entry(0, s_f, s_b);
     let f = r / (hi - lo);
     let alpha = if f >= 1.0 {
         e[3]

@@ -9,12 +9,13 @@ pub mod camera;
 pub mod preintegration;
 pub mod settings;
 pub mod shading;
+pub mod table_cache;
 pub mod table_occupancy;
 pub mod transfer;
 
 pub use settings::{
-    AdaptiveCriterion, Antialias, GivenKeys, IntervalModel, Method, RenderSettings, Shading,
-    SheetInterval, SheetShare, SkipMode, SplatSettings,
+    AdaptiveCriterion, Antialias, ExactOpacity, GivenKeys, IntervalModel, Method, RenderSettings,
+    Shading, SheetInterval, SheetShare, SkipMode, SplatSettings,
 };
 
 use camera::Camera;

@@ -21,6 +21,29 @@
 use crate::view::transfer::TransferFunction;
 use rayon::prelude::*;
 
+/// The exact opacity's smallest scalar range, as a fraction of the tables' (kernel twin:
+/// `PREINT_MIN_WIDTH` in preintegration.glsl): a zero-length segment takes τ just above its
+/// value ([`TransferFunction::mean`]).
+pub const EXACT_MIN_WIDTH: f64 = 1e-6;
+/// Below this table opacity the exact opacity's colour is that of the transfer function's point
+/// `mean_tau` names (kernel twin: `PREINT_MIN_ALPHA`).
+pub const EXACT_MIN_ALPHA: f64 = 1e-12;
+
+/// The kernels' macros of the exact opacity (`PREINT_EXACT_OPACITY` on or off, and its
+/// constants), so that the kernels and [`PreintegrationTables::entry`] share one copy.
+///
+/// `points`: the transfer function's points where the scan reads them from the parameters'
+/// [`crate::gpu_types::TfBlock`] (at most [`crate::gpu_types::TF_BLOCK_POINTS`]), 0 where it
+/// reads the texel view.
+pub fn exact_opacity_defines(on: bool, points: u32) -> Vec<(String, String)> {
+    vec![
+        ("PREINT_EXACT_OPACITY".into(), u8::from(on).to_string()),
+        ("PREINT_TF_POINTS".into(), points.to_string()),
+        ("PREINT_MIN_WIDTH".into(), format!("{EXACT_MIN_WIDTH:e}")),
+        ("PREINT_MIN_ALPHA".into(), format!("{EXACT_MIN_ALPHA:e}")),
+    ]
+}
+
 /// Gauss–Legendre nodes and weights on [−1, 1], 5 points.
 const GL_NODES: [f64; 5] = [
     -0.906_179_845_938_664,
@@ -482,6 +505,10 @@ pub struct PreintegrationTables {
     /// Per length, the bins of nodes that touch a cell with extinction (`occupied`, in
     /// `view::table_occupancy`, which computes them after each build).
     pub occupied: Vec<u64>,
+    /// `render.exact_opacity` taken: the transfer function the tables were built from, whose
+    /// integral gives each length table's opacity exactly ([`Self::entry`]; the kernels'
+    /// `PREINT_EXACT_OPACITY`). `None`: the tables' own.
+    pub exact_opacity: Option<TransferFunction>,
 }
 
 impl PreintegrationTables {
@@ -556,6 +583,7 @@ impl PreintegrationTables {
             tables: Vec::new(),
             limits: Vec::new(),
             occupied: Vec::new(),
+            exact_opacity: None,
         };
         let done = std::sync::atomic::AtomicUsize::new(0);
         let total = (lengths.len() * (n - 1)).max(1);
@@ -665,6 +693,47 @@ impl PreintegrationTables {
         })
     }
 
+    /// Takes each length table's opacity from `tf`'s integral (`Some`, the transfer function
+    /// the tables were built from) or from the tables (`None`): see [`Self::entry`].
+    pub fn set_exact_opacity(&mut self, tf: Option<&TransferFunction>) {
+        self.exact_opacity = tf.cloned();
+    }
+
+    /// Table `k` at (s_f, s_b) (stage `preint_lookup`): the bilinear [`Self::lookup`], or with
+    /// [`Self::exact_opacity`] ([LUM]'s integral function, DESIGN §4) its α replaced by
+    /// 1 − exp(−l τ̄), τ̄ the exact mean extinction over the clamped [s_f, s_b]
+    /// ([`TransferFunction::mean_tau`]), and its colour scaled to keep the tables' C/α. For s
+    /// linear along the segment that α is exact, where the tables' errs by a cell's square
+    /// over a feature's width; C/α is exact for a constant colour and, for another, varies as
+    /// slowly as the colour does. Where the tables hold no opacity at all (a zero-width range
+    /// on a node next to a feature thinner than a cell) the colour is that of the point
+    /// `mean_tau` names.
+    pub fn entry(&self, k: usize, s_f: f64, s_b: f64) -> [f64; 4] {
+        let e = self.lookup(&self.tables[k], s_f, s_b);
+        let Some(tf) = &self.exact_opacity else {
+            return e;
+        };
+        let clamp = |s: f64| s.clamp(self.s_min, self.s_max);
+        let (tau, at) = tf.mean_tau(
+            clamp(s_f),
+            clamp(s_b),
+            (self.s_max - self.s_min) * EXACT_MIN_WIDTH,
+        );
+        let alpha = -(-self.lengths[k] * tau).exp_m1();
+        let colour: [f64; 3] = if e[3] > EXACT_MIN_ALPHA {
+            std::array::from_fn(|c| e[c] / e[3])
+        } else {
+            let p = tf.points()[at];
+            [p[1], p[2], p[3]]
+        };
+        [
+            colour[0] * alpha,
+            colour[1] * alpha,
+            colour[2] * alpha,
+            alpha,
+        ]
+    }
+
     /// α and C of a segment of any length r ∈ (0, lengths[0]] (stage `preintegrate_clipped`):
     /// binary decomposition over the table lengths, composited front to back with s
     /// interpolated at the split points; the remainder below the smallest length takes α from
@@ -683,7 +752,7 @@ impl PreintegrationTables {
         };
         for (k, &l) in self.lengths.iter().enumerate() {
             if r - done >= l * (1.0 - 1e-6) {
-                let e = self.lookup(&self.tables[k], s_at(done), s_at((done + l).min(r)));
+                let e = self.entry(k, s_at(done), s_at((done + l).min(r)));
                 add([e[0], e[1], e[2]], e[3], &mut alpha);
                 done = (done + l).min(r);
             }
@@ -695,7 +764,7 @@ impl PreintegrationTables {
             let tau = zero[3];
             let a = -(-rest * tau).exp_m1();
             let smallest = self.lengths.len() - 1;
-            let e = self.lookup(&self.tables[smallest], s0, s1);
+            let e = self.entry(smallest, s0, s1);
             let t_small = self.lengths[smallest] * tau;
             let mut c = [zero[0], zero[1], zero[2]];
             if e[3] > 0.0 && t_small > 0.0 {
@@ -710,9 +779,6 @@ impl PreintegrationTables {
     }
 }
 
-/// What tables depend on: control points, lengths, resolution, scalar range.
-type TableKey = (Vec<[f64; 5]>, Vec<f64>, usize, (f64, f64));
-
 /// One table of an earlier build, kept for the next ([`PreintegrationTables::build_reusing`]).
 #[derive(Debug)]
 pub struct SpareTable {
@@ -723,168 +789,19 @@ pub struct SpareTable {
 }
 
 impl SpareTable {
-    fn bytes(&self) -> u64 {
+    pub(super) fn bytes(&self) -> u64 {
         entry_bytes(self.entries.len())
     }
 }
 
 /// Bytes of `n` RGBA f32 table entries.
-fn entry_bytes(n: usize) -> u64 {
+pub(super) fn entry_bytes(n: usize) -> u64 {
     (n * std::mem::size_of::<[f32; 4]>()) as u64
-}
-
-/// The spare tables a [`TableCache`] keeps whatever the current tables' size.
-const SPARE_FLOOR_BYTES: u64 = 64 << 20;
-
-/// Keeps the last preintegration tables and rebuilds them only when what they depend on changes:
-/// the transfer function, the lengths, the resolution or the scalar range (for applications
-/// that re-render with a new camera, or edit the transfer function interactively). Shared by
-/// ray casting (its integrators' lengths) and post-shaded splatting (its half sheets).
-///
-/// Tables of earlier builds of the same transfer function and range are kept as spares, newest
-/// last, up to half the current tables' bytes (at least [`SPARE_FLOOR_BYTES`]), and a new build
-/// takes every length it needs from them: a tolerance's pilots go back and forth between
-/// resolutions and levels (`renderer::tolerance`). A new transfer function or range drops
-/// them.
-#[derive(Debug, Default)]
-pub struct TableCache {
-    key: Option<TableKey>,
-    tables: Option<PreintegrationTables>,
-    spare: Vec<SpareTable>,
-    builds: usize,
-    reused: usize,
-}
-
-impl TableCache {
-    /// The tables of these `lengths` over the scalar `range` (`None` when no length is
-    /// asked for: the direct methods), built if needed.
-    pub fn get(
-        &mut self,
-        tf: &TransferFunction,
-        range: (f64, f64),
-        lengths: Vec<f64>,
-        resolution: usize,
-        progress: impl Fn(f64) + Sync,
-    ) -> Option<&PreintegrationTables> {
-        if lengths.is_empty() {
-            return None;
-        }
-        let key = (tf.points().to_vec(), lengths, resolution, range);
-        if self.key.as_ref() != Some(&key) {
-            let same_function = self
-                .key
-                .as_ref()
-                .is_some_and(|k| k.0 == key.0 && k.3 == key.3);
-            let old = self.tables.take();
-            if same_function {
-                self.spare
-                    .extend(old.into_iter().flat_map(|t| t.into_spares()));
-            } else {
-                self.spare.clear();
-            }
-            let before = self.spare.len();
-            let tables = PreintegrationTables::build_reusing(
-                tf,
-                key.3,
-                &key.1,
-                resolution,
-                &mut self.spare,
-                progress,
-            );
-            self.reused += before - self.spare.len();
-            let budget = (tables.bytes() / 2).max(SPARE_FLOOR_BYTES);
-            let mut kept: u64 = self.spare.iter().map(SpareTable::bytes).sum();
-            let mut oldest = 0;
-            while kept > budget {
-                kept -= self.spare[oldest].bytes();
-                oldest += 1;
-            }
-            self.spare.drain(..oldest);
-            self.tables = Some(tables);
-            self.key = Some(key);
-            self.builds += 1;
-        }
-        self.tables.as_ref()
-    }
-
-    /// The tables of the last `get` that needed any.
-    pub fn current(&self) -> Option<&PreintegrationTables> {
-        self.tables.as_ref()
-    }
-
-    /// How many times tables were built.
-    pub fn builds(&self) -> usize {
-        self.builds
-    }
-
-    /// How many tables builds took from earlier ones instead of building them.
-    pub fn reused(&self) -> usize {
-        self.reused
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn reused_tables_equal_fresh_ones_to_the_bit() {
-        let tf = TransferFunction::new(vec![
-            [0.0, 1.0, 0.5, 0.2, 0.0],
-            [0.4, 1.0, 0.5, 0.2, 6.0],
-            [1.0, 0.2, 0.5, 1.0, 1.0],
-        ]);
-        let first = PreintegrationTables::build(&tf, (0.0, 1.0), &[0.5, 0.25], 24, |_| {});
-        // The next rung of a halving ladder: one length shared, one new.
-        let lengths = [0.25, 0.125];
-        let mut spare: Vec<SpareTable> = first.clone().into_spares().collect();
-        let reused =
-            PreintegrationTables::build_reusing(&tf, (0.0, 1.0), &lengths, 24, &mut spare, |_| {});
-        let fresh = PreintegrationTables::build(&tf, (0.0, 1.0), &lengths, 24, |_| {});
-        assert_eq!(reused.tables, fresh.tables);
-        assert_eq!(reused.limits, fresh.limits);
-        assert_eq!(
-            reused.tables[0], first.tables[1],
-            "the shared length was taken over"
-        );
-        assert_eq!(spare.len(), 1, "the table taken is no longer spare");
-        assert_eq!(spare[0].length, 0.5);
-        // Another resolution is never taken over.
-        let mut spare: Vec<SpareTable> = first.clone().into_spares().collect();
-        let other =
-            PreintegrationTables::build_reusing(&tf, (0.0, 1.0), &[0.25], 16, &mut spare, |_| {});
-        assert_eq!(spare.len(), 2);
-        assert_eq!(other.tables[0].len(), 16 * 16);
-    }
-
-    #[test]
-    fn the_cache_takes_back_tables_of_an_earlier_resolution() {
-        let tf = TransferFunction::new(vec![[0.0, 1.0, 0.5, 0.2, 0.0], [1.0, 0.2, 0.5, 1.0, 4.0]]);
-        let mut cache = TableCache::default();
-        let lengths = vec![0.5, 0.25];
-        let get = |cache: &mut TableCache, r: usize| {
-            cache
-                .get(&tf, (0.0, 1.0), lengths.clone(), r, |_| {})
-                .cloned()
-                .expect("tables")
-        };
-        let coarse = get(&mut cache, 24);
-        let fine = get(&mut cache, 32);
-        assert_eq!((cache.builds(), cache.reused()), (2, 0));
-        // Back to the coarse tables, as a tolerance does after checking finer ones: both
-        // lengths come from the spares, to the bit.
-        let again = get(&mut cache, 24);
-        assert_eq!((cache.builds(), cache.reused()), (3, 2));
-        assert_eq!(again.tables, coarse.tables);
-        assert_eq!(get(&mut cache, 32).tables, fine.tables);
-        assert_eq!(cache.reused(), 4);
-        // Another transfer function drops the spares.
-        let other =
-            TransferFunction::new(vec![[0.0, 1.0, 0.5, 0.2, 1.0], [1.0, 0.2, 0.5, 1.0, 4.0]]);
-        cache.get(&other, (0.0, 1.0), lengths.clone(), 24, |_| {});
-        cache.get(&tf, (0.0, 1.0), lengths.clone(), 24, |_| {});
-        assert_eq!((cache.builds(), cache.reused()), (6, 4));
-    }
 
     #[test]
     fn lengths_halve_down_to_l_min() {

@@ -128,6 +128,9 @@ pub struct RenderSettings {
     pub skip: SkipMode,
     /// Preintegration table resolution per scalar axis.
     pub table_resolution: usize,
+    /// `render.exact_opacity`: the length tables' opacity from the transfer function's
+    /// integral instead of the tables ([`crate::view::preintegration::PreintegrationTables::entry`]).
+    pub exact_opacity: ExactOpacity,
     /// Splatting settings (scene section `[splat]`).
     pub splat: SplatSettings,
     /// `render.tolerance`: the accepted 99th-percentile pixel error against the converged
@@ -156,6 +159,33 @@ pub struct GivenKeys {
 
 /// `render.table_resolution` unset: preintegration table nodes per scalar axis.
 pub const DEFAULT_TABLE_RESOLUTION: usize = 512;
+
+/// `render.exact_opacity`: where the preintegrated integrators take each table lookup's opacity
+/// from ([`crate::view::preintegration::PreintegrationTables::entry`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ExactOpacity {
+    /// The tables' bilinear opacity.
+    Off,
+    /// 1 − exp(−l τ̄) with τ̄ the transfer function's exact mean extinction over the segment's
+    /// scalar range: one scan of its points per lookup.
+    On,
+    /// The default: on where the transfer function has a piece of changing extinction
+    /// narrower than [`crate::view::transfer::EXACT_OPACITY_WIDTH`] of the data's range
+    /// ([`crate::view::transfer::TransferFunction::has_narrow_extinction`]), which tables of a
+    /// resolution that fits a device do not resolve.
+    Auto,
+}
+
+impl ExactOpacity {
+    /// Whether a frame of `tf` over data of scalar `range` takes the exact opacity.
+    pub fn resolve(self, tf: &super::transfer::TransferFunction, range: (f64, f64)) -> bool {
+        match self {
+            Self::Off => false,
+            Self::On => true,
+            Self::Auto => tf.has_narrow_extinction(range),
+        }
+    }
+}
 
 /// `render.skip`: empty-space skipping off, on, or chosen per frame ([`crate::field::skip`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

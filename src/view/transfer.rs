@@ -2,7 +2,7 @@
 //! (stage `transfer_lookup`). Colour and extinction τ (per world unit) are interpolated
 //! linearly in s between control points and clamped outside their range.
 
-use crate::gpu_types::TfPoint;
+use crate::gpu_types::{TF_BLOCK_POINTS, TfBlock, TfPoint};
 
 /// Most control points a transfer function may have: the kernels scan them per lookup, so the
 /// count bounds the work of every sample (1024 is more than any colour-map preset ParaView
@@ -15,6 +15,11 @@ pub const MAX_COLOUR: f64 = 1e6;
 /// Largest extinction per world unit: with the smallest world lengths the domain check allows
 /// (1e-12), optical depths of a sample stay moderate; beyond it f32 products overflow.
 pub const MAX_TAU: f64 = 1e15;
+
+/// `render.exact_opacity = "auto"` takes the exact opacity where a piece of changing
+/// extinction is narrower than this fraction of the scalar range
+/// ([`TransferFunction::has_narrow_extinction`]).
+pub const EXACT_OPACITY_WIDTH: f64 = 1.0 / 64.0;
 
 /// Control points `[s, r, g, b, τ]`, sorted by s.
 #[derive(Debug, Clone, PartialEq)]
@@ -170,6 +175,70 @@ impl TransferFunction {
             .fold(0.0, f64::max)
     }
 
+    /// Stage `transfer_mean_tau` ([LUM]'s integral function, DESIGN §4): the mean extinction
+    /// ∫τ ds / |b − a| over [a, b] (either order) of the piecewise-linear function, clamped
+    /// outside its points, exactly: each piece the range overlaps adds its overlap times τ at
+    /// the overlap's middle. With it, the point nearest the largest share of that integral
+    /// (of the piece adding most, its end of larger τ; the first or last point for the
+    /// clamped ends): the colour [`crate::view::preintegration::PreintegrationTables::entry`]
+    /// falls back on. A range narrower than `min_width` is widened upwards to it, so that a
+    /// zero-length one gets τ just above a, as a segment leaving a sees it. The kernel does the
+    /// same in f32, over the same points in the same order.
+    pub fn mean_tau(&self, a: f64, b: f64, min_width: f64) -> (f64, usize) {
+        let lo = a.min(b);
+        let hi = a.max(b).max(lo + min_width);
+        let p = &self.points;
+        let below = (hi.min(p[0][0]) - lo).max(0.0) * p[0][4];
+        let (mut sum, mut best, mut at) = (below, below, 0);
+        for (i, pair) in p.windows(2).enumerate() {
+            let (x0, x1) = (pair[0][0], pair[1][0]);
+            let (u, v) = (lo.max(x0), hi.min(x1));
+            let w = (v - u).max(0.0);
+            let t = if w > 0.0 {
+                (0.5 * (u + v) - x0) / (x1 - x0)
+            } else {
+                0.0
+            };
+            let d = w * (pair[0][4] + (pair[1][4] - pair[0][4]) * t);
+            sum += d;
+            if d > best {
+                best = d;
+                at = if pair[1][4] >= pair[0][4] { i + 1 } else { i };
+            }
+        }
+        let last = p.len() - 1;
+        let above = (hi - lo.max(p[last][0])).max(0.0) * p[last][4];
+        sum += above;
+        if above > best {
+            at = last;
+        }
+        (sum / (hi - lo), at)
+    }
+
+    /// Whether the preintegration tables' opacity should come from [`Self::mean_tau`] instead
+    /// (`render.exact_opacity = "auto"`): some piece over which τ changes is narrower than
+    /// [`EXACT_OPACITY_WIDTH`] of the scalar range `range`. Bilinear interpolation in the
+    /// tables errs by the square of a cell over such a piece's width, and a table fine enough
+    /// for a peak of 1/500 of the range no longer fits a texel buffer on lavapipe
+    /// (BENCHMARKS.md, "The thinnest Marschner–Lobb peak").
+    pub fn has_narrow_extinction(&self, range: (f64, f64)) -> bool {
+        let width = (range.1 - range.0) * EXACT_OPACITY_WIDTH;
+        self.points
+            .windows(2)
+            .any(|q| q[0][4] != q[1][4] && q[1][0] - q[0][0] < width)
+    }
+
+    /// The (s, τ) of the first [`TF_BLOCK_POINTS`] points, two a vec4, zero past the last:
+    /// the exact opacity's unrolled scan reads them (kernel: `TF_S_TAU`).
+    pub fn gpu_block(&self) -> TfBlock {
+        let mut block = TfBlock::default();
+        for (i, p) in self.points.iter().take(TF_BLOCK_POINTS).enumerate() {
+            block.s_tau[i / 2][2 * (i % 2)] = p[0] as f32;
+            block.s_tau[i / 2][2 * (i % 2) + 1] = p[4] as f32;
+        }
+        block
+    }
+
     /// GPU layout.
     pub fn to_gpu(&self) -> Vec<TfPoint> {
         self.points
@@ -177,7 +246,8 @@ impl TransferFunction {
             .map(|p| TfPoint {
                 color_tau: [p[1] as f32, p[2] as f32, p[3] as f32, p[4] as f32],
                 s: p[0] as f32,
-                _pad: [0.0; 3],
+                tau: p[4] as f32,
+                _pad: [0.0; 2],
             })
             .collect()
     }

@@ -208,6 +208,7 @@ pub fn run_render(
             "table_build_ms_cpu": tables.map(|_| table_ms),
             "table_lengths_world": tables.map(|t| t.lengths.clone()),
             "table_resolution": tables.map(|t| t.resolution),
+            "exact_opacity": tables.map(|t| t.exact_opacity.is_some()),
             "octree_nodes": field.octree_if_built().map(|o| o.nodes.len()),
             "octree_references": field.octree_if_built().map(|o| o.references),
             "octree": field.octree_if_built().map(|o| octree_json(&o.stats(std::mem::size_of::<vmls::gpu_types::Sample>() as u64))),
