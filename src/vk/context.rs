@@ -3,6 +3,14 @@
 //! Destruction order is enforced by ownership: resources hold `Arc<Shared>`; when the last one is
 //! gone, `Shared::drop` frees the allocator (after checking for leaked allocations), then the
 //! device, the debug messenger and the instance — the last three only when vmls created them.
+//!
+//! The Vulkan loader keeps process-wide lists of instances and devices, and Debian 12's
+//! (1.3.239) walks them under one lock, to find the device behind vkGetDeviceProcAddr and
+//! vkSetDebugUtilsObjectNameEXT, while vkDestroyDevice unlinks and frees an entry under another
+//! (KhronosGroup/Vulkan-Loader#2018): two contexts on two threads, one naming a buffer while the
+//! other dropped its device, crashed a test binary in SIGSEGV. So every context makes and
+//! destroys its instance and device holding [`LOADER_LISTS`] for writing, and names objects
+//! holding it for reading.
 
 use super::commands::SubmitObjects;
 use super::{VkError, VkResultExt};
@@ -11,9 +19,23 @@ use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 use std::ffi::{CStr, CString, c_void};
 use std::mem::ManuallyDrop;
 use std::sync::atomic::{AtomicU32, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex, MutexGuard, RwLock, RwLockReadGuard, RwLockWriteGuard};
 
 const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
+
+/// Held for writing while vmls creates or destroys an instance or a device (which changes the
+/// loader's lists), for reading while a call walks them (see the module's docs).
+static LOADER_LISTS: RwLock<()> = RwLock::new(());
+
+/// The loader's lists, to change them. Not reentrant: nothing that holds it names an object.
+fn changing_loader_lists() -> RwLockWriteGuard<'static, ()> {
+    LOADER_LISTS.write().unwrap_or_else(|p| p.into_inner())
+}
+
+/// The loader's lists, for a call that walks them.
+fn reading_loader_lists() -> RwLockReadGuard<'static, ()> {
+    LOADER_LISTS.read().unwrap_or_else(|p| p.into_inner())
+}
 
 /// How to create a [`Context`].
 #[derive(Debug, Clone, Default)]
@@ -469,6 +491,8 @@ impl Context {
         let fault = allocation_fault_from_env()?;
         let entry = load_entry()?;
         let sync = options.sync_validation.unwrap_or(true);
+        // Through `assemble`, which loads the debug-name functions (vkGetDeviceProcAddr).
+        let _lists = changing_loader_lists();
         let (instance, messenger, state) = create_instance(&entry, validation, sync)?;
         // From here on, failures must destroy what exists: build a guard-like closure.
         let destroy_instance = |messenger: Option<Messenger>| {
@@ -634,6 +658,7 @@ impl Context {
     /// default choice then serves).
     pub fn device_for_process(local: usize) -> Result<Option<usize>, VkError> {
         let entry = load_entry()?;
+        let _lists = changing_loader_lists();
         let (instance, _, _) = create_instance(&entry, false, false)?;
         let result = candidates(&instance).map(|list| spread(&list, local));
         // SAFETY: no child of this instance exists.
@@ -644,6 +669,7 @@ impl Context {
     /// Lists the devices the loader reports, one line each, marking the one vmls would choose.
     pub fn list_devices() -> Result<Vec<String>, VkError> {
         let entry = load_entry()?;
+        let _lists = changing_loader_lists();
         let (instance, _, _) = create_instance(&entry, false, false)?;
         let result = candidates(&instance).map(|list| {
             let best = choose(&list, None).ok();
@@ -755,6 +781,7 @@ impl Shared {
             let info = vk::DebugUtilsObjectNameInfoEXT::default()
                 .object_handle(handle)
                 .object_name(&name);
+            let _lists = reading_loader_lists();
             // SAFETY: `handle` is a live object of this device; naming is best-effort, so a
             // failure is ignored on purpose.
             let _ = unsafe { loader.set_debug_utils_object_name(&info) };
@@ -792,6 +819,7 @@ impl Drop for Shared {
                 .destroy_pipeline_cache(self.pipeline_cache, None);
             ManuallyDrop::drop(&mut self.allocator);
             if self.owns_device {
+                let _lists = changing_loader_lists();
                 self.device.destroy_device(None);
                 if let Some((loader, m)) = self.messenger.take() {
                     loader.destroy_debug_utils_messenger(m, None);
