@@ -208,6 +208,20 @@ fn bad_inputs_fail_with_one_clear_line() {
         &["camera.zoom"],
         &png,
     );
+    // The keys that take true, false or "auto".
+    for key in ["render.skip", "render.exact_opacity"] {
+        assert_fails(
+            &vmls(&[
+                "render",
+                "-o",
+                s(&png),
+                "--set",
+                &format!("{key}=\"maybe\""),
+            ]),
+            &[key, "true, false or \"auto\"", "\"maybe\""],
+            &png,
+        );
+    }
     // Unsupported output format.
     let jpg = d.join("out.jpg");
     assert_fails(

@@ -88,6 +88,16 @@ impl<'a> Section<'a> {
         }
     }
 
+    /// A key that takes true, false or "auto": `None` for "auto" and for a key left out.
+    pub(super) fn on_off_auto(&self, key: &str) -> Result<Option<bool>, SceneError> {
+        match self.get(key) {
+            None => Ok(None),
+            Some(Value::Boolean(b)) => Ok(Some(*b)),
+            Some(Value::String(a)) if a == "auto" => Ok(None),
+            Some(v) => Err(self.err(key, "true, false or \"auto\"", v)),
+        }
+    }
+
     pub(super) fn string(&self, key: &str) -> Result<Option<&'a str>, SceneError> {
         match self.get(key) {
             None => Ok(None),

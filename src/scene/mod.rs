@@ -580,19 +580,15 @@ impl Scene {
             )?,
             epsilon: ren.float("epsilon", adaptive.default_epsilon(), 0.0, 1e3)?,
             early_termination: ren.float("early_termination", 0.99, 0.0, 1.0)?,
-            skip: match ren.get("skip") {
+            skip: match ren.on_off_auto("skip")? {
                 None => SkipMode::Auto,
-                Some(Value::Boolean(true)) => SkipMode::On,
-                Some(Value::Boolean(false)) => SkipMode::Off,
-                Some(Value::String(a)) if a == "auto" => SkipMode::Auto,
-                Some(v) => return Err(ren.err("skip", "true, false or \"auto\"", v)),
+                Some(true) => SkipMode::On,
+                Some(false) => SkipMode::Off,
             },
-            exact_opacity: match ren.get("exact_opacity") {
+            exact_opacity: match ren.on_off_auto("exact_opacity")? {
                 None => ExactOpacity::Auto,
-                Some(Value::Boolean(true)) => ExactOpacity::On,
-                Some(Value::Boolean(false)) => ExactOpacity::Off,
-                Some(Value::String(a)) if a == "auto" => ExactOpacity::Auto,
-                Some(v) => return Err(ren.err("exact_opacity", "true, false or \"auto\"", v)),
+                Some(true) => ExactOpacity::On,
+                Some(false) => ExactOpacity::Off,
             },
             table_resolution: ren.int(
                 "table_resolution",
