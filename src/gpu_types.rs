@@ -645,8 +645,11 @@ pub struct SplatParams {
     /// Post-shaded intervals between sheet middles: the preintegration table of half a
     /// sheet (`SplatSetup::table_lengths`; zero without).
     pub tables: TableBlock,
+    /// The transfer function's (s, τ) for the exact opacity's unrolled scan, as
+    /// [`RenderParams::tf`].
+    pub tf: TfBlock,
 }
-const _: () = assert!(std::mem::size_of::<SplatParams>() == 320);
+const _: () = assert!(std::mem::size_of::<SplatParams>() == 576);
 
 /// One projected kernel (splat_project's output). GLSL twin: `Splat`. The footprint words
 /// depend on the projection (`splat::project::Splat` names them):

@@ -204,6 +204,9 @@ fn glsl_and_rust_layouts_agree() {
                 peak: 48.0,
                 occupied: [49, 50],
             },
+            tf: TfBlock {
+                s_tau: std::array::from_fn(|i| v(51.0 + i as f32)),
+            },
         },
         "SplatParams"
     );

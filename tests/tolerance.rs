@@ -366,6 +366,47 @@ fn auto_counts_a_tolerance_s_pilots_in_the_first_frame() {
     );
 }
 
+/// Post-shaded splatting's intervals read a table as well, and the tolerance now checks its
+/// share as it does the ray casters': it did not, and on issue 29's thinnest peak splatting's
+/// 512² table erred by 5e-2 (p99) unreported (BENCHMARKS.md). With the tables' opacity the
+/// tolerance measures their move and refines them; with "auto"'s exact opacity the move is
+/// f32 rounding and the coarse table stays.
+#[test]
+fn splatting_tolerances_check_the_table_of_their_intervals() {
+    let peak = "transfer.points=[[0.0,1.0,0.6,0.2,0.0],[0.498,1.0,0.6,0.2,0.0],\
+                [0.5,1.0,0.6,0.2,100],[0.502,1.0,0.6,0.2,0.0],[1.0,1.0,0.6,0.2,0.0]]";
+    let (ctx, _compiler) = gpu();
+    let splat = ["render.method=\"splat-post\"", "reconstruction.resample=0"];
+    let base = scene(&[&[peak][..], &splat].concat());
+    let field: Field = base.field(|_| {}).expect("field");
+    let mut renderer = Renderer::new(&ctx, field).expect("renderer");
+    let mut report = |exact: &str| {
+        let s = scene(&[&[peak, "render.tolerance=1e-2", exact][..], &splat].concat());
+        let (_, stats) = renderer.render(&s.view(), |_| {}).expect("render");
+        let r = stats.tolerance.expect("a tolerance report");
+        eprintln!(
+            "{exact}: tables {}, moves {:?}, notes {:?}",
+            r.table_resolution, r.table_moves, r.notes
+        );
+        r
+    };
+    let plain = report("render.exact_opacity=false");
+    let first = plain.table_moves.first().expect("the tables were checked");
+    assert!(first.1 > 1e-2, "the premise: 512² errs by {:.2e}", first.1);
+    assert!(plain.table_resolution > 512, "{}", plain.table_resolution);
+    let exact = report("render.exact_opacity=\"auto\"");
+    assert!(!exact.table_moves.is_empty(), "the tables were not checked");
+    for (resolution, error) in &exact.table_moves {
+        assert!(
+            *error < 1e-5,
+            "exact opacity: tables of {resolution} err by {error:.2e}"
+        );
+    }
+    assert_eq!(exact.table_resolution, 512);
+    drop(renderer);
+    finish(ctx);
+}
+
 #[test]
 fn a_peak_thinner_than_the_tables_resolve_meets_its_tolerance_by_the_exact_opacity() {
     // Issue 29's thinnest peak (half-width 0.002, 1/550 of the tables' range, τ up to 100),

@@ -191,6 +191,7 @@ struct SplatParams {
     vec4 cell_max;
     ivec4 pixel_window;
     TableBlock tables;
+    TfBlock tf;
 };
 
 

@@ -150,6 +150,9 @@ void main() {
     splat_params.tables.peak = 48.0;
     splat_params.tables.occupied0 = 49u;
     splat_params.tables.occupied1 = 50u;
+    for (int i = 0; i < 16; ++i) {
+        splat_params.tf.s_tau[i] = v(51.0 + float(i));
+    }
 
     splat.footprint0 = v(1.0);
     splat.footprint1 = v(2.0);

@@ -64,6 +64,7 @@ impl Renderer {
         setup.table_resolution = view.settings.table_resolution;
         setup.fit_device(self.ctx.info().device_type == "cpu");
         setup.fit_transfer(&self.field, view.transfer);
+        setup.resolve_exact_opacity(view.settings.exact_opacity, &self.field, view.transfer);
         if let Some(budget) = self.budget {
             setup.check_budget(0, budget)?;
         }
@@ -124,7 +125,7 @@ impl Renderer {
         setup: &SplatSetup,
     ) -> Result<(bool, f64), RenderError> {
         let range = setup.table_range(&self.field, view.transfer);
-        self.ensure_tables(view, setup.table_lengths(), range, false)
+        self.ensure_tables(view, setup.table_lengths(), range, setup.exact_opacity)
     }
 
     /// The renderer's own frame buffers (`render()`'s), fitted to `setup`; whether they were

@@ -24,7 +24,7 @@
 //!   to [1, 4]; the method's expected order until two differences exist). The ladder stops
 //!   once that estimate is below [`SAFETY`] · E/2; the level is then the power law's, between
 //!   the last two rungs.
-//! - **Tables** (preintegrated methods): a level rendered once more with tables of twice the
+//! - **Tables** (preintegrated methods, post-shaded splatting's intervals): a level rendered once more with tables of twice the
 //!   resolution (half again where twice does not fit the device); the move, extrapolated at
 //!   the tables' order 2 in the cell, is the tables' error, and while it exceeds E/4 the finer
 //!   tables are taken (up to 4096). This runs before the ladder, at its level 0, so that the
@@ -54,6 +54,7 @@
 use super::Renderer;
 use crate::field::RenderError;
 use crate::view::camera::Camera;
+use crate::view::settings::SheetInterval;
 use crate::view::{AdaptiveCriterion, Method, RenderSettings, View, ViewKey};
 use std::time::Instant;
 
@@ -218,7 +219,7 @@ pub fn fewest_pilots(settings: &RenderSettings) -> u32 {
         return 0;
     }
     let (_, key_given) = ladder_key(settings);
-    let tables = settings.method.preintegrated() && !settings.given.table_resolution;
+    let tables = reads_tables(settings) && !settings.given.table_resolution;
     let ladder = if key_given { 0 } else { 2 };
     let table_checks = match (tables, key_given) {
         (false, _) => 0,
@@ -226,6 +227,16 @@ pub fn fewest_pilots(settings: &RenderSettings) -> u32 {
         (true, false) => 4,
     };
     ladder + table_checks
+}
+
+/// Whether frames of these settings read preintegration tables, whose share of E the
+/// tolerance checks: the preintegrated ray casters, and post-shaded splatting's intervals
+/// between sheet middles (all but constant sheets). Splatting's were left unchecked before: on
+/// a peak of half-width 0.002 its 512² tables erred by 5e-2 (p99) unreported (BENCHMARKS.md).
+fn reads_tables(settings: &RenderSettings) -> bool {
+    settings.method.preintegrated()
+        || (settings.method == Method::SplatPost
+            && settings.splat.interval != Some(SheetInterval::Constant))
 }
 
 /// The settings of a tolerance's first level, the coarsest it renders (`settings` themselves
@@ -340,7 +351,7 @@ impl Renderer {
         };
         let (key, key_given) = ladder_key(&base);
         let mut table_moves = Vec::new();
-        if base.method.preintegrated() && !given.table_resolution && !key_given {
+        if reads_tables(&base) && !given.table_resolution && !key_given {
             // Tables first, at the ladder's first level: their error changes with the step
             // (the segment length), and with coarse tables that change entered the ladder's
             // differences and made it refine the step for the tables' sake (a transfer-function
@@ -408,7 +419,7 @@ impl Renderer {
             let at_k = estimate * 2f64.powf(order * (f64::from(level) - k));
             (s, Some((key, v, at_k)))
         };
-        if settings.method.preintegrated() {
+        if reads_tables(&settings) {
             if given.table_resolution {
                 notes.push(format!(
                     "render.table_resolution = {} given: kept",

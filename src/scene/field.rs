@@ -281,6 +281,7 @@ impl Scene {
             field,
         )?;
         setup.table_resolution = self.render.table_resolution;
+        setup.resolve_exact_opacity(self.render.exact_opacity, field, &self.transfer);
         Ok(setup)
     }
 

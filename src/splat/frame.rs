@@ -115,6 +115,7 @@ pub(super) fn params(
         cell_max: v(setup.cell.map_or(glam::DVec3::INFINITY, |c| c.1)),
         pixel_window: setup.window.0,
         tables: tables.map_or_else(Default::default, |t| t.gpu_block(tf)),
+        tf: tf.gpu_block(),
     }
 }
 

@@ -201,6 +201,13 @@ pub struct SplatVariant {
     pub outside_skip: bool,
     /// What the walk loads one entry ahead (`SplatSetup::prefetch`).
     pub prefetch: super::Prefetch,
+    /// Post-shaded intervals' lookups take the transfer function's exact opacity
+    /// (`SplatSetup::exact_opacity`, `PREINT_EXACT_OPACITY`).
+    pub exact_opacity: bool,
+    /// With it, the transfer function's points its scan unrolls over from `SplatParams::tf`
+    /// (`PREINT_TF_POINTS`; 0: more than fit there, read from the texel view). Only the exact
+    /// opacity sets it: without, a function of another length must not cost a pipeline.
+    pub tf_points: u32,
 }
 
 impl SplatVariant {
@@ -208,6 +215,9 @@ impl SplatVariant {
     pub fn of(setup: &SplatSetup, device: &crate::vk::DeviceInfo) -> Self {
         let subgroup = device.subgroup_size.clamp(1, 128);
         let pixels = setup.raster_pixels();
+        let exact_opacity = setup.exact_opacity
+            && setup.shading == Shading::Post
+            && setup.interval != super::SheetInterval::Constant;
         Self {
             shading: setup.shading,
             antialias: setup.settings.antialias,
@@ -232,6 +242,14 @@ impl SplatVariant {
             clear_skip: setup.clear_skip,
             outside_skip: setup.outside_skip,
             prefetch: setup.prefetch,
+            exact_opacity,
+            tf_points: if exact_opacity
+                && setup.tf_points as usize <= crate::gpu_types::TF_BLOCK_POINTS
+            {
+                setup.tf_points
+            } else {
+                0
+            },
         }
     }
 
@@ -319,6 +337,10 @@ impl SplatVariant {
             // length on lavapipe (field::gpu::FIRST_HULL_HITS).
             ("HULL_MAX_HITS".into(), SEGMENT_HITS.to_string()),
         ]);
+        d.extend(crate::view::preintegration::exact_opacity_defines(
+            self.exact_opacity,
+            self.tf_points,
+        ));
         d
     }
 
@@ -348,7 +370,7 @@ impl SplatVariant {
     /// Human-readable name for `--stats`.
     pub fn name(&self) -> String {
         format!(
-            "splat {} {} {}{}{}{}{}{} tile {}{}{}{}{}{}{}",
+            "splat {} {} {}{}{}{}{}{}{} tile {}{}{}{}{}{}{}",
             match self.shading {
                 Shading::Pre => "pre-shaded",
                 Shading::Post => "post-shaded",
@@ -382,6 +404,11 @@ impl SplatVariant {
                 format!(" {}-intervals", self.interval.name())
             } else {
                 String::new()
+            },
+            if self.exact_opacity {
+                " exact-opacity"
+            } else {
+                ""
             },
             self.tile,
             if self.surfaces {

@@ -45,6 +45,7 @@ pub mod project;
 pub mod raster;
 pub mod surface;
 
+use crate::view::settings::ExactOpacity;
 pub use crate::view::settings::{
     Antialias, Prefetch, Shading, SheetInterval, SheetShare, SplatSettings,
 };
@@ -200,6 +201,13 @@ pub struct SplatSetup {
     /// Nodes per scalar axis of the intervals' preintegration table (`render.table_resolution`,
     /// which the caller sets; [`crate::view::settings::DEFAULT_TABLE_RESOLUTION`] unset).
     pub table_resolution: usize,
+    /// The intervals' table lookups take their opacity from the transfer function's integral
+    /// (`render.exact_opacity`, resolved by [`SplatSetup::resolve_exact_opacity`]; false until
+    /// then): [`crate::view::preintegration::PreintegrationTables::entry`], as the ray caster's.
+    pub exact_opacity: bool,
+    /// The transfer function's point count, which the exact opacity's scan unrolls over where
+    /// it is at most [`crate::gpu_types::TF_BLOCK_POINTS`] (recorded with it).
+    pub tf_points: u32,
     /// The quadrature meets kernels thinner along a ray than it serves, which it widens
     /// ([`SplatSetup::share_deviation`]).
     pub widen: bool,
@@ -484,6 +492,8 @@ impl SplatSetup {
             sheet_share,
             interval,
             table_resolution: crate::view::settings::DEFAULT_TABLE_RESOLUTION,
+            exact_opacity: false,
+            tf_points: 0,
             widen: post && ring > 0 && sheet_share.sampled() && thickest > QUADRATURE_MAX_SHEET,
             lighting: *lighting,
             cell: field.clip().map(|clip| brick_cell(clip, (box_lo, box_hi))),
@@ -716,6 +726,23 @@ impl SplatSetup {
                 self.table_range(field, tf),
                 self.table_resolution,
             );
+    }
+
+    /// Decides `render.exact_opacity` for a frame of `tf` over `field`: only post-shaded
+    /// intervals read a table ([`ExactOpacity::resolve`] otherwise, "auto" by the data's range
+    /// as for ray casting). A thin peak's opacity errs in a table by a cell's square over its
+    /// width here too: the 0.002 peak's post-shaded frames at 512² and 2048² tables differed by
+    /// 5e-2 (p99), the tables were 3e-3 apart at 2048² and 4096² (BENCHMARKS.md).
+    pub fn resolve_exact_opacity(
+        &mut self,
+        mode: ExactOpacity,
+        field: &Field,
+        tf: &TransferFunction,
+    ) {
+        self.exact_opacity = !self.table_lengths().is_empty()
+            && self.shading == Shading::Post
+            && mode.resolve(tf, crate::field::scalar_range(field));
+        self.tf_points = tf.points().len() as u32;
     }
 
     /// Invocations of one `splat_raster` workgroup: the tile and its apron.

@@ -561,13 +561,15 @@ pub fn splat_image(
     counts.entries = bins.list.len() as u64;
     let lengths = setup.table_lengths();
     let tables = (!lengths.is_empty()).then(|| {
-        PreintegrationTables::build(
+        let mut t = PreintegrationTables::build(
             tf,
             setup.table_range(field, tf),
             &lengths,
             setup.table_resolution,
             |_| {},
-        )
+        );
+        t.set_exact_opacity(setup.exact_opacity.then_some(tf));
+        t
     });
     let segments = splat_segments(setup, field);
     let (w, h) = (setup.camera.width as usize, setup.camera.height as usize);
