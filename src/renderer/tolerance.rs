@@ -24,11 +24,12 @@
 //!   to [1, 4]; the method's expected order until two differences exist). The ladder stops
 //!   once that estimate is below [`SAFETY`] · E/2; the level is then the power law's, between
 //!   the last two rungs.
-//! - **Tables** (preintegrated methods, post-shaded splatting's intervals): a level rendered once more with tables of twice the
-//!   resolution (half again where twice does not fit the device); the move, extrapolated at
-//!   the tables' order 2 in the cell, is the tables' error, and while it exceeds E/4 the finer
-//!   tables are taken (up to 4096). This runs before the ladder, at its level 0, so that the
-//!   rungs differ by their step and not by their tables' error, and again at the level chosen.
+//! - **Tables** (preintegrated methods, post-shaded splatting's intervals): a level rendered
+//!   once more with tables of twice the resolution (half again where twice does not fit the
+//!   device); the move, extrapolated at the tables' order 2 in the cell, is the tables' error,
+//!   and while it exceeds E/4 the finer tables are taken (up to 4096). This runs before the
+//!   ladder, at its level 0, so that the rungs differ by their step and not by their tables'
+//!   error, and again at the level chosen.
 //!
 //! - **The adaptive criterion**: Hermite's (`render.adaptive = "hermite"`) unless the scene
 //!   names one or gives ε: it met E with 4-9× fewer evaluations than [MLS]'s.
