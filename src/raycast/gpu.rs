@@ -23,14 +23,7 @@ pub fn variant_for_render(field: &Field, setup: &RaySetup) -> Variant {
         hull_cache: setup.hull_cache,
         skip: setup.skip,
         exact_opacity,
-        // Only the exact opacity unrolls over the points; without it a new transfer function of
-        // another length must not cost a pipeline.
-        tf_points: if exact_opacity && setup.tf_points as usize <= crate::gpu_types::TF_BLOCK_POINTS
-        {
-            setup.tf_points
-        } else {
-            0
-        },
+        tf_points: crate::view::preintegration::unrolled_tf_points(exact_opacity, setup.tf_points),
         clip: setup.clip.is_some(),
         ..Variant::of(field)
     }

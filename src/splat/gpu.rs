@@ -205,8 +205,7 @@ pub struct SplatVariant {
     /// (`SplatSetup::exact_opacity`, `PREINT_EXACT_OPACITY`).
     pub exact_opacity: bool,
     /// With it, the transfer function's points its scan unrolls over from `SplatParams::tf`
-    /// (`PREINT_TF_POINTS`; 0: more than fit there, read from the texel view). Only the exact
-    /// opacity sets it: without, a function of another length must not cost a pipeline.
+    /// ([`crate::view::preintegration::unrolled_tf_points`]).
     pub tf_points: u32,
 }
 
@@ -215,9 +214,6 @@ impl SplatVariant {
     pub fn of(setup: &SplatSetup, device: &crate::vk::DeviceInfo) -> Self {
         let subgroup = device.subgroup_size.clamp(1, 128);
         let pixels = setup.raster_pixels();
-        let exact_opacity = setup.exact_opacity
-            && setup.shading == Shading::Post
-            && setup.interval != super::SheetInterval::Constant;
         Self {
             shading: setup.shading,
             antialias: setup.settings.antialias,
@@ -242,14 +238,11 @@ impl SplatVariant {
             clear_skip: setup.clear_skip,
             outside_skip: setup.outside_skip,
             prefetch: setup.prefetch,
-            exact_opacity,
-            tf_points: if exact_opacity
-                && setup.tf_points as usize <= crate::gpu_types::TF_BLOCK_POINTS
-            {
-                setup.tf_points
-            } else {
-                0
-            },
+            exact_opacity: setup.exact_opacity,
+            tf_points: crate::view::preintegration::unrolled_tf_points(
+                setup.exact_opacity,
+                setup.tf_points,
+            ),
         }
     }
 

@@ -728,9 +728,10 @@ impl SplatSetup {
             );
     }
 
-    /// Decides `render.exact_opacity` for a frame of `tf` over `field`: only post-shaded
-    /// intervals read a table ([`ExactOpacity::resolve`] otherwise, "auto" by the data's range
-    /// as for ray casting). A thin peak's opacity errs in a table by a cell's square over its
+    /// Decides `render.exact_opacity` for a frame of `tf` over `field`: only intervals between
+    /// sheet middles read a table (post-shaded, not constant sheets; pre-shaded frames' are
+    /// constant), and there [`ExactOpacity::resolve`] decides, "auto" by the data's range as
+    /// for ray casting. A thin peak's opacity errs in a table by a cell's square over its
     /// width here too: the 0.002 peak's post-shaded frames at 512² and 2048² tables differed by
     /// 5e-2 (p99), the tables were 3e-3 apart at 2048² and 4096² (BENCHMARKS.md).
     pub fn resolve_exact_opacity(
@@ -739,8 +740,7 @@ impl SplatSetup {
         field: &Field,
         tf: &TransferFunction,
     ) {
-        self.exact_opacity = !self.table_lengths().is_empty()
-            && self.shading == Shading::Post
+        self.exact_opacity = self.interval != SheetInterval::Constant
             && mode.resolve(tf, crate::field::scalar_range(field));
         self.tf_points = tf.points().len() as u32;
     }

@@ -35,6 +35,18 @@ pub const EXACT_MIN_ALPHA: f64 = 1e-12;
 /// `points`: the transfer function's points where the scan reads them from the parameters'
 /// [`crate::gpu_types::TfBlock`] (at most [`crate::gpu_types::TF_BLOCK_POINTS`]), 0 where it
 /// reads the texel view.
+/// The transfer-function points a kernel's exact-opacity scan unrolls over from the
+/// parameters' `TfBlock` (`PREINT_TF_POINTS`): `points` where the exact opacity is on and they
+/// fit, else 0 (off, or read from the texel view). Only the exact opacity may set it: without,
+/// a function of another length must not cost a pipeline.
+pub fn unrolled_tf_points(exact_opacity: bool, points: u32) -> u32 {
+    if exact_opacity && points as usize <= crate::gpu_types::TF_BLOCK_POINTS {
+        points
+    } else {
+        0
+    }
+}
+
 pub fn exact_opacity_defines(on: bool, points: u32) -> Vec<(String, String)> {
     vec![
         ("PREINT_EXACT_OPACITY".into(), u8::from(on).to_string()),
