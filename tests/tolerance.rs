@@ -90,6 +90,94 @@ fn fixed_steps_and_the_adaptive_integrator_meet_the_tolerance() {
     finish(ctx);
 }
 
+/// The converged image of the scene's field through `camera`.
+fn converged_through(
+    renderer: &mut Renderer,
+    field_scene: &Scene,
+    camera: &vmls::view::camera::Camera,
+) -> Vec<[f32; 4]> {
+    let mut s = field_scene.render.clone();
+    s.method = vmls::view::Method::Reference;
+    s.reference_step_spacings = 1.0 / 64.0;
+    s.min_transmittance = 1e-7;
+    s.tolerance = None;
+    let view = vmls::view::View {
+        settings: &s,
+        ..field_scene.view_with(camera)
+    };
+    renderer.render(&view, |_| {}).expect("reference").0.pixels
+}
+
+/// A turning camera: the next view of the same settings starts its pilots from the last
+/// view's choice, renders fewer of them, and still meets E against its own converged image,
+/// with a choice within a level of what that view's pilots choose from scratch (one level: the
+/// step halves, ε quarters). Any other change (here E) resolves from scratch.
+#[test]
+fn a_turning_camera_carries_the_choice_and_still_meets_the_tolerance() {
+    let (ctx, _compiler) = gpu();
+    let e = 1e-2;
+    for (method, per_level) in [("fixed", 2.0f64), ("adaptive", 4.0)] {
+        let m = format!("render.method=\"{method}\"");
+        let t = format!("render.tolerance={e}");
+        let s = scene(&[&m, &t]);
+        let field: Field = s.field(|_| {}).expect("field");
+        let mut renderer = Renderer::new(&ctx, field.clone()).expect("renderer");
+        let mut first_pilots = 0;
+        for k in 0..4 {
+            let camera = s.camera.orbited((25.0 * f64::from(k)).to_radians());
+            let (image, stats) = renderer
+                .render(&s.view_with(&camera), |_| {})
+                .expect("render");
+            let report = stats.tolerance.expect("a tolerance report");
+            let (_, value, _) = report.chosen.expect("the tolerance chose");
+            let truth = converged_through(&mut renderer, &s, &camera);
+            let measured = p99_error(&image.pixels, &truth);
+            // A fresh renderer resolves this view from scratch.
+            let mut fresh = Renderer::new(&ctx, field.clone()).expect("renderer");
+            let (_, fresh_stats) = fresh.render(&s.view_with(&camera), |_| {}).expect("render");
+            drop(fresh);
+            let fresh_report = fresh_stats.tolerance.expect("a tolerance report");
+            let (_, fresh_value, _) = fresh_report.chosen.expect("the tolerance chose");
+            eprintln!(
+                "{method} view {k}: value {value:.4} (fresh {fresh_value:.4}), measured \
+                 {measured:.2e}, {} pilots (fresh {}), carried {}, notes {:?}",
+                report.pilots, fresh_report.pilots, report.carried, report.notes
+            );
+            assert_eq!(report.carried, k > 0, "{method} view {k}");
+            assert!(!fresh_report.carried);
+            assert!(report.met, "{method} view {k}: {:?}", report.notes);
+            assert!(measured <= e, "{method} view {k}: measured {measured:e}");
+            let levels = (value / fresh_value).ln().abs() / per_level.ln();
+            assert!(
+                levels <= 1.0 + 1e-9,
+                "{method} view {k}: {value} against {fresh_value} fresh"
+            );
+            if k == 0 {
+                first_pilots = report.pilots;
+            } else {
+                assert!(
+                    report.pilots < first_pilots,
+                    "{method} view {k}: {} pilots, the first view {first_pilots}",
+                    report.pilots
+                );
+            }
+        }
+        // Another E through the last camera: not carried.
+        let finer = scene(&[&m, "render.tolerance=0.003"]);
+        let camera = finer.camera.orbited((75.0f64).to_radians());
+        let (_, stats) = renderer
+            .render(&finer.view_with(&camera), |_| {})
+            .expect("render");
+        let report = stats.tolerance.expect("a tolerance report");
+        assert!(
+            !report.carried,
+            "{method}: a new E is resolved from scratch"
+        );
+        drop(renderer);
+    }
+    finish(ctx);
+}
+
 #[test]
 fn explicit_keys_win_over_the_tolerance_and_are_reported() {
     let (ctx, _compiler) = gpu();

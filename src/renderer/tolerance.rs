@@ -31,6 +31,15 @@
 //!   ladder, at its level 0, so that the rungs differ by their step and not by their tables'
 //!   error, and again at the level chosen.
 //!
+//! - **A turning camera**: the next view of the same settings (another camera only: an
+//!   orbit, a resized image) starts from the last one's choice instead of from scratch. Its
+//!   ladder starts one level below the level chosen, with the order measured there, and runs
+//!   as above (so an easier view coarsens by up to a level, a harder one refines until the
+//!   estimate holds); its tables are the last view's, checked again at the level chosen unless
+//!   their last measured error was within E/16. An orbit's frames at 128² paid 8 pilots and
+//!   1.2-3.4 s of wall time each for a 20 ms frame, most of it the table check's uploads
+//!   (BENCHMARKS.md, "A tolerance carried across a turning camera").
+//!
 //! - **The adaptive criterion**: Hermite's (`render.adaptive = "hermite"`) unless the scene
 //!   names one or gives ε: it met E with 4-9× fewer evaluations than [MLS]'s.
 //!
@@ -131,6 +140,9 @@ pub struct ToleranceReport {
     pub pilot_wall_ms: f64,
     pub pilot_gpu_ms: f64,
     pub pilots: u32,
+    /// Whether the pilots started from the last view's choice (the same settings through
+    /// another camera) rather than from the ladder's first level.
+    pub carried: bool,
 }
 
 /// The renderer's last resolution: the view it was for and what it chose.
@@ -138,6 +150,20 @@ pub(super) struct Resolved {
     key: ViewKey,
     settings: RenderSettings,
     report: ToleranceReport,
+    carry: Carry,
+}
+
+/// What a resolution leaves to the next view of the same settings through another camera
+/// (module documentation, "A turning camera").
+#[derive(Debug, Clone, Copy)]
+struct Carry {
+    /// The ladder's level chosen (continuous; 0 where the scene gave the ladder's key).
+    level: f64,
+    /// The order fitted at that level.
+    order: f64,
+    table_resolution: usize,
+    /// The tables' error where it was last measured.
+    table_error: Option<f64>,
 }
 
 /// The order in the level assumed until two differences measure one: every ladder's
@@ -264,7 +290,8 @@ fn fitted_order(d: &[f64], expected: f64) -> f64 {
 
 impl Renderer {
     /// The settings a view's tolerance chooses (cached while the view stays the same), or
-    /// `None` without a tolerance.
+    /// `None` without a tolerance. A view that differs from the last one only by its camera
+    /// starts from the last one's choice ([`Carry`]).
     pub(super) fn tolerance_settings(
         &mut self,
         view: &View<'_>,
@@ -276,27 +303,35 @@ impl Renderer {
         if let Some(r) = self.tolerance.as_ref().filter(|r| r.key == key) {
             return Ok(Some((r.settings.clone(), r.report.clone())));
         }
+        let carry = self
+            .tolerance
+            .as_ref()
+            .filter(|r| r.key.same_but_camera(&key))
+            .map(|r| r.carry);
         // Pilots keep hull segments but never read them: at their size a walk costs less than
         // compiling the variant that reads (the frame after the pilots has another size, and
         // walks anyway).
         self.segments_keep_only = true;
-        let resolved = self.resolve(view, tolerance);
+        let resolved = self.resolve(view, tolerance, carry);
         self.segments_keep_only = false;
-        let (settings, report) = resolved?;
+        let (settings, report, carry) = resolved?;
         self.tolerance = Some(Resolved {
             key,
             settings: settings.clone(),
             report: report.clone(),
+            carry,
         });
         Ok(Some((settings, report)))
     }
 
-    /// Runs the pilots of `view` for tolerance `e` (module documentation).
+    /// Runs the pilots of `view` for tolerance `e` (module documentation), from the last
+    /// view's choice where `carry` holds it.
     fn resolve(
         &mut self,
         view: &View<'_>,
         e: f64,
-    ) -> Result<(RenderSettings, ToleranceReport), RenderError> {
+        carry: Option<Carry>,
+    ) -> Result<(RenderSettings, ToleranceReport, Carry), RenderError> {
         let start = Instant::now();
         let given = view.settings.given;
         let mut base = view.settings.clone();
@@ -351,29 +386,48 @@ impl Renderer {
             Ok(image.pixels)
         };
         let (key, key_given) = ladder_key(&base);
+        let tables_chosen = reads_tables(&base) && !given.table_resolution;
         let mut table_moves = Vec::new();
-        if reads_tables(&base) && !given.table_resolution && !key_given {
+        // The tables' error last measured, where they were.
+        let mut table_error = None;
+        if let Some(c) = carry {
+            base.table_resolution = c.table_resolution;
+            table_error = c.table_error;
+            notes.push(format!(
+                "carried from the last view (the same settings through another camera): \
+                 its tables, and the ladder from its level {:.2} less one",
+                c.level
+            ));
+        } else if tables_chosen && !key_given {
             // Tables first, at the ladder's first level: their error changes with the step
             // (the segment length), and with coarse tables that change entered the ladder's
             // differences and made it refine the step for the tables' sake (a transfer-function
             // peak of half-width 0.01 took a step 4.6× finer than the oracle's at E = 3e-3,
             // BENCHMARKS.md). The tables are checked again at the level chosen.
             let (mut first, _) = at_level(&base, 0.0);
-            table_moves = refine_tables(self, &mut first, e, &mut pilot)?.moves;
+            let refined = refine_tables(self, &mut first, e, &mut pilot)?;
+            table_moves = refined.moves;
+            table_error = refined.error;
             base.table_resolution = first.table_resolution;
         }
         let budget = SAFETY * e / 2.0;
         let mut rungs: Vec<(f64, f64)> = Vec::new();
-        let mut order = EXPECTED_ORDER;
+        let mut order = carry.map_or(EXPECTED_ORDER, |c| c.order);
+        let mut chosen_level = 0.0;
         let (mut settings, chosen) = if key_given {
             notes.push(format!("{} given: kept, not chosen by the tolerance", key));
             (base.clone(), None)
         } else {
-            let (s0, v0) = at_level(&base, 0.0);
+            // A carried ladder starts a level below the last view's choice, so that an easier
+            // view can coarsen by up to one level and a harder one refines from there, with
+            // the order the last view measured until two differences measure this one's.
+            let first = carry.map_or(0, |c| (c.level.floor() as u32).saturating_sub(1));
+            let expected = order;
+            let (s0, v0) = at_level(&base, f64::from(first));
             let mut previous = pilot(self, &s0)?;
             let mut last_value = v0;
             let mut d = Vec::new();
-            let mut level = 0u32;
+            let mut level = first;
             // The estimate at the last rung rendered, and the level.
             let mut estimate = f64::INFINITY;
             loop {
@@ -391,7 +445,7 @@ impl Renderer {
                 let dk = p99_error(&previous, &image);
                 rungs.push((last_value, dk));
                 d.push(dk);
-                order = fitted_order(&d, EXPECTED_ORDER);
+                order = fitted_order(&d, expected);
                 estimate = dk / (2f64.powf(order) - 1.0);
                 previous = image;
                 last_value = v;
@@ -402,9 +456,10 @@ impl Renderer {
             if estimate > e / 2.0 {
                 met = false;
                 notes.push(format!(
-                    "{} = {last_value:.4} after {level} refinements still estimates \
+                    "{} = {last_value:.4} after {} refinements still estimates \
                      {estimate:.2e}, more than its share E/2 = {:.2e}: the tolerance is not met",
                     key,
+                    level - first,
                     e / 2.0
                 ));
             }
@@ -415,9 +470,9 @@ impl Renderer {
             } else {
                 -1.0
             };
-            let k = f64::from(level) + extra.clamp(-1.0, 0.0);
-            let (s, v) = at_level(&base, k);
-            let at_k = estimate * 2f64.powf(order * (f64::from(level) - k));
+            chosen_level = f64::from(level) + extra.clamp(-1.0, 0.0);
+            let (s, v) = at_level(&base, chosen_level);
+            let at_k = estimate * 2f64.powf(order * (f64::from(level) - chosen_level));
             (s, Some((key, v, at_k)))
         };
         if reads_tables(&settings) {
@@ -426,9 +481,19 @@ impl Renderer {
                     "render.table_resolution = {} given: kept",
                     settings.table_resolution
                 ));
+            } else if let Some(t) = table_error.filter(|&t| carry.is_some() && t <= e / 16.0) {
+                // Far inside their share where last measured: the tables' error depends on
+                // the transfer function and the segment lengths, which a new camera changes
+                // little, and checking them costs the pilots' largest uploads.
+                notes.push(format!(
+                    "tables of {} carried unchecked: their error was {t:.2e} at the last view, \
+                     within E/16",
+                    settings.table_resolution
+                ));
             } else {
                 let refined = refine_tables(self, &mut settings, e, &mut pilot)?;
                 table_moves.extend(refined.moves);
+                table_error = refined.error;
                 if let Some(note) = refined.miss {
                     met = false;
                     notes.push(note);
@@ -448,8 +513,15 @@ impl Renderer {
             pilot_wall_ms: start.elapsed().as_secs_f64() * 1e3,
             pilot_gpu_ms,
             pilots,
+            carried: carry.is_some(),
         };
-        Ok((settings, report))
+        let carry = Carry {
+            level: chosen_level,
+            order,
+            table_resolution: settings.table_resolution,
+            table_error,
+        };
+        Ok((settings, report, carry))
     }
 }
 
@@ -463,6 +535,9 @@ type Pilot<'a> = dyn FnMut(&mut Renderer, &RenderSettings) -> Result<Image, Rend
 /// the tables' share could not be shown where it could not.
 struct TableRefinement {
     moves: Vec<(usize, f64)>,
+    /// The error of the tables taken, extrapolated from the last move to them (`None`: not
+    /// measured).
+    error: Option<f64>,
     miss: Option<String>,
 }
 
@@ -477,8 +552,6 @@ fn refine_tables(
 ) -> Result<TableRefinement, RenderError> {
     let mut moves = Vec::new();
     let mut image = pilot(renderer, settings)?;
-    // The error of the tables taken, extrapolated from the last move to them (`None`: not
-    // measured).
     let mut current: Option<f64> = None;
     while settings.table_resolution < MAX_TABLE {
         let r = settings.table_resolution;
@@ -510,7 +583,11 @@ fn refine_tables(
             settings.table_resolution
         )),
     };
-    Ok(TableRefinement { moves, miss })
+    Ok(TableRefinement {
+        moves,
+        error: current,
+        miss,
+    })
 }
 
 /// The pilot with tables twice as fine, or half again as fine where twice does not fit the

@@ -59,4 +59,13 @@ impl ViewKey {
             lighting: *view.lighting,
         }
     }
+
+    /// Whether `other` is the same view through another camera (a turning camera, a resized
+    /// image): what does not depend on the camera can be carried over.
+    pub fn same_but_camera(&self, other: &ViewKey) -> bool {
+        self.settings == other.settings
+            && self.transfer == other.transfer
+            && self.isosurfaces == other.isosurfaces
+            && self.lighting == other.lighting
+    }
 }

@@ -282,6 +282,7 @@ fn tolerance_json(r: &vmls::renderer::tolerance::ToleranceReport) -> serde_json:
         "pilot_frames": r.pilots,
         "pilot_wall_ms": r.pilot_wall_ms,
         "pilot_gpu_ms": r.pilot_gpu_ms,
+        "carried": r.carried,
     })
 }
 
