@@ -315,17 +315,31 @@ impl Octree {
 
     /// The leaf containing x: (its sample indices, basis scale); empty outside the root cube.
     pub fn leaf(&self, x: [f64; 3]) -> (LeafCodes<'_>, f64) {
+        match self.leaf_cell(x) {
+            Some((node, _, _)) => {
+                let [_, begin, count, scale] = self.nodes[node];
+                (
+                    LeafCodes::new(&self.codes, begin, count),
+                    f64::from(f32::from_bits(scale)),
+                )
+            }
+            None => (LeafCodes::empty(), 0.0),
+        }
+    }
+
+    /// The leaf containing x as a cell: its node index (the same for every point of the
+    /// leaf), centre and half size; `None` outside the root cube.
+    pub fn leaf_cell(&self, x: [f64; 3]) -> Option<(usize, [f64; 3], f64)> {
         let mut center = self.root_center;
         let mut half = self.root_half;
         if (0..3).any(|a| (x[a] - center[a]).abs() > half) {
-            return (LeafCodes::empty(), 0.0);
+            return None;
         }
         let mut node = 0usize;
         loop {
-            let [child, begin, count, scale] = self.nodes[node];
+            let child = self.nodes[node][0];
             if child == 0 {
-                let list = LeafCodes::new(&self.codes, begin, count);
-                return (list, f64::from(f32::from_bits(scale)));
+                return Some((node, center, half));
             }
             half *= 0.5;
             let mut octant = 0;
@@ -339,6 +353,11 @@ impl Octree {
             }
             node = child as usize + octant;
         }
+    }
+
+    /// Whether the leaf at node `node` ([`Octree::leaf_cell`]) lists any sample.
+    pub fn leaf_is_empty(&self, node: usize) -> bool {
+        self.nodes[node][2] == 0
     }
 
     /// Depth of the deepest leaf.

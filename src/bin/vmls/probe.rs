@@ -4,7 +4,8 @@ use crate::{CliError, DeviceArgs, context, plan_outputs, write_json};
 use std::path::Path;
 use vmls::field::{Field, RenderError};
 use vmls::probe::{
-    MemoryMode, coherent_order, fma_probe, median, memory_probe, mls_probe, random_points,
+    MemoryMode, coherent_order, fma_probe, leaf_reuse, median, memory_probe, mls_probe,
+    random_points,
 };
 use vmls::scene::{NeighbourMode, Scene, load_volume};
 use vmls::vk::ShaderCompiler;
@@ -19,6 +20,36 @@ pub fn octree_json(s: &vmls::recon::OctreeStats) -> serde_json::Value {
         "bytes": s.bytes,
         "build_ms": s.build_ms,
     })
+}
+
+/// Steps, in sample spacings, at which the probe reports [`leaf_reuse`].
+const REUSE_STEPS: [f64; 3] = [1.0, 0.25, 0.0625];
+
+/// How often a fixed-step ray's consecutive samples share an octree leaf (printed, and the
+/// rows of `--json`): what keeping the leaf between samples could save of the descents.
+fn leaf_reuse_rows(field: &Field) -> Result<Vec<serde_json::Value>, CliError> {
+    let Some(octree) = field.octree().map_err(RenderError::from)? else {
+        return Ok(Vec::new());
+    };
+    let (lo, hi) = field.bounds();
+    let mut rows = Vec::new();
+    for steps in REUSE_STEPS {
+        let step = steps * field.samples.spacing;
+        let r = leaf_reuse(octree, (lo.to_array(), hi.to_array()), 2000, step, 5);
+        println!(
+            "leaf reuse at a step of {steps} spacings: {:.1}% of {} consecutive sample pairs \
+             share a leaf",
+            100.0 * r.rate(),
+            r.pairs
+        );
+        rows.push(serde_json::json!({
+            "step_spacings": steps,
+            "pairs": r.pairs,
+            "same_leaf": r.same_leaf,
+            "rate": r.rate(),
+        }));
+    }
+    Ok(rows)
 }
 
 pub fn run_file_probe(
@@ -67,6 +98,7 @@ pub fn run_file_probe(
             s.build_ms
         );
     }
+    let reuse = leaf_reuse_rows(&field)?;
     let random = random_points(&field, points, 0.0, 7);
     let coherent = coherent_order(&field, random.clone());
     let mut rows = Vec::new();
@@ -95,6 +127,7 @@ pub fn run_file_probe(
                 "file": file.display().to_string(),
                 "samples": field.samples.len(),
                 "octree": stats.as_ref().map(octree_json),
+                "leaf_reuse": reuse,
                 "mls": rows,
             }),
         )?;
@@ -138,6 +171,7 @@ pub fn run_probe(
         }));
     }
     let mut rows = Vec::new();
+    let mut reuse = Vec::new();
     for mode in [NeighbourMode::Grid, NeighbourMode::Octree] {
         let scene = Scene::load(
             None,
@@ -161,6 +195,9 @@ pub fn run_probe(
             &scene.octree,
             |_| {},
         )?;
+        if mode == NeighbourMode::Octree {
+            reuse = leaf_reuse_rows(&field)?;
+        }
         let random = random_points(&field, points, 0.0, 7);
         let coherent = coherent_order(&field, random.clone());
         for (order, pts) in [("random", random), ("coherent", coherent)] {
@@ -197,6 +234,7 @@ pub fn run_probe(
                 "fma": { "gflops": fma.gflops, "gpu_ms": fma.gpu_ms },
                 "memory": memory,
                 "mls": rows,
+                "leaf_reuse": reuse,
             }),
         )?;
     }
