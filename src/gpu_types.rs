@@ -477,7 +477,8 @@ pub struct Sample {
     pub pos_value: [f32; 4],
     /// The support's metric M (ρ² = dᵀMd): xx, yy, zz, xy.
     pub metric: [f32; 4],
-    /// The rest of the metric: xz, yz; zw unused. Read only by the full-metric variant.
+    /// The rest of the metric: xz, yz (read only by the full-metric variant); z: the Gaussian
+    /// weight v_i·norm_i; w unused.
     pub metric_off: [f32; 4],
 }
 const _: () = assert!(std::mem::size_of::<Sample>() == 48);

@@ -249,6 +249,26 @@ uvec3 octree_leaf(vec3 x) {
     return uvec3(0u);
 }
 
+// Texels per sample (Sample in src/gpu_types.rs) or inline record (record_texels in
+// src/field/records.rs: two without a full metric, the Gaussian weight in the metric's w).
+#if OCTREE_INLINE == 1 && MLS_FULL_METRIC == 0
+#define RECORD_STRIDE 2
+#else
+#define RECORD_STRIDE 3
+#endif
+
+#if OCTREE_INLINE == 1
+// Stage `octree_records` (twin: InlineLeaves in src/field/records.rs): a leaf is its first
+// record and its record count; candidate r is record first + r, an address no load precedes.
+uint leaf_first(uvec3 leaf) {
+    return leaf.x;
+}
+
+bool leaf_code(uvec3 leaf, uint r, inout uint prev) {
+    prev = leaf.x + r;
+    return true;
+}
+#else
 // Stage `octree_codes` (twin: LeafCodes in src/recon/octree_codes.rs): a leaf is its first
 // sample index (word `begin`), then 16-bit codes from half 2 (begin + 1), two to a word: each
 // adds itself to the running index, and names a sample unless it is the jump 0xFFFF. Code c's
@@ -264,17 +284,32 @@ bool leaf_code(uvec3 leaf, uint r, inout uint prev) {
     prev += code;
     return code != 0xFFFFu;
 }
+#endif
+
+// Position and value of sample (or record) i.
+vec4 sample_pos_value(int i) {
+    return imageLoad(samples, RECORD_STRIDE * i);
+}
 
 // M d for sample i's support metric (MLS_FULL_METRIC 0: diagonal metrics only, and the third
 // texel is never read).
 vec3 metric_apply(int i, vec3 d) {
-    vec4 m = imageLoad(samples, 3 * i + 1);
+    vec4 m = imageLoad(samples, RECORD_STRIDE * i + 1);
     vec3 md = m.xyz * d;
 #if MLS_FULL_METRIC == 1
-    vec4 off = imageLoad(samples, 3 * i + 2);
+    vec4 off = imageLoad(samples, RECORD_STRIDE * i + 2);
     md += vec3(m.w * d.y + off.x * d.z, m.w * d.x + off.y * d.z, off.x * d.x + off.y * d.y);
 #endif
     return md;
+}
+
+// The Gaussian-sum weight v_i·norm_i of sample i.
+float sample_weight(int i) {
+#if RECORD_STRIDE == 2
+    return imageLoad(samples, 2 * i + 1).w;
+#else
+    return imageLoad(samples, 3 * i + 2).z;
+#endif
 }
 
 void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float c[MLS_TERMS]) {
@@ -288,7 +323,7 @@ void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float
             continue;
         }
         int i = int(prev);
-        vec4 pos_value = imageLoad(samples, 3 * i);
+        vec4 pos_value = sample_pos_value(i);
         vec3 d = pos_value.xyz - x;
         vec3 md = metric_apply(i, d);
         float rho2 = dot(d, md);
@@ -347,12 +382,12 @@ MlsResult gaussian_evaluate(vec3 x) {
             continue;
         }
         int i = int(prev);
-        vec4 pos_value = imageLoad(samples, 3 * i);
+        vec4 pos_value = sample_pos_value(i);
         vec3 d = pos_value.xyz - x;
         vec3 md = metric_apply(i, d);
         float rho2 = dot(d, md);
         if (rho2 < 1.0) {
-            float w = imageLoad(samples, 3 * i + 2).z;
+            float w = sample_weight(i);
             float wf = w * pos_value.w * exp(k * rho2);
             value += wf;
             grad += wf * md;

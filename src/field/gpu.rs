@@ -3,6 +3,7 @@
 //! itself and the field's kernel constants are [`super::variant`].
 
 use super::Field;
+use super::records;
 use super::variant::{Variant, field_params, grid_binding, groups_2d, pipeline_for, v4};
 use crate::data::Storage;
 use crate::gpu_types::{CountPush, GRID_PAD, MlsOut, Sample, binding, params_copies};
@@ -183,11 +184,32 @@ impl GpuField {
                 // Kernels read all three through texel views (neighbours.glsl): bounded by
                 // maxTexelBufferElements, not by one storage binding's range.
                 let texel = BufferUsage::Texel;
-                let octree = [
-                    Buffer::from_slice_as(ctx, "octree samples", &samples, texel)?,
-                    Buffer::from_slice_as(ctx, "octree nodes", &o.nodes, texel)?,
-                    Buffer::from_slice_as(ctx, "octree reference codes", &o.codes, texel)?,
-                ];
+                let octree = if field.octree_inline() {
+                    let stride = records::record_stride(field.has_full_metric());
+                    let texels = records::record_texel_count(o, stride);
+                    let limit = ctx.info().max_texel_buffer_elements;
+                    if texels > limit {
+                        return Err(VkError::Usage(format!(
+                            "octree.records = \"inline\" needs {texels} texels for {} \
+                             references, more than the device's maxTexelBufferElements \
+                             ({limit}): set octree.records = \"coded\" or \"auto\"",
+                            o.references
+                        )));
+                    }
+                    let leaves = records::InlineLeaves::build(o, &samples, stride);
+                    [
+                        Buffer::from_slice_as(ctx, "octree records", &leaves.texels, texel)?,
+                        Buffer::from_slice_as(ctx, "octree nodes", &leaves.nodes, texel)?,
+                        // Unread by the inline variant; bound because the layout names it.
+                        Buffer::from_slice_as(ctx, "octree reference codes", &[0u32], texel)?,
+                    ]
+                } else {
+                    [
+                        Buffer::from_slice_as(ctx, "octree samples", &samples, texel)?,
+                        Buffer::from_slice_as(ctx, "octree nodes", &o.nodes, texel)?,
+                        Buffer::from_slice_as(ctx, "octree reference codes", &o.codes, texel)?,
+                    ]
+                };
                 // The fast path's fine grid over the lattice, through the octree.
                 let [s, n, i] = &octree;
                 let fast = FastPath::build(

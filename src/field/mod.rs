@@ -15,6 +15,7 @@ mod error;
 pub mod exact;
 mod fast_path;
 pub mod gpu;
+pub mod records;
 pub mod resample;
 pub mod skip;
 pub mod variant;
@@ -466,6 +467,33 @@ impl Field {
     /// Whether kernels read the octree (else the implicit grid).
     pub fn uses_octree(&self) -> bool {
         self.octree_wanted
+    }
+
+    /// How kernels read the built octree's leaves ("inline" or "coded") and the bytes that
+    /// form takes on the device (nodes, and records or samples and codes), for `--stats`.
+    pub fn octree_layout(&self) -> Option<(&'static str, u64)> {
+        let o = self.octree_if_built()?;
+        let sample_bytes = std::mem::size_of::<crate::gpu_types::Sample>() as u64;
+        Some(if self.octree_inline() {
+            let stride = records::record_stride(self.full_metric);
+            let texels = records::record_texel_count(o, stride);
+            ("inline", 16 * (texels + o.nodes.len() as u64))
+        } else {
+            ("coded", o.stats(sample_bytes).bytes)
+        })
+    }
+
+    /// Whether kernels read the built octree's leaves as inline records
+    /// ([`records`]; `octree.records`); false before the octree is built.
+    pub fn octree_inline(&self) -> bool {
+        self.octree_if_built().is_some_and(|o| {
+            records::inline_chosen(
+                o,
+                records::record_stride(self.full_metric),
+                self.octree_settings.records,
+                self.octree_settings.max_record_texels,
+            )
+        })
     }
 
     /// Compile-time MLS choices.

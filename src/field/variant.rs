@@ -25,6 +25,9 @@ pub struct Variant {
     pub neighbours: NeighbourMode,
     /// Per-sample supports: diagonal metrics only, or full ones (octree path).
     pub full_metric: bool,
+    /// The octree's leaves are read as inline records, not coded references
+    /// (`OCTREE_INLINE`, [`super::records`]).
+    pub inline_records: bool,
     /// The ray caster's integrator (`None` for kernels that do not integrate).
     pub method: Option<Method>,
     /// Adaptive stack entries (levels of subdivision).
@@ -99,6 +102,7 @@ impl Variant {
                 NeighbourMode::Grid
             },
             full_metric: field.has_full_metric(),
+            inline_records: field.uses_octree() && field.octree_inline(),
             hull: false,
             hull_hits: crate::samples::bvh::MAX_HITS as u32,
             hull_cache: HullCache::Off,
@@ -166,6 +170,7 @@ impl Variant {
             flag(self.neighbours == NeighbourMode::Octree),
         ));
         d.push(("MLS_FULL_METRIC".into(), flag(self.full_metric)));
+        d.push(("OCTREE_INLINE".into(), flag(self.inline_records)));
         d.push(("GRID_SIGNED".into(), flag(self.grid.signed())));
         d.push(("MLS_GAUSSIAN".into(), flag(self.gaussian)));
         d.push(("MLS_EXACT".into(), flag(self.exact)));
@@ -252,8 +257,12 @@ impl Variant {
             },
             match self.neighbours {
                 NeighbourMode::Grid => "grid",
-                NeighbourMode::Octree if self.full_metric => "octree-ellipsoid",
-                NeighbourMode::Octree => "octree",
+                NeighbourMode::Octree => match (self.full_metric, self.inline_records) {
+                    (true, true) => "octree-ellipsoid-inline",
+                    (true, false) => "octree-ellipsoid",
+                    (false, true) => "octree-inline",
+                    (false, false) => "octree",
+                },
             },
             self.method
                 .map(|m| match (m, self.adaptive, self.interval) {

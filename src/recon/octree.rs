@@ -50,6 +50,13 @@ pub struct OctreeSettings {
     /// Largest length of the reference buffer, in 32-bit words (two references to a word,
     /// [`super::octree_codes`]; the name is the scene key's).
     pub max_references: u64,
+    /// How kernels read a leaf's samples (`octree.records`): `Some(true)` as inline records,
+    /// `Some(false)` through the coded references, `None` ("auto") inline where the records
+    /// fit (`crate::field::records`).
+    pub records: Option<bool>,
+    /// Most texels the inline records may take: the device's texel-view limit, like
+    /// `max_references`.
+    pub max_record_texels: u64,
 }
 
 impl Default for OctreeSettings {
@@ -63,6 +70,8 @@ impl Default for OctreeSettings {
             // storage binding's 128 MiB does not bound them (it refused 10⁶ scattered points,
             // 33.5 M references); `Scene::field_on` lowers this to the device's own view limit.
             max_references: 1 << 27,
+            records: None,
+            max_record_texels: 1 << 27,
         }
     }
 }

@@ -79,6 +79,8 @@ impl Scene {
                 if let Some(info) = device {
                     octree.max_references =
                         octree.max_references.min(info.max_texel_buffer_elements);
+                    octree.max_record_texels =
+                        octree.max_record_texels.min(info.max_texel_buffer_elements);
                 }
                 self.field_from_dataset_with(&dataset, path, &octree, progress)
             }

@@ -110,7 +110,10 @@ const KNOWN: &[(&str, &[&str])] = &[
             "anisotropic",
         ],
     ),
-    ("octree", &["leaf_budget", "max_depth", "leaf_size"]),
+    (
+        "octree",
+        &["leaf_budget", "max_depth", "leaf_size", "records"],
+    ),
     ("transfer", &["points", "isosurfaces"]),
     (
         "lighting",
@@ -448,6 +451,16 @@ impl Scene {
             max_depth: oct.int("max_depth", i64::from(defaults.max_depth), 0, 20)? as u32,
             leaf_size: oct.positive("leaf_size", defaults.leaf_size, 1e3)?,
             max_references: defaults.max_references,
+            records: oct.choice(
+                "records",
+                None,
+                &[
+                    ("auto", None),
+                    ("inline", Some(true)),
+                    ("coded", Some(false)),
+                ],
+            )?,
+            max_record_texels: defaults.max_record_texels,
         };
 
         let tf = section("transfer");

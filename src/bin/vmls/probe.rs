@@ -172,7 +172,13 @@ pub fn run_probe(
     }
     let mut rows = Vec::new();
     let mut reuse = Vec::new();
-    for mode in [NeighbourMode::Grid, NeighbourMode::Octree] {
+    // The octree twice, its leaves read through coded references and as inline records
+    // (`octree.records`), side by side with the grid.
+    for (mode, records) in [
+        (NeighbourMode::Grid, "auto"),
+        (NeighbourMode::Octree, "coded"),
+        (NeighbourMode::Octree, "inline"),
+    ] {
         let scene = Scene::load(
             None,
             &[
@@ -187,6 +193,7 @@ pub fn run_probe(
                         "octree"
                     }
                 ),
+                format!("octree.records=\"{records}\""),
             ],
         )?;
         let field = Field::new(
@@ -195,7 +202,7 @@ pub fn run_probe(
             &scene.octree,
             |_| {},
         )?;
-        if mode == NeighbourMode::Octree {
+        if mode == NeighbourMode::Octree && records == "coded" {
             reuse = leaf_reuse_rows(&field)?;
         }
         let random = random_points(&field, points, 0.0, 7);

@@ -212,6 +212,10 @@ pub fn run_render(
             "octree_nodes": field.octree_if_built().map(|o| o.nodes.len()),
             "octree_references": field.octree_if_built().map(|o| o.references),
             "octree": field.octree_if_built().map(|o| octree_json(&o.stats(std::mem::size_of::<vmls::gpu_types::Sample>() as u64))),
+            "octree_records": field.octree_layout().map(|(layout, bytes)| serde_json::json!({
+                "layout": layout,
+                "device_bytes": bytes,
+            })),
             "data": {
                 "kind": field.samples.provenance.kind,
                 "array": field.samples.provenance.array,
