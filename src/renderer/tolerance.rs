@@ -23,7 +23,11 @@
 //!   e_{k+1} ≈ d_k / (2^p − 1), with the order p fitted from consecutive differences (clamped
 //!   to [1, 4]; the method's expected order until two differences exist). The ladder stops
 //!   once that estimate is below [`SAFETY`] · E/2; the level is then the power law's, between
-//!   the last two rungs.
+//!   the last two rungs. Where the first difference already puts level 0 itself inside that
+//!   budget, the ladder climbs instead (levels −1, −2: coarser steps, sheets and ε), measuring
+//!   each rung from its difference to the one below while the power law predicts it inside,
+//!   and the level is the power law's between the coarsest rung measured inside and the one
+//!   above it.
 //! - **Tables** (preintegrated methods, post-shaded splatting's intervals): a level rendered
 //!   once more with tables of twice the resolution (half again where twice does not fit the
 //!   device); the move, extrapolated at the tables' order 2 in the cell, is the tables' error,
@@ -73,8 +77,13 @@ pub const PILOT_EDGE: u32 = 96;
 /// The share of the discretization budget the ladder aims at (the rest absorbs the
 /// extrapolation's error).
 pub const SAFETY: f64 = 0.5;
-/// Rungs of the ladder at most.
-const MAX_LEVELS: u32 = 9;
+/// Refinements of the ladder at most.
+const MAX_LEVELS: i32 = 9;
+/// The coarsest level the ladder may climb to where its first rungs are far inside the
+/// budget ([`coarsen`]): steps and sheets of 4 spacings, ε 16× level 0's with the longest
+/// interval twice as long. Coarser, a feature narrower than a step could lie unseen between
+/// both rungs of a difference that then reads as converged.
+const MIN_LEVEL: i32 = -2;
 /// The largest table resolution the tolerance chooses.
 const MAX_TABLE: usize = 4096;
 
@@ -236,7 +245,8 @@ pub fn pilot_size(camera: &Camera, method: Method) -> (u32, u32) {
 }
 
 /// The fewest pilot frames a tolerance renders before its frame for these settings (none
-/// without one), each costing at least the ladder's first level ([`first_level`]): two there
+/// without one), each costing about the ladder's first level ([`first_level`]; a climb's
+/// coarser rungs and a level chosen above it cost less): two there
 /// to check the tables, that level and the next, and two at the level chosen to check the
 /// tables again; fewer where the scene gives the ladder's key or the tables' resolution. What
 /// the first frame of a scene under a tolerance costs beyond its own (`reconstruction.resample
@@ -421,10 +431,11 @@ impl Renderer {
             // A carried ladder starts a level below the last view's choice, so that an easier
             // view can coarsen by up to one level and a harder one refines from there, with
             // the order the last view measured until two differences measure this one's.
-            let first = carry.map_or(0, |c| (c.level.floor() as u32).saturating_sub(1));
+            let first = carry.map_or(0, |c| (c.level.floor() as i32 - 1).max(MIN_LEVEL));
             let expected = order;
             let (s0, v0) = at_level(&base, f64::from(first));
-            let mut previous = pilot(self, &s0)?;
+            let coarsest = pilot(self, &s0)?;
+            let mut previous = coarsest.clone();
             let mut last_value = v0;
             let mut d = Vec::new();
             let mut level = first;
@@ -449,9 +460,23 @@ impl Renderer {
                 estimate = dk / (2f64.powf(order) - 1.0);
                 previous = image;
                 last_value = v;
-                if estimate <= budget || level >= MAX_LEVELS {
+                if estimate <= budget || level - first >= MAX_LEVELS {
                     break;
                 }
+            }
+            if level == first + 1 && estimate.is_finite() {
+                let up = coarsen(
+                    self,
+                    &base,
+                    budget,
+                    (first, coarsest),
+                    (estimate, order),
+                    &mut pilot,
+                )?;
+                for rung in up.rungs.into_iter().rev() {
+                    rungs.insert(0, rung);
+                }
+                (level, estimate, order) = up.level;
             }
             if estimate > e / 2.0 {
                 met = false;
@@ -530,6 +555,63 @@ type Image = Vec<[f32; 4]>;
 
 /// A pilot frame of the view being resolved at these settings (counted in the report).
 type Pilot<'a> = dyn FnMut(&mut Renderer, &RenderSettings) -> Result<Image, RenderError> + 'a;
+
+/// What [`coarsen`] found: the level the choice extrapolates from, its estimated error and
+/// the order to extrapolate with; and the rungs it rendered above the ladder's first, coarsest
+/// first (each rung's value and its difference to the next finer one).
+struct Coarsened {
+    level: (i32, f64, f64),
+    rungs: Vec<(f64, f64)>,
+}
+
+/// The ladder upward: where its first difference puts the first rung itself inside the budget
+/// by the power law (the estimate at the second times 2^p), the rung above is rendered and
+/// the first's error measured from their difference, and so on up to [`MIN_LEVEL`] while each
+/// new rung is predicted inside the budget. `first` is the ladder's first level and its image,
+/// `(estimate, order)` the second rung's estimate and the order it assumed. Returns the
+/// coarsest level measured inside the budget with its estimate and order; where a measured
+/// error came out above the budget, the order between it and the level below, so that the
+/// power law interpolates between two measured rungs. Without it the shell's 0.002 peak kept ε
+/// at level 0 and measured E/29 at E = 1e-2, and the graded torus stopped at step 1 with E/7
+/// (BENCHMARKS.md): level 0 was the coarsest the ladder could reach.
+fn coarsen(
+    renderer: &mut Renderer,
+    base: &RenderSettings,
+    budget: f64,
+    (first, image): (i32, Image),
+    (estimate, order): (f64, f64),
+    pilot: &mut Pilot<'_>,
+) -> Result<Coarsened, RenderError> {
+    let (mut level, mut estimate, mut order) = (first + 1, estimate, order);
+    let (mut top, mut top_image) = (first, image);
+    // The difference between `top` and the rung below it.
+    let mut below = estimate * (2f64.powf(order) - 1.0);
+    let mut rungs = Vec::new();
+    while top > MIN_LEVEL && estimate * 2f64.powf(order) <= budget {
+        let (s, v) = at_level(base, f64::from(top - 1));
+        let image = match pilot(renderer, &s) {
+            Err(RenderError::Setting { .. } | RenderError::Budget { .. }) => break,
+            r => r?,
+        };
+        let d = p99_error(&image, &top_image);
+        rungs.push((v, d));
+        // The order between the two coarsest differences (they grow upward).
+        let p = fitted_order(&[d, below], order);
+        let at_top = d / (2f64.powf(p) - 1.0);
+        if at_top > budget {
+            // `top` measured outside the budget and `level` inside: the local law between them.
+            order = (at_top / estimate).log2();
+            break;
+        }
+        (level, estimate, order) = (top, at_top, p);
+        (top, top_image, below) = (top - 1, image, d);
+    }
+    rungs.reverse();
+    Ok(Coarsened {
+        level: (level, estimate, order),
+        rungs,
+    })
+}
 
 /// What [`refine_tables`] found: each resolution tried with its extrapolated error, and why
 /// the tables' share could not be shown where it could not.
