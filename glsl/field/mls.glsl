@@ -70,6 +70,29 @@ void mls_basis(vec3 y, out float b[MLS_TERMS]) {
 #endif
 }
 
+#if MLS_WEIGHT == 0
+// mls_accumulate for a loop over candidates that may lie outside the support (the octree's):
+// no branch, the Wendland weight clamped to 0 there, so outside candidates add zeros and the
+// sums of those inside are mls_accumulate's to the bit. On llvmpipe both sides of a branch run
+// and every statement after an early return is a masked write; without them octree frames
+// took 6-11% less GPU time (BENCHMARKS.md, "Octree candidates without branches").
+void mls_accumulate_all(inout MlsSystem s, vec3 y, float rho2, float f) {
+    float q = max(1.0 - rho2, 0.0);
+    float q3 = q * q * q;
+    float w = q3 * q;
+    s.neighbours += rho2 < 1.0 ? 1u : 0u;
+    float b[MLS_TERMS];
+    mls_basis(y, b);
+    [[unroll]] for (int i = 0; i < MLS_TERMS; ++i) {
+        float wb = w * b[i];
+        s.r[i] += wb * f;
+        [[unroll]] for (int j = 0; j <= i; ++j) {
+            s.a[TRI(i, j)] += wb * b[j];
+        }
+    }
+}
+#endif
+
 void mls_accumulate(inout MlsSystem s, vec3 y, float rho2, float f) {
     float w = mls_weight(rho2).x;
     if (w <= 0.0) {

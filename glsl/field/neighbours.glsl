@@ -327,6 +327,12 @@ void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float
         vec3 d = pos_value.xyz - x;
         vec3 md = metric_apply(i, d);
         float rho2 = dot(d, md);
+#if MLS_WEIGHT == 0
+        if (pass == 0u) {
+            mls_accumulate_all(s, d * scale, rho2, pos_value.w);
+            continue;
+        }
+#endif
         if (rho2 < 1.0) {
             if (pass == 0u) {
                 mls_accumulate(s, d * scale, rho2, pos_value.w);
@@ -386,13 +392,12 @@ MlsResult gaussian_evaluate(vec3 x) {
         vec3 d = pos_value.xyz - x;
         vec3 md = metric_apply(i, d);
         float rho2 = dot(d, md);
-        if (rho2 < 1.0) {
-            float w = sample_weight(i);
-            float wf = w * pos_value.w * exp(k * rho2);
-            value += wf;
-            grad += wf * md;
-            ++count;
-        }
+        // Selects, not a branch (see mls_accumulate_all): outside candidates add zeros.
+        float w = sample_weight(i);
+        float wf = rho2 < 1.0 ? w * pos_value.w * exp(k * rho2) : 0.0;
+        value += wf;
+        grad += wf * md;
+        count += rho2 < 1.0 ? 1u : 0u;
     }
     if (r < leaf.y) {
         g_loop_cut = true;
