@@ -8,7 +8,6 @@
 mod common;
 
 use common::*;
-use std::path::Path;
 use vmls::data::dataset::Geometry;
 use vmls::field::Field;
 use vmls::field::gpu::{GpuField, evaluate};
@@ -16,7 +15,7 @@ use vmls::gpu_types::MlsOut;
 use vmls::probe::Lcg;
 use vmls::raycast::build_tables;
 use vmls::recon::{Basis, GradientMode, OctreeSettings, ReconMethod, Weight};
-use vmls::samples::{SampleSet, SampleSettings};
+use vmls::samples::SampleSet;
 use vmls::scene::{NeighbourMode, Reconstruction, Scene};
 
 fn settings(inline: bool) -> OctreeSettings {
@@ -42,18 +41,7 @@ fn scattered(n: usize, far: usize, anisotropic: Option<bool>) -> SampleSet {
     let d = point_data(Geometry::Points { points }, |p| {
         0.5 + 0.3 * (2.0 * p[0]).sin() * (1.5 * p[1]).cos() + 0.2 * p[2]
     });
-    SampleSet::from_dataset(
-        &d,
-        Path::new("scattered"),
-        None,
-        &SampleSettings {
-            support: 2.4,
-            knn_support: vmls::samples::KNN_SUPPORT,
-            knn: 8,
-            anisotropic,
-        },
-    )
-    .expect("samples")
+    common::splat::point_samples(&d, anisotropic)
 }
 
 fn fields(set: &SampleSet, r: Reconstruction) -> [Field; 2] {

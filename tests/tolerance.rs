@@ -32,16 +32,7 @@ fn converged(renderer: &mut Renderer, field_scene: &Scene) -> Vec<[f32; 4]> {
 
 /// The reference integrator's image of the scene's field at `step` spacings.
 fn converged_at(renderer: &mut Renderer, field_scene: &Scene, step: f64) -> Vec<[f32; 4]> {
-    let mut s = field_scene.render.clone();
-    s.method = vmls::view::Method::Reference;
-    s.reference_step_spacings = step;
-    s.min_transmittance = 1e-7;
-    s.tolerance = None;
-    let view = vmls::view::View {
-        settings: &s,
-        ..field_scene.view()
-    };
-    renderer.render(&view, |_| {}).expect("reference").0.pixels
+    converged_through(renderer, field_scene, &field_scene.camera, step)
 }
 
 #[test]
@@ -127,15 +118,16 @@ fn a_loose_tolerance_coarsens_past_the_first_level_and_still_meets_it() {
     finish(ctx);
 }
 
-/// The converged image of the scene's field through `camera`.
+/// The reference integrator's image of the scene's field through `camera` at `step` spacings.
 fn converged_through(
     renderer: &mut Renderer,
     field_scene: &Scene,
     camera: &vmls::view::camera::Camera,
+    step: f64,
 ) -> Vec<[f32; 4]> {
     let mut s = field_scene.render.clone();
     s.method = vmls::view::Method::Reference;
-    s.reference_step_spacings = 1.0 / 64.0;
+    s.reference_step_spacings = step;
     s.min_transmittance = 1e-7;
     s.tolerance = None;
     let view = vmls::view::View {
@@ -167,7 +159,7 @@ fn a_turning_camera_carries_the_choice_and_still_meets_the_tolerance() {
                 .expect("render");
             let report = stats.tolerance.expect("a tolerance report");
             let (_, value, _) = report.chosen.expect("the tolerance chose");
-            let truth = converged_through(&mut renderer, &s, &camera);
+            let truth = converged_through(&mut renderer, &s, &camera, 1.0 / 64.0);
             let measured = p99_error(&image.pixels, &truth);
             // A fresh renderer resolves this view from scratch.
             let mut fresh = Renderer::new(&ctx, field.clone()).expect("renderer");
