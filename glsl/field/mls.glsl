@@ -155,53 +155,98 @@ void mls_solve(float l[MLS_PACKED], uint n, inout float c[MLS_TERMS]) {
     c[0] = z0; c[1] = z1; c[2] = z2; c[3] = z3;
 }
 #else
+// Column k of the in-place LDLᵀ (mls_factor), skipped once a pivot failed. The factor and the
+// solve call these with literal k, so that after inlining every loop has a constant trip count
+// and is unrolled: a loop over k stayed rolled on llvmpipe, its arrays in memory, and a
+// quadratic evaluation took twice as long (BENCHMARKS.md, "The quadratic basis's solve
+// unrolled"). Same arithmetic in the same order.
+void ldl_column(inout float a[MLS_PACKED], const int k, inout bool ok, inout uint sound) {
+    if (ok) {
+        float diag = a[TRI(k, k)];
+        float d = diag;
+        [[unroll]] for (int m = 0; m < k; ++m) {
+            d -= a[TRI(k, m)] * a[TRI(k, m)] * a[TRI(m, m)];
+        }
+        float tolerance = k >= 4 ? QUADRATIC_PIVOT_TOLERANCE : PIVOT_TOLERANCE;
+        if (!(d > tolerance * diag) || !(diag > 0.0)) {
+            ok = false;
+        } else {
+            a[TRI(k, k)] = d;
+            [[unroll]] for (int i = k + 1; i < MLS_TERMS; ++i) {
+                float v = a[TRI(i, k)];
+                [[unroll]] for (int m = 0; m < k; ++m) {
+                    v -= a[TRI(i, m)] * a[TRI(k, m)] * a[TRI(m, m)];
+                }
+                a[TRI(i, k)] = v / d;
+            }
+            sound = uint(k + 1);
+        }
+    }
+}
+
 // In-place LDLᵀ without square roots; returns the determined leading terms (10, 4, 1 or 0).
 uint mls_factor(inout float a[MLS_PACKED]) {
     uint sound = 0u;
     bool ok = true;
-    [[unroll]] for (int k = 0; k < MLS_TERMS; ++k) {
-        if (ok) {
-            float diag = a[TRI(k, k)];
-            float d = diag;
-            [[unroll]] for (int m = 0; m < k; ++m) {
-                d -= a[TRI(k, m)] * a[TRI(k, m)] * a[TRI(m, m)];
-            }
-            float tolerance = k >= 4 ? QUADRATIC_PIVOT_TOLERANCE : PIVOT_TOLERANCE;
-            if (!(d > tolerance * diag) || !(diag > 0.0)) {
-                ok = false;
-            } else {
-                a[TRI(k, k)] = d;
-                [[unroll]] for (int i = k + 1; i < MLS_TERMS; ++i) {
-                    float v = a[TRI(i, k)];
-                    [[unroll]] for (int m = 0; m < k; ++m) {
-                        v -= a[TRI(i, m)] * a[TRI(k, m)] * a[TRI(m, m)];
-                    }
-                    a[TRI(i, k)] = v / d;
-                }
-                sound = uint(k + 1);
-            }
-        }
-    }
+    ldl_column(a, 0, ok, sound);
+#if MLS_TERMS >= 10
+    ldl_column(a, 1, ok, sound);
+    ldl_column(a, 2, ok, sound);
+    ldl_column(a, 3, ok, sound);
+    ldl_column(a, 4, ok, sound);
+    ldl_column(a, 5, ok, sound);
+    ldl_column(a, 6, ok, sound);
+    ldl_column(a, 7, ok, sound);
+    ldl_column(a, 8, ok, sound);
+    ldl_column(a, 9, ok, sound);
+#endif
     if (sound >= 10u && MLS_TERMS >= 10) return 10u;
     if (sound >= 4u && MLS_TERMS >= 4) return 4u;
     return sound >= 1u ? 1u : 0u;
 }
 
+// Row i of L z = c (mls_solve), in place.
+void solve_forward(float l[MLS_PACKED], const int i, inout float c[MLS_TERMS]) {
+    [[unroll]] for (int m = 0; m < i; ++m) {
+        c[i] -= l[TRI(i, m)] * c[m];
+    }
+}
+
+// Row i of Lᵀ c = z (mls_solve), in place.
+void solve_backward(float l[MLS_PACKED], const int i, inout float c[MLS_TERMS]) {
+    [[unroll]] for (int m = i + 1; m < MLS_TERMS; ++m) {
+        c[i] -= l[TRI(m, i)] * c[m];
+    }
+}
+
 // Solves L D Lᵀ c = c for the leading n terms; the others become 0.
 void mls_solve(float l[MLS_PACKED], uint n, inout float c[MLS_TERMS]) {
-    [[unroll]] for (int i = 0; i < MLS_TERMS; ++i) {
-        [[unroll]] for (int m = 0; m < i; ++m) {
-            c[i] -= l[TRI(i, m)] * c[m];
-        }
-    }
+#if MLS_TERMS >= 10
+    solve_forward(l, 1, c);
+    solve_forward(l, 2, c);
+    solve_forward(l, 3, c);
+    solve_forward(l, 4, c);
+    solve_forward(l, 5, c);
+    solve_forward(l, 6, c);
+    solve_forward(l, 7, c);
+    solve_forward(l, 8, c);
+    solve_forward(l, 9, c);
+#endif
     [[unroll]] for (int i = 0; i < MLS_TERMS; ++i) {
         c[i] = uint(i) < n ? c[i] / l[TRI(i, i)] : 0.0;
     }
-    [[unroll]] for (int i = MLS_TERMS - 1; i >= 0; --i) {
-        [[unroll]] for (int m = i + 1; m < MLS_TERMS; ++m) {
-            c[i] -= l[TRI(m, i)] * c[m];
-        }
-    }
+#if MLS_TERMS >= 10
+    solve_backward(l, 9, c);
+    solve_backward(l, 8, c);
+    solve_backward(l, 7, c);
+    solve_backward(l, 6, c);
+    solve_backward(l, 5, c);
+    solve_backward(l, 4, c);
+    solve_backward(l, 3, c);
+    solve_backward(l, 2, c);
+    solve_backward(l, 1, c);
+    solve_backward(l, 0, c);
+#endif
 }
 #endif
 
