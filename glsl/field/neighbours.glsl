@@ -96,12 +96,15 @@ void mls_visit_gradient(inout MlsGradient g, vec3 y, float rho2, float f, vec3 m
     }
 }
 
-#if MLS_NEIGHBOURS == 0 && MLS_TERMS <= 4
-// Specialisation for regular grids with the constant or linear basis (DESIGN §7): the support
-// box of x always fits in MLS_GRID_BOX³ grid points (MLS_GRID_BOX = ⌊2·support⌋ + 1, set by the
-// host), so every lane runs the same fixed trip counts. Along an x-row, y_y and y_z are
-// constant, so the row only needs the moments Σw, Σw·y_x, Σw·y_x², Σw·f, Σw·y_x·f (5 FMAs per
-// sample) and the 4×4 system is updated once per row. Same sums as mls_accumulate, reordered.
+#if MLS_NEIGHBOURS == 0
+// Specialisation for regular grids (DESIGN §7): the support box of x always fits in
+// MLS_GRID_BOX³ grid points (MLS_GRID_BOX = ⌊2·support⌋ + 1, set by the host), so every lane
+// runs the same fixed trip counts. Along an x-row, y_y and y_z are constant, so the row only
+// needs the moments Σw, Σw·y_x, Σw·y_x², Σw·f, Σw·y_x·f (5 FMAs per sample), and the system is
+// updated once per row. The quadratic basis adds Σw·y_x³, Σw·y_x⁴ and Σw·y_x²·f: each of its
+// terms is y_x^p times a monomial g in (y_y, y_z) (QP, gyz), so entry (i, j) gains
+// g_i g_j Σw·y_x^(p_i+p_j) and r_i gains g_i Σw·y_x^p_i·f; 8 sums a sample instead of 65.
+// Same sums as mls_accumulate, reordered (f32 rounding apart).
 void mls_gather_rows(vec3 x, inout MlsSystem s) {
     vec3 gp = (x - params.field.grid_origin.xyz) * params.field.grid_inv_spacing.xyz;
     float inv_sc = 1.0 / params.field.support_cells;
@@ -149,6 +152,9 @@ void mls_gather_rows(vec3 x, inout MlsSystem s) {
                 }
             }
             float s0 = 0.0, sx = 0.0, sxx = 0.0, sf = 0.0, sxf = 0.0;
+#if MLS_TERMS >= 10
+            float sx3 = 0.0, sx4 = 0.0, sxxf = 0.0;
+#endif
             [[unroll]] for (int ii = 0; ii < MLS_GRID_BOX; ++ii) {
                 float rho2 = xs[ii] * xs[ii] + r2;
                 float w = xin[ii] ? mls_weight(rho2).x : 0.0;
@@ -171,10 +177,30 @@ void mls_gather_rows(vec3 x, inout MlsSystem s) {
                 sxx += wx * xs[ii];
                 sf += w * f;
                 sxf += wx * f;
+#if MLS_TERMS >= 10
+                float wxx = wx * xs[ii];
+                float wx3 = wxx * xs[ii];
+                sx3 += wx3;
+                sx4 += wx3 * xs[ii];
+                sxxf += wxx * f;
+#endif
             }
+#if MLS_TERMS >= 10
+            float mom[5] = float[](s0, sx, sxx, sx3, sx4);
+            float fmom[3] = float[](sf, sxf, sxxf);
+            float gyz[10] = float[](1.0, 1.0, yy, yz, 1.0, yy * yy, yz * yz, yy, yz, yy * yz);
+            const int QP[10] = int[](0, 1, 0, 0, 2, 0, 0, 1, 1, 0);
+            [[unroll]] for (int i = 0; i < 10; ++i) {
+                s.r[i] += gyz[i] * fmom[QP[i]];
+                [[unroll]] for (int j = 0; j <= i; ++j) {
+                    s.a[TRI(i, j)] += gyz[i] * gyz[j] * mom[QP[i] + QP[j]];
+                }
+            }
+#else
             s.a[0] += s0;
             s.r[0] += sf;
-#if MLS_TERMS >= 4
+#endif
+#if MLS_TERMS >= 4 && MLS_TERMS < 10
             s.a[TRI(1, 0)] += sx;
             s.a[TRI(1, 1)] += sxx;
             s.a[TRI(2, 0)] += yy * s0;
@@ -505,7 +531,7 @@ MlsResult mls_evaluate(vec3 x) {
         g.qz[i] = 0.0;
         c[i] = 0.0;
     }
-#if MLS_NEIGHBOURS == 0 && MLS_TERMS <= 4
+#if MLS_NEIGHBOURS == 0
     mls_gather_rows(x, s);
 #else
     mls_gather(0u, x, s, g, c);

@@ -13,10 +13,11 @@
 //!   neighbouring rays). The preintegration lookups are not counted (a lower bound).
 //! - Other loads, all through texel-buffer views, against the coherent texel-gather ceiling
 //!   (neighbouring rays of a SIMD row read nearby grid rows or one leaf): the grid's row path
-//!   (constant and linear bases) reads π·s² rows of MLS_GRID_WINDOW vec4s (s = support in
-//!   spacings); the generic grid path one texel per weighted neighbour (again for an
-//!   analytic-gradient pass); the octree path depth node texels and, per reference of the leaf
-//!   (references / leaves on average), an index and 2 or 3 sample texels.
+//!   (every basis) reads π·s² rows of MLS_GRID_WINDOW vec4s (s = support in spacings); the
+//!   Gaussian sum on a grid one texel per weighted neighbour, as an analytic-gradient pass
+//!   does; the octree path depth node texels and, per reference of the leaf (references /
+//!   leaves on average), its record's 2 or 3 texels inline (`octree.records`), or a code and 2
+//!   or 3 sample texels through the coded references.
 //! - k is measured, not modelled: the mean weighted neighbours of `mls_eval` at random points
 //!   of the domain (`probe::mls_probe`).
 //!
@@ -31,7 +32,7 @@
 
 use crate::field::Field;
 use crate::probe::Ceilings;
-use crate::recon::{Basis, GradientMode, ReconMethod};
+use crate::recon::{GradientMode, ReconMethod};
 
 /// How an evaluation reads memory: which probe is its ceiling.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -90,7 +91,7 @@ pub fn evaluation_cost(field: &Field, k: f64) -> EvaluationCost {
     };
     let (loads, reads) = match (field.octree_if_built(), r.method) {
         (_, ReconMethod::Exact) => (0.0, Reads::Storage),
-        (None, ReconMethod::Mls) if r.basis != Basis::Quadratic => {
+        (None, ReconMethod::Mls) => {
             let s = r.support;
             let bx = (2.0 * s).floor() + 1.0;
             let window = ((bx + 3.0) / 4.0).ceil();
@@ -103,7 +104,12 @@ pub fn evaluation_cost(field: &Field, k: f64) -> EvaluationCost {
         (Some(o), _) => {
             let stats = o.stats(0);
             let per_leaf = stats.references as f64 / stats.leaves.max(1) as f64;
-            let texels = if field.has_full_metric() { 4.0 } else { 3.0 };
+            let record = if field.has_full_metric() { 3.0 } else { 2.0 };
+            let texels = if field.octree_inline() {
+                record
+            } else {
+                record + 1.0
+            };
             let depth = f64::from(stats.depth);
             (
                 depth + per_leaf * texels * (1.0 + gradient_pass.min(1.0)),
