@@ -76,6 +76,28 @@ struct MlsGradient {
     float qz[MLS_TERMS];
 };
 
+#if MLS_WEIGHT == 0
+// mls_visit_gradient without a branch (as mls_accumulate_all): outside the support the
+// Wendland weight's derivative is clamped to 0 and adds zeros.
+void mls_visit_gradient_all(inout MlsGradient g, vec3 y, float rho2, float f, vec3 md,
+                            float c[MLS_TERMS]) {
+    float q = max(1.0 - rho2, 0.0);
+    float dtheta = -8.0 * (q * q * q);
+    float b[MLS_TERMS];
+    mls_basis(y, b);
+    float fit = 0.0;
+    [[unroll]] for (int t = 0; t < MLS_TERMS; ++t) {
+        fit += b[t] * c[t];
+    }
+    vec3 dw = -dtheta * md * (f - fit);
+    [[unroll]] for (int t = 0; t < MLS_TERMS; ++t) {
+        g.qx[t] += dw.x * b[t];
+        g.qy[t] += dw.y * b[t];
+        g.qz[t] += dw.z * b[t];
+    }
+}
+#endif
+
 void mls_visit_gradient(inout MlsGradient g, vec3 y, float rho2, float f, vec3 md,
                         float c[MLS_TERMS]) {
     vec2 w = mls_weight(rho2);
@@ -240,6 +262,12 @@ void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float
             for (int i = lo.x; i <= hi.x; ++i) {
                 vec3 y = vec3((float(i) - gp.x) * inv_sc, yy, yz);
                 float rho2 = dot(y, y);
+#if MLS_WEIGHT == 0
+                if (pass == 1u) {
+                    mls_visit_gradient_all(g, y, rho2, grid_value(GRID_PAD + row + i), y * inv_h, c);
+                    continue;
+                }
+#endif
                 if (rho2 < 1.0) {
                     float f = grid_value(GRID_PAD + row + i);
                     if (pass == 0u) {
@@ -356,8 +384,10 @@ void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float
 #if MLS_WEIGHT == 0
         if (pass == 0u) {
             mls_accumulate_all(s, d * scale, rho2, pos_value.w);
-            continue;
+        } else {
+            mls_visit_gradient_all(g, d * scale, rho2, pos_value.w, md, c);
         }
+        continue;
 #endif
         if (rho2 < 1.0) {
             if (pass == 0u) {
