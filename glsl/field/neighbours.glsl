@@ -127,7 +127,12 @@ void mls_visit_gradient(inout MlsGradient g, vec3 y, float rho2, float f, vec3 m
 // terms is y_x^p times a monomial g in (y_y, y_z) (QP, gyz), so entry (i, j) gains
 // g_i g_j Σw·y_x^(p_i+p_j) and r_i gains g_i Σw·y_x^p_i·f; 8 sums a sample instead of 65.
 // Same sums as mls_accumulate, reordered (f32 rounding apart).
-void mls_gather_rows(vec3 x, inout MlsSystem s) {
+// Pass 1 (the analytic gradient, Wendland weight) factors the same way: with u = −θ'(ρ)/ρ·…
+// = 8(1 − ρ²)³ and e = f − fit, where the fit along the row is A₀ + A₁y_x + A₂y_x² (A_p the
+// sum of c_t g_t over the terms of x-power p), q_x[t] gains h⁻¹_x g_t Σu·e·y_x^(p_t+1) and
+// q_y[t], q_z[t] gain h⁻¹ y_y g_t, h⁻¹ y_z g_t times Σu·e·y_x^p_t: 4 sums a sample instead of
+// the basis, the fit and 3T multiply-adds (mls_visit_gradient_all's terms, reordered).
+void mls_gather_rows(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float c[MLS_TERMS]) {
     vec3 gp = (x - params.field.grid_origin.xyz) * params.field.grid_inv_spacing.xyz;
     float inv_sc = 1.0 / params.field.support_cells;
     ivec3 base = ivec3(ceil(gp - params.field.support_cells));
@@ -173,6 +178,48 @@ void mls_gather_rows(vec3 x, inout MlsSystem s) {
                     win[GRID_UNIT * v + s] = u[s];
                 }
             }
+            // Each term's x-power and (y_y, y_z) monomial.
+#if MLS_TERMS >= 10
+            const int QP[10] = int[](0, 1, 0, 0, 2, 0, 0, 1, 1, 0);
+            float gyz[10] = float[](1.0, 1.0, yy, yz, 1.0, yy * yy, yz * yz, yy, yz, yy * yz);
+#elif MLS_TERMS >= 4
+            const int QP[4] = int[](0, 1, 0, 0);
+            float gyz[4] = float[](1.0, 1.0, yy, yz);
+#else
+            const int QP[1] = int[](0);
+            float gyz[1] = float[](1.0);
+#endif
+#if MLS_WEIGHT == 0
+            if (pass == 1u) {
+                float fit[3] = float[](0.0, 0.0, 0.0);
+                [[unroll]] for (int t = 0; t < MLS_TERMS; ++t) {
+                    fit[QP[t]] += c[t] * gyz[t];
+                }
+                float e0 = 0.0, e1 = 0.0, e2 = 0.0, e3 = 0.0;
+                [[unroll]] for (int ii = 0; ii < MLS_GRID_BOX; ++ii) {
+                    float xv = xs[ii];
+                    float q = xin[ii] ? max(1.0 - (xv * xv + r2), 0.0) : 0.0;
+#if GRID_UNIT == 2
+                    float f = o == 0 ? win[ii] : win[ii + 1];
+#else
+                    float f = o == 0 ? win[ii] : o == 1 ? win[ii + 1] : o == 2 ? win[ii + 2] : win[ii + 3];
+#endif
+                    float ue = 8.0 * (q * q * q) * (f - (fit[0] + xv * (fit[1] + xv * fit[2])));
+                    e0 += ue;
+                    e1 += ue * xv;
+                    e2 += ue * xv * xv;
+                    e3 += ue * xv * xv * xv;
+                }
+                float e[4] = float[](e0, e1, e2, e3);
+                vec3 inv_h = params.field.inv_support.xyz;
+                [[unroll]] for (int t = 0; t < MLS_TERMS; ++t) {
+                    g.qx[t] += inv_h.x * gyz[t] * e[QP[t] + 1];
+                    g.qy[t] += inv_h.y * yy * gyz[t] * e[QP[t]];
+                    g.qz[t] += inv_h.z * yz * gyz[t] * e[QP[t]];
+                }
+                continue;
+            }
+#endif
             float s0 = 0.0, sx = 0.0, sxx = 0.0, sf = 0.0, sxf = 0.0;
 #if MLS_TERMS >= 10
             float sx3 = 0.0, sx4 = 0.0, sxxf = 0.0;
@@ -210,8 +257,6 @@ void mls_gather_rows(vec3 x, inout MlsSystem s) {
 #if MLS_TERMS >= 10
             float mom[5] = float[](s0, sx, sxx, sx3, sx4);
             float fmom[3] = float[](sf, sxf, sxxf);
-            float gyz[10] = float[](1.0, 1.0, yy, yz, 1.0, yy * yy, yz * yz, yy, yz, yy * yz);
-            const int QP[10] = int[](0, 1, 0, 0, 2, 0, 0, 1, 1, 0);
             [[unroll]] for (int i = 0; i < 10; ++i) {
                 s.r[i] += gyz[i] * fmom[QP[i]];
                 [[unroll]] for (int j = 0; j <= i; ++j) {
@@ -238,8 +283,10 @@ void mls_gather_rows(vec3 x, inout MlsSystem s) {
 #endif
         }
     }
-    s.neighbours = count;
-    s.inv_h = params.field.inv_support.xyz;
+    if (pass == 0u) {
+        s.neighbours = count;
+        s.inv_h = params.field.inv_support.xyz;
+    }
 }
 #endif
 
@@ -562,7 +609,7 @@ MlsResult mls_evaluate(vec3 x) {
         c[i] = 0.0;
     }
 #if MLS_NEIGHBOURS == 0
-    mls_gather_rows(x, s);
+    mls_gather_rows(0u, x, s, g, c);
 #else
     mls_gather(0u, x, s, g, c);
 #endif
@@ -584,7 +631,11 @@ MlsResult mls_evaluate(vec3 x) {
     }
 #endif
 #if MLS_ANALYTIC_GRADIENT == 1
+#if MLS_NEIGHBOURS == 0 && MLS_WEIGHT == 0
+    mls_gather_rows(1u, x, s, g, c);
+#else
     mls_gather(1u, x, s, g, c);
+#endif
     mls_solve(s.a, n, g.qx);
     mls_solve(s.a, n, g.qy);
     mls_solve(s.a, n, g.qz);
