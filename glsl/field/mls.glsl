@@ -155,6 +155,10 @@ void mls_solve(float l[MLS_PACKED], uint n, inout float c[MLS_TERMS]) {
     c[0] = z0; c[1] = z1; c[2] = z2; c[3] = z3;
 }
 #else
+// The quadratic basis's term indices as literals, for the calls below.
+#define QUADRATIC_1_TO_9(F) F(1) F(2) F(3) F(4) F(5) F(6) F(7) F(8) F(9)
+#define QUADRATIC_9_TO_0(F) F(9) F(8) F(7) F(6) F(5) F(4) F(3) F(2) F(1) F(0)
+
 // Column k of the in-place LDLᵀ (mls_factor), skipped once a pivot failed. The factor and the
 // solve call these with literal k, so that after inlining every loop has a constant trip count
 // and is unrolled: a loop over k stayed rolled on llvmpipe, its arrays in memory, and a
@@ -190,15 +194,8 @@ uint mls_factor(inout float a[MLS_PACKED]) {
     bool ok = true;
     ldl_column(a, 0, ok, sound);
 #if MLS_TERMS >= 10
-    ldl_column(a, 1, ok, sound);
-    ldl_column(a, 2, ok, sound);
-    ldl_column(a, 3, ok, sound);
-    ldl_column(a, 4, ok, sound);
-    ldl_column(a, 5, ok, sound);
-    ldl_column(a, 6, ok, sound);
-    ldl_column(a, 7, ok, sound);
-    ldl_column(a, 8, ok, sound);
-    ldl_column(a, 9, ok, sound);
+#define LDL_COLUMN(k) ldl_column(a, k, ok, sound);
+    QUADRATIC_1_TO_9(LDL_COLUMN)
 #endif
     if (sound >= 10u && MLS_TERMS >= 10) return 10u;
     if (sound >= 4u && MLS_TERMS >= 4) return 4u;
@@ -222,30 +219,15 @@ void solve_backward(float l[MLS_PACKED], const int i, inout float c[MLS_TERMS]) 
 // Solves L D Lᵀ c = c for the leading n terms; the others become 0.
 void mls_solve(float l[MLS_PACKED], uint n, inout float c[MLS_TERMS]) {
 #if MLS_TERMS >= 10
-    solve_forward(l, 1, c);
-    solve_forward(l, 2, c);
-    solve_forward(l, 3, c);
-    solve_forward(l, 4, c);
-    solve_forward(l, 5, c);
-    solve_forward(l, 6, c);
-    solve_forward(l, 7, c);
-    solve_forward(l, 8, c);
-    solve_forward(l, 9, c);
+#define SOLVE_FORWARD(i) solve_forward(l, i, c);
+    QUADRATIC_1_TO_9(SOLVE_FORWARD)
 #endif
     [[unroll]] for (int i = 0; i < MLS_TERMS; ++i) {
         c[i] = uint(i) < n ? c[i] / l[TRI(i, i)] : 0.0;
     }
 #if MLS_TERMS >= 10
-    solve_backward(l, 9, c);
-    solve_backward(l, 8, c);
-    solve_backward(l, 7, c);
-    solve_backward(l, 6, c);
-    solve_backward(l, 5, c);
-    solve_backward(l, 4, c);
-    solve_backward(l, 3, c);
-    solve_backward(l, 2, c);
-    solve_backward(l, 1, c);
-    solve_backward(l, 0, c);
+#define SOLVE_BACKWARD(i) solve_backward(l, i, c);
+    QUADRATIC_9_TO_0(SOLVE_BACKWARD)
 #endif
 }
 #endif
