@@ -127,11 +127,11 @@ void mls_visit_gradient(inout MlsGradient g, vec3 y, float rho2, float f, vec3 m
 // terms is y_x^p times a monomial g in (y_y, y_z) (QP, gyz), so entry (i, j) gains
 // g_i g_j Σw·y_x^(p_i+p_j) and r_i gains g_i Σw·y_x^p_i·f; 8 sums a sample instead of 65.
 // Same sums as mls_accumulate, reordered (f32 rounding apart).
-// Pass 1 (the analytic gradient, Wendland weight) factors the same way: with u = −θ'(ρ)/ρ·…
-// = 8(1 − ρ²)³ and e = f − fit, where the fit along the row is A₀ + A₁y_x + A₂y_x² (A_p the
-// sum of c_t g_t over the terms of x-power p), q_x[t] gains h⁻¹_x g_t Σu·e·y_x^(p_t+1) and
-// q_y[t], q_z[t] gain h⁻¹ y_y g_t, h⁻¹ y_z g_t times Σu·e·y_x^p_t: 4 sums a sample instead of
-// the basis, the fit and 3T multiply-adds (mls_visit_gradient_all's terms, reordered).
+// Pass 1 (the analytic gradient, Wendland weight θ = (1 − ρ²)⁴) factors the same way: with
+// u = −θ'(ρ)/ρ = 8(1 − ρ²)³ and e = f − fit, where the fit along the row is A₀ + A₁y_x + A₂y_x²
+// (A_p the sum of c_t g_t over the terms of x-power p), q_x[t] gains h⁻¹_x g_t Σu·e·y_x^(p_t+1)
+// and q_y[t], q_z[t] gain h⁻¹_y y_y g_t, h⁻¹_z y_z g_t times Σu·e·y_x^p_t: 4 sums a sample
+// instead of the basis, the fit and 3T multiply-adds (mls_visit_gradient_all's terms, reordered).
 void mls_gather_rows(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float c[MLS_TERMS]) {
     vec3 gp = (x - params.field.grid_origin.xyz) * params.field.grid_inv_spacing.xyz;
     float inv_sc = 1.0 / params.field.support_cells;
