@@ -31,6 +31,18 @@ struct MlsResult {
     uint terms;
 };
 
+#if MLS_WEIGHT == 0
+// The Wendland weight (1 − ρ²)⁴ and θ'(ρ)/ρ, clamped to 0 outside the support rather than
+// branched, for loops over candidates that may lie outside it (mls_accumulate_all). The
+// same values inside the support as mls_weight's, which keeps its branch and no clamp: the
+// grid's rows measured 2-3% slower with this form there.
+vec2 wendland_clamped(float rho2) {
+    float q = max(1.0 - rho2, 0.0);
+    float q3 = q * q * q;
+    return vec2(q3 * q, -8.0 * q3);
+}
+#endif
+
 // θ(ρ) and θ'(ρ)/ρ from ρ²; zero outside the support.
 vec2 mls_weight(float rho2) {
     if (rho2 >= 1.0) {
@@ -70,17 +82,8 @@ void mls_basis(vec3 y, out float b[MLS_TERMS]) {
 #endif
 }
 
-#if MLS_WEIGHT == 0
-// mls_accumulate for a loop over candidates that may lie outside the support (the octree's):
-// no branch, the Wendland weight clamped to 0 there, so outside candidates add zeros and the
-// sums of those inside are mls_accumulate's to the bit. On llvmpipe both sides of a branch run
-// and every statement after an early return is a masked write; without them octree frames
-// took 6-11% less GPU time (BENCHMARKS.md, "Octree candidates without branches").
-void mls_accumulate_all(inout MlsSystem s, vec3 y, float rho2, float f) {
-    float q = max(1.0 - rho2, 0.0);
-    float q3 = q * q * q;
-    float w = q3 * q;
-    s.neighbours += rho2 < 1.0 ? 1u : 0u;
+// Adds w·b bᵀ and w·f·b to the normal equations.
+void mls_add(inout MlsSystem s, vec3 y, float w, float f) {
     float b[MLS_TERMS];
     mls_basis(y, b);
     [[unroll]] for (int i = 0; i < MLS_TERMS; ++i) {
@@ -90,6 +93,17 @@ void mls_accumulate_all(inout MlsSystem s, vec3 y, float rho2, float f) {
             s.a[TRI(i, j)] += wb * b[j];
         }
     }
+}
+
+#if MLS_WEIGHT == 0
+// mls_accumulate for a loop over candidates that may lie outside the support (the octree's):
+// no branch, the Wendland weight is 0 there, so outside candidates add zeros and the sums of
+// those inside are mls_accumulate's to the bit. On llvmpipe both sides of a branch run and
+// every statement after an early return is a masked write; without them octree frames took
+// 6-11% less GPU time (BENCHMARKS.md, "Octree candidates without branches").
+void mls_accumulate_all(inout MlsSystem s, vec3 y, float rho2, float f) {
+    s.neighbours += rho2 < 1.0 ? 1u : 0u;
+    mls_add(s, y, wendland_clamped(rho2).x, f);
 }
 #endif
 
@@ -105,15 +119,7 @@ void mls_accumulate(inout MlsSystem s, vec3 y, float rho2, float f) {
     }
 #endif
     s.neighbours += 1u;
-    float b[MLS_TERMS];
-    mls_basis(y, b);
-    [[unroll]] for (int i = 0; i < MLS_TERMS; ++i) {
-        float wb = w * b[i];
-        s.r[i] += wb * f;
-        [[unroll]] for (int j = 0; j <= i; ++j) {
-            s.a[TRI(i, j)] += wb * b[j];
-        }
-    }
+    mls_add(s, y, w, f);
 }
 
 #if MLS_TERMS == 4

@@ -76,13 +76,9 @@ struct MlsGradient {
     float qz[MLS_TERMS];
 };
 
-#if MLS_WEIGHT == 0
-// mls_visit_gradient without a branch (as mls_accumulate_all): outside the support the
-// Wendland weight's derivative is clamped to 0 and adds zeros.
-void mls_visit_gradient_all(inout MlsGradient g, vec3 y, float rho2, float f, vec3 md,
-                            float c[MLS_TERMS]) {
-    float q = max(1.0 - rho2, 0.0);
-    float dtheta = -8.0 * (q * q * q);
+// Adds sample (y, f)'s terms of the gradient correction, dθ = θ'(ρ)/ρ its weight's derivative.
+void mls_add_gradient(inout MlsGradient g, vec3 y, float dtheta, float f, vec3 md,
+                      float c[MLS_TERMS]) {
     float b[MLS_TERMS];
     mls_basis(y, b);
     float fit = 0.0;
@@ -96,6 +92,14 @@ void mls_visit_gradient_all(inout MlsGradient g, vec3 y, float rho2, float f, ve
         g.qz[t] += dw.z * b[t];
     }
 }
+
+#if MLS_WEIGHT == 0
+// mls_visit_gradient without a branch (as mls_accumulate_all): outside the support the
+// Wendland weight's derivative is 0 and adds zeros.
+void mls_visit_gradient_all(inout MlsGradient g, vec3 y, float rho2, float f, vec3 md,
+                            float c[MLS_TERMS]) {
+    mls_add_gradient(g, y, wendland_clamped(rho2).y, f, md, c);
+}
 #endif
 
 void mls_visit_gradient(inout MlsGradient g, vec3 y, float rho2, float f, vec3 md,
@@ -104,18 +108,7 @@ void mls_visit_gradient(inout MlsGradient g, vec3 y, float rho2, float f, vec3 m
     if (w.x <= 0.0) {
         return;
     }
-    float b[MLS_TERMS];
-    mls_basis(y, b);
-    float fit = 0.0;
-    [[unroll]] for (int t = 0; t < MLS_TERMS; ++t) {
-        fit += b[t] * c[t];
-    }
-    vec3 dw = -w.y * md * (f - fit);
-    [[unroll]] for (int t = 0; t < MLS_TERMS; ++t) {
-        g.qx[t] += dw.x * b[t];
-        g.qy[t] += dw.y * b[t];
-        g.qz[t] += dw.z * b[t];
-    }
+    mls_add_gradient(g, y, w.y, f, md, c);
 }
 
 #if MLS_NEIGHBOURS == 0
@@ -178,6 +171,13 @@ void mls_gather_rows(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, 
                     win[GRID_UNIT * v + s] = u[s];
                 }
             }
+            // Value ii of the row, win[o + ii], with constant indices only (a dynamic index
+            // would spill win).
+#if GRID_UNIT == 2
+#define ROW_VALUE(ii) (o == 0 ? win[ii] : win[ii + 1])
+#else
+#define ROW_VALUE(ii) (o == 0 ? win[ii] : o == 1 ? win[ii + 1] : o == 2 ? win[ii + 2] : win[ii + 3])
+#endif
             // Each term's x-power and (y_y, y_z) monomial.
 #if MLS_TERMS >= 10
             const int QP[10] = int[](0, 1, 0, 0, 2, 0, 0, 1, 1, 0);
@@ -198,13 +198,8 @@ void mls_gather_rows(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, 
                 float e0 = 0.0, e1 = 0.0, e2 = 0.0, e3 = 0.0;
                 [[unroll]] for (int ii = 0; ii < MLS_GRID_BOX; ++ii) {
                     float xv = xs[ii];
-                    float q = xin[ii] ? max(1.0 - (xv * xv + r2), 0.0) : 0.0;
-#if GRID_UNIT == 2
-                    float f = o == 0 ? win[ii] : win[ii + 1];
-#else
-                    float f = o == 0 ? win[ii] : o == 1 ? win[ii + 1] : o == 2 ? win[ii + 2] : win[ii + 3];
-#endif
-                    float ue = 8.0 * (q * q * q) * (f - (fit[0] + xv * (fit[1] + xv * fit[2])));
+                    float u = xin[ii] ? -wendland_clamped(xv * xv + r2).y : 0.0;
+                    float ue = u * (ROW_VALUE(ii) - (fit[0] + xv * (fit[1] + xv * fit[2])));
                     e0 += ue;
                     e1 += ue * xv;
                     e2 += ue * xv * xv;
@@ -227,12 +222,7 @@ void mls_gather_rows(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, 
             [[unroll]] for (int ii = 0; ii < MLS_GRID_BOX; ++ii) {
                 float rho2 = xs[ii] * xs[ii] + r2;
                 float w = xin[ii] ? mls_weight(rho2).x : 0.0;
-                // win[o + ii] with constant indices only (a dynamic index would spill win).
-#if GRID_UNIT == 2
-                float f = o == 0 ? win[ii] : win[ii + 1];
-#else
-                float f = o == 0 ? win[ii] : o == 1 ? win[ii + 1] : o == 2 ? win[ii + 2] : win[ii + 3];
-#endif
+                float f = ROW_VALUE(ii);
 #if MLS_WEIGHT == 1
                 if (w > 0.0 && rho2 < RHO_MIN * RHO_MIN) {
                     s.exact = true;
