@@ -434,8 +434,9 @@ impl Renderer {
             let first = carry.map_or(0, |c| (c.level.floor() as i32 - 1).max(MIN_LEVEL));
             let expected = order;
             let (s0, v0) = at_level(&base, f64::from(first));
-            let coarsest = pilot(self, &s0)?;
-            let mut previous = coarsest.clone();
+            let mut previous = pilot(self, &s0)?;
+            // The first rung's image, kept once the second is rendered for a climb above it.
+            let mut first_image = None;
             let mut last_value = v0;
             let mut d = Vec::new();
             let mut level = first;
@@ -458,24 +459,26 @@ impl Renderer {
                 d.push(dk);
                 order = fitted_order(&d, expected);
                 estimate = dk / (2f64.powf(order) - 1.0);
-                previous = image;
+                let coarser = std::mem::replace(&mut previous, image);
+                if level == first + 1 {
+                    first_image = Some(coarser);
+                }
                 last_value = v;
                 if estimate <= budget || level - first >= MAX_LEVELS {
                     break;
                 }
             }
-            if level == first + 1 && estimate.is_finite() {
+            if let Some(image) = first_image.filter(|_| level == first + 1 && estimate.is_finite())
+            {
                 let up = coarsen(
                     self,
                     &base,
                     budget,
-                    (first, coarsest),
+                    (first, image),
                     (estimate, order),
                     &mut pilot,
                 )?;
-                for rung in up.rungs.into_iter().rev() {
-                    rungs.insert(0, rung);
-                }
+                rungs.splice(0..0, up.rungs);
                 (level, estimate, order) = up.level;
             }
             if estimate > e / 2.0 {
