@@ -333,7 +333,8 @@ pub fn point_bounds(p: [f64; 4], h: [f64; 3]) -> [f64; 2] {
 /// its (block + 1)³ fine points (`at` an index into the grid's data; paged: every copy of a point
 /// on a face between pages, since a cell reads its own page's, and a block whose pages all share
 /// one constant slot is that constant without reading its points). They bound the fast field
-/// over the block rigorously (tested against dense sampling in `tests/resample.rs`). Undefined
+/// over the block rigorously (tested against dense sampling in `tests/resample.rs`), widened by
+/// 8 ulps of their magnitude for the interpolant's own rounding. Undefined
 /// points (NaN bounds) are left out: the field is undefined in every cell they touch; a block of
 /// undefined points only gets [+∞, −∞], an empty range. Returns the block counts per axis and
 /// the ranges.
@@ -371,6 +372,12 @@ pub fn block_ranges(
                         }
                     }
                 }
+            }
+            // The interpolant's own rounding: a convex combination of equal corners (one
+            // sample's constant fit) may come out an ulp past them. A range at 0 stays exact.
+            let ulps = 8.0 * f64::EPSILON * r[0].abs().max(r[1].abs());
+            if ulps.is_finite() {
+                r = [r[0] - ulps, r[1] + ulps];
             }
             r
         })
@@ -460,6 +467,37 @@ mod tests {
             ranges[0][0] > ranges[0][1],
             "no defined point: {:?}",
             ranges[0]
+        );
+    }
+
+    /// A block whose points all hold one value (one sample's constant fit) still bounds the
+    /// interpolant, whose convex combination of equal corners may round an ulp past them.
+    #[test]
+    fn block_ranges_of_equal_points_allow_for_rounding() {
+        let c = 0.259_439_796_209_335_3;
+        let grid = ResampledGrid::build([4, 4, 4], [0.0; 3], [1.0; 3], 1, |_| {
+            Some(MlsValue {
+                value: c,
+                gradient: [0.0; 3],
+                neighbours: 1,
+                terms: 1,
+            })
+        });
+        let (_, ranges) = grid.block_ranges(4);
+        let mut off = 0;
+        for n in 0..4000 {
+            let t = |k: u32| (n as f64 * 0.618_034 * f64::from(k)).fract();
+            let v = grid.evaluate([t(1) * 3.0, t(2) * 3.0, t(3) * 3.0]).value;
+            off += usize::from(v != c);
+            assert!(
+                v >= ranges[0][0] && v <= ranges[0][1],
+                "{v} not in {:?}",
+                ranges[0]
+            );
+        }
+        assert!(
+            off > 0,
+            "every value rounded to c: the case is not exercised"
         );
     }
 
