@@ -413,18 +413,24 @@ fn hull_segments_are_found_once_per_camera_and_images_equal_the_walk() {
     // A frame's own camera again after the move: found again (the cache holds one camera).
     let (_, stats) = renderer.render(&first.view(), |_| {}).expect("frame");
     assert_eq!(stats.hull_segments, Some(HullSegments::Found));
-    // Adaptive with l_max / l_min = 260: a dispatch per top interval, so every ray runs in
-    // several chunks (only the first keeps the segments).
+    // Adaptive with short top intervals: more of them than a chunk holds, so every ray that
+    // crosses the box runs in several chunks (only the first keeps the segments).
     let adaptive = scene(&[
         ORTHO,
         ORTHO_HEIGHT,
         "camera.eye=[0.3, -4.0, 1.6]",
         "camera.up=[0.0, 0.0, 1.0]",
         "render.method=\"adaptive\"",
-        "render.l_min=0.01",
+        "render.l_max=0.02",
+        "render.l_min=0.0025",
     ]);
     let setup = adaptive.ray_setup(&field).expect("setup");
-    assert_eq!(vmls::renderer::default_chunk(&setup), 1);
+    let chunk = vmls::renderer::default_chunk(&setup);
+    let outer = vmls::renderer::outer_steps(&setup);
+    assert!(
+        outer > 2 * chunk,
+        "{outer} outer steps in chunks of {chunk}"
+    );
     let (walk, _) = both(&field, &adaptive);
     for expect in [HullSegments::Found, HullSegments::Reused] {
         let (img, stats) = renderer.render(&adaptive.view(), |_| {}).expect("frame");

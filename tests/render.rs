@@ -501,6 +501,87 @@ fn hermite_chunks_carry_the_controller_state() {
     assert!(max <= 1e-6, "chunked image differs by {max:e}");
 }
 
+#[test]
+fn adaptive_chunks_cut_short_by_the_driver_are_rendered_again_smaller() {
+    // Default adaptive chunks assume tops of about 4 evaluations (default_chunk). Here ε is so
+    // small that tops refine towards the deepest of 9 levels (up to 256 evaluations each), so a
+    // default chunk passes llvmpipe's loop limit: the band is rendered again in smaller chunks,
+    // and the image and the counts equal those of one top per dispatch.
+    let mut o = SMALL.to_vec();
+    o.extend([
+        "render.method=\"adaptive\"",
+        "render.adaptive=\"hermite\"",
+        "render.epsilon=1e-9",
+        "render.l_max=0.5",
+        "render.l_min=0.001953125",
+    ]);
+    let s = scene(&o);
+    let f = field(&s);
+    let t = tables(&s, &f);
+    let (ctx, compiler) = gpu();
+    let llvmpipe = ctx.info().name.contains("llvmpipe");
+    let gf = GpuField::upload(&ctx, &f).expect("upload");
+    // A renderer keeps the chunk the first frame learned: its next frame is not cut short.
+    let mut renderer = vmls::renderer::Renderer::new(&ctx, f.clone()).expect("renderer");
+    let (first, one) = renderer.render(&s.view(), |_| {}).expect("frame");
+    let (again, two) = renderer.render(&s.view(), |_| {}).expect("frame");
+    drop(renderer);
+    assert!(
+        !llvmpipe || one.bands > 1,
+        "first frame: {} submissions",
+        one.bands
+    );
+    assert_eq!(two.bands, 1, "the second frame was cut short again");
+    assert_eq!(first.counts, again.counts);
+    let mut images = Vec::new();
+    for chunk in [None, Some(1)] {
+        let mut setup = s.ray_setup(&f).expect("setup");
+        if chunk.is_none() {
+            assert_eq!(vmls::renderer::default_chunk(&setup), 64);
+        }
+        setup.chunk = chunk;
+        images.push(
+            render(
+                &ctx,
+                &compiler,
+                &f,
+                &gf,
+                &s.transfer,
+                t.as_ref(),
+                &setup,
+                |_| {},
+            )
+            .expect("render"),
+        );
+    }
+    drop(gf);
+    finish(ctx);
+    let (a, b) = (&images[0], &images[1]);
+    let most = b.counts.iter().max().copied().unwrap_or(0);
+    assert!(
+        most > 2000,
+        "the test needs rays past the limit: {most} evaluations"
+    );
+    // One band (24 × 20 pixels): more than one submission is the band rendered again.
+    assert!(
+        !llvmpipe || a.bands > 1,
+        "llvmpipe ran the default chunks in {} submission(s)",
+        a.bands
+    );
+    assert_eq!(
+        a.counts, b.counts,
+        "evaluation counts differ between chunkings"
+    );
+    assert_eq!(first.counts, b.counts, "the renderer's counts differ");
+    let max = a
+        .pixels
+        .iter()
+        .zip(&b.pixels)
+        .flat_map(|(p, q)| (0..4).map(move |k| (p[k] - q[k]).abs()))
+        .fold(0.0f32, f32::max);
+    assert!(max <= 1e-6, "chunked image differs by {max:e}");
+}
+
 /// The CPU twin's RMSE against its own reference (step 1/32) and its evaluations, for SMALL with
 /// early termination off plus the given keys; the reference is rendered once.
 fn cpu_error_meter() -> impl Fn(&[&str]) -> (f64, u64) {

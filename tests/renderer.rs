@@ -219,23 +219,27 @@ fn the_pipeline_cache_reads_back_and_loads_into_a_new_context() {
     finish(second);
 }
 
-/// Stage `raycast_next` against its CPU twin: bands whose rays are all done, partly done, or
-/// not started, at a width that is not a multiple of the workgroup.
+/// Stage `raycast_next` against its CPU twin: bands whose rays are all done, partly done, not
+/// started, or cut short by the driver, at a width that is not a multiple of the workgroup.
 #[test]
 fn raycast_next_matches_its_cpu_twin() {
     use vmls::gpu_types::{NextPush, RenderParams, binding, binding_defines, params_copies};
     use vmls::renderer::next_groups;
     use vmls::vk::{BindGroup, Buffer, BufferUsage, ComputePipeline, ShaderSource};
     let (ctx, compiler) = gpu();
-    let (width, height, rows) = (21u32, 24u32, 8u32);
+    let (width, height, rows) = (21u32, 32u32, 8u32);
     let done = vmls::gpu_types::ray_count::DONE;
-    // Band 0 done, band 1 one unfinished ray, band 2 nothing done.
+    let truncated = vmls::gpu_types::ray_count::TRUNCATED;
+    // Band 0 done, band 1 one unfinished ray, band 2 nothing done, band 3 unfinished rays and
+    // one cut short.
     let counts: Vec<u32> = (0..width * height)
         .map(|i| match i / (width * rows) {
             0 => done | 3,
             1 if i == width * rows + 17 => 9,
             1 => done,
-            _ => 0,
+            2 => 0,
+            _ if i == 3 * width * rows + 5 => truncated | 4,
+            _ => 2,
         })
         .collect();
     let mut params = RenderParams::default();
@@ -243,7 +247,7 @@ fn raycast_next_matches_its_cpu_twin() {
     params.camera.height = height;
     let params = Buffer::from_slice(&ctx, "params", &params_copies(params)).expect("params");
     let counts_buf = Buffer::from_slice(&ctx, "counts", &counts).expect("counts");
-    let args = Buffer::new(&ctx, "args", 16 * 3, BufferUsage::Storage).expect("args");
+    let args = Buffer::new(&ctx, "args", 16 * 4, BufferUsage::Storage).expect("args");
     let spirv = compiler
         .compile(
             ShaderSource::File("raycast/raycast_next.comp"),
@@ -265,7 +269,7 @@ fn raycast_next_matches_its_cpu_twin() {
     )
     .expect("bind");
     ctx.submit(|rec| {
-        for band in 0..3 {
+        for band in 0..4 {
             let push = NextPush {
                 row_offset: band * rows,
                 rows,
@@ -294,6 +298,7 @@ fn raycast_next_matches_its_cpu_twin() {
     assert_eq!(got[0][0], 0, "a finished band dispatches nothing");
     assert_eq!(got[1][..3], [3, 1, 1]);
     assert_eq!(got[2][..3], [2, 1, 1], "a window's columns only");
+    assert_eq!(got[3][0], 0, "a band with a truncated ray stops");
     drop(group);
     drop((pipeline, args, counts_buf, params));
     finish(ctx);

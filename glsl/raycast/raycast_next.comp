@@ -3,8 +3,9 @@
 // recorded frame, whether any ray of a band is unfinished, written as the workgroup counts of
 // the band's next chunk (x = 0 when every ray is done), which the next chunk dispatches
 // indirectly. A frame recorded whole (Renderer::record) then costs no raycast dispatch for a
-// band whose rays all ended, as render() stops a band by reading its rays back. One workgroup
-// per band.
+// band whose rays all ended, as render() stops a band by reading its rays back. A band with a
+// ray that the driver cut short (RAY_TRUNCATED) stops too: the host renders it again with
+// smaller chunks, so its later chunks would be work thrown away. One workgroup per band.
 
 layout(local_size_x = 64) in;
 
@@ -16,26 +17,34 @@ layout(std430, binding = BINDING_DISPATCH_ARGS) writeonly buffer ArgsBuf { uvec4
 layout(push_constant) uniform Push { NextPush push; };
 
 shared uint live;
+shared uint cut;
 
 void main() {
     load_params();
     if (gl_LocalInvocationIndex == 0u) {
         live = 0u;
+        cut = 0u;
     }
     barrier();
     uint width = params.camera.width;
     uint first = push.row_offset * width;
     uint n = push.rows * width;
     uint mine = 0u;
+    uint truncated = 0u;
     for (uint i = gl_LocalInvocationIndex; i < n; i += 64u) {
-        mine |= (counts[first + i] & RAY_DONE) == 0u ? 1u : 0u;
+        uint count = counts[first + i];
+        mine |= (count & RAY_DONE) == 0u ? 1u : 0u;
+        truncated |= count & RAY_TRUNCATED;
     }
     if (mine != 0u) {
         atomicOr(live, 1u);
     }
+    if (truncated != 0u) {
+        atomicOr(cut, 1u);
+    }
     barrier();
     if (gl_LocalInvocationIndex == 0u) {
-        args[push.args_slot] = live != 0u ? uvec4((push.cols + 7u) / 8u, (push.rows + 7u) / 8u, 1u, 0u)
+        args[push.args_slot] = live != 0u && cut == 0u ? uvec4((push.cols + 7u) / 8u, (push.rows + 7u) / 8u, 1u, 0u)
                                           : uvec4(0u, 1u, 1u, 0u);
     }
 }

@@ -45,16 +45,40 @@ pub fn outer_steps(setup: &RaySetup) -> u32 {
 /// Outer steps per dispatch. llvmpipe ends every loop after 65 535 iterations per invocation
 /// and dispatch (LAVAPIPE.md), and one MLS evaluation runs 30–60 of them (neighbour rows,
 /// octree descent): about 256 evaluations per ray and dispatch leaves a margin of 4 or more.
-/// An adaptive top interval costs up to 2^levels evaluations.
+///
+/// An adaptive top interval costs 1 to 2^(levels − 1) evaluations. Sizing chunks for the
+/// deepest top (one top per dispatch at 9 levels) made the dispatches, not the evaluations,
+/// what an adaptive frame paid on lavapipe: every chunk of a band runs every ray of it again
+/// (reloading its state, walking its hull) and then `raycast_next` (BENCHMARKS.md,
+/// 2026-12-06 (vii): the same evaluations in a quarter to a third of the time at 64 tops). So
+/// adaptive chunks assume tops that split twice on average (4 evaluations); a ray that needs
+/// more in one dispatch trips the loop limit, and the band is rendered again at a quarter of
+/// the chunk ([`smaller_chunk`]), which the renderer then keeps for its next frames.
 pub fn default_chunk(setup: &RaySetup) -> u32 {
     const EVALUATIONS_PER_DISPATCH: u32 = 256;
+    /// Splits the adaptive chunk assumes per top: 2^2 evaluations.
+    const TYPICAL_SPLITS: usize = 2;
     match setup.method {
         Method::Adaptive => {
             let levels = super::adaptive::stack_size(setup.l_max_world, setup.l_min_world);
-            (EVALUATIONS_PER_DISPATCH >> levels.min(8)).max(1)
+            EVALUATIONS_PER_DISPATCH >> (levels - 1).min(TYPICAL_SPLITS)
         }
         _ => EVALUATIONS_PER_DISPATCH,
     }
+}
+
+/// The chunk to render a band again with after the driver cut one of its rays short at
+/// `chunk` outer steps per dispatch (`ray_count::TRUNCATED`): a quarter, so that a chunk sized
+/// for typical rays reaches one step per dispatch in three reruns at most, not six. None at
+/// one step already.
+pub(crate) fn smaller_chunk(chunk: u32) -> Option<u32> {
+    (chunk > 1).then(|| chunk.div_ceil(4))
+}
+
+/// Whether a band of `setup` runs in more than one chunk (at its own chunk size): where it does,
+/// a frame that keeps its hull segments reads them in the later chunks ([`BandCommands`]).
+pub(crate) fn chunks_after_first(setup: &RaySetup) -> bool {
+    outer_steps(setup) > setup.chunk.unwrap_or_else(|| default_chunk(setup))
 }
 
 /// Image rows per band: about `BAND_PIXELS` pixels, a multiple of the workgroup's 8 rows.
@@ -312,10 +336,13 @@ pub(crate) fn next_group<'a>(
 /// What a band of a ray-cast frame records, for `render()` (a submission per band) and for a
 /// recorded frame (every band): the ray caster and `raycast_next` with their bind groups, the
 /// indirect arguments, the columns it dispatches (first and count: a brick's window, else the
-/// image's) and the frame's outer steps.
+/// image's) and the frame's outer steps. A frame that keeps its rays' hull segments
+/// (`HullCache::Keep`) walks the hull in a band's first chunk only: `later` is the variant that
+/// reads them (`HullCache::Read`) with its bindings, for every later chunk.
 pub(crate) struct BandCommands<'a> {
     pub(crate) pipeline: &'a ComputePipeline,
     pub(crate) group: &'a BindGroup<'a>,
+    pub(crate) later: Option<(&'a ComputePipeline, &'a BindGroup<'a>)>,
     pub(crate) next: &'a ComputePipeline,
     pub(crate) next_group: &'a BindGroup<'a>,
     pub(crate) args: &'a Buffer,
@@ -349,6 +376,7 @@ impl BandCommands<'_> {
                     "raycast",
                 )?;
             } else {
+                let (pipeline, group) = self.later.unwrap_or((self.pipeline, self.group));
                 let next_push = crate::gpu_types::NextPush {
                     row_offset: row,
                     rows,
@@ -363,8 +391,8 @@ impl BandCommands<'_> {
                     "raycast_next",
                 )?;
                 rec.dispatch_indirect(
-                    self.pipeline,
-                    self.group,
+                    pipeline,
+                    group,
                     bytemuck::bytes_of(&push),
                     self.args,
                     16 * u64::from(slot),
@@ -425,8 +453,9 @@ pub(crate) fn frame_buffers<'a>(
 
 /// How [`run_bands`] ended.
 pub(crate) enum Bands {
-    /// Every band finished: GPU ms and submissions.
-    Done(f64, u32),
+    /// Every band finished: GPU ms, submissions and the outer steps per dispatch the last band
+    /// ran with (smaller than the setup's where the loop limit cut a ray short).
+    Done(f64, u32, u32),
     /// The stop flag was raised.
     Stopped,
     /// A ray crossed the hull more often than the variant's `HULL_MAX_HITS`, which is below
@@ -438,6 +467,9 @@ pub(crate) enum Bands {
 pub(crate) struct FramePipelines<'a> {
     pub(crate) raycast: &'a ComputePipeline,
     pub(crate) next: &'a ComputePipeline,
+    /// Where `raycast` keeps the hull segments it walks: the variant that reads them, for the
+    /// chunks after a band's first ([`BandCommands`]).
+    pub(crate) read_segments: Option<&'a ComputePipeline>,
 }
 
 /// Binds everything and runs the bands: each band is recorded as a recorded frame records it
@@ -458,6 +490,17 @@ pub(crate) fn run_bands(
 ) -> Result<Bands, VkError> {
     let all = frame_buffers(gpu_field, constants, targets, table, setup);
     let group = BindGroup::new(ctx, pipelines.raycast, &all)?;
+    let read_group = match pipelines.read_segments {
+        Some(p) if setup.hull_cache == HullCache::Keep => {
+            let read = RaySetup {
+                hull_cache: HullCache::Read,
+                ..setup.clone()
+            };
+            let all = frame_buffers(gpu_field, constants, targets, table, &read);
+            Some((p, BindGroup::new(ctx, p, &all)?))
+        }
+        _ => None,
+    };
     let next_group = next_group(ctx, pipelines.next, constants, targets, &targets.args)?;
     let (w, h) = (setup.camera.width, setup.camera.height);
     let band_rows = band_rows(setup);
@@ -465,6 +508,7 @@ pub(crate) fn run_bands(
     let commands = BandCommands {
         pipeline: pipelines.raycast,
         group: &group,
+        later: read_group.as_ref().map(|(p, g)| (*p, g)),
         next: pipelines.next,
         next_group: &next_group,
         args: &targets.args,
@@ -508,16 +552,17 @@ pub(crate) fn run_bands(
                 .counts
                 .read_range(ctx, (row * w) as usize, (rows * w) as usize)?;
             if counts.iter().any(|c| c & ray_count::TRUNCATED != 0) {
-                // The driver cut a loop short: this band again, from its start, in halves.
-                if chunk == 1 {
+                // The driver cut a loop short: this band again, from its start, in smaller
+                // chunks, which the bands after it keep.
+                let Some(smaller) = smaller_chunk(chunk) else {
                     return Err(VkError::Usage(format!(
                         "raycast: the device ended a loop early even for one step per dispatch \
                          (llvmpipe allows 65 535 loop iterations per invocation); rows {row}..{} \
                          cannot be rendered with these settings",
                         row + rows
                     )));
-                }
-                chunk = chunk.div_ceil(2);
+                };
+                chunk = smaller;
                 continue;
             }
             break counts;
@@ -546,7 +591,7 @@ pub(crate) fn run_bands(
         row += rows;
         progress(f64::from(row) / f64::from(h));
     }
-    Ok(Bands::Done(gpu_ms, bands))
+    Ok(Bands::Done(gpu_ms, bands, chunk))
 }
 
 /// A ray-cast frame as read back.

@@ -15,8 +15,9 @@ use crate::field::variant::{HullCache, Variant};
 use crate::field::{Field, RenderError, scalar_range};
 use crate::raycast::frame::FrameTargets;
 use crate::raycast::frame::{
-    Bands, FramePipelines, Readback, frame_bindings, frame_constants, frame_pipeline,
-    frame_targets, next_pipeline, read_image, run_bands, table_buffer, write_tables,
+    Bands, FramePipelines, Readback, chunks_after_first, frame_bindings, frame_constants,
+    frame_pipeline, frame_targets, next_pipeline, read_image, run_bands, table_buffer,
+    write_tables,
 };
 pub use crate::raycast::frame::{default_chunk, outer_steps};
 use crate::raycast::gpu::variant_for_render;
@@ -164,6 +165,7 @@ pub fn render(
             FramePipelines {
                 raycast: &pipeline,
                 next: &next,
+                read_segments: None,
             },
             gpu_field,
             &constants,
@@ -173,7 +175,7 @@ pub fn render(
             &mut progress,
             None,
         )? {
-            Bands::Done(ms, bands) => break (variant, ms, bands),
+            Bands::Done(ms, bands, _) => break (variant, ms, bands),
             Bands::HullHits => resolved.hull_hits = crate::samples::bvh::MAX_HITS as u32,
             Bands::Stopped => {
                 return Err(VkError::Usage(
@@ -250,6 +252,10 @@ pub struct Renderer {
     budget: Option<f64>,
     /// [`Renderer::set_splat_raster_chunk`].
     splat_raster_chunk: Option<u32>,
+    /// Ray casting: a chunk the loop limit taught a frame (`Bands::Done`'s), with the chunk the
+    /// setup asked for then; later frames whose setup asks the same use it and are not cut
+    /// short again.
+    ray_chunk: Option<(u32, u32)>,
     /// This renderer's identity, carried by the frames it records.
     id: u64,
     /// Recorded frames' resources, one slot per frame in flight ([`Renderer::record`]).
@@ -320,6 +326,7 @@ impl Renderer {
             stop: None,
             budget: None,
             splat_raster_chunk: None,
+            ray_chunk: None,
             id: NEXT_RENDERER.fetch_add(1, Ordering::Relaxed),
             slots: Vec::new(),
             record: record::RecordState::default(),
@@ -379,12 +386,32 @@ impl Renderer {
         let mut pipeline_built = false;
         // Once more with every crossing the CPU twin allows if a ray had more than the first
         // variant keeps (Bands::HullHits).
+        let own_chunk = setup.chunk.unwrap_or_else(|| default_chunk(&setup));
+        if let Some((own, learned)) = self.ray_chunk
+            && own == own_chunk
+        {
+            setup.chunk = Some(learned);
+        }
         let (variant, gpu_ms, bands, hull_segments) = loop {
             let found = self.render_segments(&mut setup)?;
             let variant = variant_for_render(&self.field, &setup);
             let bindings = frame_bindings(&self.gpu_field, &setup, has_tables, variant.skip);
             let (index, built) = self.ray_pipeline(&variant, bindings)?;
             pipeline_built |= built;
+            // The later chunks of a frame that keeps its segments read them (BandCommands).
+            let read_index = if setup.hull_cache == HullCache::Keep && chunks_after_first(&setup) {
+                let read = RaySetup {
+                    hull_cache: HullCache::Read,
+                    ..setup.clone()
+                };
+                let variant = variant_for_render(&self.field, &read);
+                let bindings = frame_bindings(&self.gpu_field, &read, has_tables, variant.skip);
+                let (i, built) = self.ray_pipeline(&variant, bindings)?;
+                pipeline_built |= built;
+                Some(i)
+            } else {
+                None
+            };
             let tables = self.tables.current().filter(|_| has_tables);
             let with_table = tables.is_some();
             let constants = frame_constants(
@@ -412,6 +439,7 @@ impl Renderer {
                 FramePipelines {
                     raycast: &self.pipelines[index].2,
                     next,
+                    read_segments: read_index.map(|i| &self.pipelines[i].2),
                 },
                 &self.gpu_field,
                 &constants,
@@ -421,7 +449,10 @@ impl Renderer {
                 &mut progress,
                 self.stop.as_deref(),
             )? {
-                Bands::Done(ms, bands) => {
+                Bands::Done(ms, bands, chunk) => {
+                    if chunk < setup.chunk.unwrap_or(own_chunk) {
+                        self.ray_chunk = Some((own_chunk, chunk));
+                    }
                     self.segments_stored(&setup);
                     break (variant, ms, bands, found);
                 }

@@ -59,9 +59,9 @@ use crate::field::variant::{HullCache, Variant};
 use crate::gpu_types::ray_count;
 use crate::raycast::RaySetup;
 use crate::raycast::frame::{
-    BandCommands, FrameConstants, FrameTargets, band_groups, band_rows, constant_data,
-    default_chunk, frame_bindings, frame_buffers, frame_targets, next_group, next_pipeline,
-    outer_steps, skip_report,
+    BandCommands, FrameConstants, FrameTargets, band_groups, band_rows, chunks_after_first,
+    constant_data, default_chunk, frame_bindings, frame_buffers, frame_targets, next_group,
+    next_pipeline, outer_steps, skip_report, smaller_chunk,
 };
 use crate::raycast::gpu::variant_for_render;
 use crate::splat::gpu::GpuKernels;
@@ -373,6 +373,16 @@ impl Renderer {
             &mut setup,
         );
         let (variant, index) = self.record_pipeline(&setup)?;
+        // The later chunks of a frame that keeps its segments read them (BandCommands).
+        let read_setup =
+            (setup.hull_cache == HullCache::Keep && chunks_after_first(&setup)).then(|| RaySetup {
+                hull_cache: HullCache::Read,
+                ..setup.clone()
+            });
+        let read_index = match &read_setup {
+            Some(read) => Some(self.record_pipeline(read)?.1),
+            None => None,
+        };
         // A chunk learned from a cut-short frame applies only where it is smaller than this
         // setup's own (the adaptive integrator's default is far smaller than the others').
         let own = setup.chunk.unwrap_or_else(|| default_chunk(&setup));
@@ -461,6 +471,20 @@ impl Renderer {
             &setup,
         );
         let group = BindGroup::new(&ctx, pipeline, &buffers)?;
+        let read_group = match (read_index, &read_setup) {
+            (Some(i), Some(read)) => {
+                let p = &self.pipelines[i].2;
+                let buffers = frame_buffers(
+                    &self.gpu_field,
+                    constants,
+                    targets,
+                    slot.table.as_deref(),
+                    read,
+                );
+                Some((p, BindGroup::new(&ctx, p, &buffers)?))
+            }
+            _ => None,
+        };
         let pack_group = match pack {
             Some(p) => Some(
                 self.record
@@ -484,6 +508,7 @@ impl Renderer {
             let commands = BandCommands {
                 pipeline,
                 group: &group,
+                later: read_group.as_ref().map(|(p, g)| (*p, g)),
                 next,
                 next_group: &next_group,
                 args,
@@ -510,6 +535,7 @@ impl Renderer {
             Ok(())
         })?;
         let mut groups = vec![group.detach(), next_group.detach()];
+        groups.extend(read_group.map(|(_, g)| g.detach()));
         groups.extend(pack_group.map(|g| g.detach()));
         slot.keep_groups(groups);
         slot.variant = Some(variant);
@@ -593,19 +619,18 @@ impl Renderer {
             )));
         }
         if counts.iter().any(|c| c & ray_count::TRUNCATED != 0) {
-            if chunk <= 1 {
+            let Some(smaller) = smaller_chunk(chunk) else {
                 return Err(RenderError::Recorded(
                     "the device ended a loop early even for one step per dispatch (llvmpipe \
                      allows 65 535 loop iterations per invocation); this view cannot be \
                      rendered with these settings"
                         .into(),
                 ));
-            }
-            self.record.chunk = Some(chunk.div_ceil(2));
+            };
+            self.record.chunk = Some(smaller);
             return Err(RenderError::Recorded(format!(
                 "the device's loop limit cut rays short at {chunk} steps per dispatch; the next \
-                 frames record {} (record again)",
-                chunk.div_ceil(2)
+                 frames record {smaller} (record again)"
             )));
         }
         if let Some(i) = counts.iter().position(|c| c & ray_count::DONE == 0) {
@@ -635,9 +660,11 @@ impl Renderer {
 
 /// Stage `raycast_next`: the workgroup counts of a band's next chunk from its rays' counts
 /// after this one (its rows' pixels): the band's groups (`cols` × `rows`) while any ray is
-/// unfinished, none (x = 0) once every ray is done.
+/// unfinished, none (x = 0) once every ray is done or once a ray was cut short
+/// (`ray_count::TRUNCATED`: the band is rendered again, so its later chunks would be wasted).
 pub fn next_groups(counts: &[u32], cols: u32, rows: u32) -> [u32; 3] {
-    if counts.iter().any(|c| c & ray_count::DONE == 0) {
+    let truncated = counts.iter().any(|c| c & ray_count::TRUNCATED != 0);
+    if !truncated && counts.iter().any(|c| c & ray_count::DONE == 0) {
         band_groups(cols, rows)
     } else {
         [0, 1, 1]
@@ -651,6 +678,16 @@ mod tests {
         use crate::gpu_types::ray_count::DONE;
         assert_eq!(super::next_groups(&[DONE, DONE, 7], 20, 12), [3, 2, 1]);
         assert_eq!(super::next_groups(&[DONE | 5, DONE], 20, 12), [0, 1, 1]);
+    }
+
+    #[test]
+    fn next_groups_stop_a_band_with_a_truncated_ray() {
+        use crate::gpu_types::ray_count::{DONE, TRUNCATED};
+        assert_eq!(
+            super::next_groups(&[DONE, 7 | TRUNCATED, 3], 20, 12),
+            [0, 1, 1]
+        );
+        assert_eq!(super::next_groups(&[DONE, 7, 3], 20, 12), [3, 2, 1]);
     }
 
     #[test]
