@@ -341,14 +341,6 @@ fn rays_with_more_crossings_than_the_first_variant_keeps_render_again_with_all()
     assert!(img.variant.ends_with("-hull8"), "{}", img.variant);
 }
 
-/// The largest channel difference between two GPU images.
-fn gpu_diff(a: &[[f32; 4]], b: &[[f32; 4]]) -> f32 {
-    a.iter()
-        .zip(b)
-        .flat_map(|(p, q)| (0..4).map(move |k| (p[k] - q[k]).abs()))
-        .fold(0.0, f32::max)
-}
-
 /// A view of the torus, the same view with another transfer function, and another camera:
 /// each with `extra`.
 fn three_views(extra: &[&str]) -> [Scene; 3] {

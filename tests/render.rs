@@ -11,7 +11,7 @@ use vmls::renderer::{GpuImage, render};
 use vmls::scene::Scene;
 use vmls::scene::load_volume;
 use vmls::view::preintegration::PreintegrationTables;
-use vmls::vk::Context;
+use vmls::vk::{Context, ShaderCompiler};
 
 fn scene(overrides: &[&str]) -> Scene {
     let o: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
@@ -39,12 +39,7 @@ fn tables(scene: &Scene, field: &Field) -> Option<PreintegrationTables> {
     )
 }
 
-fn gpu_render(
-    ctx: &Context,
-    compiler: &vmls::vk::ShaderCompiler,
-    scene: &Scene,
-    field: &Field,
-) -> GpuImage {
+fn gpu_render(ctx: &Context, compiler: &ShaderCompiler, scene: &Scene, field: &Field) -> GpuImage {
     let setup = scene.ray_setup(field).expect("setup");
     let gf = GpuField::upload(ctx, field).expect("upload");
     let t = tables(scene, field);
@@ -467,24 +462,7 @@ fn hermite_chunks_carry_the_controller_state() {
     let t = tables(&s, &f);
     let (ctx, compiler) = gpu();
     let gf = GpuField::upload(&ctx, &f).expect("upload");
-    let mut images = Vec::new();
-    for chunk in [None, Some(1)] {
-        let mut setup = s.ray_setup(&f).expect("setup");
-        setup.chunk = chunk;
-        images.push(
-            render(
-                &ctx,
-                &compiler,
-                &f,
-                &gf,
-                &s.transfer,
-                t.as_ref(),
-                &setup,
-                |_| {},
-            )
-            .expect("render"),
-        );
-    }
+    let images = in_chunks(&ctx, &compiler, &s, &f, &gf, t.as_ref(), [None, Some(1)]);
     drop(gf);
     finish(ctx);
     let (a, b) = (&images[0], &images[1]);
@@ -492,13 +470,25 @@ fn hermite_chunks_carry_the_controller_state() {
         a.counts, b.counts,
         "evaluation counts differ between chunkings"
     );
-    let max = a
-        .pixels
-        .iter()
-        .zip(&b.pixels)
-        .flat_map(|(p, q)| (0..4).map(move |k| (p[k] - q[k]).abs()))
-        .fold(0.0f32, f32::max);
+    let max = gpu_diff(&a.pixels, &b.pixels);
     assert!(max <= 1e-6, "chunked image differs by {max:e}");
+}
+
+/// The scene's frame by the stateless `render` at each chunk (None: `default_chunk`).
+fn in_chunks<const N: usize>(
+    ctx: &Context,
+    compiler: &ShaderCompiler,
+    s: &Scene,
+    f: &Field,
+    gf: &GpuField,
+    t: Option<&PreintegrationTables>,
+    chunks: [Option<u32>; N],
+) -> [GpuImage; N] {
+    chunks.map(|chunk| {
+        let mut setup = s.ray_setup(f).expect("setup");
+        setup.chunk = chunk;
+        render(ctx, compiler, f, gf, &s.transfer, t, &setup, |_| {}).expect("render")
+    })
 }
 
 #[test]
@@ -533,27 +523,9 @@ fn adaptive_chunks_cut_short_by_the_driver_are_rendered_again_smaller() {
     );
     assert_eq!(two.bands, 1, "the second frame was cut short again");
     assert_eq!(first.counts, again.counts);
-    let mut images = Vec::new();
-    for chunk in [None, Some(1)] {
-        let mut setup = s.ray_setup(&f).expect("setup");
-        if chunk.is_none() {
-            assert_eq!(vmls::renderer::default_chunk(&setup), 64);
-        }
-        setup.chunk = chunk;
-        images.push(
-            render(
-                &ctx,
-                &compiler,
-                &f,
-                &gf,
-                &s.transfer,
-                t.as_ref(),
-                &setup,
-                |_| {},
-            )
-            .expect("render"),
-        );
-    }
+    let setup = s.ray_setup(&f).expect("setup");
+    assert_eq!(vmls::renderer::default_chunk(&setup), 64);
+    let images = in_chunks(&ctx, &compiler, &s, &f, &gf, t.as_ref(), [None, Some(1)]);
     drop(gf);
     finish(ctx);
     let (a, b) = (&images[0], &images[1]);
@@ -573,12 +545,7 @@ fn adaptive_chunks_cut_short_by_the_driver_are_rendered_again_smaller() {
         "evaluation counts differ between chunkings"
     );
     assert_eq!(first.counts, b.counts, "the renderer's counts differ");
-    let max = a
-        .pixels
-        .iter()
-        .zip(&b.pixels)
-        .flat_map(|(p, q)| (0..4).map(move |k| (p[k] - q[k]).abs()))
-        .fold(0.0f32, f32::max);
+    let max = gpu_diff(&a.pixels, &b.pixels);
     assert!(max <= 1e-6, "chunked image differs by {max:e}");
 }
 

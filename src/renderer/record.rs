@@ -463,25 +463,21 @@ impl Renderer {
             return Err(VkError::Usage("recorded frame buffers missing".into()).into());
         };
         let pipeline = &self.pipelines[index].2;
-        let buffers = frame_buffers(
-            &self.gpu_field,
-            constants,
-            targets,
-            slot.table.as_deref(),
-            &setup,
-        );
-        let group = BindGroup::new(&ctx, pipeline, &buffers)?;
+        let bind = |pipeline: &ComputePipeline, setup: &RaySetup| {
+            let buffers = frame_buffers(
+                &self.gpu_field,
+                constants,
+                targets,
+                slot.table.as_deref(),
+                setup,
+            );
+            BindGroup::new(&ctx, pipeline, &buffers)
+        };
+        let group = bind(pipeline, &setup)?;
         let read_group = match (read_index, &read_setup) {
             (Some(i), Some(read)) => {
                 let p = &self.pipelines[i].2;
-                let buffers = frame_buffers(
-                    &self.gpu_field,
-                    constants,
-                    targets,
-                    slot.table.as_deref(),
-                    read,
-                );
-                Some((p, BindGroup::new(&ctx, p, &buffers)?))
+                Some((p, bind(p, read)?))
             }
             _ => None,
         };

@@ -233,3 +233,11 @@ pub fn gpu_frames_in_chunks_and_cpu(
     finish(ctx);
     (images, cpu)
 }
+
+/// The largest channel difference between two GPU images.
+pub fn gpu_diff(a: &[[f32; 4]], b: &[[f32; 4]]) -> f32 {
+    a.iter()
+        .zip(b)
+        .flat_map(|(p, q)| (0..4).map(move |k| (p[k] - q[k]).abs()))
+        .fold(0.0, f32::max)
+}
