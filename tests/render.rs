@@ -462,7 +462,7 @@ fn hermite_chunks_carry_the_controller_state() {
     let t = tables(&s, &f);
     let (ctx, compiler) = gpu();
     let gf = GpuField::upload(&ctx, &f).expect("upload");
-    let images = in_chunks(&ctx, &compiler, &s, &f, &gf, t.as_ref(), [None, Some(1)]);
+    let images = frames_in_chunks(&ctx, &compiler, &s, &f, &gf, t.as_ref(), &[None, Some(1)]);
     drop(gf);
     finish(ctx);
     let (a, b) = (&images[0], &images[1]);
@@ -472,23 +472,6 @@ fn hermite_chunks_carry_the_controller_state() {
     );
     let max = gpu_diff(&a.pixels, &b.pixels);
     assert!(max <= 1e-6, "chunked image differs by {max:e}");
-}
-
-/// The scene's frame by the stateless `render` at each chunk (None: `default_chunk`).
-fn in_chunks<const N: usize>(
-    ctx: &Context,
-    compiler: &ShaderCompiler,
-    s: &Scene,
-    f: &Field,
-    gf: &GpuField,
-    t: Option<&PreintegrationTables>,
-    chunks: [Option<u32>; N],
-) -> [GpuImage; N] {
-    chunks.map(|chunk| {
-        let mut setup = s.ray_setup(f).expect("setup");
-        setup.chunk = chunk;
-        render(ctx, compiler, f, gf, &s.transfer, t, &setup, |_| {}).expect("render")
-    })
 }
 
 #[test]
@@ -525,7 +508,7 @@ fn adaptive_chunks_cut_short_by_the_driver_are_rendered_again_smaller() {
     assert_eq!(first.counts, again.counts);
     let setup = s.ray_setup(&f).expect("setup");
     assert_eq!(vmls::renderer::default_chunk(&setup), 64);
-    let images = in_chunks(&ctx, &compiler, &s, &f, &gf, t.as_ref(), [None, Some(1)]);
+    let images = frames_in_chunks(&ctx, &compiler, &s, &f, &gf, t.as_ref(), &[None, Some(1)]);
     drop(gf);
     finish(ctx);
     let (a, b) = (&images[0], &images[1]);

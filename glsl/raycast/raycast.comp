@@ -10,8 +10,8 @@
 // loop once an invocation has run 65 535 loop iterations in one dispatch (nested ones
 // included); chunks keep typical rays below that (default_chunk). Between chunks a ray's
 // state lives in the image ((C, T) while running), the counts (evaluations | RAY_DONE) and the
-// ray-state buffer (the last knot). A loop that ends before its chunk does marks RAY_TRUNCATED, and the
-// host renders the band again with smaller chunks.
+// ray-state buffer (the last knot). A loop that ends before its chunk does marks
+// RAY_TRUNCATED, and the host renders the band again with smaller chunks.
 #extension GL_EXT_control_flow_attributes : require
 
 layout(local_size_x = 8, local_size_y = 8) in;

@@ -16,35 +16,30 @@ layout(std430, binding = BINDING_COUNTS) readonly buffer CountsBuf { uint counts
 layout(std430, binding = BINDING_DISPATCH_ARGS) writeonly buffer ArgsBuf { uvec4 args[]; };
 layout(push_constant) uniform Push { NextPush push; };
 
-shared uint live;
-shared uint cut;
+// Bit 0: a ray of the band is unfinished; bit 1: a ray was cut short.
+shared uint band_state;
 
 void main() {
     load_params();
     if (gl_LocalInvocationIndex == 0u) {
-        live = 0u;
-        cut = 0u;
+        band_state = 0u;
     }
     barrier();
     uint width = params.camera.width;
     uint first = push.row_offset * width;
     uint n = push.rows * width;
     uint mine = 0u;
-    uint truncated = 0u;
     for (uint i = gl_LocalInvocationIndex; i < n; i += 64u) {
         uint count = counts[first + i];
-        mine |= (count & RAY_DONE) == 0u ? 1u : 0u;
-        truncated |= count & RAY_TRUNCATED;
+        mine |= ((count & RAY_DONE) == 0u ? 1u : 0u) | ((count & RAY_TRUNCATED) != 0u ? 2u : 0u);
     }
     if (mine != 0u) {
-        atomicOr(live, 1u);
-    }
-    if (truncated != 0u) {
-        atomicOr(cut, 1u);
+        atomicOr(band_state, mine);
     }
     barrier();
     if (gl_LocalInvocationIndex == 0u) {
-        args[push.args_slot] = live != 0u && cut == 0u ? uvec4((push.cols + 7u) / 8u, (push.rows + 7u) / 8u, 1u, 0u)
-                                          : uvec4(0u, 1u, 1u, 0u);
+        args[push.args_slot] = band_state == 1u
+                                   ? uvec4((push.cols + 7u) / 8u, (push.rows + 7u) / 8u, 1u, 0u)
+                                   : uvec4(0u, 1u, 1u, 0u);
     }
 }

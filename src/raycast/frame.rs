@@ -75,10 +75,15 @@ pub(crate) fn smaller_chunk(chunk: u32) -> Option<u32> {
     (chunk > 1).then(|| chunk.div_ceil(4))
 }
 
-/// Whether a band of `setup` runs in more than one chunk (at its own chunk size): where it does,
-/// a frame that keeps its hull segments reads them in the later chunks ([`BandCommands`]).
-pub(crate) fn chunks_after_first(setup: &RaySetup) -> bool {
-    outer_steps(setup) > setup.chunk.unwrap_or_else(|| default_chunk(setup))
+/// The setup of the variant that reads the hull segments a frame of `setup` keeps, for the
+/// chunks after a band's first ([`BandCommands`]); None where its frames keep none or a band
+/// runs in one chunk (at the setup's own chunk size).
+pub(crate) fn later_chunks_setup(setup: &RaySetup) -> Option<RaySetup> {
+    let chunk = setup.chunk.unwrap_or_else(|| default_chunk(setup));
+    (setup.hull_cache == HullCache::Keep && outer_steps(setup) > chunk).then(|| RaySetup {
+        hull_cache: HullCache::Read,
+        ..setup.clone()
+    })
 }
 
 /// Image rows per band: about `BAND_PIXELS` pixels, a multiple of the workgroup's 8 rows.
@@ -490,12 +495,8 @@ pub(crate) fn run_bands(
 ) -> Result<Bands, VkError> {
     let all = frame_buffers(gpu_field, constants, targets, table, setup);
     let group = BindGroup::new(ctx, pipelines.raycast, &all)?;
-    let read_group = match pipelines.read_segments {
-        Some(p) if setup.hull_cache == HullCache::Keep => {
-            let read = RaySetup {
-                hull_cache: HullCache::Read,
-                ..setup.clone()
-            };
+    let read_group = match (pipelines.read_segments, later_chunks_setup(setup)) {
+        (Some(p), Some(read)) => {
             let all = frame_buffers(gpu_field, constants, targets, table, &read);
             Some((p, BindGroup::new(ctx, p, &all)?))
         }

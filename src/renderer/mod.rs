@@ -15,8 +15,8 @@ use crate::field::variant::{HullCache, Variant};
 use crate::field::{Field, RenderError, scalar_range};
 use crate::raycast::frame::FrameTargets;
 use crate::raycast::frame::{
-    Bands, FramePipelines, Readback, chunks_after_first, frame_bindings, frame_constants,
-    frame_pipeline, frame_targets, next_pipeline, read_image, run_bands, table_buffer,
+    Bands, FramePipelines, Readback, frame_bindings, frame_constants, frame_pipeline,
+    frame_targets, later_chunks_setup, next_pipeline, read_image, run_bands, table_buffer,
     write_tables,
 };
 pub use crate::raycast::frame::{default_chunk, outer_steps};
@@ -399,18 +399,15 @@ impl Renderer {
             let (index, built) = self.ray_pipeline(&variant, bindings)?;
             pipeline_built |= built;
             // The later chunks of a frame that keeps its segments read them (BandCommands).
-            let read_index = if setup.hull_cache == HullCache::Keep && chunks_after_first(&setup) {
-                let read = RaySetup {
-                    hull_cache: HullCache::Read,
-                    ..setup.clone()
-                };
-                let variant = variant_for_render(&self.field, &read);
-                let bindings = frame_bindings(&self.gpu_field, &read, has_tables, variant.skip);
-                let (i, built) = self.ray_pipeline(&variant, bindings)?;
-                pipeline_built |= built;
-                Some(i)
-            } else {
-                None
+            let read_index = match later_chunks_setup(&setup) {
+                Some(read) => {
+                    let variant = variant_for_render(&self.field, &read);
+                    let bindings = frame_bindings(&self.gpu_field, &read, has_tables, variant.skip);
+                    let (i, built) = self.ray_pipeline(&variant, bindings)?;
+                    pipeline_built |= built;
+                    Some(i)
+                }
+                None => None,
             };
             let tables = self.tables.current().filter(|_| has_tables);
             let with_table = tables.is_some();

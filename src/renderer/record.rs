@@ -59,8 +59,8 @@ use crate::field::variant::{HullCache, Variant};
 use crate::gpu_types::ray_count;
 use crate::raycast::RaySetup;
 use crate::raycast::frame::{
-    BandCommands, FrameConstants, FrameTargets, band_groups, band_rows, chunks_after_first,
-    constant_data, default_chunk, frame_bindings, frame_buffers, frame_targets, next_group,
+    BandCommands, FrameConstants, FrameTargets, band_groups, band_rows, constant_data,
+    default_chunk, frame_bindings, frame_buffers, frame_targets, later_chunks_setup, next_group,
     next_pipeline, outer_steps, skip_report, smaller_chunk,
 };
 use crate::raycast::gpu::variant_for_render;
@@ -374,11 +374,7 @@ impl Renderer {
         );
         let (variant, index) = self.record_pipeline(&setup)?;
         // The later chunks of a frame that keeps its segments read them (BandCommands).
-        let read_setup =
-            (setup.hull_cache == HullCache::Keep && chunks_after_first(&setup)).then(|| RaySetup {
-                hull_cache: HullCache::Read,
-                ..setup.clone()
-            });
+        let read_setup = later_chunks_setup(&setup);
         let read_index = match &read_setup {
             Some(read) => Some(self.record_pipeline(read)?.1),
             None => None,

@@ -206,32 +206,47 @@ pub fn gpu_frames_in_chunks_and_cpu(
     Vec<vmls::renderer::GpuImage>,
     Vec<vmls::raycast::PixelResult>,
 ) {
-    let mut setup = scene.ray_setup(field).expect("setup");
+    let setup = scene.ray_setup(field).expect("setup");
     let tables = vmls::raycast::build_tables(&setup, field, &scene.transfer, 128, |_| {});
     let cpu = vmls::raycast::raycast_image(&setup, field, &scene.transfer, tables.as_ref())
         .expect("CPU twin");
     let (ctx, compiler) = gpu();
     let gf = vmls::field::gpu::GpuField::upload(&ctx, field).expect("upload");
-    let images = chunks
+    let images = frames_in_chunks(&ctx, &compiler, scene, field, &gf, tables.as_ref(), chunks);
+    drop(gf);
+    finish(ctx);
+    (images, cpu)
+}
+
+/// The scene's frame by the stateless `render`, once per entry of `chunks` (outer steps per
+/// dispatch, `RaySetup::chunk`; None: the default).
+pub fn frames_in_chunks(
+    ctx: &vmls::vk::Context,
+    compiler: &vmls::vk::ShaderCompiler,
+    scene: &Scene,
+    field: &Field,
+    gf: &vmls::field::gpu::GpuField,
+    tables: Option<&vmls::view::preintegration::PreintegrationTables>,
+    chunks: &[Option<u32>],
+) -> Vec<vmls::renderer::GpuImage> {
+    chunks
         .iter()
         .map(|&chunk| {
+            let mut setup = scene.ray_setup(field).expect("setup");
             setup.chunk = chunk;
             vmls::renderer::render(
-                &ctx,
-                &compiler,
+                ctx,
+                compiler,
                 field,
-                &gf,
+                gf,
                 &scene.transfer,
-                tables.as_ref(),
+                tables,
                 &setup,
                 |_| {},
             )
             .expect("render")
         })
-        .collect();
-    drop(gf);
-    finish(ctx);
-    (images, cpu)
+        .collect()
 }
 
 /// The largest channel difference between two GPU images.
