@@ -165,7 +165,54 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
         bool split = false;
         bool ended = false;
         bool top_start = false;
+        // One pass of this loop tests the stack's top interval and, once the stack is empty,
+        // places the next end: llvmpipe runs every body of a pass under a mask, so a dense scene,
+        // whose every evaluation ends one accepted interval, pays one pass per evaluation (two
+        // when the new end had a pass of its own: 20-25% of its frame, BENCHMARKS.md).
         while (true) {
+            if (sp > 0) {
+                vec4 packed = stack_get(stack, sp - 1);
+                depth = uint(abs(packed.w)) - 1u;
+                vec4 e = vec4(packed.xyz, packed.w > 0.0 ? 1.0 : 0.0);
+                float len = l_max * exp2(-float(depth));
+                bool can_split = int(depth) + 1 < ADAPTIVE_LEVELS;
+                vec4 mid;
+                float error = hermite_error(a, e, transmittance, mid);
+                if (can_split && error > epsilon) {
+                    t_eval = 0.5 * (a.x + e.x);
+                    split = true;
+                    break;
+                }
+                predicted = error == 0.0 ? 0u
+                    : (depth > 0u && 0.81 * epsilon >= 4.0 * error ? depth - 1u : depth);
+                count_error(error, len, transmittance);
+                // Accepted: the halves through the predicted midpoint when the hull holds no
+                // isosurface value, else the whole interval split at the surfaces it crosses.
+                // One emit_interval call site: GLSL inlines every call, and lavapipe's compile
+                // time grows with the inlined copies of the root finders. Both halves and the
+                // whole interval read a table (adaptive setups build one below the deepest
+                // level): no clipped composite here.
+                bool halves = mid.w > 0.0;
+                vec4 cl = table_segment(halves ? depth + 1u : depth, a, halves ? mid : e);
+                vec4 cr = table_segment(depth + 1u, mid, e);
+                for (uint piece = 0u; piece < (halves ? 2u : 1u); ++piece) {
+                    bool left = piece == 0u;
+                    emit_interval(o, d, left ? a : mid, halves && left ? mid : e,
+                                  halves ? 0.5 * len : len, left ? cl : cr, color,
+                                  transmittance, evaluations);
+                }
+                sp -= 1;
+                position += units >> depth;
+                a = e;
+                if (1.0 - transmittance > termination) {
+                    return CHUNK_FINISHED;
+                }
+                if (sp > 0) {
+                    continue;
+                }
+            }
+            // The stack is empty: past a top's covered units, the next top (a last top that
+            // covers none goes round again, to its tail).
             float start = t0 + float(k) * l_max;
             uint limit = top_limit(start, t1, l_max, units);
             if (position == limit) {
@@ -180,56 +227,22 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
                     ended = true;
                     break;
                 }
-                continue;
-            }
-            if (sp == 0) {
-                // A new end at the controller's depth, or deeper until the interval is aligned
-                // and inside the covered part of the top.
-                depth = predicted;
-                while (position % (units >> depth) != 0u || position + (units >> depth) > limit) {
-                    depth += 1u;
+                start = t0 + float(k) * l_max;
+                limit = top_limit(start, t1, l_max, units);
+                if (position == limit) {
+                    continue;
                 }
-                uint to = position + (units >> depth);
-                t_eval = start + l_max * (float(to) / float(units));
-                top_start = position == 0u;
-                break;
             }
-            vec4 packed = stack_get(stack, sp - 1);
-            depth = uint(abs(packed.w)) - 1u;
-            vec4 e = vec4(packed.xyz, packed.w > 0.0 ? 1.0 : 0.0);
-            float len = l_max * exp2(-float(depth));
-            bool can_split = int(depth) + 1 < ADAPTIVE_LEVELS;
-            vec4 mid;
-            float error = hermite_error(a, e, transmittance, mid);
-            if (can_split && error > epsilon) {
-                t_eval = 0.5 * (a.x + e.x);
-                split = true;
-                break;
+            // A new end at the controller's depth, or deeper until the interval is aligned and
+            // inside the covered part of the top.
+            depth = predicted;
+            while (position % (units >> depth) != 0u || position + (units >> depth) > limit) {
+                depth += 1u;
             }
-            predicted = error == 0.0 ? 0u
-                : (depth > 0u && 0.81 * epsilon >= 4.0 * error ? depth - 1u : depth);
-            count_error(error, len, transmittance);
-            // Accepted: the halves through the predicted midpoint when the hull holds no
-            // isosurface value, else the whole interval split at the surfaces it crosses. One
-            // emit_interval call site: GLSL inlines every call, and lavapipe's compile time
-            // grows with the inlined copies of the root finders. Both halves and the whole
-            // interval read a table (adaptive setups build one below the deepest level): no
-            // clipped composite here.
-            bool halves = mid.w > 0.0;
-            vec4 cl = table_segment(halves ? depth + 1u : depth, a, halves ? mid : e);
-            vec4 cr = table_segment(depth + 1u, mid, e);
-            for (uint piece = 0u; piece < (halves ? 2u : 1u); ++piece) {
-                bool left = piece == 0u;
-                emit_interval(o, d, left ? a : mid, halves && left ? mid : e,
-                              halves ? 0.5 * len : len, left ? cl : cr, color, transmittance,
-                              evaluations);
-            }
-            sp -= 1;
-            position += units >> depth;
-            a = e;
-            if (1.0 - transmittance > termination) {
-                return CHUNK_FINISHED;
-            }
+            uint to = position + (units >> depth);
+            t_eval = start + l_max * (float(to) / float(units));
+            top_start = position == 0u;
+            break;
         }
         if (ended) {
             break;
