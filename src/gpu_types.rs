@@ -423,8 +423,9 @@ pub struct RenderParams {
     /// Blinn–Phong ambient, diffuse, specular, shininess.
     pub lighting: [f32; 4],
     pub tf: TfBlock,
+    pub sensitivity: SensitivityBlock,
 }
-const _: () = assert!(std::mem::size_of::<RenderParams>() == 608);
+const _: () = assert!(std::mem::size_of::<RenderParams>() == 864);
 
 /// Points of a transfer function the exact opacity's scan reads from the parameters
 /// ([`TfBlock`]) instead of the texel view.
@@ -441,6 +442,26 @@ pub struct TfBlock {
     pub s_tau: [[f32; 4]; TF_BLOCK_POINTS / 2],
 }
 const _: () = assert!(std::mem::size_of::<TfBlock>() == 256);
+
+/// Pieces of a transfer function the Hermite criterion's sensitivity scans from the parameters
+/// ([`SensitivityBlock`]) instead of the texel view.
+pub const SENSITIVITY_PIECES: usize = 16;
+
+/// The pieces of the transfer function over which τ or some τ·c_k changes, in order, each
+/// (s_a, s_b, rate, jump): the sensitivity's per-piece terms, computed on the host in f32 as
+/// the texel scan computes them (rate = jump / (s_b − s_a), −1 for a step of width 0). The
+/// kernels copy the block into registers and the adaptive kernel's scan (`transfer_sensitivity`
+/// with `TF_SENSITIVITY_PIECES`) unrolls over them: no gather, and flat pieces, which add
+/// nothing, are left out. Zero past the last piece, and unused where there are more than
+/// [`SENSITIVITY_PIECES`]
+/// ([`TransferFunction::sensitivity_pieces`](crate::view::transfer::TransferFunction::sensitivity_pieces)).
+/// GLSL twin: `SensitivityBlock`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct SensitivityBlock {
+    pub pieces: [[f32; 4]; SENSITIVITY_PIECES],
+}
+const _: () = assert!(std::mem::size_of::<SensitivityBlock>() == 256);
 
 /// One isosurface. GLSL twin: `IsoSurface`.
 #[repr(C)]

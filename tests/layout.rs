@@ -92,6 +92,9 @@ fn glsl_and_rust_layouts_agree() {
         tf: TfBlock {
             s_tau: std::array::from_fn(|i| v(45.0 + i as f32)),
         },
+        sensitivity: SensitivityBlock {
+            pieces: std::array::from_fn(|i| v(61.0 + i as f32)),
+        },
     };
     assert_eq!(*p, expected, "RenderParams");
 

@@ -161,8 +161,9 @@ fn constant_field_matches_the_analytic_integral() {
 
 #[test]
 fn gpu_image_matches_cpu_reference() {
-    // More points than the exact opacity's unrolled scan takes (TF_BLOCK_POINTS): the scan
-    // reads the texel view. A comb of 40 points with a thin tooth every fifth.
+    // More points than the exact opacity's unrolled scan takes (TF_BLOCK_POINTS), and more
+    // pieces of change than the sensitivity's (SENSITIVITY_PIECES): the scans read the texel
+    // view. A comb of 40 points with a thin tooth every fifth.
     let comb = format!(
         "transfer.points=[{}]",
         (0..40)
@@ -258,6 +259,13 @@ fn gpu_image_matches_cpu_reference() {
             "transfer.points=[[0.0,1.0,0.6,0.2,0.0],[0.498,1.0,0.6,0.2,0.0],[0.5,0.2,0.6,1.0,100],[0.502,1.0,0.6,0.2,0.0],[1.0,1.0,0.6,0.2,0.0]]",
         ],
         vec!["render.exact_opacity=true", comb.as_str()],
+        // More pieces of change than the Hermite criterion's unrolled sensitivity scan takes
+        // (SENSITIVITY_PIECES): it reads the texel view.
+        vec![
+            "render.method=\"adaptive\"",
+            "render.adaptive=\"hermite\"",
+            comb.as_str(),
+        ],
     ] {
         let mut o = SMALL.to_vec();
         o.extend(extra.iter().copied());

@@ -103,8 +103,24 @@ vec4 transfer_lookup(float s, uint count) {
 
 // How far τ and τ·c can move when s departs by at most `deviation` from the line the tables
 // assume, somewhere in [lo, hi] (twin of TransferFunction::sensitivity, stage
-// transfer_sensitivity). Reads through the texel view: inside divergent code a storage-buffer
-// load is a per-lane loop even at a uniform index.
+// transfer_sensitivity).
+#if TF_SENSITIVITY_PIECES >= 0
+// Over the pieces of change the host computed (SensitivityBlock; flat pieces add nothing and are
+// left out), copied into registers with the parameters: a constant trip count, so NIR unrolls
+// the scan and no lane gathers. The adaptive kernel runs it for every interval it tests, and
+// the scan through the texel view below cost about a fifth of a dense scene's frame.
+float transfer_sensitivity(float lo, float hi, float deviation, uint count) {
+    float m = 0.0;
+    [[unroll]] for (int i = 0; i < TF_SENSITIVITY_PIECES; ++i) {
+        vec4 p = params.sensitivity.pieces[i];
+        float change = p.z < 0.0 ? p.w : min(p.z * deviation, p.w);
+        m = p.y >= lo && p.x <= hi ? max(m, change) : m;
+    }
+    return m;
+}
+#else
+// Through the texel view: inside divergent code a storage-buffer load is a per-lane loop even
+// at a uniform index.
 float transfer_sensitivity(float lo, float hi, float deviation, uint count) {
     float m = 0.0;
     vec4 ca = imageLoad(tf_texels, 0);
@@ -125,6 +141,7 @@ float transfer_sensitivity(float lo, float hi, float deviation, uint count) {
     }
     return m;
 }
+#endif
 #endif
 
 #endif

@@ -70,6 +70,12 @@ struct TfBlock {
     vec4 s_tau[16];
 };
 
+// The transfer function's pieces of change (s_a, s_b, rate or -1 for a step, jump), for the
+// Hermite criterion's unrolled sensitivity scan (twin: SensitivityBlock).
+struct SensitivityBlock {
+    vec4 pieces[16];
+};
+
 struct RenderParams {
     CameraBlock camera;
     FieldBlock field;
@@ -77,6 +83,7 @@ struct RenderParams {
     TableBlock tables;
     vec4 lighting;  // Blinn-Phong ambient, diffuse, specular, shininess
     TfBlock tf;
+    SensitivityBlock sensitivity;
 };
 
 

@@ -74,6 +74,9 @@ void main() {
     for (int i = 0; i < 16; ++i) {
         render_params.tf.s_tau[i] = v(45.0 + float(i));
     }
+    for (int i = 0; i < 16; ++i) {
+        render_params.sensitivity.pieces[i] = v(61.0 + float(i));
+    }
 
     iso_surface.color_opacity = v(1.0);
     iso_surface.value = 2.0;

@@ -42,6 +42,10 @@ pub struct Variant {
     /// With it, the transfer function's point count where its scan is unrolled over the
     /// parameters' `TfBlock` (`PREINT_TF_POINTS`; 0: read from the texel view).
     pub tf_points: u32,
+    /// The Hermite criterion's pieces of change where its sensitivity scan is unrolled over
+    /// the parameters' `SensitivityBlock` (`TF_SENSITIVITY_PIECES`; `None`: it reads the
+    /// texel view, as every kernel without that criterion is compiled).
+    pub sensitivity_pieces: Option<u32>,
     /// Isosurfaces of the scene (0 compiles no isosurface code).
     pub isosurfaces: usize,
     /// Rays are clipped to a boundary hull (else to the domain's box).
@@ -119,6 +123,7 @@ impl Variant {
             interval: IntervalModel::Linear,
             exact_opacity: false,
             tf_points: 0,
+            sensitivity_pieces: None,
             isosurfaces: 0,
             grid: if field.uses_octree() {
                 Storage::F32
@@ -228,6 +233,11 @@ impl Variant {
         d.extend(crate::view::preintegration::exact_opacity_defines(
             self.exact_opacity,
             self.tf_points,
+        ));
+        d.push((
+            "TF_SENSITIVITY_PIECES".into(),
+            self.sensitivity_pieces
+                .map_or("-1".into(), |n| n.to_string()),
         ));
         d.push((
             "MAX_ISO".into(),

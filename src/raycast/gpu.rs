@@ -5,9 +5,10 @@ use super::adaptive;
 use super::setup::RaySetup;
 use crate::field::Field;
 use crate::field::variant::{Variant, field_params, v4};
-use crate::gpu_types::{IntegratorBlock, RenderParams};
+use crate::gpu_types::{IntegratorBlock, RenderParams, SENSITIVITY_PIECES};
 use crate::view::preintegration::PreintegrationTables;
 use crate::view::transfer::TransferFunction;
+use crate::view::{AdaptiveCriterion, Method};
 
 /// The ray caster's variant for a field and a ray setup.
 pub fn variant_for_render(field: &Field, setup: &RaySetup) -> Variant {
@@ -24,6 +25,10 @@ pub fn variant_for_render(field: &Field, setup: &RaySetup) -> Variant {
         skip: setup.skip,
         exact_opacity,
         tf_points: crate::view::preintegration::unrolled_tf_points(exact_opacity, setup.tf_points),
+        sensitivity_pieces: (setup.method == Method::Adaptive
+            && setup.adaptive == AdaptiveCriterion::Hermite
+            && setup.sensitivity_pieces as usize <= SENSITIVITY_PIECES)
+            .then_some(setup.sensitivity_pieces),
         clip: setup.clip.is_some(),
         ..Variant::of(field)
     }
@@ -63,8 +68,9 @@ pub fn render_params(field: &Field, setup: &RaySetup, tf_count: u32) -> RenderPa
 }
 
 /// Adds the tables' description to the kernel constants, with the peak of the transfer
-/// function they were built from.
+/// function they were built from and its blocks for the unrolled scans.
 pub fn table_params(p: &mut RenderParams, tables: &PreintegrationTables, tf: &TransferFunction) {
     p.tables = tables.gpu_block(tf);
     p.tf = tf.gpu_block();
+    p.sensitivity = tf.gpu_sensitivity();
 }

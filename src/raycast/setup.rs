@@ -97,6 +97,10 @@ pub struct RaySetup {
     /// (0 until then): the exact opacity's scan is unrolled for up to
     /// [`crate::gpu_types::TF_BLOCK_POINTS`] of them.
     pub tf_points: u32,
+    /// The transfer function's pieces of change ([`TransferFunction::sensitivity_pieces`]),
+    /// recorded with `tf_points`: the Hermite criterion's sensitivity scan is unrolled over
+    /// up to [`crate::gpu_types::SENSITIVITY_PIECES`] of them.
+    pub sensitivity_pieces: u32,
     /// The fraction of ray length "auto" found in empty blocks when it decided.
     pub skip_estimate: Option<f64>,
     pub background: [f64; 3],
@@ -198,6 +202,7 @@ impl RaySetup {
             exact_opacity: render.exact_opacity == ExactOpacity::On,
             exact_opacity_auto: render.exact_opacity == ExactOpacity::Auto,
             tf_points: 0,
+            sensitivity_pieces: 0,
             hull_hits: FIRST_HULL_HITS,
             hull_cache: HullCache::Off,
             background: render.background,
@@ -234,15 +239,22 @@ impl RaySetup {
 
     /// Decides `render.exact_opacity = "auto"` for a frame of `tf` over `field`
     /// ([`ExactOpacity::resolve`]; the direct methods read no tables and stay off), and records
-    /// `tf`'s point count for the kernel's scan.
+    /// what the kernel's scans of `tf` unroll over ([`RaySetup::record_transfer`]).
     pub fn resolve_exact_opacity(&mut self, tf: &TransferFunction, field: &Field) {
-        self.tf_points = tf.points().len() as u32;
+        self.record_transfer(tf);
         if !self.exact_opacity_auto {
             return;
         }
         self.exact_opacity_auto = false;
         self.exact_opacity =
             self.method.preintegrated() && ExactOpacity::Auto.resolve(tf, scalar_range(field));
+    }
+
+    /// Records `tf`'s point count and pieces of change, which the kernel's scans of the
+    /// transfer function unroll over.
+    pub fn record_transfer(&mut self, tf: &TransferFunction) {
+        self.tf_points = tf.points().len() as u32;
+        self.sensitivity_pieces = tf.sensitivity_pieces().len() as u32;
     }
 
     /// The shortest length, in world units, this setup's method steps by: the step (the

@@ -142,8 +142,8 @@ pub fn render(
     resolved.hull_cache = HullCache::Off;
     resolved.resolve_skip(gpu_field.blocks(), tf, field);
     // The exact opacity as the setup has it (the caller's tables follow the same setup), with
-    // the transfer function's point count for its scan.
-    resolved.tf_points = tf.points().len() as u32;
+    // what the kernel's scans of the transfer function unroll over.
+    resolved.record_transfer(tf);
     let tables = tables.filter(|_| resolved.method.preintegrated());
     let table = tables.map(|t| table_buffer(ctx, t)).transpose()?;
     let (w, h) = (resolved.camera.width, resolved.camera.height);

@@ -2,7 +2,7 @@
 //! (stage `transfer_lookup`). Colour and extinction τ (per world unit) are interpolated
 //! linearly in s between control points and clamped outside their range.
 
-use crate::gpu_types::{TF_BLOCK_POINTS, TfBlock, TfPoint};
+use crate::gpu_types::{SensitivityBlock, TF_BLOCK_POINTS, TfBlock, TfPoint};
 
 /// Most control points a transfer function may have: the kernels scan them per lookup, so the
 /// count bounds the work of every sample (1024 is more than any colour-map preset ParaView
@@ -239,6 +239,41 @@ impl TransferFunction {
         block
     }
 
+    /// The pieces over which τ or some τ·c_k changes, each (s_a, s_b, rate, jump) as the
+    /// kernel's texel scan of [`Self::sensitivity`] computes them, in f32 from the f32 points:
+    /// jump the largest change, rate = jump / (s_b − s_a), or −1 for a step (width 0). Flat
+    /// pieces add nothing to the sensitivity and are left out. The kernel's unrolled scan reads
+    /// them from [`SensitivityBlock`] where there are at most
+    /// [`SENSITIVITY_PIECES`](crate::gpu_types::SENSITIVITY_PIECES).
+    pub fn sensitivity_pieces(&self) -> Vec<[f32; 4]> {
+        let weighted = |p: &[f64; 5]| {
+            let (r, g, b, tau) = (p[1] as f32, p[2] as f32, p[3] as f32, p[4] as f32);
+            [r * tau, g * tau, b * tau, tau]
+        };
+        self.points
+            .windows(2)
+            .filter_map(|pair| {
+                let (wa, wb) = (weighted(&pair[0]), weighted(&pair[1]));
+                let jump = (0..4).map(|k| (wb[k] - wa[k]).abs()).fold(0.0f32, f32::max);
+                let (sa, sb) = (pair[0][0] as f32, pair[1][0] as f32);
+                let width = sb - sa;
+                let rate = if width > 0.0 { jump / width } else { -1.0 };
+                (jump > 0.0).then_some([sa, sb, rate, jump])
+            })
+            .collect()
+    }
+
+    /// [`Self::sensitivity_pieces`], zero past the last, for the kernel constants (unused where
+    /// there are more than
+    /// [`SENSITIVITY_PIECES`](crate::gpu_types::SENSITIVITY_PIECES)).
+    pub fn gpu_sensitivity(&self) -> SensitivityBlock {
+        let mut block = SensitivityBlock::default();
+        for (slot, piece) in block.pieces.iter_mut().zip(self.sensitivity_pieces()) {
+            *slot = piece;
+        }
+        block
+    }
+
     /// GPU layout.
     pub fn to_gpu(&self) -> Vec<TfPoint> {
         self.points
@@ -304,6 +339,60 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn sensitivity_pieces_give_the_sensitivity() {
+        // The kernel's unrolled scan over the pieces (transfer_sensitivity with
+        // TF_SENSITIVITY_PIECES), in f64 over the f32 pieces, against the f64 scan of the
+        // points: flat pieces left out, a step (width 0) counting its jump, ranges past the ends.
+        let tf = TransferFunction::new(vec![
+            [0.0, 0.5, 0.5, 0.5, 0.0],
+            [0.2, 0.9, 0.1, 0.3, 0.0],
+            [0.3, 1.0, 0.55, 0.15, 4.0],
+            [0.3, 0.2, 0.5, 1.0, 1.5],
+            [0.5, 0.2, 0.5, 1.0, 1.5],
+            [0.6, 0.7, 0.2, 0.1, 6.0],
+            [0.9, 0.7, 0.2, 0.1, 6.0],
+            [1.0, 0.0, 0.0, 0.0, 0.0],
+        ]);
+        let pieces = tf.sensitivity_pieces();
+        // [0, 0.2] is transparent at both ends and [0.3, 0.5], [0.6, 0.9] are flat.
+        assert_eq!(pieces.len(), 4, "{pieces:?}");
+        assert_eq!(pieces[1][2], -1.0, "the step at 0.3: {pieces:?}");
+        let scan = |lo: f64, hi: f64, deviation: f64| {
+            pieces.iter().fold(0.0f64, |m, p| {
+                let [sa, sb, rate, jump] = p.map(f64::from);
+                let change = if rate < 0.0 {
+                    jump
+                } else {
+                    (rate * deviation).min(jump)
+                };
+                if sb >= lo && sa <= hi {
+                    m.max(change)
+                } else {
+                    m
+                }
+            })
+        };
+        for i in 0..400 {
+            // Offset so that no range ends on a point, where f32 and f64 would disagree.
+            let lo = -0.1 + 1.2 * (f64::from(i) + 0.37) / 400.0;
+            for (width, deviation) in [(0.0, 0.0), (0.01, 0.003), (0.05, 0.02), (0.3, 1.0)] {
+                let (a, b) = (
+                    scan(lo, lo + width, deviation),
+                    tf.sensitivity(lo, lo + width, deviation),
+                );
+                assert!(
+                    (a - b).abs() <= 1e-6 * b.max(1.0),
+                    "[{lo}, {}] deviation {deviation}: pieces {a}, points {b}",
+                    lo + width
+                );
+            }
+        }
+        let block = tf.gpu_sensitivity();
+        assert_eq!(&block.pieces[..4], &pieces[..]);
+        assert!(block.pieces[4..].iter().all(|p| *p == [0.0; 4]));
     }
 
     #[test]
