@@ -7,12 +7,13 @@
 // [t0 + k·l_max, min(t0 + (k+1)·l_max, t1)]); twin of src/raycast/adaptive.rs, whose
 // documentation states both criteria: ADAPTIVE_CRITERION 0 = [MLS] §4 (halves compared),
 // 1 = the Hermite criterion with its step controller. Intervals are dyadic inside a top; a stack
-// entry is a knot whose w holds ±(depth + 1) of the interval it closes, negative when f is
-// undefined there (one vec4 per entry keeps the stack small, which matters on lavapipe; the
-// Hermite kernel also keeps it in registers). `a` is the knot at the chunk's start (evaluated
-// here for the first chunk) and `predicted` the Hermite controller's depth (unused by [MLS]'s
-// criterion), both carried between chunks. Each loop body has few MLS call sites: GLSL inlines
-// every call, and lavapipe's compile time and code size grow with the copies.
+// entry is a knot closing a pending interval. [MLS]'s kernel keeps it as a vec4 whose w holds
+// ±(depth + 1) of that interval, negative when f is undefined there; the Hermite kernel keeps
+// (t, f, f') in registers and the rest in three words (integrate_adaptive). `a` is the knot at
+// the chunk's start (evaluated here for the first chunk) and `predicted` the Hermite
+// controller's depth (unused by [MLS]'s criterion), both carried between chunks. Each loop
+// body has few MLS call sites: GLSL inlines every call, and lavapipe's compile time and code
+// size grow with the copies.
 
 // Stage `count_error` (twin of Ray::count_error): adds an accepted interval of `len` whose
 // criterion estimated `error` per sample spacing, capped by the most that length can add.
@@ -68,15 +69,15 @@ float hermite_error(vec4 a, vec4 e, float transmittance, out vec4 mid) {
 // The stack lives in registers: constant-trip loops, unrolled by NIR into selects, stand in for
 // dynamic indexing (LAVAPIPE.md: a dynamically indexed local array in divergent code ran at
 // one core's speed).
-vec4 stack_get(vec4 stack[ADAPTIVE_LEVELS], int i) {
-    vec4 v = stack[0];
+vec3 stack_get(vec3 stack[ADAPTIVE_LEVELS], int i) {
+    vec3 v = stack[0];
     [[unroll]] for (int k = 1; k < ADAPTIVE_LEVELS; ++k) {
         v = k == i ? stack[k] : v;
     }
     return v;
 }
 
-void stack_set(inout vec4 stack[ADAPTIVE_LEVELS], int i, vec4 v) {
+void stack_set(inout vec3 stack[ADAPTIVE_LEVELS], int i, vec3 v) {
     [[unroll]] for (int k = 0; k < ADAPTIVE_LEVELS; ++k) {
         stack[k] = k == i ? v : stack[k];
     }
@@ -130,7 +131,18 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
 #endif
         predicted = 0u;
     }
-    vec4 stack[ADAPTIVE_LEVELS];
+    // The stack: entry i's knot (t, f, f'), and bit i of `defined` whether f is defined there.
+    // The depths of the intervals the entries close rise strictly from the bottom up to the
+    // entry under the top, whose depth the top's equals or exceeds (a split deepens the top and
+    // pushes its left half at the same depth; a pop leaves the rest as it was), so bit j of
+    // `below` marks the entry under the top that closes an interval of depth j, and
+    // `top_depth` is the top's. A vec4 an entry, with the depth in w, kept more values live
+    // across the loop (7 more at 7 levels) and measured about a fifth slower on a dense scene
+    // (BENCHMARKS.md).
+    vec3 stack[ADAPTIVE_LEVELS];
+    uint defined = 0u;
+    uint below = 0u;
+    uint top_depth = 0u;
     uint last = min(last_step, tops);
     uint k = first;
     uint position = 0u;
@@ -171,9 +183,9 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
         // when the new end had a pass of its own: 20-25% of its frame, BENCHMARKS.md).
         while (true) {
             if (sp > 0) {
-                vec4 packed = stack_get(stack, sp - 1);
-                depth = uint(abs(packed.w)) - 1u;
-                vec4 e = vec4(packed.xyz, packed.w > 0.0 ? 1.0 : 0.0);
+                depth = top_depth;
+                vec4 e = vec4(stack_get(stack, sp - 1),
+                              ((defined >> uint(sp - 1)) & 1u) != 0u ? 1.0 : 0.0);
                 float len = l_max * exp2(-float(depth));
                 bool can_split = int(depth) + 1 < ADAPTIVE_LEVELS;
                 vec4 mid;
@@ -208,6 +220,8 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
                     return CHUNK_FINISHED;
                 }
                 if (sp > 0) {
+                    top_depth = uint(findMSB(below));
+                    below &= ~(1u << top_depth);
                     continue;
                 }
             }
@@ -289,13 +303,11 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
             continue;
         }
 #endif
-        float level = float(depth + (split ? 2u : 1u));
-        if (split) {
-            // Both halves are one level deeper; the left one (closed by m) comes first.
-            vec4 top_entry = stack_get(stack, sp - 1);
-            stack_set(stack, sp - 1, vec4(top_entry.xyz, top_entry.w > 0.0 ? level : -level));
-        }
-        stack_set(stack, sp, vec4(m.xyz, m.w > 0.0 ? level : -level));
+        // A split's halves are both one level deeper; the left one (closed by m) comes first.
+        top_depth = split ? depth + 1u : depth;
+        below = split ? below | (1u << top_depth) : 0u;
+        stack_set(stack, sp, m.xyz);
+        defined = (defined & ~(1u << uint(sp))) | (m.w > 0.0 ? 1u << uint(sp) : 0u);
         sp += 1;
     }
     if (tail) {
