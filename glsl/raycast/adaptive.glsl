@@ -92,15 +92,6 @@ uint top_limit(float start, float t1, float l_max, uint units) {
     return min(uint(max(floor((t1 - start) / l_max * float(units)), 0.0)), units);
 }
 
-// Twin of resume_position: the last unit of the deepest level before `exit` (by at least
-// RESUME_MARGIN units) in the top starting at `start`, within its covered units.
-#define RESUME_MARGIN 0.01
-uint resume_position(float start, float t1, float l_max, uint units, float exit) {
-    float p = floor((exit - start) / l_max * float(units) - RESUME_MARGIN);
-    uint q = p > 0.0 ? uint(min(p, float(units))) : 0u;
-    return min(q, top_limit(start, t1, l_max, units));
-}
-
 // The Hermite criterion with its step controller (twin of integrate_hermite). Every iteration
 // of the outer loop evaluates f exactly once, at a new end or at a rejected interval's
 // midpoint; the inner loop composites the intervals that pass in between without evaluating.
@@ -264,7 +255,8 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
 #if SKIP == 1
         // At a top's start, outside the inner loop (whose `if` bodies every lane pays): tops
         // inside a run of empty blocks are skipped, and the integration resumes from a fresh
-        // knot at the last unit before the run's end (twin of the skip in integrate_hermite).
+        // knot at the start of the top holding the run's end (twin of the skip in
+        // integrate_hermite).
         // A run past this chunk leaves the knot pending (PENDING) instead of evaluating one at
         // the chunk's end: the next chunk's first top looks again and resumes, whether or not
         // the run reaches past that top's start, with the one knot the twin evaluates.
@@ -282,12 +274,10 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
                 restart = true;
                 defer = j >= last;
                 uint to = min(j, last);
-                float resume = t0 + float(to) * l_max;
-                position = defer ? 0u : resume_position(resume, t1, l_max, units, run);
-                float into = l_max * (float(position) / float(units));
-                count_skip(float(to - k) * l_max + into, to - k, defer ? 0u : 1u);
+                position = 0u;
+                count_skip(float(to - k) * l_max, to - k, defer ? 0u : 1u);
                 k = to;
-                t_eval = resume + into;
+                t_eval = t0 + float(to) * l_max;
             }
         }
         if (defer) {

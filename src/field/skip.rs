@@ -31,8 +31,8 @@
 //! intervals inside an empty block would add the table's value for a straight line between their
 //! end values, which may cross extinction the field never reaches, so skipping changes those
 //! images — towards the field (tests bound the change). The adaptive integrator (Hermite
-//! criterion) follows a run only at a top interval's start, and resumes at the last unit of its
-//! deepest level before the run's end.
+//! criterion) follows a run only at a top interval's start, and resumes at the start of the top
+//! holding the run's end.
 
 use crate::recon::resample::ResampledGrid;
 use crate::view::shading::Isosurface;

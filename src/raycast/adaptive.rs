@@ -11,9 +11,9 @@
 //! the last top only in whole units of the deepest level, so that every interval it tests has a
 //! table, and composites the remainder (shorter than a unit) as the ray's clipped tail. With
 //! empty-space skipping it looks at each top's start for a run of empty blocks
-//! ([`crate::field::skip::Blocks::run`]) and resumes from a fresh knot at the last unit of the
-//! deepest level before the run's end (in the top holding it), from where intervals climb back
-//! to aligned ones; [MLS]'s criterion does not skip.
+//! ([`crate::field::skip::Blocks::run`]) and resumes from a fresh knot at the start of the top
+//! holding the run's end, from where the top's intervals are aligned as everywhere else;
+//! [MLS]'s criterion does not skip.
 //!
 //! - `mls2008` ([MLS] §4): C1 = table(len)(s_a, s_e) against C2 = the halves composited (the
 //!   midpoint is evaluated for every test). Accepted when (1 − α_acc)·|C1 − C2| ≤ ε·|C1| (|·| the
@@ -320,7 +320,10 @@ fn integrate_hermite(
             }
             let Some(&(e, depth)) = stack.last() else {
                 // At a top's start: tops inside a run of empty blocks are skipped, and the
-                // integration resumes from a fresh knot at the last unit before the run's end.
+                // integration resumes from a fresh knot at the start of the top holding the
+                // run's end. The top's empty part then costs at most its splits; a knot at the
+                // last unit before the run's end cost the climb back to aligned intervals, about
+                // log2(units)/2 evaluations, 3-13% more on the thin peaks (BENCHMARKS.md, "(ix)").
                 if let Some(skip) = ray.skip.filter(|_| position == 0) {
                     let run = skip.run(ray.o, ray.d, start, t1, true);
                     let j = resume_interval(t0, setup.l_max_world, run, k);
@@ -329,11 +332,8 @@ fn integrate_hermite(
                         return;
                     }
                     if j > k || pending {
-                        let resume = t0 + j as f64 * setup.l_max_world;
-                        let p = resume_position(resume, t1, setup.l_max_world, units, run);
-                        let into = setup.l_max_world * (p as f64 / units as f64);
-                        ray.count_skip((j - k) as f64 * setup.l_max_world + into, j - k, 1);
-                        break (resume + into, 0, Next::Restart(j, p));
+                        ray.count_skip((j - k) as f64 * setup.l_max_world, j - k, 1);
+                        break (t0 + j as f64 * setup.l_max_world, 0, Next::Restart(j));
                     }
                 }
                 // A new end at the controller's depth, or deeper until the interval is aligned
@@ -381,11 +381,11 @@ fn integrate_hermite(
         match next {
             Next::End => stack.push((m, depth)),
             Next::Split => push_half(&mut stack, m, depth),
-            Next::Restart(j, p) => {
+            Next::Restart(j) => {
                 a = m;
                 pending = false;
                 k = j;
-                position = p;
+                position = 0;
             }
         }
     }
@@ -411,32 +411,9 @@ enum Next {
     End,
     /// The midpoint of the rejected interval on top of the stack.
     Split,
-    /// Position p (in units of the deepest level) of top j, after a run of empty blocks.
-    Restart(u64, u64),
+    /// The start of top j, after a run of empty blocks.
+    Restart(u64),
 }
-
-/// Where the Hermite integrator resumes in the top starting at `start` after a run of empty
-/// blocks ending at `exit` inside it: the last unit of the deepest level (u = l_max/units)
-/// before `exit`, within the top's covered units (twin of resume_position). The first knot then
-/// lies within one unit of the first occupied block instead of up to a top before it, where
-/// nothing can contribute; every interval after it is dyadic and aligned as before. An exit
-/// within a hundredth of a unit past a unit's start resumes a unit earlier, so that the f32
-/// kernel and this twin pick the same unit: without that margin their images of a thin peak
-/// differed by up to 0.1 at a few pixels (presumably exits on unit boundaries, rounded either
-/// way; the ray enters the domain on a block face), with it by 5e-5 as before the change.
-fn resume_position(start: f64, t1: f64, l_max: f64, units: u64, exit: f64) -> u64 {
-    let p = ((exit - start) / l_max * units as f64 - RESUME_MARGIN).floor();
-    let p = if p.is_finite() && p > 0.0 {
-        p.min(units as f64) as u64
-    } else {
-        0
-    };
-    p.min(top_limit(start, t1, l_max, units))
-}
-
-/// How far before a run's end, in units of the deepest level, the Hermite integrator resumes
-/// at the least (the kernel's RESUME_MARGIN).
-const RESUME_MARGIN: f64 = 0.01;
 
 /// Units of the deepest level that the Hermite integrator covers in the top starting at
 /// `start`: all of them in a full top, ⌊r/u⌋ of the last one (length r = t1 − start).
@@ -460,7 +437,7 @@ fn push_half(stack: &mut Vec<(Knot, usize)>, m: Knot, depth: usize) {
 #[cfg(test)]
 mod tests {
     use super::super::interval::{bezier_hull, hermite_midpoint};
-    use super::{predict_depth, resume_position, top_limit};
+    use super::{predict_depth, top_limit};
 
     /// The cubic Hermite on u ∈ [0, 1] with the given end values and derivatives.
     fn hermite(f0: f64, f1: f64, m0: f64, m1: f64, u: f64) -> f64 {
@@ -519,30 +496,6 @@ mod tests {
         assert_eq!(predict_depth(3, 0.01 * 0.81 / 4.0, 0.01), 2);
         assert_eq!(predict_depth(3, 0.01 * 0.81 / 4.0 * 1.01, 0.01), 3);
         assert_eq!(predict_depth(0, 0.0, 0.01), 0);
-    }
-
-    #[test]
-    fn resumes_at_the_last_unit_before_the_runs_end_and_never_past_it() {
-        // 16 units of 0.25 in a top of 4 starting at 8.
-        assert_eq!(resume_position(8.0, 20.0, 4.0, 16, 9.1), 4);
-        // A run ending on a unit's start resumes a unit before it, and one ending before the
-        // first unit at the top's start.
-        assert_eq!(resume_position(8.0, 20.0, 4.0, 16, 9.0), 3);
-        assert_eq!(resume_position(8.0, 20.0, 4.0, 16, 8.2), 0);
-        assert_eq!(resume_position(8.0, 20.0, 4.0, 16, 7.0), 0);
-        // Never past the covered units of the ray's last top, nor past the top's end.
-        assert_eq!(resume_position(8.0, 10.1, 4.0, 16, 11.0), 8);
-        assert_eq!(resume_position(8.0, 20.0, 4.0, 16, 12.5), 16);
-        assert_eq!(resume_position(8.0, 20.0, 4.0, 16, f64::NAN), 0);
-        for i in 0..4000 {
-            let exit = 8.0 + 4.0 * f64::from(i) / 4000.0;
-            let p = resume_position(8.0, 20.0, 4.0, 16, exit);
-            let at = 8.0 + 0.25 * p as f64;
-            assert!(
-                at <= exit && (exit - at < 0.25 + 0.0025 + 1e-12 || p == 0),
-                "exit {exit}: unit {p}"
-            );
-        }
     }
 
     #[test]
