@@ -323,7 +323,7 @@ fn integrate_hermite(
                 // integration resumes from a fresh knot at the start of the top holding the
                 // run's end. The top's empty part then costs at most its splits; a knot at the
                 // last unit before the run's end cost the climb back to aligned intervals, about
-                // log2(units)/2 evaluations, 3-13% more on the thin peaks (BENCHMARKS.md, "(ix)").
+                // log2(units)/2 evaluations, 1-13% more where rays skip (BENCHMARKS.md, "(ix)").
                 if let Some(skip) = ray.skip.filter(|_| position == 0) {
                     let run = skip.run(ray.o, ray.d, start, t1, true);
                     let j = resume_interval(t0, setup.l_max_world, run, k);
