@@ -273,8 +273,8 @@ uint integrate_adaptive(vec3 o, vec3 d, float t0, float t1, uint first, uint las
             if (j > k || a.w == PENDING) {
                 restart = true;
                 defer = j >= last;
+                // At a top's start the position is already 0, as at the top resumed.
                 uint to = min(j, last);
-                position = 0u;
                 count_skip(float(to - k) * l_max, to - k, defer ? 0u : 1u);
                 k = to;
                 t_eval = t0 + float(to) * l_max;

@@ -381,11 +381,11 @@ fn integrate_hermite(
         match next {
             Next::End => stack.push((m, depth)),
             Next::Split => push_half(&mut stack, m, depth),
+            // A restart is looked for only at a top's start, so the position is already 0.
             Next::Restart(j) => {
                 a = m;
                 pending = false;
                 k = j;
-                position = 0;
             }
         }
     }
