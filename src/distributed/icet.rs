@@ -197,10 +197,9 @@ impl Icet {
             1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
         ];
         let background = [0.0f32; 4];
-        // SAFETY: this context is made current first; `order` holds one entry per rank (the
-        // caller's visibility order of every rank), `viewport` four ints, the matrices 16
-        // doubles, the background four floats, and `pixels` width × height RGBA32F texels, all
-        // alive across the calls; IceT reads them during icetCompositeImage only.
+        // SAFETY: this context is made current first; `order` has one entry per rank, `viewport`
+        // 4 ints, the matrices 16 doubles, the background 4 floats, `pixels` width × height
+        // RGBA32F texels; all outlive icetCompositeImage, the only call that reads them.
         let image = unsafe {
             icetSetContext(self.context);
             icetSingleImageStrategy(strategy.icet());

@@ -485,10 +485,9 @@ impl Recorder<'_> {
                     (&[], &wait),
                     (&[], &release),
                     |device, cmd| {
-                        // SAFETY: recording; `image` is the application's live image with
-                        // TRANSFER_DST usage, the target's format and at least width × height
-                        // texels (Target::image), in TRANSFER_DST_OPTIMAL after the wait barrier;
-                        // `src` holds width × height pixels of that format, tightly packed.
+                        // SAFETY: recording; `image` is the application's live TRANSFER_DST
+                        // image of the target's format, ≥ width × height texels (Target::image),
+                        // TRANSFER_DST_OPTIMAL after the wait; `src`: those pixels, packed.
                         unsafe {
                             device.cmd_copy_buffer_to_image(
                                 cmd, src.handle, image, dst_layout, &region,
