@@ -84,6 +84,10 @@ fn fixed_steps_and_the_adaptive_integrator_meet_the_tolerance() {
 /// A loose tolerance climbs above the ladder's first level where its first rungs are far
 /// inside the budget (`coarsen`): before, ε stayed at level 0's, the coarsest the ladder could
 /// reach, and frames came out many times better than asked (the shell's 0.002 peak at E/29).
+/// The scene gives `render.l_max` (2.6 spacings, the default), so that the rungs differ by ε
+/// alone: with the ladder's own l_max (from √2 × 2.6 at level 0) this scene's level 0 is no
+/// longer far inside E = 0.1 (its first difference 2.3e-2, where 1.6e-2 with 2.6) and the
+/// ladder refines from it instead.
 #[test]
 fn a_loose_tolerance_coarsens_past_the_first_level_and_still_meets_it() {
     let (ctx, _compiler) = gpu();
@@ -95,6 +99,7 @@ fn a_loose_tolerance_coarsens_past_the_first_level_and_still_meets_it() {
     let s = scene(&[
         "render.method=\"adaptive\"",
         "render.adaptive=\"hermite\"",
+        "render.l_max=2.6",
         "render.tolerance=0.1",
     ]);
     let level0 = vmls::renderer::tolerance::first_level(&s.render).epsilon;
@@ -112,7 +117,7 @@ fn a_loose_tolerance_coarsens_past_the_first_level_and_still_meets_it() {
         report.rungs
     );
     assert!(measured <= e, "measured {measured:e}");
-    // Measured on lavapipe: 2.33e-2, at ε 0.030 against level 0's 0.024.
+    // Measured on lavapipe: 2.35e-2, at ε 0.054 against level 0's 0.024.
     assert!(measured >= e / 10.0, "measured {measured:e}");
     drop(renderer);
     finish(ctx);

@@ -18,7 +18,8 @@
 //! - **Discretization**: a ladder of pilot frames ([`PILOT_EDGE`] pixels on the longer side,
 //!   the same camera; splatting at the frame's size) at refinement levels k = 0, 1, 2, …: the fixed step (`render.step`) or
 //!   the sheet thickness (`splat.slab`) halves from level to level; the adaptive integrator's
-//!   ε quarters and its shortest and longest intervals halve. The difference of consecutive levels,
+//!   ε quarters, its shortest interval halves and its longest shrinks by 2^(2/3) (from √2 times
+//!   the scene's `render.l_max` at level 0). The difference of consecutive levels,
 //!   d_k = p99(I_k − I_{k+1}), estimates the error left in I_{k+1} by Richardson extrapolation,
 //!   e_{k+1} ≈ d_k / (2^p − 1), with the order p fitted from consecutive differences (clamped
 //!   to [1, 4]; the method's expected order until two differences exist). The ladder stops
@@ -206,16 +207,20 @@ fn at_level(base: &RenderSettings, k: f64) -> (RenderSettings, f64) {
         }
         Method::Adaptive => {
             s.epsilon = base.adaptive.default_epsilon() * START_EPSILON * halve * halve;
-            // The longest interval shrinks too, by √2 a level: a feature between an
-            // interval's knots that none of its evaluations sees is never subdivided, whatever
-            // ε (DESIGN.md §4), so with l_max fixed the ladder converged to a biased limit
-            // (before the hull's margin: 1.2e-3 on ml-emission at 128² while consecutive levels
-            // differed by 1.7e-4; with the margin, the graded torus at l_max = 2.6 spacings
-            // still stopped at 6e-4). Halving it every level, as before the margin, cost the
-            // torus and the thin peaks 20-40% more evaluations at equal error (BENCHMARKS.md,
-            // "A margin on the Hermite hull").
+            // The longest interval shrinks too: a feature between an interval's knots that
+            // none of its evaluations sees is never subdivided, whatever ε (DESIGN.md §4), so
+            // with l_max fixed the ladder converged to a biased limit (before the hull's
+            // margin: 1.2e-3 on ml-emission at 128² while consecutive levels differed by
+            // 1.7e-4; with the margin, the graded torus at l_max = 2.6 spacings still stopped
+            // at 6e-4). Halving it every level, as before the margin, cost the torus and the
+            // thin peaks 20-40% more evaluations at equal error (BENCHMARKS.md, "A margin on
+            // the Hermite hull"). It shrinks by 2^(2/3) a level from START_L_MAX times the
+            // scene's: the error its floor leaves falls 1.9-3.9× a halving (the graded torus's
+            // floor: 1.1e-3, 5.9e-4, 1.5e-4 at 5.2, 2.6, 1.3 spacings), so 1.5-2.5× a level,
+            // nearer ε's 4× than at √2 a level (BENCHMARKS.md "(x)").
             if !base.given.l_max {
-                s.l_max_spacings = base.l_max_spacings * halve.sqrt();
+                s.l_max_spacings =
+                    base.l_max_spacings * START_L_MAX * halve.powf(L_MAX_SHRINK_EXPONENT);
             }
             if !base.given.l_min {
                 s.l_min_spacings = base.l_min_spacings * halve;
@@ -289,6 +294,16 @@ pub fn first_level(settings: &RenderSettings) -> RenderSettings {
 const START_STEP: f64 = 1.0;
 /// Level 0's ε, in multiples of the criterion's default.
 const START_EPSILON: f64 = 8.0;
+/// Level 0's l_max, in multiples of the scene's (`render.l_max`, 2.6 spacings by default), and
+/// the exponent of its shrink a level: level k's is 2.6 · √2 · 2^(−2k/3). Most evaluations of a
+/// thin scene's adaptive frame are the ends of its longest intervals (BENCHMARKS.md "(ix)":
+/// 16 876 of 24 292 on the graded torus). At eight views of the six tolerance scenes this
+/// ladder kept every tolerance and met E with at most a third of the oracle's evaluations in 8
+/// of the 12 thin cases (6 with l_max from 1× shrinking by √2); √2 shrinking by √2 did too but
+/// took ml-emission at E = 1e-3 to 2.4× the oracle's time, and 2× took more evaluations on the
+/// 0.01 peak (BENCHMARKS.md "(x)").
+const START_L_MAX: f64 = std::f64::consts::SQRT_2;
+const L_MAX_SHRINK_EXPONENT: f64 = 2.0 / 3.0;
 
 /// The order fitted from the last two differences, clamped to [1, 4]; `expected` with fewer.
 fn fitted_order(d: &[f64], expected: f64) -> f64 {
