@@ -214,10 +214,8 @@ fn at_level(base: &RenderSettings, k: f64) -> (RenderSettings, f64) {
             // 1.7e-4; with the margin, the graded torus at l_max = 2.6 spacings still stopped
             // at 6e-4). Halving it every level, as before the margin, cost the torus and the
             // thin peaks 20-40% more evaluations at equal error (BENCHMARKS.md, "A margin on
-            // the Hermite hull"). It shrinks by 2^(2/3) a level from START_L_MAX times the
-            // scene's: the error its floor leaves falls 1.9-3.9× a halving (the graded torus's
-            // floor: 1.1e-3, 5.9e-4, 1.5e-4 at 5.2, 2.6, 1.3 spacings), so 1.5-2.5× a level,
-            // nearer ε's 4× than at √2 a level (BENCHMARKS.md "(x)").
+            // the Hermite hull"). Where it starts and how fast it shrinks: START_L_MAX and
+            // L_MAX_SHRINK_EXPONENT.
             if !base.given.l_max {
                 s.l_max_spacings =
                     base.l_max_spacings * START_L_MAX * halve.powf(L_MAX_SHRINK_EXPONENT);
@@ -294,8 +292,8 @@ pub fn first_level(settings: &RenderSettings) -> RenderSettings {
 const START_STEP: f64 = 1.0;
 /// Level 0's ε, in multiples of the criterion's default.
 const START_EPSILON: f64 = 8.0;
-/// Level 0's l_max, in multiples of the scene's (`render.l_max`, 2.6 spacings by default), and
-/// the exponent of its shrink a level: level k's is 2.6 · √2 · 2^(−2k/3). Most evaluations of a
+/// Level 0's l_max, in multiples of the scene's (`render.l_max`, 2.6 spacings by default), so
+/// that level k's is 2.6 · √2 · 2^(−2k/3) with [`L_MAX_SHRINK_EXPONENT`]. Most evaluations of a
 /// thin scene's adaptive frame are the ends of its longest intervals (BENCHMARKS.md "(ix)":
 /// 16 876 of 24 292 on the graded torus). At eight views of the six tolerance scenes this
 /// ladder kept every tolerance and met E with at most a third of the oracle's evaluations in 8
@@ -303,6 +301,10 @@ const START_EPSILON: f64 = 8.0;
 /// took ml-emission at E = 1e-3 to 2.4× the oracle's time, and 2× took more evaluations on the
 /// 0.01 peak (BENCHMARKS.md "(x)").
 const START_L_MAX: f64 = std::f64::consts::SQRT_2;
+/// l_max shrinks by 2^this a level. The error its floor leaves falls 1.9–3.9× a halving (the
+/// graded torus's floor: 1.1e-3, 5.9e-4, 1.5e-4 at 5.2, 2.6, 1.3 spacings), so 1.5–2.5× a level
+/// here, nearer ε's 4× than at √2 a level, where the ladder's one fitted order chose a finer ε
+/// for ml-emission at E = 1e-3 (1.8e-4 against 2.7e-4, BENCHMARKS.md "(x)").
 const L_MAX_SHRINK_EXPONENT: f64 = 2.0 / 3.0;
 
 /// The order fitted from the last two differences, clamped to [1, 4]; `expected` with fewer.
