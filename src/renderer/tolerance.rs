@@ -28,7 +28,10 @@
 //!   budget, the ladder climbs instead (levels −1, −2: coarser steps, sheets and ε), measuring
 //!   each rung from its difference to the one below while the power law predicts it inside,
 //!   and the level is the power law's between the coarsest rung measured inside and the one
-//!   above it.
+//!   above it. The power law may coarsen up to two levels past the last rung, never past the
+//!   coarsest rung rendered: where a ladder resolves a feature between two rungs, its last
+//!   difference falls far below the trend and one level left frames at E/20 (BENCHMARKS.md,
+//!   "The power law two rungs back").
 //! - **Tables** (preintegrated methods, post-shaded splatting's intervals): a level rendered
 //!   once more with tables of twice the resolution (half again where twice does not fit the
 //!   device); the move, extrapolated at the tables' order 2 in the cell, is the tables' error,
@@ -85,6 +88,11 @@ const MAX_LEVELS: i32 = 9;
 /// interval twice as long. Coarser, a feature narrower than a step could lie unseen between
 /// both rungs of a difference that then reads as converged.
 const MIN_LEVEL: i32 = -2;
+
+/// How many levels the power law may take the choice above the last rung (within the rungs
+/// rendered). One level left the 0.005 peak's even views at E/21 where its ladder resolved the
+/// peak between two rungs; two kept every eight-view case within [E/10, E] (BENCHMARKS.md).
+const MAX_COARSENING: i32 = 2;
 /// The largest table resolution the tolerance chooses.
 const MAX_TABLE: usize = 4096;
 
@@ -485,6 +493,8 @@ impl Renderer {
                     break;
                 }
             }
+            // The coarsest rung rendered: the power law interpolates, never extrapolates, to it.
+            let mut coarsest = first;
             if let Some(image) = first_image.filter(|_| level == first + 1 && estimate.is_finite())
             {
                 let up = coarsen(
@@ -495,6 +505,7 @@ impl Renderer {
                     (estimate, order),
                     &mut pilot,
                 )?;
+                coarsest -= up.rungs.len() as i32;
                 rungs.splice(0..0, up.rungs);
                 (level, estimate, order) = up.level;
             }
@@ -508,14 +519,7 @@ impl Renderer {
                     e / 2.0
                 ));
             }
-            // The power law between the last two rungs: refine no further than the last,
-            // coarsen at most to the one before.
-            let extra = if estimate > 0.0 {
-                (estimate / budget).log2() / order
-            } else {
-                -1.0
-            };
-            chosen_level = f64::from(level) + extra.clamp(-1.0, 0.0);
+            chosen_level = power_law_level(level, coarsest, estimate / budget, order);
             let (s, v) = at_level(&base, chosen_level);
             let at_k = estimate * 2f64.powf(order * (f64::from(level) - chosen_level));
             (s, Some((key, v, at_k)))
@@ -714,9 +718,38 @@ fn finer_tables(
     Ok(None)
 }
 
+/// The level whose error the power law from the last rung `level` (its estimate `ratio` times
+/// the budget, at `order`) puts at the budget: no finer than `level`, at most
+/// [`MAX_COARSENING`] levels coarser and never past `coarsest`, the coarsest rung rendered, so
+/// that the law interpolates between measured rungs. An estimate of zero coarsens one level.
+fn power_law_level(level: i32, coarsest: i32, ratio: f64, order: f64) -> f64 {
+    let extra = if ratio > 0.0 {
+        ratio.log2() / order
+    } else {
+        -1.0
+    };
+    let reach = (coarsest - level).max(-MAX_COARSENING);
+    f64::from(level) + extra.clamp(f64::from(reach.min(0)), 0.0)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_power_law_coarsens_within_the_rungs_rendered() {
+        // Inside the budget by 2^4 at order 2: two levels coarser, where two rungs above exist.
+        assert_eq!(power_law_level(3, 0, 1.0 / 16.0, 2.0), 1.0);
+        // Only one rung above the last: no further than it.
+        assert_eq!(power_law_level(3, 2, 1.0 / 16.0, 2.0), 2.0);
+        // Far inside: never more than two levels.
+        assert_eq!(power_law_level(5, -2, 1e-9, 1.0), 3.0);
+        // Between rungs: the law's own level.
+        assert!((power_law_level(2, 0, 0.5, 2.0) - 1.5).abs() < 1e-12);
+        // Outside the budget (the ladder ran out): the last rung, never finer.
+        assert_eq!(power_law_level(4, 0, 3.0, 2.0), 4.0);
+        assert_eq!(power_law_level(4, 0, 0.0, 2.0), 3.0);
+    }
 
     #[test]
     fn p99_is_the_rank_of_the_99th_percentile() {
