@@ -23,14 +23,14 @@
 //!   d_k = p99(I_k − I_{k+1}), estimates the error left in I_{k+1} by Richardson extrapolation,
 //!   e_{k+1} ≈ d_k / (2^p − 1), with the order p fitted from consecutive differences (clamped
 //!   to [1, 4]; the method's expected order until two differences exist). The ladder stops
-//!   once that estimate is below [`SAFETY`] · E/2; the level is then the power law's, between
-//!   the last two rungs. Where the first difference already puts level 0 itself inside that
+//!   once that estimate is below [`SAFETY`] · E/2; the level is then the power law's from the
+//!   last rung (within the rungs rendered, below). Where the first difference already puts level 0 itself inside that
 //!   budget, the ladder climbs instead (levels −1, −2: coarser steps, sheets and ε), measuring
 //!   each rung from its difference to the one below while the power law predicts it inside,
 //!   and the level is the power law's between the coarsest rung measured inside and the one
 //!   above it. The power law may coarsen up to two levels past the last rung, never past the
 //!   coarsest rung rendered: where a ladder resolves a feature between two rungs, its last
-//!   difference falls far below the trend and one level left frames at E/20 (BENCHMARKS.md,
+//!   difference falls far below the trend and one level left frames at E/21 (BENCHMARKS.md,
 //!   "The power law two rungs back").
 //! - **Tables** (preintegrated methods, post-shaded splatting's intervals): a level rendered
 //!   once more with tables of twice the resolution (half again where twice does not fit the
