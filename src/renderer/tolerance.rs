@@ -24,8 +24,8 @@
 //!   e_{k+1} ≈ d_k / (2^p − 1), with the order p fitted from consecutive differences (clamped
 //!   to [1, 4]; the method's expected order until two differences exist). The ladder stops
 //!   once that estimate is below [`SAFETY`] · E/2; the level is then the power law's from the
-//!   last rung (within the rungs rendered, below). Where the first difference already puts level 0 itself inside that
-//!   budget, the ladder climbs instead (levels −1, −2: coarser steps, sheets and ε), measuring
+//!   last rung (within the rungs rendered, below). Where the first difference already puts
+//!   level 0 itself inside that budget, the ladder climbs instead (levels −1, −2: coarser steps, sheets and ε), measuring
 //!   each rung from its difference to the one below while the power law predicts it inside,
 //!   and the level is the power law's between the coarsest rung measured inside and the one
 //!   above it. The power law may coarsen up to two levels past the last rung, never past the
