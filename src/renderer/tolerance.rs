@@ -25,10 +25,10 @@
 //!   to [1, 4]; the method's expected order until two differences exist). The ladder stops
 //!   once that estimate is below [`SAFETY`] · E/2; the level is then the power law's from the
 //!   last rung (within the rungs rendered, below). Where the first difference already puts
-//!   level 0 itself inside that budget, the ladder climbs instead (levels −1, −2: coarser steps, sheets and ε), measuring
-//!   each rung from its difference to the one below while the power law predicts it inside,
-//!   and the level is the power law's between the coarsest rung measured inside and the one
-//!   above it. The power law may coarsen up to two levels past the last rung, never past the
+//!   level 0 itself inside that budget, the ladder climbs instead (levels −1, −2: coarser
+//!   steps, sheets and ε), measuring each rung from its difference to the one below while the
+//!   power law predicts it inside, and the level is the power law's between the coarsest rung
+//!   measured inside and the one above it. The power law may coarsen up to two levels past the last rung, never past the
 //!   coarsest rung rendered: where a ladder resolves a feature between two rungs, its last
 //!   difference falls far below the trend and one level left frames at E/21 (BENCHMARKS.md,
 //!   "The power law two rungs back").
