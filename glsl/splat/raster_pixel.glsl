@@ -233,15 +233,19 @@ void load_pixel(inout Pixel px, uint w) {
 #undef GET
 }
 
-// The invocation's pixels, one statement each.
+// The invocation's pixels, one statement each, and the last of them.
 #if SPLAT_PIXELS == 1
 #define EACH(F) F(px0)
+#define LAST_PIXEL px0
 #elif SPLAT_PIXELS == 2
 #define EACH(F) F(px0) F(px1)
+#define LAST_PIXEL px1
 #elif SPLAT_PIXELS == 4
 #define EACH(F) F(px0) F(px1) F(px2) F(px3)
+#define LAST_PIXEL px3
 #elif SPLAT_PIXELS == 8
 #define EACH(F) F(px0) F(px1) F(px2) F(px3) F(px4) F(px5) F(px6) F(px7)
+#define LAST_PIXEL px7
 #else
 #error "SPLAT_PIXELS is 1, 2, 4 or 8"
 #endif

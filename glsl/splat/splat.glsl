@@ -1,5 +1,5 @@
-// EWA splatting helpers shared by the splat_* kernels: f32 twins of src/splat/project.rs
-// (erfc_pos, phi_between, splat_footprint) and the sheet addition. Kernels declare
+// EWA splatting helpers shared by the splat_* kernels: f32 twins of src/splat/footprint.rs
+// (erfc_pos, phi_between, splat_profile, splat_column) and the sheet addition. Kernels declare
 // `SplatParams params` first.
 #ifndef VMLS_SPLAT_GLSL
 #define VMLS_SPLAT_GLSL
@@ -101,10 +101,76 @@ vec3 splat_profile(Splat s, float cutoff, vec2 pixel, vec3 view) {
 #endif
 }
 
-// The share of a splat's line integral through pixel (x, y) that lies in t in [ta, tb]
-// (SPLAT_SPLIT == 0: the whole integral); zero outside the cutoff.
-float splat_footprint(Splat s, float cutoff, vec2 pixel, vec3 view, float ta, float tb) {
-    vec3 pr = splat_profile(s, cutoff, pixel, view);
+// The exact profile down one column of pixels, the rays d'(t) = (dx, dy0 + t, 1) of one dx
+// (twin: splat_column in src/splat/footprint.rs): a(t) = a0 + t (a1 + t a2), b(t) = b0 + t b1
+// and g(t) = g0 + t (g1 + t g2), exact polynomials since d' and w = r x d' are affine in t.
+// Taken once per entry at the middle of an invocation's SPLAT_PIXELS rows and shared by them:
+// a pixel then pays 5 multiply-adds for a, b and g where splat_profile pays 29 operations.
+// The price is f32 rounding: g1 and g2 cancel a little, so e = g/a errs about 3x the direct
+// Gram form (tests/splat_footprint.rs: 3.9e-5 against 1.2e-5 at most, the naive c - b^2/a
+// 1.0); about the column's first row instead of its middle, 6.6x.
+struct Column {
+    vec3 a;
+    vec2 b;
+    vec3 g;
+    float dy0;
+};
+
+Column splat_column(Splat s, vec2 view0) {
+    Column c;
+    c.dy0 = view0.y;
+#if SPLAT_EXACT == 1
+    float dx = view0.x;
+    float dy = view0.y;
+    vec4 q0 = s.footprint0, q1 = s.footprint1, j0 = s.footprint2, j1 = s.footprint3;
+    vec3 qd = vec3(q0.x * dx + q0.y * dy + q0.w,
+                   q0.y * dx + q0.z * dy + q1.x,
+                   q0.w * dx + q1.x * dy + q1.y);
+    vec3 r = vec3(q1.z, q1.w, j1.z);
+    vec3 w = vec3(r.y - r.z * dy, r.z * dx - r.x, r.x * dy - r.y * dx);
+    // adj(P) w, and adj(P) w1 for w1 = dw/dt = (-r.z, 0, r.x).
+    vec3 pw = vec3(j0.x * w.x + j0.y * w.y + j0.w * w.z,
+                   j0.y * w.x + j0.z * w.y + j1.x * w.z,
+                   j0.w * w.x + j1.x * w.y + j1.y * w.z);
+    vec3 pw1 = vec3(j0.w * r.x - j0.x * r.z, j1.x * r.x - j0.y * r.z, j1.y * r.x - j0.w * r.z);
+    c.a = vec3(dx * qd.x + dy * qd.y + qd.z, 2.0 * qd.y, q0.z);
+    c.b = vec2(dot(r, qd), r.x * q0.y + r.y * q0.z + r.z * q1.x);
+    c.g = vec3(dot(w, pw), 2.0 * dot(w, pw1), r.x * pw1.z - r.z * pw1.x);
+#else
+    c.a = vec3(0.0);
+    c.b = vec2(0.0);
+    c.g = vec3(0.0);
+#endif
+    return c;
+}
+
+// splat_profile at a pixel of the column `c` was taken for (its pixel_view `view`): through
+// the column where an invocation draws several rows, else directly.
+vec3 splat_profile_at(Splat s, Column c, float cutoff, vec2 pixel, vec3 view) {
+#if SPLAT_EXACT == 1 && SPLAT_PIXELS > 1
+    float t = view.y - c.dy0;
+    float a = c.a.x + t * (c.a.y + t * c.a.z);
+    float b = c.b.x + t * c.b.y;
+    float g = c.g.x + t * (c.g.y + t * c.g.z);
+    if (!(a > 0.0)) {
+        return vec3(0.0, 0.0, 1.0);
+    }
+    float e = g / a;
+    if (e > cutoff * cutoff) {
+        return vec3(0.0, 0.0, 1.0);
+    }
+    float len = view.z;
+    float inv_sqrt_a = inversesqrt(a);
+    return vec3(s.footprint3.w * len * inv_sqrt_a * exp_e(-0.5 * e), -b * len / a,
+                1.0 / (len * inv_sqrt_a));
+#else
+    return splat_profile(s, cutoff, pixel, view);
+#endif
+}
+
+// The share of a profile `pr` (splat_profile's) that lies in t in [ta, tb] (SPLAT_SPLIT == 0:
+// the whole line integral); zero outside the cutoff.
+float profile_share(vec3 pr, float ta, float tb) {
 #if SPLAT_SPLIT == 1
     if (pr.x == 0.0) {
         return 0.0;

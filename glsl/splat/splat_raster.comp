@@ -156,7 +156,7 @@ uvec2 next_entry(uint at, uint at_end, uint steps) {
 // 0 and every share a finite multiple of it). On lavapipe an early `return` here cost about
 // 30% of a post-shaded splat_raster: every statement after it, the ring's registers
 // included, became a masked write (BENCHMARKS.md, "Branch-free accumulation").
-void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) {
+void accumulate(inout Pixel px, Splat s, Column col, uint k, uint span, float ta, float tb) {
     // (Padding invocations past the tile's rows have no pixel.)
     bool in_box = px.inside && all(greaterThanEqual(ivec2(px.x, px.y), s.bbox.xy))
                   && all(lessThanEqual(ivec2(px.x, px.y), s.bbox.zw));
@@ -168,7 +168,7 @@ void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) 
     px.evaluated += in_box ? 1u : 0u;
 #if SPLAT_RING > 0
     // The lateral footprint once, then its share of each sheet k + d (d < span).
-    vec3 pr = splat_profile(s, cutoff, pixel, px.view);
+    vec3 pr = splat_profile_at(s, col, cutoff, pixel, px.view);
     pr.x = in_box ? pr.x : 0.0;
     px.contributions += pr.x != 0.0 ? 1u : 0u;
 #if SPLAT_BRANCHES == 1
@@ -329,7 +329,7 @@ void accumulate(inout Pixel px, Splat s, uint k, uint span, float ta, float tb) 
 #undef RING_STEP
 #endif
 #else
-    float g = splat_footprint(s, cutoff, pixel, px.view, ta, tb);
+    float g = profile_share(splat_profile_at(s, col, cutoff, pixel, px.view), ta, tb);
     g = in_box ? g : 0.0;
     px.contributions += g != 0.0 ? 1u : 0u;
 #if SPLAT_POST == 1
@@ -495,6 +495,8 @@ void main() {
 #if SPLAT_PREFETCH >= 1
     uvec2 entry1 = next_entry(at + 1u, at_end, steps);
 #endif
+    // Where splat_column takes each entry's forms: the middle of the invocation's rows.
+    vec2 column_view = vec2(px0.view.x, 0.5 * (px0.view.y + LAST_PIXEL.view.y));
     // The walk's cost in this pass, in loop iterations (one per entry, push.sheet_cost per
     // sheet, which counts the loops of compositing it): a pass stops before it would pass
     // push.chunk, below llvmpipe's limit, and leaves the walk to the next (`cut`).
@@ -562,7 +564,9 @@ void main() {
 #else
             uint span = 1u;
 #endif
-#define ACCUMULATE(px) accumulate(px, s, k, span, ta, tb);
+            // The exact footprint down this invocation's column (splat_column).
+            Column col = splat_column(s, column_view);
+#define ACCUMULATE(px) accumulate(px, s, col, k, span, ta, tb);
             EACH(ACCUMULATE)
 #undef ACCUMULATE
             at += 1u;

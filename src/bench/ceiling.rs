@@ -23,8 +23,11 @@
 //!
 //! - Splatting rows are measured on `splat_raster`, the main kernel of a splatting frame: per
 //!   pixel whose footprint it evaluates, 110 flops for exact footprints and 65 for affine ones
-//!   (the operations of `splat_footprint`, a transcendental function counted as 10; post-shaded
-//!   entries add their ring's sheet shares, `entry_flops`), plus per
+//!   (the operations of `splat_footprint` evaluated directly, a transcendental function counted
+//!   as 10: a nominal count, like the MLS rows' paper count; the kernel shares each entry's
+//!   `splat_column` among an invocation's rows, where a pixel's 29 operations for a′, b′ and g
+//!   become 5 plus its part of the column's 60; post-shaded entries add their ring's sheet
+//!   shares, `entry_flops`), plus per
 //!   entry walked 8 per pixel of the tile (the box test and the loop), against `probe_fma`;
 //!   and per entry walked and per subgroup of the tile (8 invocations on lavapipe, 32 on an
 //!   NVIDIA GPU) one broadcast load of the 120 bytes of its entry and record, against the

@@ -38,6 +38,7 @@
 //!   cubic of the four nearest sheets, each half preintegrated by one table half a sheet
 //!   long, [`SplatSetup::table_lengths`]; one sheet more, past the kernels, closes the last
 //!   interval).
+pub mod footprint;
 pub mod frame;
 pub mod gpu;
 pub mod plan;
@@ -96,7 +97,7 @@ pub const RING_ENTRY_COST: f64 = 3.0;
 pub const RING_SPILL: f64 = 0.2 / 16.0;
 /// The quadrature sheet share ([`SheetShare::Quadrature`]) serves sheets at most this many of
 /// a kernel's standard deviations thick along the ray: its error is then at most 1.5·10⁻⁴ of
-/// the kernel's line integral per sheet (`project::sheet_share`), and the kernel's recurrence
+/// the kernel's line integral per sheet (`footprint::sheet_share`), and the kernel's recurrence
 /// stays inside f32's range (its seeds lie at most 4 sheets, 6 deviations, from every sheet
 /// they serve). A kernel thinner than that along a pixel's ray is shared out as if it were
 /// that thick ([`SplatSetup::share_deviation`]).

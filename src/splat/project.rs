@@ -16,7 +16,7 @@
 //!   mean varies by at most cutoff·√(bᵀV̂_f b) over it, plus cutoff·s.
 //!
 //! Perspective-exact footprints: the affine footprint above errs by up to ~6·10⁻³ of its peak for
-//! a 16:1 needle at a few hundred pixels (tests/splat.rs), so for a perspective camera the
+//! a 16:1 needle at a few hundred pixels (tests/splat_footprint.rs), so for a perspective camera the
 //! footprint is evaluated per pixel as the exact integral of the kernel along that pixel's ray:
 //! with unit direction d, a = dᵀPd, b = dᵀP(eye − p), c = (eye − p)ᵀP(eye − p),
 //! ∫ w·G(eye + t d − p) dt = w·√det P/(2π)^{3/2} · √(2π/a) · e^{−(c − b²/a)/2}, and t given the
@@ -33,7 +33,7 @@
 //! behind the eye) are culled; a footprint variance below `MIN_VARIANCE` px² is raised to it;
 //! det ≤ 0 or any non-finite intermediate culls the kernel as degenerate.
 
-use super::{Antialias, MIN_VARIANCE, Shading, SheetShare, SplatCounts, SplatSetup};
+use super::{Antialias, MIN_VARIANCE, Shading, SplatCounts, SplatSetup};
 use crate::samples::Metric;
 use crate::samples::supports::largest_eigenvalue_bound;
 use crate::view::shading::shade_cos;
@@ -85,7 +85,8 @@ pub struct Splat {
     pub depth_sigma: f64,
     /// Perspective: the filtered kernel's precision P = V″_f⁻¹ in the camera frame (Q: xx, xy,
     /// yy, xz, yz, zz), its adjugate det(P)·V″_f (same order), the eye relative to the kernel
-    /// r (camera frame) and w·√det P / (2π): the per-pixel ray integral ([`splat_footprint`]).
+    /// r (camera frame) and w·√det P / (2π): the per-pixel ray integral
+    /// ([`super::footprint::splat_footprint`]).
     pub precision: [f64; 6],
     pub adjugate: [f64; 6],
     pub eye_offset: [f64; 3],
@@ -536,43 +537,11 @@ pub fn splat_project(
     })
 }
 
-/// erfc(x) for x ≥ 0 (Abramowitz & Stegun 7.1.26, |error| ≤ 1.5·10⁻⁷), the same polynomial as
-/// the kernel's.
-pub fn erfc_pos(x: f64) -> f64 {
-    let t = 1.0 / (1.0 + 0.327_591_1 * x);
-    let poly = t
-        * (0.254_829_592
-            + t * (-0.284_496_736
-                + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
-    poly * (-x * x).exp()
-}
-
-/// The normal distribution's mass beyond |z|: ½·erfc(|z|/√2).
-pub fn normal_tail(z: f64) -> f64 {
-    0.5 * erfc_pos(z.abs() * std::f64::consts::FRAC_1_SQRT_2)
-}
-
-/// Φ(zb) − Φ(za) for za ≤ zb from the tails qa, qb at its ends ([`normal_tail`]): each branch
-/// subtracts tails, so that both keep their precision in f32.
-pub fn phi_from_tails(za: f64, qa: f64, zb: f64, qb: f64) -> f64 {
-    if za >= 0.0 {
-        qa - qb
-    } else if zb <= 0.0 {
-        qb - qa
-    } else {
-        1.0 - qa - qb
-    }
-}
-
-/// Φ(zb) − Φ(za) for za ≤ zb, through its two tails as the kernel computes it.
-pub fn phi_between(za: f64, zb: f64) -> f64 {
-    phi_from_tails(za, normal_tail(za), zb, normal_tail(zb))
-}
-
 /// The rays through d′ = (dx, dy, 1) whose Mahalanobis distance to the kernel centre is at most
 /// `cut` satisfy d′ᵀ(K − cut²·Q)d′ ≤ 0 with K = [r]ₓᵀ adj(P) [r]ₓ (the numerator of
-/// [`splat_footprint`]'s e): an ellipse in the image plane while the kernel lies in front of the
-/// eye. Returns its centre and half extents in pixels; `None` when it is not an ellipse.
+/// [`super::footprint::splat_footprint`]'s e): an ellipse in the image plane while the kernel
+/// lies in front of the eye. Returns its centre and half extents in pixels; `None` when it is
+/// not an ellipse.
 pub fn cutoff_conic(
     setup: &SplatSetup,
     q: &[f64; 6],
@@ -611,97 +580,9 @@ pub fn cutoff_conic(
     ))
 }
 
-/// Stage `splat_profile`: the lateral part of a splat's footprint at pixel (x, y), `(A, m,
-/// inv)` with A the whole line integral through the pixel, m the kernel's mean distance along
-/// the pixel's ray and inv the inverse of its standard deviation there, so that the share in
-/// t ∈ [ta, tb] is A·(Φ((tb − m)·inv) − Φ((ta − m)·inv)); `None` outside the cutoff. The affine
-/// footprint (orthographic, where it is exact, or `splat.footprint = "affine"`), else the
-/// integral along the pixel's own ray.
-pub fn splat_profile(splat: &Splat, setup: &SplatSetup, x: f64, y: f64) -> Option<(f64, f64, f64)> {
-    let cutoff = setup.settings.cutoff;
-    if !setup.exact_footprints() {
-        let dx = x - splat.centre[0];
-        let dy = y - splat.centre[1];
-        let q =
-            splat.conic[0] * dx * dx + 2.0 * splat.conic[1] * dx * dy + splat.conic[2] * dy * dy;
-        if q > cutoff * cutoff {
-            return None;
-        }
-        let m = splat.depth + splat.slope[0] * dx + splat.slope[1] * dy;
-        return Some((
-            splat.amplitude * (-0.5 * q).exp(),
-            m,
-            1.0 / splat.depth_sigma,
-        ));
-    }
-    let dx = (x - setup.centre[0]) / setup.focal;
-    let dy = (setup.centre[1] - y) / setup.focal;
-    let q = &splat.precision;
-    // a′ = d′ᵀQd′, b′ = d′ᵀQr with d′ = (dx, dy, 1).
-    let qd = [
-        q[0] * dx + q[1] * dy + q[3],
-        q[1] * dx + q[2] * dy + q[4],
-        q[3] * dx + q[4] * dy + q[5],
-    ];
-    let a = dx * qd[0] + dy * qd[1] + qd[2];
-    let r = &splat.eye_offset;
-    let b = r[0] * qd[0] + r[1] * qd[1] + r[2] * qd[2];
-    // c − b′²/a′ = (r × d′)ᵀ adj(P) (r × d′) / a′: the Gram determinant of r and d′ in the metric
-    // P, free of the cancellation of c − b′²/a′ (both ≈ |r|²·|P| ≫ their difference).
-    let w = [r[1] - r[2] * dy, r[2] * dx - r[0], r[0] * dy - r[1] * dx];
-    let j = &splat.adjugate;
-    let g = j[0] * w[0] * w[0]
-        + j[2] * w[1] * w[1]
-        + j[5] * w[2] * w[2]
-        + 2.0 * (j[1] * w[0] * w[1] + j[3] * w[0] * w[2] + j[4] * w[1] * w[2]);
-    if a <= 0.0 || a.is_nan() {
-        return None;
-    }
-    let e = g / a;
-    if e > cutoff * cutoff {
-        return None;
-    }
-    let len = (1.0 + dx * dx + dy * dy).sqrt();
-    let inv_sqrt_a = 1.0 / a.sqrt();
-    Some((
-        splat.ray_amplitude * len * inv_sqrt_a * (-0.5 * e).exp(),
-        -b * len / a,
-        1.0 / (len * inv_sqrt_a),
-    ))
-}
-
-/// Stage `splat_footprint`: the share of a splat's line integral through pixel (x, y) that lies
-/// in t ∈ [ta, tb] ([`splat_profile`] and the erfc); zero outside the cutoff.
-pub fn splat_footprint(splat: &Splat, setup: &SplatSetup, x: f64, y: f64, ta: f64, tb: f64) -> f64 {
-    splat_profile(splat, setup, x, y).map_or(0.0, |(a, m, inv)| {
-        a * phi_between((ta - m) * inv, (tb - m) * inv)
-    })
-}
-
-/// Stage `sheet_share`: Φ(zb) − Φ(za), the share of a kernel's line integral between two sheet
-/// boundaries in units of its deviation along the ray, by `rule`. The quadrature is the
-/// Hermite–Simpson rule with φ′ = −zφ: for h = zb − za,
-/// h/30·(7φ(za) + 16φ(zm) + 7φ(zb)) + h²/60·(zb·φ(zb) − za·φ(za)), exact for quintics; its
-/// error is at most 1.5·10⁻⁴ for h ≤ 1.5 ([`super::QUADRATURE_MAX_SHEET`]). The midpoint rule is
-/// h·φ(zm). The kernel computes the φ by a recurrence; here each is direct.
-pub fn sheet_share(rule: SheetShare, za: f64, zb: f64) -> f64 {
-    match rule {
-        SheetShare::Erfc => phi_between(za, zb),
-        SheetShare::Quadrature => {
-            let phi = |z: f64| (-0.5 * z * z).exp() / (2.0 * std::f64::consts::PI).sqrt();
-            let h = zb - za;
-            let (pa, pm, pb) = (phi(za), phi(0.5 * (za + zb)), phi(zb));
-            h / 30.0 * (7.0 * (pa + pb) + 16.0 * pm) + h * h / 60.0 * (zb * pb - za * pa)
-        }
-        SheetShare::Midpoint => {
-            (zb - za) * (-0.125 * (za + zb) * (za + zb)).exp() / (2.0 * std::f64::consts::PI).sqrt()
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
-    use super::{Antialias, erfc_pos, phi_between, screen_lowpass};
+    use super::{Antialias, screen_lowpass};
 
     /// The eigenvalues (larger first) of the symmetric 2×2 [[a, b], [b, c]].
     fn eigen(v: [f64; 3]) -> (f64, f64) {
@@ -764,56 +645,5 @@ mod tests {
             screen_lowpass([25.0, 0.0, 25.0], Antialias::Auto, lp),
             [0.0; 3]
         );
-    }
-
-    /// erfc(x) = 2/√π ∫ₓ^∞ e^{−t²} dt by composite Simpson on [x, x + 9] (the rest is below
-    /// e^{−81}), 20 000 intervals: about 1e-13, independent of the A&S polynomial.
-    fn erfc_simpson(x: f64) -> f64 {
-        let (n, span) = (20_000, 9.0);
-        let h = span / n as f64;
-        let f = |t: f64| (-t * t).exp();
-        let inner: f64 = (1..n)
-            .map(|i| f(x + i as f64 * h) * if i % 2 == 1 { 4.0 } else { 2.0 })
-            .sum();
-        (f(x) + inner + f(x + span)) * h / 3.0 * 2.0 / std::f64::consts::PI.sqrt()
-    }
-
-    #[test]
-    fn erfc_pos_stays_within_its_published_bound_of_an_independent_integral() {
-        // Abramowitz & Stegun 7.1.26: |ε(x)| ≤ 1.5e-7 for x ≥ 0.
-        let mut worst = 0.0f64;
-        for i in 0..=600 {
-            let x = i as f64 * 0.01;
-            worst = worst.max((erfc_pos(x) - erfc_simpson(x)).abs());
-        }
-        assert!(worst <= 1.5e-7, "largest error {worst:.2e}");
-        assert!(worst > 1e-9, "the polynomial is not exact: {worst:.2e}");
-    }
-
-    #[test]
-    fn phi_between_is_the_normal_mass_between_its_bounds() {
-        // Φ(b) − Φ(a) = (erfc(−b/√2) − erfc(−a/√2)) / 2, with erfc(−y) = 2 − erfc(y).
-        let erfc = |y: f64| {
-            if y >= 0.0 {
-                erfc_simpson(y)
-            } else {
-                2.0 - erfc_simpson(-y)
-            }
-        };
-        let k = std::f64::consts::FRAC_1_SQRT_2;
-        for (a, b) in [
-            (-3.0, -1.0),
-            (-0.5, 0.7),
-            (0.2, 2.5),
-            (-6.0, 6.0),
-            (1.0, 1.0),
-        ] {
-            let exact = 0.5 * (erfc(-b * k) - erfc(-a * k));
-            let got = phi_between(a, b);
-            assert!(
-                (got - exact).abs() <= 1.5e-7,
-                "[{a}, {b}]: {got} vs {exact}"
-            );
-        }
     }
 }

@@ -26,10 +26,9 @@
 //!   early-termination opacity ([BLUR]'s early splat elimination, per tile): such pixels never
 //!   composite again, so stopping changes no pixel.
 
+use super::footprint::{sheet_share, splat_footprint, splat_profile};
 use super::project::KernelKind;
-use super::project::{
-    Cull, Kernel, Splat, sheet_share, splat_footprint, splat_profile, splat_project,
-};
+use super::project::{Cull, Kernel, Splat, splat_project};
 use super::surface::surface_kernels;
 use super::{Shading, SheetInterval, SplatCounts, SplatSetup};
 use crate::field::Field;

@@ -1,4 +1,5 @@
-//! Helpers of the splatting tests (tests/splat.rs, tests/splat_cases.rs, tests/splat_raster.rs).
+//! Helpers of the splatting tests (tests/splat.rs, tests/splat_footprint.rs,
+//! tests/splat_cases.rs, tests/splat_raster.rs).
 #![allow(dead_code)]
 
 use glam::DVec3;
@@ -30,6 +31,24 @@ pub fn scene(extra: &[&str]) -> Scene {
 
 pub fn setup(s: &Scene, field: &Field, shading: Shading) -> SplatSetup {
     s.splat_setup(shading, field).expect("splat setup")
+}
+
+/// ∫ w·G_V(o + t d − p) dt over the whole line, V = σ²M⁻¹ (P = V⁻¹ = M/σ²).
+pub fn line_integral(w: f64, sigma: f64, m: &Metric, p: DVec3, o: DVec3, d: DVec3) -> f64 {
+    let pm = |y: DVec3| {
+        DVec3::new(
+            m[0] * y.x + m[3] * y.y + m[4] * y.z,
+            m[3] * y.x + m[1] * y.y + m[5] * y.z,
+            m[4] * y.x + m[5] * y.y + m[2] * y.z,
+        ) / (sigma * sigma)
+    };
+    let r = o - p;
+    let a = d.dot(pm(d));
+    let b = d.dot(pm(r));
+    let c = r.dot(pm(r));
+    let det_p = vmls::recon::gaussian::metric_det(m) / sigma.powi(6);
+    let norm = det_p.sqrt() / (2.0 * std::f64::consts::PI).powf(1.5);
+    w * norm * (2.0 * std::f64::consts::PI / a).sqrt() * (-0.5 * (c - b * b / a)).exp()
 }
 
 /// A metric with axes `radii` rotated by `angle` about (1, 1, 1)/√3.
