@@ -6,10 +6,38 @@ mod common;
 
 use common::splat::*;
 use glam::DVec3;
-use vmls::splat::Shading;
+use vmls::field::Field;
+use vmls::samples::Metric;
+use vmls::scene::Scene;
 use vmls::splat::footprint::{splat_column, splat_footprint, splat_profile, splat_profile_column};
 use vmls::splat::project::{Kernel, KernelKind, Splat, splat_project};
+use vmls::splat::{Shading, SplatSetup};
 use vmls::view::camera::Projection;
+
+/// The kernel of value 0.7 and volume 2e-3 at `position` with `metric`, projected; it must be
+/// kept.
+fn project(setup: &SplatSetup, s: &Scene, position: [f64; 3], metric: &Metric) -> Splat {
+    let kernel = Kernel {
+        position,
+        value: 0.7,
+        metric: *metric,
+        volume: 2e-3,
+        kind: KernelKind::Volume,
+    };
+    splat_project(setup, &s.transfer, &kernel)
+        .unwrap_or_else(|c| panic!("{metric:?} at {position:?} culled: {c:?}"))
+}
+
+/// The tests' scene at 256² without a low-pass, and its field.
+fn base_scene() -> (Scene, Field) {
+    let base = scene(&[
+        "camera.width=256",
+        "camera.height=256",
+        "splat.antialias=\"none\"",
+    ]);
+    let field = base.field(|_| {}).expect("field");
+    (base, field)
+}
 
 /// Orthographic footprints are [EWA] §4's affine ones, exact for parallel rays; perspective ones
 /// are the integral along each pixel's ray (`splat::project`), because the affine footprint
@@ -18,12 +46,7 @@ use vmls::view::camera::Projection;
 /// (measured ≤ 1.8e-9) for isotropic and 16:1 kernels at distances 3–12 and three positions.
 #[test]
 fn one_kernel_footprint_is_the_line_integral_of_its_gaussian() {
-    let base = scene(&[
-        "camera.width=256",
-        "camera.height=256",
-        "splat.antialias=\"none\"",
-    ]);
-    let field = base.field(|_| {}).expect("field");
+    let (base, field) = base_scene();
     let projections = [
         Projection::Perspective {
             fov_y_degrees: 30.0,
@@ -43,15 +66,7 @@ fn one_kernel_footprint_is_the_line_integral_of_its_gaussian() {
             let setup = setup(&s, &field, Shading::Post);
             for offset in [[0.0, 0.0, 0.0], [0.3, -0.2, 0.1], [-0.35, 0.3, -0.3]] {
                 for (name, metric) in &metrics {
-                    let kernel = Kernel {
-                        position: offset,
-                        value: 0.7,
-                        metric: *metric,
-                        volume: 2e-3,
-                        kind: KernelKind::Volume,
-                    };
-                    let splat = splat_project(&setup, &s.transfer, &kernel)
-                        .unwrap_or_else(|c| panic!("{name} at {offset:?} culled: {c:?}"));
+                    let splat = project(&setup, &s, offset, metric);
                     let (cx, cy) = (
                         splat.centre[0].round() as i32,
                         splat.centre[1].round() as i32,
@@ -103,14 +118,7 @@ fn one_kernel_footprint_is_the_line_integral_of_its_gaussian() {
     s.camera.eye = (DVec3::new(0.6, -0.5, 0.45).normalize() * 2.0).to_array();
     let setup = setup(&s, &field, Shading::Post);
     let metric = rotated_metric([0.16, 0.01, 0.05], 0.7);
-    let kernel = Kernel {
-        position: [0.3, -0.2, 0.1],
-        value: 0.7,
-        metric,
-        volume: 2e-3,
-        kind: KernelKind::Volume,
-    };
-    let splat = splat_project(&setup, &s.transfer, &kernel).expect("kept");
+    let splat = project(&setup, &s, [0.3, -0.2, 0.1], &metric);
     let (cx, cy) = (
         splat.centre[0].round() as i32,
         splat.centre[1].round() as i32,
@@ -142,23 +150,6 @@ fn one_kernel_footprint_is_the_line_integral_of_its_gaussian() {
         "affine needle error {:.2e} of the peak",
         worst / peak
     );
-}
-
-/// e = g/a of the exact footprint in f64, by the Gram form.
-fn e_f64(splat: &Splat, dx: f64, dy: f64) -> f64 {
-    let (q, j, r) = (&splat.precision, &splat.adjugate, &splat.eye_offset);
-    let qd = [
-        q[0] * dx + q[1] * dy + q[3],
-        q[1] * dx + q[2] * dy + q[4],
-        q[3] * dx + q[4] * dy + q[5],
-    ];
-    let a = dx * qd[0] + dy * qd[1] + qd[2];
-    let w = [r[1] - r[2] * dy, r[2] * dx - r[0], r[0] * dy - r[1] * dx];
-    let g = j[0] * w[0] * w[0]
-        + j[2] * w[1] * w[1]
-        + j[5] * w[2] * w[2]
-        + 2.0 * (j[1] * w[0] * w[1] + j[3] * w[0] * w[2] + j[4] * w[1] * w[2]);
-    g / a
 }
 
 /// e = g/a of the exact footprint in f32 as the kernel computes it: `column` true through
@@ -219,12 +210,7 @@ fn e_f32(splat: &Splat, dx: f64, dy: f64, t: f64, form: &str) -> f64 {
 /// instead, 7.8e-5 fails), and the naive c − b²/a that both avoid errs by 1.0 here.
 #[test]
 fn the_column_form_is_the_exact_footprint() {
-    let base = scene(&[
-        "camera.width=256",
-        "camera.height=256",
-        "splat.antialias=\"none\"",
-    ]);
-    let field = base.field(|_| {}).expect("field");
+    let (base, field) = base_scene();
     let metrics = [
         rotated_metric([0.08; 3], 0.0),
         rotated_metric([0.16, 0.01, 0.05], 0.7),
@@ -243,15 +229,7 @@ fn the_column_form_is_the_exact_footprint() {
         assert!(setup.exact_footprints());
         for offset in [[0.0, 0.0, 0.0], [0.3, -0.2, 0.1], [-0.35, 0.3, -0.3]] {
             for metric in &metrics {
-                let kernel = Kernel {
-                    position: offset,
-                    value: 0.7,
-                    metric: *metric,
-                    volume: 2e-3,
-                    kind: KernelKind::Volume,
-                };
-                let splat = splat_project(&setup, &s.transfer, &kernel)
-                    .unwrap_or_else(|c| panic!("{metric:?} at {offset:?}, {distance}: {c:?}"));
+                let splat = project(&setup, &s, offset, metric);
                 let (cx, cy) = (splat.centre[0].round(), splat.centre[1].round());
                 let cut2 = setup.settings.cutoff.powi(2);
                 for x in (-12..=12).map(|i| cx + f64::from(i)) {
@@ -276,7 +254,9 @@ fn the_column_form_is_the_exact_footprint() {
                         let dx = (x - setup.centre[0]) / setup.focal;
                         let dy = (setup.centre[1] - y) / setup.focal;
                         let t = (y.rem_euclid(8.0) - 3.5) / -setup.focal;
-                        let e64 = e_f64(&splat, dx, dy);
+                        // f64: the column's own forms at the pixel (t = 0).
+                        let at = splat_column(&splat, &setup, x, y);
+                        let e64 = at.g[0] / at.a[0];
                         if e64 <= cut2 {
                             for (f, form) in forms.iter().enumerate() {
                                 let e = e_f32(&splat, dx, dy, t, form);

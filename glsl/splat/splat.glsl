@@ -55,6 +55,31 @@ vec3 pixel_view(vec2 pixel) {
     return vec3(dx, dy, sqrt(1.0 + dx * dx + dy * dy));
 }
 
+// Q d' for d' = (dx, dy, 1): the exact footprint's precision (footprint0, footprint1.xy) times
+// the pixel's ray (twin: precision_times in src/splat/footprint.rs).
+vec3 precision_times(Splat s, float dx, float dy) {
+    vec4 q0 = s.footprint0, q1 = s.footprint1;
+    return vec3(q0.x * dx + q0.y * dy + q0.w,
+                q0.y * dx + q0.z * dy + q1.x,
+                q0.w * dx + q1.x * dy + q1.y);
+}
+
+// The exact footprint's profile from a' = d'^T Q d', b' = d'^T Q r and the Gram form g at a
+// pixel whose d' has length `len` (twin: lateral_profile in src/splat/footprint.rs), for a
+// kernel of ray amplitude `amplitude`: (0, 0, 1) outside the cutoff.
+vec3 lateral_profile(float a, float b, float g, float len, float amplitude, float cutoff) {
+    if (!(a > 0.0)) {
+        return vec3(0.0, 0.0, 1.0);
+    }
+    float e = g / a;
+    if (e > cutoff * cutoff) {
+        return vec3(0.0, 0.0, 1.0);
+    }
+    float inv_sqrt_a = inversesqrt(a);
+    return vec3(amplitude * len * inv_sqrt_a * exp_e(-0.5 * e), -b * len / a,
+                1.0 / (len * inv_sqrt_a));
+}
+
 // The lateral part of a splat's footprint at a pixel: (A, m, inv) with A the whole line
 // integral through the pixel (0 outside the cutoff), m the kernel's mean distance along the
 // pixel's ray and inv the inverse of its standard deviation there, so that the share in
@@ -77,9 +102,7 @@ vec3 splat_profile(Splat s, float cutoff, vec2 pixel, vec3 view) {
     float dy = view.y;
     vec4 q0 = s.footprint0, q1 = s.footprint1, j0 = s.footprint2, j1 = s.footprint3;
     // a' = d'^T Q d', b' = d'^T Q r with d' = (dx, dy, 1).
-    vec3 qd = vec3(q0.x * dx + q0.y * dy + q0.w,
-                   q0.y * dx + q0.z * dy + q1.x,
-                   q0.w * dx + q1.x * dy + q1.y);
+    vec3 qd = precision_times(s, dx, dy);
     float a = dx * qd.x + dy * qd.y + qd.z;
     vec3 r = vec3(q1.z, q1.w, j1.z);
     float b = dot(r, qd);
@@ -87,17 +110,7 @@ vec3 splat_profile(Splat s, float cutoff, vec2 pixel, vec3 view) {
     vec3 w = vec3(r.y - r.z * dy, r.z * dx - r.x, r.x * dy - r.y * dx);
     float g = j0.x * w.x * w.x + j0.z * w.y * w.y + j1.y * w.z * w.z
             + 2.0 * (j0.y * w.x * w.y + j0.w * w.x * w.z + j1.x * w.y * w.z);
-    if (!(a > 0.0)) {
-        return vec3(0.0, 0.0, 1.0);
-    }
-    float e = g / a;
-    if (e > cutoff * cutoff) {
-        return vec3(0.0, 0.0, 1.0);
-    }
-    float len = view.z;
-    float inv_sqrt_a = inversesqrt(a);
-    return vec3(j1.w * len * inv_sqrt_a * exp_e(-0.5 * e), -b * len / a,
-                1.0 / (len * inv_sqrt_a));
+    return lateral_profile(a, b, g, view.z, j1.w, cutoff);
 #endif
 }
 
@@ -123,9 +136,7 @@ Column splat_column(Splat s, vec2 view0) {
     float dx = view0.x;
     float dy = view0.y;
     vec4 q0 = s.footprint0, q1 = s.footprint1, j0 = s.footprint2, j1 = s.footprint3;
-    vec3 qd = vec3(q0.x * dx + q0.y * dy + q0.w,
-                   q0.y * dx + q0.z * dy + q1.x,
-                   q0.w * dx + q1.x * dy + q1.y);
+    vec3 qd = precision_times(s, dx, dy);
     vec3 r = vec3(q1.z, q1.w, j1.z);
     vec3 w = vec3(r.y - r.z * dy, r.z * dx - r.x, r.x * dy - r.y * dx);
     // adj(P) w, and adj(P) w1 for w1 = dw/dt = (-r.z, 0, r.x).
@@ -152,17 +163,7 @@ vec3 splat_profile_at(Splat s, Column c, float cutoff, vec2 pixel, vec3 view) {
     float a = c.a.x + t * (c.a.y + t * c.a.z);
     float b = c.b.x + t * c.b.y;
     float g = c.g.x + t * (c.g.y + t * c.g.z);
-    if (!(a > 0.0)) {
-        return vec3(0.0, 0.0, 1.0);
-    }
-    float e = g / a;
-    if (e > cutoff * cutoff) {
-        return vec3(0.0, 0.0, 1.0);
-    }
-    float len = view.z;
-    float inv_sqrt_a = inversesqrt(a);
-    return vec3(s.footprint3.w * len * inv_sqrt_a * exp_e(-0.5 * e), -b * len / a,
-                1.0 / (len * inv_sqrt_a));
+    return lateral_profile(a, b, g, view.z, s.footprint3.w, cutoff);
 #else
     return splat_profile(s, cutoff, pixel, view);
 #endif

@@ -46,6 +46,24 @@ pub fn phi_between(za: f64, zb: f64) -> f64 {
     phi_from_tails(za, normal_tail(za), zb, normal_tail(zb))
 }
 
+/// (dx, dy) of pixel (x, y)'s ray d′ = (dx, dy, 1) in the camera frame (the kernel's
+/// `pixel_view`).
+fn pixel_ray(setup: &SplatSetup, x: f64, y: f64) -> (f64, f64) {
+    (
+        (x - setup.centre[0]) / setup.focal,
+        (setup.centre[1] - y) / setup.focal,
+    )
+}
+
+/// Q·d′ for d′ = (dx, dy, 1), Q's six entries in `Splat::precision`'s order.
+fn precision_times(q: &[f64; 6], dx: f64, dy: f64) -> [f64; 3] {
+    [
+        q[0] * dx + q[1] * dy + q[3],
+        q[1] * dx + q[2] * dy + q[4],
+        q[3] * dx + q[4] * dy + q[5],
+    ]
+}
+
 /// Stage `splat_profile`: the lateral part of a splat's footprint at pixel (x, y), `(A, m,
 /// inv)` with A the whole line integral through the pixel, m the kernel's mean distance along
 /// the pixel's ray and inv the inverse of its standard deviation there, so that the share in
@@ -69,15 +87,9 @@ pub fn splat_profile(splat: &Splat, setup: &SplatSetup, x: f64, y: f64) -> Optio
             1.0 / splat.depth_sigma,
         ));
     }
-    let dx = (x - setup.centre[0]) / setup.focal;
-    let dy = (setup.centre[1] - y) / setup.focal;
-    let q = &splat.precision;
+    let (dx, dy) = pixel_ray(setup, x, y);
     // a′ = d′ᵀQd′, b′ = d′ᵀQr with d′ = (dx, dy, 1).
-    let qd = [
-        q[0] * dx + q[1] * dy + q[3],
-        q[1] * dx + q[2] * dy + q[4],
-        q[3] * dx + q[4] * dy + q[5],
-    ];
+    let qd = precision_times(&splat.precision, dx, dy);
     let a = dx * qd[0] + dy * qd[1] + qd[2];
     let r = &splat.eye_offset;
     let b = r[0] * qd[0] + r[1] * qd[1] + r[2] * qd[2];
@@ -122,14 +134,9 @@ pub struct Column {
 
 /// [`Column`] of `splat` down pixel column `x`, about the (possibly fractional) row `y0`.
 pub fn splat_column(splat: &Splat, setup: &SplatSetup, x: f64, y0: f64) -> Column {
-    let dx = (x - setup.centre[0]) / setup.focal;
-    let dy = (setup.centre[1] - y0) / setup.focal;
+    let (dx, dy) = pixel_ray(setup, x, y0);
     let q = &splat.precision;
-    let qd = [
-        q[0] * dx + q[1] * dy + q[3],
-        q[1] * dx + q[2] * dy + q[4],
-        q[3] * dx + q[4] * dy + q[5],
-    ];
+    let qd = precision_times(q, dx, dy);
     let r = &splat.eye_offset;
     let j = &splat.adjugate;
     let w = [r[1] - r[2] * dy, r[2] * dx - r[0], r[0] * dy - r[1] * dx];
@@ -166,8 +173,7 @@ pub fn splat_profile_column(
     x: f64,
     y: f64,
 ) -> Option<(f64, f64, f64)> {
-    let dx = (x - setup.centre[0]) / setup.focal;
-    let dy = (setup.centre[1] - y) / setup.focal;
+    let (dx, dy) = pixel_ray(setup, x, y);
     let t = dy - column.dy0;
     let [a0, a1, a2] = column.a;
     let [g0, g1, g2] = column.g;
@@ -177,8 +183,8 @@ pub fn splat_profile_column(
     lateral_profile(splat, setup, a, b, g, (1.0 + dx * dx + dy * dy).sqrt())
 }
 
-/// The profile from the three forms at a pixel whose d′ has length `len`: the kernel's tail of
-/// `splat_profile` and `splat_profile_at`.
+/// The profile from the three forms at a pixel whose d′ has length `len` (twin of the kernel's
+/// `lateral_profile`).
 fn lateral_profile(
     splat: &Splat,
     setup: &SplatSetup,
