@@ -9,7 +9,9 @@ use glam::DVec3;
 use vmls::field::Field;
 use vmls::samples::Metric;
 use vmls::scene::Scene;
-use vmls::splat::footprint::{splat_column, splat_footprint, splat_profile, splat_profile_column};
+use vmls::splat::footprint::{
+    pixel_ray, splat_column, splat_footprint, splat_profile, splat_profile_column,
+};
 use vmls::splat::project::{Kernel, KernelKind, Splat, splat_project};
 use vmls::splat::{Shading, SplatSetup};
 use vmls::view::camera::Projection;
@@ -152,9 +154,9 @@ fn one_kernel_footprint_is_the_line_integral_of_its_gaussian() {
     );
 }
 
-/// e = g/a of the exact footprint in f32 as the kernel computes it: `column` true through
-/// `splat_column`'s forms taken `t` below the pixel (dy₀ = dy − t), false directly
-/// (`splat_profile`), and the naive c − b²/a that the Gram form g replaces.
+/// e = g/a of the exact footprint in f32 as the kernel computes it, by `form`: "column" through
+/// `splat_column`'s forms taken `t` below the pixel (dy₀ = dy − t), "direct" as
+/// `splat_profile`, anything else the naive c − b²/a that the Gram form g replaces.
 fn e_f32(splat: &Splat, dx: f64, dy: f64, t: f64, form: &str) -> f64 {
     let q = splat.precision.map(|v| v as f32);
     let j = splat.adjugate.map(|v| v as f32);
@@ -227,11 +229,11 @@ fn the_column_form_is_the_exact_footprint() {
         s.camera.eye = (DVec3::new(0.6, -0.5, 0.45).normalize() * distance).to_array();
         let setup = setup(&s, &field, Shading::Post);
         assert!(setup.exact_footprints());
+        let cut2 = setup.settings.cutoff.powi(2);
         for offset in [[0.0, 0.0, 0.0], [0.3, -0.2, 0.1], [-0.35, 0.3, -0.3]] {
             for metric in &metrics {
                 let splat = project(&setup, &s, offset, metric);
                 let (cx, cy) = (splat.centre[0].round(), splat.centre[1].round());
-                let cut2 = setup.settings.cutoff.powi(2);
                 for x in (-12..=12).map(|i| cx + f64::from(i)) {
                     let column = splat_column(&splat, &setup, x, cy - 12.0);
                     for y in (-12..=12).map(|i| cy + f64::from(i)) {
@@ -251,8 +253,7 @@ fn the_column_form_is_the_exact_footprint() {
                         }
                         // f32 as a pre-shaded invocation draws rows 8i .. 8i + 7 of a tile:
                         // t from their middle.
-                        let dx = (x - setup.centre[0]) / setup.focal;
-                        let dy = (setup.centre[1] - y) / setup.focal;
+                        let (dx, dy) = pixel_ray(&setup, x, y);
                         let t = (y.rem_euclid(8.0) - 3.5) / -setup.focal;
                         // f64: the column's own forms at the pixel (t = 0).
                         let at = splat_column(&splat, &setup, x, y);

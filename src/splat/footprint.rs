@@ -48,7 +48,7 @@ pub fn phi_between(za: f64, zb: f64) -> f64 {
 
 /// (dx, dy) of pixel (x, y)'s ray d′ = (dx, dy, 1) in the camera frame (the kernel's
 /// `pixel_view`).
-fn pixel_ray(setup: &SplatSetup, x: f64, y: f64) -> (f64, f64) {
+pub fn pixel_ray(setup: &SplatSetup, x: f64, y: f64) -> (f64, f64) {
     (
         (x - setup.centre[0]) / setup.focal,
         (setup.centre[1] - y) / setup.focal,
