@@ -263,6 +263,18 @@ pub fn binding_defines() -> Vec<(String, String)> {
         format!("{}u", crate::recon::resample::UNDEFINED_BITS),
     ));
     d.push((
+        "RESAMPLE_DIRECT_BITS".into(),
+        format!("{}u", crate::recon::resample::DIRECT_BITS),
+    ));
+    d.push((
+        "RESAMPLE_DIRECT_TERMS".into(),
+        format!("{}u", crate::recon::resample::DIRECT_TERMS),
+    ));
+    d.push((
+        "RESAMPLE_DIRECT_MARGIN".into(),
+        format!("{:e}", crate::recon::resample::DIRECT_MARGIN),
+    ));
+    d.push((
         "HULL_HIT_MERGE".into(),
         format!("{:e}", crate::samples::bvh::HIT_MERGE),
     ));

@@ -103,6 +103,7 @@ fn wraps_an_application_device() {
                     neighbours: NeighbourMode::Grid,
                     resample: 0,
                     resample_auto: false,
+                    resample_direct: false,
                 },
                 &OctreeSettings::default(),
                 |_| {},

@@ -12,6 +12,13 @@
 // evaluation silently; the ray caster reports the ray as truncated instead.
 bool g_loop_cut = false;
 
+#if RESAMPLE_DIRECT == 1 && MLS_RESAMPLED == 0
+// The margin of the last solve (twin: mls_evaluate_margin's): its smallest pivot d_k / A_kk,
+// k >= 1, or 0 where it fell back to fewer terms. recon_resample marks a fine point whose margin
+// is below RESAMPLE_DIRECT_MARGIN, and the fast path solves the cells around it directly.
+float g_margin = 1.0;
+#endif
+
 #if MLS_NEIGHBOURS == 0
 // The grid, GRID_PAD zeros first, read through texel-buffer views (binding::kind): on llvmpipe
 // an imageLoad is one gather per 8 lanes where a storage-buffer load with a per-lane index is a
@@ -559,22 +566,33 @@ MlsResult resampled_evaluate(vec3 x) {
     float value = 0.0;
     vec3 gradient = vec3(0.0);
     bool defined = true;
+    // A direct corner (resample::DIRECT) holds +inf in its first gradient component.
+    bool direct = false;
     [[unroll]] for (int c = 0; c < 8; ++c) {
         vec3 b = vec3(c & 1, (c >> 1) & 1, c >> 2);
         vec3 wa = mix(1.0 - u, u, b);
         float w = wa.x * wa.y * wa.z;
         vec4 v = imageLoad(resampled, base + (c & 1) * next.x + ((c >> 1) & 1) * next.y + (c >> 2) * next.z);
         defined = defined && floatBitsToUint(v.x) != RESAMPLE_UNDEFINED && !isnan(v.x);
+        direct = direct || floatBitsToUint(v.y) == 0x7F800000u;
         value += w * (v.x + 0.5 * dot(v.yzw, (u - b) * h));
         gradient += w * v.yzw;
     }
-    return defined ? MlsResult(value, gradient, 8u, 1u) : MlsResult(0.0, vec3(0.0), 8u, 0u);
+    return direct    ? MlsResult(0.0, vec3(0.0), 8u, RESAMPLE_DIRECT_TERMS)
+           : defined ? MlsResult(value, gradient, 8u, 1u)
+                     : MlsResult(0.0, vec3(0.0), 8u, 0u);
 }
 #endif
 
 // f(x), ∇f(x); terms == 0 where no sample has weight (the field is undefined there).
 MlsResult mls_evaluate(vec3 x) {
-#if MLS_RESAMPLED > 0
+#if MLS_RESAMPLED > 0 && RESAMPLE_DIRECT == 1
+    // Cells with a direct corner fall through to the general path below (twin: Field::evaluate).
+    MlsResult fast = resampled_evaluate(x);
+    if (fast.terms != RESAMPLE_DIRECT_TERMS) {
+        return fast;
+    }
+#elif MLS_RESAMPLED > 0
     return resampled_evaluate(x);
 #endif
 #if MLS_EXACT == 1
@@ -607,10 +625,24 @@ MlsResult mls_evaluate(vec3 x) {
     if (s.neighbours == 0u) {
         return res;
     }
+#if RESAMPLE_DIRECT == 1 && MLS_RESAMPLED == 0
+    float diag[MLS_TERMS];
+    [[unroll]] for (int k = 0; k < MLS_TERMS; ++k) {
+        diag[k] = s.a[TRI(k, k)];
+    }
+#endif
     uint n = mls_factor(s.a);
     if (n == 0u) {
         return res;
     }
+#if RESAMPLE_DIRECT == 1 && MLS_RESAMPLED == 0
+    // After the factor, the diagonal holds the pivots d_k.
+    g_margin = 1.0;
+    [[unroll]] for (int k = 1; k < MLS_TERMS; ++k) {
+        g_margin = min(g_margin, s.a[TRI(k, k)] / diag[k]);
+    }
+    g_margin = n < uint(MLS_TERMS) ? 0.0 : g_margin;
+#endif
     c = s.r;
     mls_solve(s.a, n, c);
     res.terms = n;

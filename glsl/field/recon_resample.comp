@@ -50,6 +50,15 @@ void main() {
     vec3 spacing = 1.0 / params.field.grid_inv_spacing.xyz;
     vec3 x = params.field.grid_origin.xyz + vec3(idx) * (spacing / float(RESAMPLE_FACTOR));
     MlsResult m = mls_evaluate(x);
+#if RESAMPLE_DIRECT == 1
+    // A fit the samples barely determine: the cells around this point are solved directly
+    // (twin: resample::DIRECT, f the bits RESAMPLE_DIRECT_BITS, +inf in the first gradient).
+    if (m.terms > 0u && g_margin < RESAMPLE_DIRECT_MARGIN) {
+        imageStore(fine, int(n), vec4(uintBitsToFloat(RESAMPLE_DIRECT_BITS),
+                                      uintBitsToFloat(0x7F800000u), 0.0, 0.0));
+        return;
+    }
+#endif
     imageStore(fine, int(n), m.terms > 0u ? vec4(m.value, m.gradient)
                                           : vec4(uintBitsToFloat(RESAMPLE_UNDEFINED), vec3(0.0)));
 }

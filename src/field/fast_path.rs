@@ -6,11 +6,11 @@
 use super::{Field, skip};
 use crate::recon::ReconError;
 use crate::recon::ReconMethod;
-use crate::recon::mls::{MlsSettings, MlsValue, Neighbours, mls_evaluate};
+use crate::recon::mls::{MlsSettings, MlsValue, Neighbours, mls_evaluate_margin};
 use crate::recon::pages::{Constants, Pages, grid_reach, scattered_reach};
 use crate::recon::resample::{
-    AUTO_FACTOR, AUTO_MAX_POINTS, FINE_POINT_DEVICE_BYTES, Lattice, MAX_LATTICE_POINTS, MAX_POINTS,
-    ResampledGrid, fine_dims,
+    AUTO_FACTOR, AUTO_MAX_POINTS, DIRECT_MARGIN, DIRECT_TERMS, FINE_POINT_DEVICE_BYTES, Lattice,
+    MAX_LATTICE_POINTS, MAX_POINTS, PilotError, ResampledGrid, fine_dims,
 };
 use crate::samples::{Positions, Supports};
 
@@ -52,10 +52,25 @@ impl Field {
         }
     }
 
+    /// Solves the fast path's cells around barely determined fit directly, or not
+    /// (`Reconstruction::resample_direct`), before anything used the fine grid: MLS only (the
+    /// other methods have no pivots).
+    pub fn set_resample_direct(&mut self, on: bool) {
+        self.reconstruction.resample_direct = on && self.reconstruction.method == ReconMethod::Mls;
+        self.resampled = std::sync::OnceLock::new();
+        self.blocks = std::sync::OnceLock::new();
+    }
+
+    /// Records what "auto" chose beyond the factor, for `--stats`.
+    pub fn note_fast_path(&mut self, note: String) {
+        self.fast_path_note = Some(note);
+    }
+
     /// Turns the fast path off before anything used it, recording why for `--stats` (the
     /// scene's "auto" rule for the first frame, [`crate::scene::Scene::frame_evaluations`]).
     pub fn decline_fast_path(&mut self, why: String) {
         self.reconstruction.resample = 0;
+        self.reconstruction.resample_direct = false;
         self.fast_path_declined = Some(why);
         self.resampled = std::sync::OnceLock::new();
         self.pages = std::sync::OnceLock::new();
@@ -74,7 +89,11 @@ impl Field {
                     "fine_points": l.fine_points(factor),
                     "stored_points": self.stored_fine_points(),
                     "device_bytes": self.fine_device_bytes(),
+                    "direct_cells": self.reconstruction.resample_direct,
                 });
+                if let Some(n) = &self.fast_path_note {
+                    v["note"] = serde_json::json!(n);
+                }
                 if let Some(p) = self.fine_pages() {
                     v["pages"] = serde_json::json!({
                         "pages": p.table.len(),
@@ -240,6 +259,8 @@ impl Field {
     /// What the fine grid stores at x: the general path with the field's own derivative (the
     /// analytic gradient for MLS), since the fast path's interpolation needs ∇f, not the local
     /// fit's slope (twin of `recon_resample`'s variant).
+    /// With `resample_direct`, a point whose margin is below [`DIRECT_MARGIN`] is marked
+    /// [`DIRECT_TERMS`] (stored as [`crate::recon::resample::DIRECT`]).
     fn fine_point(&self, neighbours: &dyn Neighbours, x: [f64; 3]) -> Option<MlsValue> {
         match self.reconstruction.method {
             ReconMethod::Mls => {
@@ -247,7 +268,17 @@ impl Field {
                     gradient: crate::recon::GradientMode::Analytic,
                     ..self.mls()
                 };
-                mls_evaluate(&analytic, neighbours, x)
+                let (v, margin) = mls_evaluate_margin(&analytic, neighbours, x)?;
+                Some(
+                    if self.reconstruction.resample_direct && margin < DIRECT_MARGIN {
+                        MlsValue {
+                            terms: DIRECT_TERMS,
+                            ..v
+                        }
+                    } else {
+                        v
+                    },
+                )
             }
             _ => self.evaluate_direct(neighbours, x),
         }
@@ -255,7 +286,7 @@ impl Field {
 
     /// [`crate::recon::resample::pilot_error`] at `points` (frame-relative); `None` without
     /// the fast path, where its octree cannot be built, or where no point is defined.
-    pub fn fast_path_pilot(&self, points: &[[f64; 3]]) -> Option<(f64, f64)> {
+    pub fn fast_path_pilot(&self, points: &[[f64; 3]]) -> Option<PilotError> {
         let factor = self.reconstruction.resample;
         if factor == 0 {
             return None;

@@ -98,6 +98,8 @@ pub struct Field {
     blocks: std::sync::OnceLock<skip::Blocks>,
     /// Why `reconstruction.resample = "auto"` chose the general path, where it did.
     fast_path_declined: Option<String>,
+    /// What `reconstruction.resample = "auto"` chose beyond the factor, for `--stats`.
+    fast_path_note: Option<String>,
     /// A piece of a decomposed field ([`Field::piece`]): the box rays integrate in
     /// (frame-relative).
     clip: Option<(DVec3, DVec3)>,
@@ -226,6 +228,7 @@ impl Field {
             pages: std::sync::OnceLock::new(),
             blocks: std::sync::OnceLock::new(),
             fast_path_declined: None,
+            fast_path_note: None,
             clip,
         }
     }
@@ -296,6 +299,7 @@ impl Field {
         let mut reconstruction = frame.reconstruction;
         reconstruction.resample = 0;
         reconstruction.resample_auto = false;
+        reconstruction.resample_direct = false;
         let mut field = Self::assemble(
             samples,
             PieceFrame {
@@ -440,7 +444,11 @@ impl Field {
     /// interpolation of the fine grid (stage `resample_evaluate`), defined everywhere.
     pub fn evaluate(&self, neighbours: &dyn Neighbours, x: [f64; 3]) -> Option<MlsValue> {
         if let Some(r) = self.resampled() {
-            return Some(r.evaluate(x)).filter(|v| v.terms > 0);
+            let v = r.evaluate(x);
+            if v.terms == crate::recon::resample::DIRECT_TERMS {
+                return self.evaluate_direct(neighbours, x);
+            }
+            return Some(v).filter(|v| v.terms > 0);
         }
         self.evaluate_direct(neighbours, x)
     }

@@ -70,6 +70,10 @@ pub struct Variant {
     /// The fast path's fine grid is paged ([`crate::recon::pages`]): one page-table read
     /// before the corners'.
     pub paged: bool,
+    /// The fast path's cells with a barely determined corner are solved by the general path
+    /// (`RESAMPLE_DIRECT`; `Reconstruction::resample_direct`): recon_resample marks those
+    /// corners, the ray caster solves there.
+    pub resample_direct: bool,
     /// Empty-space skipping in the ray caster ([`super::skip`]).
     pub skip: bool,
     /// Rays clipped to a brick's box ([`Field::piece`]), steps anchored to the undivided ray.
@@ -115,6 +119,7 @@ impl Variant {
             resample: r.resample,
             resampled: r.resample > 0,
             paged: field.fine_pages().is_some(),
+            resample_direct: r.resample > 0 && r.resample_direct,
             skip: false,
             clip: false,
             method: None,
@@ -196,6 +201,7 @@ impl Variant {
             "RESAMPLE_SLOT_CONSTANT".into(),
             format!("{}u", crate::recon::pages::SLOT_CONSTANT),
         ));
+        d.push(("RESAMPLE_DIRECT".into(), flag(self.resample_direct)));
         d.push(("SKIP".into(), flag(self.skip)));
         d.push(("CLIP".into(), flag(self.clip)));
         d.push(("SKIP_BLOCK".into(), super::skip::SKIP_BLOCK.to_string()));
@@ -302,7 +308,8 @@ impl Variant {
             "-paged"
         } else {
             ""
-        } + if self.skip { "-skip" } else { "" }
+        } + if self.resample_direct { "-direct" } else { "" }
+            + if self.skip { "-skip" } else { "" }
             + if self.exact_opacity {
                 "-exactopacity"
             } else {

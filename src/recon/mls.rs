@@ -279,6 +279,20 @@ pub fn mls_evaluate(
     neighbours: &dyn Neighbours,
     x: [f64; 3],
 ) -> Option<MlsValue> {
+    mls_evaluate_margin(settings, neighbours, x).map(|(v, _)| v)
+}
+
+/// [`mls_evaluate`] and the margin of its solve (twin of `g_margin` in
+/// `glsl/field/mls.glsl`): the smallest pivot `d_k / A_kk` of the basis asked for, k ≥ 1,
+/// where every pivot passed; 0 where the solve fell back to fewer terms, 1 for the constant
+/// basis. A small margin means the samples barely determine the fit, as where a scattered set's
+/// field extrapolates past its samples; the fast path solves such cells directly
+/// ([`crate::recon::resample::DIRECT_MARGIN`]).
+pub fn mls_evaluate_margin(
+    settings: &MlsSettings,
+    neighbours: &dyn Neighbours,
+    x: [f64; 3],
+) -> Option<(MlsValue, f64)> {
     let mut sys = MlsSystem::new(settings.basis.terms());
     let scale = neighbours.basis_scale(x);
     neighbours.for_each(x, &mut |_, p, f, m| {
@@ -293,6 +307,11 @@ pub fn mls_evaluate(
     if n == 0 {
         return None;
     }
+    let margin = if n < sys.terms {
+        0.0
+    } else {
+        (1..n).map(|k| l[k][k] / sys.a[k][k]).fold(1.0, f64::min)
+    };
     let c = mls_solve(&l, n, sys.r);
     let mut gradient = if n >= 4 {
         [c[1] * scale[0], c[2] * scale[1], c[3] * scale[2]]
@@ -323,10 +342,13 @@ pub fn mls_evaluate(
             gradient[k] += mls_solve(&l, n, q[k])[0];
         }
     }
-    Some(MlsValue {
-        value: sys.exact.unwrap_or(c[0]),
-        gradient,
-        neighbours: sys.neighbours,
-        terms: n as u32,
-    })
+    Some((
+        MlsValue {
+            value: sys.exact.unwrap_or(c[0]),
+            gradient,
+            neighbours: sys.neighbours,
+            terms: n as u32,
+        },
+        margin,
+    ))
 }

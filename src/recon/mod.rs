@@ -59,6 +59,10 @@ pub struct Reconstruction {
     /// frame and, on irregular data, a pilot of the fast path's error
     /// (`Scene::fit_fast_path`).
     pub resample_auto: bool,
+    /// The fast path's cells with a corner whose fit the samples barely determine are solved
+    /// by the general path ([`resample::DIRECT`]). "auto" sets it on irregular MLS data where
+    /// the fast path's pilot fails without it and passes with it (`Scene::fit_fast_path`).
+    pub resample_direct: bool,
 }
 
 /// Errors of the reconstruction layer.

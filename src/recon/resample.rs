@@ -59,9 +59,16 @@ pub const AUTO_MAX_POINTS: u64 = 1 << 24;
 /// Largest RMSE, relative to the data range, that `"auto"` accepts from the fast path on
 /// irregular data ([`pilot_error`] at the scene's pilot points). Measured pilots: the
 /// room-fire mesh 1.5e-4, the tetrahedral torus 2.8e-5 (their images within 2e-4 of the
-/// direct solve's), 68 921 scattered Marschner–Lobb points 1.0e-2 (image RMSE 0.022 against
-/// the direct solve's 0.004 from the reference).
+/// direct solve's), 68 921 scattered Marschner–Lobb points 1.0e-2 interpolated everywhere
+/// (image RMSE 0.022 against the direct solve's 0.004 from the reference), nearly all of it
+/// past the samples, where the linear fit is barely determined; with those cells solved
+/// directly ([`DIRECT`]) 2.9e-4.
 pub const AUTO_PILOT_RMSE: f64 = 1e-3;
+
+/// Largest share of the pilot's points that `"auto"` lets the fast path solve directly
+/// ([`DIRECT`]): a frame then costs about the fast path's plus that share of the general
+/// path's (more where a SIMD row mixes both), so past half the general path alone is near.
+pub const AUTO_MAX_DIRECT_SHARE: f64 = 0.5;
 
 /// Device bytes per fine point: f and ∇f as one rgba32f texel.
 pub const FINE_POINT_DEVICE_BYTES: u64 = 16;
@@ -111,6 +118,31 @@ impl Lattice {
 pub const UNDEFINED: [f64; 4] = [f64::NAN, 0.0, 0.0, 0.0];
 /// The f32 bits of an undefined fine point's value on the GPU (`RESAMPLE_UNDEFINED`).
 pub const UNDEFINED_BITS: u32 = 0x7FC0_0000;
+
+/// A fine point whose fit the samples barely determine (its [`mls_evaluate_margin`] below
+/// [`DIRECT_MARGIN`]): every fine cell it is a corner of is solved by the general path instead
+/// of interpolated (`Reconstruction::resample_direct`). Told from [`UNDEFINED`] by the infinite
+/// first gradient component, which the GPU stores too, beside the value bits [`DIRECT_BITS`].
+///
+/// [`mls_evaluate_margin`]: super::mls::mls_evaluate_margin
+pub const DIRECT: [f64; 4] = [f64::NAN, f64::INFINITY, 0.0, 0.0];
+/// The f32 bits of a direct fine point's value on the GPU (`RESAMPLE_DIRECT_BITS`).
+pub const DIRECT_BITS: u32 = 0x7FC0_0001;
+/// `MlsValue::terms` of [`ResampledGrid::evaluate`] in a cell with a direct corner: the caller
+/// solves x by the general path ([`crate::field::Field::evaluate`]).
+pub const DIRECT_TERMS: u32 = u32::MAX;
+/// The margin below which a fine point is [`DIRECT`]: 5× the pivot tolerance. On 68 921
+/// scattered Marschner–Lobb points (linear MLS) the fast path erred by 1.6e-2 of the data range
+/// in RMSE at points uniform in the supports' box, nearly all of it where the field extrapolates
+/// past the samples (the linear fit falls back to the constant one there, a jump); with cells
+/// at margins below 0.02, 0.05, 0.1 solved directly, the rest erred by 5.3e-4, 3.2e-4, 2.9e-4,
+/// and 21%, 23%, 25% of the points were solved directly (BENCHMARKS.md).
+pub const DIRECT_MARGIN: f64 = 0.05;
+
+/// Whether fine point `p` is [`DIRECT`].
+pub fn is_direct(p: &[f64; 4]) -> bool {
+    p[0].is_nan() && p[1] == f64::INFINITY
+}
 
 /// Fine points per axis for a grid of `dims` points refined `factor` times.
 pub fn fine_dims(dims: [usize; 3], factor: u32) -> [usize; 3] {
@@ -165,7 +197,11 @@ impl ResampledGrid {
         let solve = |idx: [usize; 3]| {
             let x = std::array::from_fn(|a| origin[a] + idx[a] as f64 * step[a]);
             eval(x).map_or(UNDEFINED, |m| {
-                [m.value, m.gradient[0], m.gradient[1], m.gradient[2]]
+                if m.terms == DIRECT_TERMS {
+                    DIRECT
+                } else {
+                    [m.value, m.gradient[0], m.gradient[1], m.gradient[2]]
+                }
             })
         };
         let data = match &pages {
@@ -212,7 +248,8 @@ impl ResampledGrid {
     }
 
     /// Stage `resample_evaluate`: trilinear interpolation of (f, ∇f) at x; undefined
-    /// (`terms` 0) in a fine cell with an undefined corner.
+    /// (`terms` 0) in a fine cell with an undefined corner, [`DIRECT_TERMS`] in one with a
+    /// [`DIRECT`] corner (whatever its other corners).
     pub fn evaluate(&self, x: [f64; 3]) -> MlsValue {
         let g = self.coordinate(x);
         // The cell's lower corner (the last cell for points on the upper face) and the offset
@@ -234,12 +271,24 @@ impl ResampledGrid {
         let base = self.index(cell);
         let h = self.spacing.map(|s| s / f64::from(self.factor));
         let mut v = [0.0; 4];
+        let at = |corner: usize| {
+            let b = [corner & 1, (corner >> 1) & 1, corner >> 2];
+            &self.data[base + b[0] * next[0] + b[1] * next[1] + b[2] * next[2]]
+        };
+        if (0..8).any(|c| is_direct(at(c))) {
+            return MlsValue {
+                value: 0.0,
+                gradient: [0.0; 3],
+                neighbours: 8,
+                terms: DIRECT_TERMS,
+            };
+        }
         for corner in 0..8 {
             let b = [corner & 1, (corner >> 1) & 1, corner >> 2];
             let w = (0..3)
                 .map(|a| if b[a] == 1 { u[a] } else { 1.0 - u[a] })
                 .product::<f64>();
-            let d = &self.data[base + b[0] * next[0] + b[1] * next[1] + b[2] * next[2]];
+            let d = at(corner);
             if d[0].is_nan() {
                 return MlsValue {
                     value: 0.0,
@@ -281,11 +330,22 @@ pub fn point_index(dims: [usize; 3], pages: Option<&Pages>, idx: [usize; 3]) -> 
     }
 }
 
+/// What [`pilot_error`] measured: the fast field's difference from the general path relative
+/// to the data range, and the share of points it solves directly.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PilotError {
+    pub rmse: f64,
+    pub max: f64,
+    pub direct_share: f64,
+}
+
 /// The fast path's own error estimated at `points` before any fine grid exists: at each point
 /// the 8 corners of its fine cell are solved by `corner` (the general path with the analytic
 /// gradient, as the fine grid stores it) and interpolated as [`ResampledGrid::evaluate`] does,
-/// against `direct` (the scene's general path). Returns (RMSE, max) of the difference relative
-/// to `range`, over the points where both are defined; `None` where none is.
+/// against `direct` (the scene's general path). Returns the RMSE and max of the difference
+/// relative to `range` over the points where both are defined, and the share of those points
+/// that fall in a cell with a [`DIRECT`] corner (solved directly there: no difference); `None`
+/// where no point is defined.
 pub fn pilot_error(
     lattice: &Lattice,
     factor: u32,
@@ -293,10 +353,10 @@ pub fn pilot_error(
     corner: impl Fn([f64; 3]) -> Option<MlsValue> + Sync,
     direct: impl Fn([f64; 3]) -> Option<MlsValue>,
     range: f64,
-) -> Option<(f64, f64)> {
+) -> Option<PilotError> {
     let h: [f64; 3] = std::array::from_fn(|a| lattice.spacing[a] / f64::from(factor));
     let fine = fine_dims(lattice.dims, factor);
-    let (mut sum, mut worst, mut count) = (0.0, 0.0f64, 0usize);
+    let (mut sum, mut worst, mut count, mut direct_count) = (0.0, 0.0f64, 0usize, 0usize);
     for &x in points {
         // The fine cell's lower corner, as `evaluate` picks it.
         let lo: [f64; 3] = std::array::from_fn(|a| {
@@ -309,6 +369,11 @@ pub fn pilot_error(
             continue;
         };
         let fast = cell.evaluate(x);
+        if fast.terms == DIRECT_TERMS {
+            count += 1;
+            direct_count += 1;
+            continue;
+        }
         if fast.terms == 0 {
             continue;
         }
@@ -317,13 +382,21 @@ pub fn pilot_error(
         worst = worst.max(e);
         count += 1;
     }
-    (count > 0).then(|| ((sum / count as f64).sqrt(), worst))
+    (count > 0).then(|| PilotError {
+        rmse: (sum / count as f64).sqrt(),
+        max: worst,
+        direct_share: direct_count as f64 / count as f64,
+    })
 }
 
 /// What fine point (f, ∇f) can contribute to the fast field anywhere in the fine cells around
 /// it (fine spacing h): the field is a convex combination of the corners' f_c + ½ ∇f_c·(x − x_c)
 /// with |x − x_c| ≤ h per axis, so each corner stays within f_c ± ½ Σ|∂f_c/∂x_a| h_a.
 pub fn point_bounds(p: [f64; 4], h: [f64; 3]) -> [f64; 2] {
+    // The general path's field near a direct point is bounded by nothing known here.
+    if is_direct(&p) {
+        return [f64::NEG_INFINITY, f64::INFINITY];
+    }
     let e = 0.5 * (p[1].abs() * h[0] + p[2].abs() * h[1] + p[3].abs() * h[2]);
     [p[0] - e, p[0] + e]
 }

@@ -5,7 +5,7 @@
 use super::{Scene, VolumeSource};
 use crate::field::{Field, RenderError};
 use crate::raycast::RaySetup;
-use crate::recon::resample::AUTO_PILOT_RMSE;
+use crate::recon::resample::{AUTO_MAX_DIRECT_SHARE, AUTO_PILOT_RMSE};
 use crate::samples::SampleSet;
 use crate::view::camera::Camera;
 use std::path::Path;
@@ -133,7 +133,9 @@ impl Scene {
     }
 
     /// `reconstruction.resample = "auto"` takes the fast path on irregular data only where a
-    /// pilot finds it accurate ([`AUTO_PILOT_RMSE`]), and counts the first frame (issue 27 §2): the fine grid is
+    /// pilot finds it accurate ([`AUTO_PILOT_RMSE`]), for MLS with the cells around barely
+    /// determined fits solved directly where only that passes (and leaves at least half the
+    /// pilot interpolated, [`AUTO_MAX_DIRECT_SHARE`]), and counts the first frame (issue 27 §2): the fine grid is
     /// built in the first ray-cast frame, one general-path evaluation per fine point, so "auto"
     /// keeps the fast path only where the grid has no more points than that frame would
     /// evaluate without it ([`Scene::frame_evaluations`]). The first frame then costs at most
@@ -146,35 +148,69 @@ impl Scene {
         if !self.reconstruction.resample_auto || factor == 0 {
             return;
         }
-        // Irregular data: the lattice is uniform where the samples are not, and the MLS field
-        // of scattered points can vary within a sample spacing (supports entering and
-        // leaving); a pilot measures the fast path's own error where the rays go. A regular
-        // grid's fast path refines a fixed convolution and is bounded by tests/resample.rs.
+        // Irregular data: the lattice is uniform where the samples are not, and past a
+        // scattered set's outermost samples its MLS field extrapolates (the linear fit barely
+        // determined, then falling back to the constant one); a pilot measures the fast path's
+        // own error where the rays go. A regular grid's fast path refines a fixed convolution
+        // and is bounded by tests/resample.rs.
+        // The share of a frame's samples the fast path still solves (its direct cells).
+        let mut direct_share = 0.0;
         if field.grid().is_none() {
             let points = self.pilot_points(field);
-            if let Some((rmse, max)) = field.fast_path_pilot(&points)
-                && rmse > AUTO_PILOT_RMSE
+            if let Some(p) = field.fast_path_pilot(&points)
+                && p.rmse > AUTO_PILOT_RMSE
             {
-                field.decline_fast_path(format!(
-                    "\"auto\" declined the fast path: at {} points along the first frame's \
-                     rays its interpolation differs from the direct solve by {rmse:.1e} of the \
-                     data range in RMSE (max {max:.1e}), above auto's {AUTO_PILOT_RMSE:e}; set \
-                     reconstruction.resample = {factor} to take it anyway",
-                    points.len()
-                ));
-                return;
+                // Where the error lies in cells whose fit the samples barely determine (a
+                // scattered set's field past its samples), those cells solved directly may
+                // keep the rest: taken where that passes the pilot and leaves most points
+                // interpolated.
+                field.set_resample_direct(true);
+                let direct = field
+                    .fast_path_pilot(&points)
+                    .filter(|_| field.reconstruction.resample_direct);
+                if let Some(d) = direct
+                    && d.rmse <= AUTO_PILOT_RMSE
+                    && d.direct_share <= AUTO_MAX_DIRECT_SHARE
+                {
+                    direct_share = d.direct_share;
+                    field.note_fast_path(format!(
+                        "\"auto\" solves the fast path's cells around barely determined fits \
+                         directly: at {} points along the first frame's rays its interpolation \
+                         differs from the direct solve by {:.1e} of the data range in RMSE, \
+                         {:.1e} with {:.0}% of them solved directly",
+                        points.len(),
+                        p.rmse,
+                        d.rmse,
+                        100.0 * d.direct_share
+                    ));
+                } else {
+                    field.set_resample_direct(false);
+                    field.decline_fast_path(format!(
+                        "\"auto\" declined the fast path: at {} points along the first frame's \
+                         rays its interpolation differs from the direct solve by {:.1e} of the \
+                         data range in RMSE (max {:.1e}), above auto's {AUTO_PILOT_RMSE:e}; set \
+                         reconstruction.resample = {factor} to take it anyway",
+                        points.len(),
+                        p.rmse,
+                        p.max
+                    ));
+                    return;
+                }
             }
         }
         let Some(evaluations) = self.frame_evaluations(field) else {
             return;
         };
         let points = field.solved_fine_points();
-        if points > evaluations {
+        // Direct cells still solve their share of the frame's samples.
+        let saved = ((1.0 - direct_share) * evaluations as f64) as u64;
+        if points > saved {
             field.decline_fast_path(format!(
                 "\"auto\" declined the fast path: its fine grid's {points} solved points (one \
-                 solve each, in the first frame) exceed the {evaluations} solves the first frame \
-                 makes without it at this image size and step; set reconstruction.resample = \
-                 {factor} to take it anyway (later frames are cheaper with it)"
+                 solve each, in the first frame) exceed the {saved} solves it saves the first \
+                 frame ({evaluations} without it at this image size and step); set \
+                 reconstruction.resample = {factor} to take it anyway (later frames are cheaper \
+                 with it)"
             ));
         }
     }

@@ -414,6 +414,7 @@ impl Scene {
                 }
             },
             resample_auto: auto,
+            resample_direct: false,
         };
 
         if reconstruction.method == ReconMethod::Exact

@@ -66,6 +66,7 @@ pub fn recon(
         neighbours,
         resample: 0,
         resample_auto: false,
+        resample_direct: false,
     }
 }
 
