@@ -258,26 +258,19 @@ pub fn binding_defines() -> Vec<(String, String)> {
         .collect();
     d.push(("GRID_PAD".into(), GRID_PAD.to_string()));
     d.push(("PARAMS_COPIES".into(), PARAMS_COPIES.to_string()));
-    d.push((
-        "RESAMPLE_UNDEFINED".into(),
-        format!("{}u", crate::recon::resample::UNDEFINED_BITS),
-    ));
-    d.push((
-        "RESAMPLE_DIRECT_BITS".into(),
-        format!("{}u", crate::recon::resample::DIRECT_BITS),
-    ));
-    d.push((
-        "RESAMPLE_DIRECT_TERMS".into(),
-        format!("{}u", crate::recon::resample::DIRECT_TERMS),
-    ));
-    d.push((
-        "RESAMPLE_DIRECT_MARGIN".into(),
-        format!("{:e}", crate::recon::resample::DIRECT_MARGIN),
-    ));
-    d.push((
-        "HULL_HIT_MERGE".into(),
-        format!("{:e}", crate::samples::bvh::HIT_MERGE),
-    ));
+    use crate::recon::resample::{DIRECT_BITS, DIRECT_MARGIN, DIRECT_TERMS, UNDEFINED_BITS};
+    for (k, v) in [
+        ("RESAMPLE_UNDEFINED", format!("{UNDEFINED_BITS}u")),
+        ("RESAMPLE_DIRECT_BITS", format!("{DIRECT_BITS}u")),
+        ("RESAMPLE_DIRECT_TERMS", format!("{DIRECT_TERMS}u")),
+        ("RESAMPLE_DIRECT_MARGIN", format!("{DIRECT_MARGIN:e}")),
+        (
+            "HULL_HIT_MERGE",
+            format!("{:e}", crate::samples::bvh::HIT_MERGE),
+        ),
+    ] {
+        d.push((k.into(), v));
+    }
     for (k, v) in [
         (
             "SPLAT_STAT_SEGMENT_OVERFLOW",

@@ -153,6 +153,29 @@ fn irregular_gpu_fine_grid_matches_the_cpu_twin() {
     }
 }
 
+/// A ray-cast scene of the fast path at factor 2 (Hermite intervals, one transparent band and two
+/// emitting ones, a coloured background) with `camera` and `render.skip = skip`.
+fn image_scene(camera: &[&str], skip: &str) -> vmls::scene::Scene {
+    let mut o: Vec<String> = camera.iter().map(|c| c.to_string()).collect();
+    o.extend(
+        [
+            "reconstruction.resample=2",
+            "transfer.points=[[0.0, 0.2, 0.4, 1.0, 0.0], [0.45, 0.2, 0.4, 1.0, 0.0], [0.5, 0.2, 0.4, 1.0, 3.0], [1.0, 1.0, 0.6, 0.2, 6.0]]",
+            "render.background=[0.1, 0.2, 0.3]",
+            "render.interval=\"hermite\"",
+        ]
+        .map(String::from),
+    );
+    o.push(format!("render.skip={skip}"));
+    general_scene(&o)
+}
+
+/// The variant holds every one of `parts`, and skipping exactly where `skip` asked for it.
+fn check_variant(variant: &str, parts: &[&str], skip: &str) {
+    assert!(parts.iter().all(|p| variant.contains(p)), "{variant}");
+    assert_eq!(variant.contains("-skip"), skip == "true", "{variant}");
+}
+
 #[test]
 fn mesh_fast_path_images_match_the_cpu_twin_and_keep_the_hull() {
     let d = point_data(tet_torus(24, 3), smooth);
@@ -160,34 +183,19 @@ fn mesh_fast_path_images_match_the_cpu_twin_and_keep_the_hull() {
     field.octree().expect("octree");
     for skip in ["false", "true"] {
         // Straight down the torus axis, orthographic: pixel (18, 15) looks into the hole.
-        let scene = general_scene(
+        let scene = image_scene(
             &[
-                "reconstruction.resample=2",
                 "camera.projection=\"orthographic\"",
                 "camera.view_height=3.0",
                 "camera.eye=[0.0, 0.0, 4.0]",
                 "camera.up=[0.0, 1.0, 0.0]",
                 "camera.width=30",
                 "camera.height=30",
-                "transfer.points=[[0.0, 0.2, 0.4, 1.0, 0.0], [0.45, 0.2, 0.4, 1.0, 0.0], [0.5, 0.2, 0.4, 1.0, 3.0], [1.0, 1.0, 0.6, 0.2, 6.0]]",
-                "render.background=[0.1, 0.2, 0.3]",
-                "render.interval=\"hermite\"",
-                &format!("render.skip={skip}"),
-            ]
-            .map(String::from),
+            ],
+            skip,
         );
         let (img, cpu) = gpu_and_cpu_frames(&field, &scene);
-        assert!(
-            img.variant.contains("-hull") && img.variant.contains("resample2"),
-            "{}",
-            img.variant
-        );
-        assert_eq!(
-            img.variant.contains("-skip"),
-            skip == "true",
-            "{}",
-            img.variant
-        );
+        check_variant(&img.variant, &["-hull", "resample2"], skip);
         if skip == "true" {
             let r = img.skip.expect("skip report");
             assert!(r.fraction() > 0.0, "nothing skipped: {r:?}");
@@ -469,31 +477,16 @@ fn direct_cell_images_match_the_cpu_twin_with_and_without_skipping() {
     field.octree().expect("octree");
     for skip in ["false", "true"] {
         // Past the samples' corner: rays cross the extrapolating shell and the core.
-        let scene = general_scene(
+        let scene = image_scene(
             &[
-                "reconstruction.resample=2",
                 "camera.eye=[2.2, -2.6, 1.9]",
                 "camera.width=28",
                 "camera.height=28",
-                "transfer.points=[[0.0, 0.2, 0.4, 1.0, 0.0], [0.45, 0.2, 0.4, 1.0, 0.0], [0.5, 0.2, 0.4, 1.0, 3.0], [1.0, 1.0, 0.6, 0.2, 6.0]]",
-                "render.background=[0.1, 0.2, 0.3]",
-                "render.interval=\"hermite\"",
-                &format!("render.skip={skip}"),
-            ]
-            .map(String::from),
+            ],
+            skip,
         );
         let (img, cpu) = gpu_and_cpu_frames(&field, &scene);
-        assert!(
-            img.variant.contains("resample2") && img.variant.contains("-direct"),
-            "{}",
-            img.variant
-        );
-        assert_eq!(
-            img.variant.contains("-skip"),
-            skip == "true",
-            "{}",
-            img.variant
-        );
+        check_variant(&img.variant, &["resample2", "-direct"], skip);
         let rgba: Vec<[f64; 4]> = cpu.iter().map(|p| p.rgba).collect();
         assert!(
             rgba.iter().filter(|p| p[3] > 0.2).count() > 100,
