@@ -104,6 +104,7 @@ fn wraps_an_application_device() {
                     resample: 0,
                     resample_auto: false,
                     resample_direct: false,
+                    direct_cells: None,
                 },
                 &OctreeSettings::default(),
                 |_| {},

@@ -460,6 +460,37 @@ fn auto_solves_extrapolating_cells_directly_where_that_passes_its_pilot() {
             .is_some_and(|n| n.contains("directly")),
         "{stats}"
     );
+    // `reconstruction.direct_cells`: false keeps auto from them (it declines), true takes them
+    // with an explicit factor too; anything else is refused, naming the key.
+    let with = |extra: &[&str]| {
+        let mut o = vec![
+            "reconstruction.method=\"mls\"".to_string(),
+            "camera.width=128".into(),
+            "camera.height=128".into(),
+        ];
+        o.extend(extra.iter().map(|e| e.to_string()));
+        general_scene(&o)
+            .field_from_dataset(&d, path, |_| {})
+            .expect("field")
+            .fast_path()
+    };
+    let off = with(&[
+        "reconstruction.resample=\"auto\"",
+        "reconstruction.direct_cells=false",
+    ]);
+    assert_eq!(off["factor"], 0, "{off}");
+    let on = with(&[
+        "reconstruction.resample=2",
+        "reconstruction.direct_cells=true",
+    ]);
+    assert_eq!(on["direct_cells"], true, "{on}");
+    let plain = with(&["reconstruction.resample=2"]);
+    assert_eq!(plain["direct_cells"], false, "{plain}");
+    let bad = vmls::scene::Scene::load(None, &["reconstruction.direct_cells=\"maybe\"".into()])
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
+    assert!(bad.contains("direct_cells"), "{bad}");
     // The Gaussian sum fades past its samples instead: its pilot passes without them.
     let f = scene("gaussian")
         .field_from_dataset(&d, path, |_| {})

@@ -183,6 +183,8 @@ impl Field {
         if field.reconstruction.resample > 0 {
             field.check_resample()?;
         }
+        let always = field.reconstruction.direct_cells == Some(true);
+        field.set_resample_direct(always && field.grid().is_none());
         Ok(field)
     }
 

@@ -60,9 +60,14 @@ pub struct Reconstruction {
     /// (`Scene::fit_fast_path`).
     pub resample_auto: bool,
     /// The fast path's cells with a corner whose fit the samples barely determine are solved
-    /// by the general path ([`resample::DIRECT`]). "auto" sets it on irregular MLS data where
-    /// the fast path's pilot fails without it and passes with it (`Scene::fit_fast_path`).
+    /// by the general path ([`resample::DIRECT`]): MLS on irregular data only. Resolved from
+    /// `direct_cells` when the field is built; with "auto", a scene sets it where the fast
+    /// path's pilot fails without it and passes with it (`Scene::fit_fast_path`).
     pub resample_direct: bool,
+    /// `reconstruction.direct_cells`: `Some(true)` solves those cells directly wherever the
+    /// fast path serves irregular MLS data, `Some(false)` never, `None` ("auto", the default)
+    /// where "auto"'s pilot needs it.
+    pub direct_cells: Option<bool>,
 }
 
 /// Errors of the reconstruction layer.

@@ -157,14 +157,17 @@ impl Scene {
         let mut direct_share = 0.0;
         if field.grid().is_none() {
             let points = self.pilot_points(field);
-            if let Some(p) = field.fast_path_pilot(&points)
+            let pilot = field.fast_path_pilot(&points);
+            direct_share = pilot.map_or(0.0, |p| p.direct_share);
+            if let Some(p) = pilot
                 && p.rmse > AUTO_PILOT_RMSE
             {
                 // Where the error lies in cells whose fit the samples barely determine (a
                 // scattered set's field past its samples), those cells solved directly may
                 // keep the rest: taken where that passes the pilot and leaves most points
-                // interpolated.
-                field.set_resample_direct(true);
+                // interpolated (unless `direct_cells = false`; with true they are on already).
+                let allowed = field.reconstruction.direct_cells != Some(false);
+                field.set_resample_direct(allowed);
                 let direct = field
                     .fast_path_pilot(&points)
                     .filter(|_| field.reconstruction.resample_direct);

@@ -106,6 +106,7 @@ const KNOWN: &[(&str, &[&str])] = &[
             "gradient",
             "neighbours",
             "resample",
+            "direct_cells",
             "knn",
             "anisotropic",
         ],
@@ -415,6 +416,7 @@ impl Scene {
             },
             resample_auto: auto,
             resample_direct: false,
+            direct_cells: rec.on_off_auto("direct_cells")?,
         };
 
         if reconstruction.method == ReconMethod::Exact

@@ -67,6 +67,7 @@ pub fn recon(
         resample: 0,
         resample_auto: false,
         resample_direct: false,
+        direct_cells: None,
     }
 }
 
