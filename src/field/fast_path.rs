@@ -17,39 +17,54 @@ use crate::samples::{Positions, Supports};
 impl Field {
     /// `reconstruction.resample = "auto"` as the field sees it: [`AUTO_FACTOR`] where the
     /// fast path serves and its fine grid stores at most [`AUTO_MAX_POINTS`] points (device
-    /// memory and a first-frame build both grow with them), else 0 with the reason kept for
-    /// `--stats`. The scene weighs the first frame and a pilot after this
-    /// (`Scene::fit_fast_path`).
+    /// memory and a first-frame build both grow with them); on irregular data where that grid
+    /// does not fit, the lattice itself (factor 1: fine points at the median nearest-sample
+    /// spacing, as dense as the samples), whose accuracy the scene's pilot then judges as it
+    /// judges factor 2's; else 0 with the reason kept for `--stats`. The scene weighs the first
+    /// frame and a pilot after this (`Scene::fit_fast_path`).
     pub(super) fn resolve_auto_resample(&mut self) {
         if !self.reconstruction.resample_auto {
             return;
         }
         self.reconstruction.resample_auto = false;
-        self.reconstruction.resample = AUTO_FACTOR;
+        let irregular = self.grid().is_none();
+        match auto_factor(irregular, |f| self.auto_fits(f)) {
+            Ok((AUTO_FACTOR, _)) => {}
+            Ok((factor, why)) => self.note_fast_path(format!(
+                "factor {factor}: at {AUTO_FACTOR}, {}",
+                why.unwrap_or_default()
+            )),
+            Err(why) => self.decline_fast_path(format!(
+                "\"auto\" declined the fast path: {why}; set reconstruction.resample = \
+                 {AUTO_FACTOR} to take it anyway"
+            )),
+        }
+    }
+
+    /// Sets the fast path's factor and says why "auto" cannot take it, if it cannot: its
+    /// lattice or stored fine points past auto's bounds, or a refusal of `check_resample`.
+    fn auto_fits(&mut self, factor: u32) -> Result<(), String> {
+        self.reconstruction.resample = factor;
+        self.pages = std::sync::OnceLock::new();
         // Past this many lattice points even a paged grid would have to store under a sixteenth
         // of them to fit; auto declines without reading every sample to classify its pages.
-        let dense = self.lattice().fine_points(AUTO_FACTOR);
+        let dense = self.lattice().fine_points(factor);
         if dense > 16 * AUTO_MAX_POINTS {
-            self.decline_fast_path(format!(
-                "\"auto\" declined the fast path: its lattice has {dense} fine points, more than \
-                 16 times auto's {AUTO_MAX_POINTS} stored points; set reconstruction.resample = \
-                 {AUTO_FACTOR} to take it anyway"
+            return Err(format!(
+                "its lattice has {dense} fine points, more than 16 times auto's \
+                 {AUTO_MAX_POINTS} stored points"
             ));
-            return;
         }
-        if let Err(e) = self.check_resample() {
-            self.decline_fast_path(e.to_string());
-            return;
-        }
+        self.check_resample().map_err(|e| e.to_string())?;
         let points = self.stored_fine_points();
         if points > AUTO_MAX_POINTS {
             let bytes = self.fine_device_bytes();
-            self.decline_fast_path(format!(
-                "\"auto\" declined the fast path: its fine grid would hold {points} points ({bytes} \
-                 bytes on the device, built in the first frame), more than auto's \
-                 {AUTO_MAX_POINTS}; set reconstruction.resample = {AUTO_FACTOR} to take it anyway"
+            return Err(format!(
+                "its fine grid would hold {points} points ({bytes} bytes on the device, built in \
+                 the first frame), more than auto's {AUTO_MAX_POINTS}"
             ));
         }
+        Ok(())
     }
 
     /// Solves the fast path's cells around barely determined fit directly, or not
@@ -61,9 +76,13 @@ impl Field {
         self.blocks = std::sync::OnceLock::new();
     }
 
-    /// Records what "auto" chose beyond the factor, for `--stats`.
+    /// Records what "auto" chose beyond the default factor, for `--stats` (after any note
+    /// before it).
     pub fn note_fast_path(&mut self, note: String) {
-        self.fast_path_note = Some(note);
+        self.fast_path_note = Some(match self.fast_path_note.take() {
+            Some(before) => format!("{before}; {note}"),
+            None => note,
+        });
     }
 
     /// Turns the fast path off before anything used it, recording why for `--stats` (the
@@ -310,5 +329,55 @@ impl Field {
             self.blocks
                 .get_or_init(|| skip::Blocks::from_resampled(grid)),
         )
+    }
+}
+
+/// The factor "auto" takes: [`AUTO_FACTOR`] where `fits` accepts it, else on irregular data 1
+/// where `fits` accepts that (with the reason the first failed), else the first reason.
+/// `fits` sets the factor it is asked about; the last call leaves the one returned set.
+fn auto_factor(
+    irregular: bool,
+    mut fits: impl FnMut(u32) -> Result<(), String>,
+) -> Result<(u32, Option<String>), String> {
+    let why = match fits(AUTO_FACTOR) {
+        Ok(()) => return Ok((AUTO_FACTOR, None)),
+        Err(why) => why,
+    };
+    if irregular && fits(1).is_ok() {
+        return Ok((1, Some(why)));
+    }
+    Err(why)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn auto_falls_back_to_the_lattice_itself_on_irregular_data_only() {
+        let too_big = |f: u32| {
+            if f > 1 {
+                Err(format!("factor {f} too big"))
+            } else {
+                Ok(())
+            }
+        };
+        assert_eq!(auto_factor(true, |_| Ok(())), Ok((AUTO_FACTOR, None)));
+        assert_eq!(
+            auto_factor(true, too_big),
+            Ok((1, Some("factor 2 too big".into())))
+        );
+        assert_eq!(auto_factor(false, too_big), Err("factor 2 too big".into()));
+        assert_eq!(
+            auto_factor(true, |f| Err(format!("factor {f} too big"))),
+            Err("factor 2 too big".into())
+        );
+        // Whatever it returns, the last factor asked about is the one returned.
+        let mut last = 0;
+        let got = auto_factor(true, |f| {
+            last = f;
+            too_big(f)
+        });
+        assert_eq!(got.map(|(f, _)| f), Ok(last));
     }
 }
