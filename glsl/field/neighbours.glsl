@@ -542,7 +542,8 @@ layout(binding = BINDING_RESAMPLE_PAGES, r32ui) uniform readonly uimageBuffer re
 // into the box; from the fine cell around it (8 texel reads; paged: after its page's slot),
 // f = Σ w_c (f_c + ½ ∇f_c·(x − x_c)) with trilinear weights w_c (exact for quadratics) and ∇f interpolated trilinearly; undefined
 // (terms 0) where a corner is (f = the quiet NaN RESAMPLE_UNDEFINED, compared as bits: a NaN
-// compare could be folded away).
+// compare could be folded away); terms RESAMPLE_DIRECT_TERMS where a corner is direct
+// (RESAMPLE_DIRECT: +inf in its first gradient component), whatever the others.
 MlsResult resampled_evaluate(vec3 x) {
     ivec3 dims = (params.field.grid_dims.xyz - 1) * MLS_RESAMPLED + 1;
     vec3 h = 1.0 / (params.field.grid_inv_spacing.xyz * float(MLS_RESAMPLED));

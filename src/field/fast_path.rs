@@ -67,7 +67,7 @@ impl Field {
         Ok(())
     }
 
-    /// Solves the fast path's cells around barely determined fit directly, or not
+    /// Solves the fast path's cells around barely determined fits directly, or not
     /// (`Reconstruction::resample_direct`), before anything used the fine grid: MLS only (the
     /// other methods have no pivots).
     pub fn set_resample_direct(&mut self, on: bool) {

@@ -443,7 +443,8 @@ impl Field {
 
     /// The reconstructed field and its gradient at x (frame-relative), by the scene's method;
     /// `None` where it is undefined. With `reconstruction.resample` it is the fast path's
-    /// interpolation of the fine grid (stage `resample_evaluate`), defined everywhere.
+    /// interpolation of the fine grid (stage `resample_evaluate`), or the general path in a
+    /// cell with a direct corner (`Reconstruction::resample_direct`).
     pub fn evaluate(&self, neighbours: &dyn Neighbours, x: [f64; 3]) -> Option<MlsValue> {
         if let Some(r) = self.resampled() {
             let v = r.evaluate(x);
