@@ -283,7 +283,7 @@ pub fn mls_evaluate(
 }
 
 /// [`mls_evaluate`] and the margin of its solve (twin of `g_margin` in
-/// `glsl/field/mls.glsl`): the smallest pivot `d_k / A_kk` of the basis asked for, k ≥ 1,
+/// `glsl/field/neighbours.glsl`): the smallest pivot `d_k / A_kk` of the basis asked for, k ≥ 1,
 /// where every pivot passed; 0 where the solve fell back to fewer terms, 1 for the constant
 /// basis. A small margin means the samples barely determine the fit, as where a scattered set's
 /// field extrapolates past its samples; the fast path solves such cells directly
