@@ -165,12 +165,16 @@ impl Scene {
                 // Where the error lies in cells whose fit the samples barely determine (a
                 // scattered set's field past its samples), those cells solved directly may
                 // keep the rest: taken where that passes the pilot and leaves most points
-                // interpolated (unless `direct_cells = false`; with true they are on already).
-                let allowed = field.reconstruction.direct_cells != Some(false);
-                field.set_resample_direct(allowed);
-                let direct = field
-                    .fast_path_pilot(&points)
-                    .filter(|_| field.reconstruction.resample_direct);
+                // interpolated (unless `direct_cells = false`; with true this pilot had them
+                // already, and set_resample_direct keeps them off for methods without pivots).
+                let retry = !field.reconstruction.resample_direct
+                    && field.reconstruction.direct_cells != Some(false);
+                if retry {
+                    field.set_resample_direct(true);
+                }
+                let direct = (retry && field.reconstruction.resample_direct)
+                    .then(|| field.fast_path_pilot(&points))
+                    .flatten();
                 if let Some(d) = direct
                     && d.rmse <= AUTO_PILOT_RMSE
                     && d.direct_share <= AUTO_MAX_DIRECT_SHARE
@@ -187,7 +191,6 @@ impl Scene {
                         100.0 * d.direct_share
                     ));
                 } else {
-                    field.set_resample_direct(false);
                     field.decline_fast_path(format!(
                         "\"auto\" declined the fast path: at {} points along the first frame's \
                          rays its interpolation differs from the direct solve by {:.1e} of the \
