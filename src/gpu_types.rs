@@ -124,11 +124,10 @@ pub mod binding {
     pub fn kind(b: u32) -> crate::vk::BindingKind {
         use crate::vk::BindingKind;
         match b {
-            SAMPLES | GRID | RESAMPLED | RESAMPLE_TARGET | PREINT | SKIP_BLOCKS
-            | TRANSFER_TEXELS | SPLAT_KERNELS | SPLATS | HULL_TRIS | RAY_SEGMENTS => {
-                BindingKind::TexelRgba32Float
-            }
-            NODES | SPLAT_WORDS | HULL_NODES => BindingKind::TexelRgba32Uint,
+            GRID | RESAMPLED | RESAMPLE_TARGET | PREINT | SKIP_BLOCKS | TRANSFER_TEXELS
+            | SPLAT_KERNELS | SPLATS | HULL_TRIS | RAY_SEGMENTS => BindingKind::TexelRgba32Float,
+            // The octree's samples or records as their bits: packed records are not floats.
+            SAMPLES | NODES | SPLAT_WORDS | HULL_NODES => BindingKind::TexelRgba32Uint,
             SPLAT_LIST => BindingKind::TexelRg32Uint,
             INDICES | PROBE_TEXELS | SKIP_TABLE | GRID_WORDS | OFFSET_TEXELS | RESAMPLE_PAGES => {
                 BindingKind::TexelR32Uint

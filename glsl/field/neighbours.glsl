@@ -69,8 +69,9 @@ float grid_value(int i) {
 #else
 // Texel-buffer views (binding::kind): imageLoad compiles to one gather per 8 lanes on llvmpipe,
 // where a storage-buffer load with a per-lane index is a loop over the lanes. `Sample` i is the
-// three texels 3i, 3i + 1, 3i + 2.
-layout(binding = BINDING_SAMPLES, rgba32f) uniform readonly imageBuffer samples;
+// three texels 3i, 3i + 1, 3i + 2; inline records are RECORD_STRIDE texels. Read as uints (the
+// floats' bits), since a packed record's words are not floats.
+layout(binding = BINDING_SAMPLES, rgba32ui) uniform readonly uimageBuffer samples;
 layout(binding = BINDING_NODES, rgba32ui) uniform readonly uimageBuffer nodes;
 layout(binding = BINDING_INDICES, r32ui) uniform readonly uimageBuffer indices;
 #endif
@@ -347,23 +348,25 @@ uvec3 octree_leaf(vec3 x) {
     return uvec3(0u);
 }
 
-// Texels per sample (Sample in src/gpu_types.rs) or inline record (record_texels in
-// src/field/records.rs: two without a full metric, the Gaussian weight in the metric's w).
-#if OCTREE_INLINE == 1 && MLS_FULL_METRIC == 0
-#define RECORD_STRIDE 2
-#else
-#define RECORD_STRIDE 3
-#endif
+// RECORD_STRIDE (the host's define, Variant::defines): texels per sample as the coded layout
+// reads it (Sample in src/gpu_types.rs, 3) or per inline record (record_stride in
+// src/field/records.rs: 3 with full metrics, 2 with diagonal ones, the Gaussian weight in the
+// metric's w; 1 packed, where every support is a ball).
 
 #if OCTREE_INLINE == 1
 // Stage `octree_records` (twin: InlineLeaves in src/field/records.rs): a leaf is its first
-// record and its record count; candidate r is record first + r, an address no load precedes.
+// record and its record count; candidate r is record first + r (packed: after the leaf's
+// frame, first + 1 + r), an address no load precedes.
 uint leaf_first(uvec3 leaf) {
     return leaf.x;
 }
 
 bool leaf_code(uvec3 leaf, uint r, inout uint prev) {
+#if RECORD_STRIDE == 1
+    prev = leaf.x + 1u + r;
+#else
     prev = leaf.x + r;
+#endif
     return true;
 }
 #else
@@ -384,29 +387,53 @@ bool leaf_code(uvec3 leaf, uint r, inout uint prev) {
 }
 #endif
 
-// Position and value of sample (or record) i.
-vec4 sample_pos_value(int i) {
-    return imageLoad(samples, RECORD_STRIDE * i);
+vec4 sample_texel(int t) {
+    return uintBitsToFloat(imageLoad(samples, t));
 }
 
-// M d for sample i's support metric (MLS_FULL_METRIC 0: diagonal metrics only, and the third
-// texel is never read).
-vec3 metric_apply(int i, vec3 d) {
-    vec4 m = imageLoad(samples, RECORD_STRIDE * i + 1);
-    vec3 md = m.xyz * d;
+// The frame a leaf's candidates are offset in from query x: packed records (twin:
+// PackedFrame), the leaf's corner relative to x and the step of its records' coordinates,
+// read once per leaf; otherwise (−x, 0), so that d = p + (−x) is p − x to the bit.
+vec4 leaf_frame(uvec3 leaf, vec3 x) {
+#if RECORD_STRIDE == 1
+    vec4 f = sample_texel(int(leaf.x));
+    return vec4(f.xyz - x, f.w);
+#else
+    return vec4(-x, 0.0);
+#endif
+}
+
+// Candidate i in `frame`: its offset d = x_i − x from the query, its value (packed Gaussian
+// records: w_i f_i), and M_i d (MLS_FULL_METRIC 0: diagonal metrics only, and a third texel
+// is never read).
+void candidate(int i, vec4 frame, out vec3 d, out float value, out vec3 md) {
+#if RECORD_STRIDE == 1
+    uvec4 t = imageLoad(samples, i);
+    uvec3 q = uvec3(t.x & 0x1FFFFFu, (t.x >> 21u) | ((t.y << 11u) & 0x1FFFFFu), t.y >> 10u);
+    d = frame.xyz + vec3(ivec3(q)) * frame.w;
+    value = uintBitsToFloat(t.z);
+    md = uintBitsToFloat(t.w) * d;
+#else
+    vec4 pos_value = sample_texel(RECORD_STRIDE * i);
+    d = pos_value.xyz + frame.xyz;
+    value = pos_value.w;
+    vec4 m = sample_texel(RECORD_STRIDE * i + 1);
+    md = m.xyz * d;
 #if MLS_FULL_METRIC == 1
-    vec4 off = imageLoad(samples, RECORD_STRIDE * i + 2);
+    vec4 off = sample_texel(RECORD_STRIDE * i + 2);
     md += vec3(m.w * d.y + off.x * d.z, m.w * d.x + off.y * d.z, off.x * d.x + off.y * d.y);
 #endif
-    return md;
+#endif
 }
 
-// The Gaussian-sum weight v_i·norm_i of sample i.
+// The Gaussian-sum weight v_i·norm_i of sample i (packed records hold it in their value).
 float sample_weight(int i) {
-#if RECORD_STRIDE == 2
-    return imageLoad(samples, 2 * i + 1).w;
+#if RECORD_STRIDE == 1
+    return 1.0;
+#elif RECORD_STRIDE == 2
+    return sample_texel(2 * i + 1).w;
 #else
-    return imageLoad(samples, 3 * i + 2).z;
+    return sample_texel(3 * i + 2).z;
 #endif
 }
 
@@ -414,30 +441,30 @@ void mls_gather(uint pass, vec3 x, inout MlsSystem s, inout MlsGradient g, float
     uvec3 leaf = octree_leaf(x);
     vec3 scale = vec3(uintBitsToFloat(leaf.z));
     s.inv_h = scale;
+    vec4 frame = leaf_frame(leaf, x);
     uint prev = leaf_first(leaf);
     uint r = 0u;
     for (; r < leaf.y; ++r) {
         if (!leaf_code(leaf, r, prev)) {
             continue;
         }
-        int i = int(prev);
-        vec4 pos_value = sample_pos_value(i);
-        vec3 d = pos_value.xyz - x;
-        vec3 md = metric_apply(i, d);
+        vec3 d, md;
+        float f;
+        candidate(int(prev), frame, d, f, md);
         float rho2 = dot(d, md);
 #if MLS_WEIGHT == 0
         if (pass == 0u) {
-            mls_accumulate_all(s, d * scale, rho2, pos_value.w);
+            mls_accumulate_all(s, d * scale, rho2, f);
         } else {
-            mls_visit_gradient_all(g, d * scale, rho2, pos_value.w, md, c);
+            mls_visit_gradient_all(g, d * scale, rho2, f, md, c);
         }
         continue;
 #endif
         if (rho2 < 1.0) {
             if (pass == 0u) {
-                mls_accumulate(s, d * scale, rho2, pos_value.w);
+                mls_accumulate(s, d * scale, rho2, f);
             } else {
-                mls_visit_gradient(g, d * scale, rho2, pos_value.w, md, c);
+                mls_visit_gradient(g, d * scale, rho2, f, md, c);
             }
         }
     }
@@ -481,6 +508,7 @@ MlsResult gaussian_evaluate(vec3 x) {
     }
 #else
     uvec3 leaf = octree_leaf(x);
+    vec4 frame = leaf_frame(leaf, x);
     uint prev = leaf_first(leaf);
     uint r = 0u;
     for (; r < leaf.y; ++r) {
@@ -488,13 +516,13 @@ MlsResult gaussian_evaluate(vec3 x) {
             continue;
         }
         int i = int(prev);
-        vec4 pos_value = sample_pos_value(i);
-        vec3 d = pos_value.xyz - x;
-        vec3 md = metric_apply(i, d);
+        vec3 d, md;
+        float f;
+        candidate(i, frame, d, f, md);
         float rho2 = dot(d, md);
         // Selects, not a branch (see mls_accumulate_all): outside candidates add zeros.
         float w = sample_weight(i);
-        float wf = rho2 < 1.0 ? w * pos_value.w * exp(k * rho2) : 0.0;
+        float wf = rho2 < 1.0 ? w * f * exp(k * rho2) : 0.0;
         value += wf;
         grad += wf * md;
         count += rho2 < 1.0 ? 1u : 0u;

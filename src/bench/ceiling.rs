@@ -108,8 +108,9 @@ pub fn evaluation_cost(field: &Field, k: f64) -> EvaluationCost {
             let stats = o.stats(0);
             let per_leaf = stats.references as f64 / stats.leaves.max(1) as f64;
             let record = if field.has_full_metric() { 3.0 } else { 2.0 };
+            // Inline records: one, two or three texels; coded: the sample's and a code.
             let texels = if field.octree_inline() {
-                record
+                field.record_stride() as f64
             } else {
                 record + 1.0
             };

@@ -185,7 +185,7 @@ impl GpuField {
                 // maxTexelBufferElements, not by one storage binding's range.
                 let texel = BufferUsage::Texel;
                 let octree = if field.octree_inline() {
-                    let stride = records::record_stride(field.has_full_metric());
+                    let stride = field.record_stride();
                     let texels = records::record_texel_count(o, stride);
                     let limit = ctx.info().max_texel_buffer_elements;
                     if texels > limit {
@@ -196,7 +196,7 @@ impl GpuField {
                             o.references
                         )));
                     }
-                    let leaves = records::InlineLeaves::build(o, &samples, stride);
+                    let leaves = records::InlineLeaves::build(o, &samples, stride, gaussian);
                     [
                         Buffer::from_slice_as(ctx, "octree records", &leaves.texels, texel)?,
                         Buffer::from_slice_as(ctx, "octree nodes", &leaves.nodes, texel)?,

@@ -77,6 +77,8 @@ pub struct Field {
     range: (f64, f64),
     /// Whether any support is a rotated ellipsoid.
     full_metric: bool,
+    /// Whether every support is a ball (packed inline records).
+    isotropic: bool,
     /// Gaussian kernel volumes, computed at first use (Gaussian field, splatting).
     volumes: std::sync::OnceLock<KernelVolumes>,
     /// Set once [`Field::kernel_volumes_where`] computed some volumes alone.
@@ -195,6 +197,7 @@ impl Field {
         let grid = matches!(samples.positions, Positions::Grid { .. })
             && matches!(samples.supports, Supports::Uniform(_));
         let full_metric = samples.has_full_metric();
+        let isotropic = samples.is_isotropic();
         let support_box = match &frame.extent {
             Some(e) => e.support_box,
             None => {
@@ -221,6 +224,7 @@ impl Field {
             hull,
             range: frame.range,
             full_metric,
+            isotropic,
             volumes: std::sync::OnceLock::new(),
             partial_volumes: std::sync::OnceLock::new(),
             support_box,
@@ -486,7 +490,7 @@ impl Field {
         let o = self.octree_if_built()?;
         let sample_bytes = std::mem::size_of::<crate::gpu_types::Sample>() as u64;
         Some(if self.octree_inline() {
-            let stride = records::record_stride(self.full_metric);
+            let stride = self.record_stride();
             let texels = records::record_texel_count(o, stride);
             ("inline", 16 * (texels + o.nodes.len() as u64))
         } else {
@@ -500,11 +504,16 @@ impl Field {
         self.octree_if_built().is_some_and(|o| {
             records::inline_chosen(
                 o,
-                records::record_stride(self.full_metric),
+                self.record_stride(),
                 self.octree_settings.records,
                 self.octree_settings.max_record_texels,
             )
         })
+    }
+
+    /// Texels of an inline record ([`records::record_stride`]).
+    pub fn record_stride(&self) -> usize {
+        records::record_stride(self.full_metric, self.isotropic)
     }
 
     /// Compile-time MLS choices.

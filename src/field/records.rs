@@ -8,47 +8,156 @@
 //! octree evaluation's cost (about 150 a point, BENCHMARKS.md "Compact octree references").
 //! The inline layout copies each leaf's samples, in the coded list's order, into consecutive
 //! records: candidate r of a leaf is at record `first + r`, an address known before any load,
-//! and no index is read. The same candidates in the same order make the same sums, so the
-//! images equal the coded layout's to the bit; what it costs is memory, each sample once per
+//! and no index is read. The same candidates in the same order make the same sums, so at
+//! strides 2 and 3 the images equal the coded layout's to the bit; what it costs is memory, each sample once per
 //! leaf that lists it (the octree's redundancy, 59-144 on the data measured) instead of two
 //! bytes per reference.
 //!
-//! A record is `RECORD_STRIDE` rgba32f texels: position and value, then the metric's diagonal
-//! with the Gaussian weight in w (stride 2); a full metric keeps the sample's three texels
-//! ([`Sample`]'s layout, weight in the third's z). A leaf node's (first, count) name records
-//! instead of code words.
+//! A record is `RECORD_STRIDE` rgba32 texels (read through an rgba32ui view, floats as their
+//! bits): position and value, then the metric's diagonal with the Gaussian weight in w
+//! (stride 2); a full metric keeps the sample's three texels ([`Sample`]'s layout, weight in the
+//! third's z). A leaf node's (first, count) name records instead of code words.
+//!
+//! Isotropic supports (every metric `I / h²`, the default for scattered points and meshes) pack
+//! a record into one texel (stride 1, [`PackedFrame`]): the position as three 21-bit steps from
+//! a corner of the leaf's records, then the value (the Gaussian sum's `w f`, its only use of
+//! either) and `1 / h²`. The leaf's first texel is that corner and step. Half the memory, so
+//! twice the data fits "auto"'s cap; an evaluation's speed measured the same (BENCHMARKS.md
+//! "Packed octree records"). A position moves by at most half a step (2.4e-7 of the records'
+//! extent, where f32 rounds a coordinate by up to 6e-8 of its magnitude), so evaluations err
+//! against the f64 twin up to about three times the f32 layouts' (`tests/octree_records.rs`),
+//! and images agree with theirs within f32 rounding, not to the bit.
 
 use crate::gpu_types::Sample;
 use crate::recon::Octree;
 use crate::recon::octree_codes::LeafCodes;
 
 /// The largest inline records "auto" takes, in bytes: beyond that the coded references serve
-/// (the 68 921 scattered points of issue 26 take 317 MB, 10⁶ of them would take 3.4 GB).
+/// (the 68 921 scattered points of issue 26 take 166 MB packed, 321 MB at stride 2; 250 000
+/// take 366 MB packed; 10⁶ would take 1.7 GB).
 pub const AUTO_MAX_BYTES: u64 = 512 << 20;
 
-/// Bytes of one rgba32f texel.
+/// Bytes of one rgba32 texel.
 const TEXEL_BYTES: u64 = 16;
 
-/// Texels per record: 3 with full metrics (their off-diagonal terms), else 2.
-pub fn record_stride(full_metric: bool) -> usize {
-    if full_metric { 3 } else { 2 }
+/// Bits of each packed coordinate: three fit two words.
+pub const PACKED_BITS: u32 = 21;
+
+/// The largest packed coordinate step.
+const PACKED_MAX: u32 = (1 << PACKED_BITS) - 1;
+
+/// Texels per record: 3 with full metrics (their off-diagonal terms), 1 where every support is
+/// isotropic (packed), else 2.
+pub fn record_stride(full_metric: bool, isotropic: bool) -> usize {
+    if full_metric {
+        3
+    } else if isotropic {
+        1
+    } else {
+        2
+    }
 }
 
-/// The texels of `s`'s record at `stride` (only the first `stride` are stored).
-pub fn record_texels(s: &Sample, stride: usize) -> [[f32; 4]; 3] {
+/// The texels of `s`'s record at stride 2 or 3 (only the first `stride` are stored), as bits.
+pub fn record_texels(s: &Sample, stride: usize) -> [[u32; 4]; 3] {
+    let bits = |t: [f32; 4]| t.map(f32::to_bits);
     if stride == 2 {
         let [xx, yy, zz, _] = s.metric;
         // The diagonal's fourth component (xy) is read only with full metrics: the weight
         // takes its place.
-        [s.pos_value, [xx, yy, zz, s.metric_off[2]], [0.0; 4]]
+        [
+            bits(s.pos_value),
+            bits([xx, yy, zz, s.metric_off[2]]),
+            [0; 4],
+        ]
     } else {
-        [s.pos_value, s.metric, s.metric_off]
+        [bits(s.pos_value), bits(s.metric), bits(s.metric_off)]
     }
 }
 
-/// Texels that inline records of `octree` at `stride` take.
+/// Texels that inline records of `octree` at `stride` take (at stride 1, a frame per leaf
+/// too).
 pub fn record_texel_count(octree: &Octree, stride: usize) -> u64 {
-    octree.references as u64 * stride as u64
+    let frames = if stride == 1 {
+        octree.nodes.iter().filter(|n| n[0] == 0).count() as u64
+    } else {
+        0
+    };
+    octree.references as u64 * stride as u64 + frames
+}
+
+/// A packed leaf's frame (its first texel): the corner `lo` of its records' box and the step
+/// of their 21-bit coordinates (twin of `leaf_frame` in glsl/field/neighbours.glsl).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PackedFrame {
+    pub lo: [f32; 3],
+    pub step: f32,
+}
+
+impl PackedFrame {
+    /// The frame of records at `positions`: their smallest corner, and a step that spans
+    /// their largest extent in [`PACKED_MAX`] steps.
+    pub fn of(positions: impl Iterator<Item = [f32; 3]> + Clone) -> Self {
+        let lo = positions.clone().fold([f32::INFINITY; 3], |a, p| {
+            std::array::from_fn(|k| a[k].min(p[k]))
+        });
+        let lo = lo.map(|v| if v.is_finite() { v } else { 0.0 });
+        let extent = positions.fold(0.0f64, |e, p| {
+            (0..3).fold(e, |e, k| e.max(p[k] as f64 - lo[k] as f64))
+        });
+        // Rounded up, so that the farthest record's steps stay within PACKED_MAX.
+        let step = (extent / PACKED_MAX as f64) as f32;
+        let step = if step as f64 * (PACKED_MAX as f64) < extent {
+            f32::from_bits(step.to_bits() + 1)
+        } else {
+            step
+        };
+        Self {
+            lo,
+            step: if step > 0.0 { step } else { 1.0 },
+        }
+    }
+
+    /// The frame's texel.
+    pub fn texel(&self) -> [u32; 4] {
+        [
+            self.lo[0].to_bits(),
+            self.lo[1].to_bits(),
+            self.lo[2].to_bits(),
+            self.step.to_bits(),
+        ]
+    }
+
+    /// A record's texel: `p`'s steps (x in bits 0–20 of word 0, y in its bits 21–31 and bits
+    /// 0–9 of word 1, z in bits 10–30 of word 1), then the value's and metric's bits.
+    pub fn pack(&self, p: [f32; 3], value: f32, metric: f32) -> [u32; 4] {
+        let q: [u32; 3] = std::array::from_fn(|k| {
+            let steps = (p[k] as f64 - self.lo[k] as f64) / self.step as f64;
+            steps.round().clamp(0.0, PACKED_MAX as f64) as u32
+        });
+        [
+            q[0] | (q[1] << PACKED_BITS),
+            (q[1] >> (32 - PACKED_BITS)) | (q[2] << (2 * PACKED_BITS - 32)),
+            value.to_bits(),
+            metric.to_bits(),
+        ]
+    }
+
+    /// The position a record's texel decodes to, as the kernel computes it (its offset from a
+    /// query x is `(lo − x) + q · step` there).
+    pub fn position(&self, t: [u32; 4]) -> [f64; 3] {
+        let q = Self::steps(t);
+        std::array::from_fn(|k| self.lo[k] as f64 + q[k] as f64 * self.step as f64)
+    }
+
+    /// A record's three coordinate steps.
+    pub fn steps(t: [u32; 4]) -> [u32; 3] {
+        [
+            t[0] & PACKED_MAX,
+            (t[0] >> PACKED_BITS) | ((t[1] << (32 - PACKED_BITS)) & PACKED_MAX),
+            (t[1] >> (2 * PACKED_BITS - 32)) & PACKED_MAX,
+        ]
+    }
 }
 
 /// Whether kernels read `octree`'s leaves as inline records: the scene's choice, or ("auto",
@@ -69,19 +178,43 @@ pub fn inline_chosen(
 #[derive(Debug, Clone, PartialEq)]
 pub struct InlineLeaves {
     pub nodes: Vec<[u32; 4]>,
-    pub texels: Vec<[f32; 4]>,
+    pub texels: Vec<[u32; 4]>,
     pub stride: usize,
 }
 
 impl InlineLeaves {
     /// Stage `octree_records`: every leaf's members (in their coded order) copied from
-    /// `samples` (the octree's samples as uploaded, one per sample).
-    pub fn build(octree: &Octree, samples: &[Sample], stride: usize) -> Self {
+    /// `samples` (the octree's samples as uploaded, one per sample). At stride 1 a leaf's
+    /// first texel is its [`PackedFrame`], and `gaussian` stores `w f` as the value.
+    pub fn build(octree: &Octree, samples: &[Sample], stride: usize, gaussian: bool) -> Self {
         let mut texels = Vec::with_capacity(record_texel_count(octree, stride) as usize);
         let mut nodes = octree.nodes.clone();
         for node in nodes.iter_mut().filter(|n| n[0] == 0) {
+            let members = LeafCodes::new(&octree.codes, node[1], node[2]);
+            if stride == 1 {
+                let first = texels.len();
+                let at = |i: u32| {
+                    let p = samples[i as usize].pos_value;
+                    [p[0], p[1], p[2]]
+                };
+                let frame = PackedFrame::of(members.clone().map(at));
+                texels.push(frame.texel());
+                for i in members {
+                    let s = &samples[i as usize];
+                    let f = s.pos_value[3];
+                    let value = if gaussian {
+                        (f as f64 * s.metric_off[2] as f64) as f32
+                    } else {
+                        f
+                    };
+                    texels.push(frame.pack(at(i), value, s.metric[0]));
+                }
+                node[1] = first as u32;
+                node[2] = (texels.len() - first - 1) as u32;
+                continue;
+            }
             let first = texels.len() / stride;
-            for i in LeafCodes::new(&octree.codes, node[1], node[2]) {
+            for i in members {
                 let record = record_texels(&samples[i as usize], stride);
                 texels.extend_from_slice(&record[..stride]);
             }
@@ -96,12 +229,22 @@ impl InlineLeaves {
     }
 
     /// The records of leaf `node` as the kernel reads them: record r of the leaf at texel
-    /// `stride · (first + r)`.
-    pub fn leaf(&self, node: usize) -> impl Iterator<Item = &[[f32; 4]]> + '_ {
+    /// `stride · (first + r)`, or at stride 1 `first + 1 + r` (after the frame).
+    pub fn leaf(&self, node: usize) -> impl Iterator<Item = &[[u32; 4]]> + '_ {
         let [_, first, count, _] = self.nodes[node];
-        (first..first + count).map(move |r| {
+        let skip = u32::from(self.stride == 1);
+        (first + skip..first + skip + count).map(move |r| {
             let at = r as usize * self.stride;
             &self.texels[at..at + self.stride]
+        })
+    }
+
+    /// A packed leaf's frame (stride 1).
+    pub fn frame(&self, node: usize) -> Option<PackedFrame> {
+        let t = self.texels[self.nodes[node][1] as usize];
+        (self.stride == 1).then(|| PackedFrame {
+            lo: [t[0], t[1], t[2]].map(f32::from_bits),
+            step: f32::from_bits(t[3]),
         })
     }
 
@@ -160,43 +303,103 @@ mod tests {
 
     /// The twin comparison: every leaf's records, read as the kernel reads them, are its coded
     /// members' samples in the coded order — the position, value, the metric terms the
-    /// variant reads, and the Gaussian weight — at both strides.
+    /// variant reads, and the Gaussian weight — at every stride; packed positions within half
+    /// a step (and f32 rounding) of the sample's.
     #[test]
     fn every_leafs_records_are_its_coded_members_in_order() {
         let (tree, samples) = octree(3000);
-        for stride in [2, 3] {
-            let leaves = InlineLeaves::build(&tree, &samples, stride);
+        let bits = |t: [f32; 4]| t.map(f32::to_bits);
+        for (stride, gaussian) in [(1, false), (1, true), (2, false), (3, false)] {
+            let leaves = InlineLeaves::build(&tree, &samples, stride, gaussian);
             assert_eq!(
                 leaves.texels.len() as u64,
                 record_texel_count(&tree, stride)
             );
             let mut checked = 0;
+            let mut worst_steps = 0.0f64;
             for (node, n) in tree.nodes.iter().enumerate().filter(|(_, n)| n[0] == 0) {
                 let coded: Vec<u32> = LeafCodes::new(&tree.codes, n[1], n[2]).collect();
-                let records: Vec<&[[f32; 4]]> = leaves.leaf(node).collect();
+                let records: Vec<&[[u32; 4]]> = leaves.leaf(node).collect();
                 assert_eq!(coded.len(), records.len(), "leaf {node}");
                 assert_eq!(leaves.nodes[node][3], n[3], "leaf {node}'s scale");
                 for (&i, r) in coded.iter().zip(&records) {
                     let s = &samples[i as usize];
-                    assert_eq!(r[0], s.pos_value);
-                    assert_eq!(r[1][..3], s.metric[..3]);
-                    if stride == 2 {
-                        assert_eq!(r[1][3], s.metric_off[2], "the weight in the metric's w");
-                    } else {
-                        assert_eq!((r[1], r[2]), (s.metric, s.metric_off));
+                    match stride {
+                        1 => {
+                            let frame = leaves.frame(node).expect("a packed leaf's frame");
+                            let p = frame.position(r[0]);
+                            for (pk, sk) in p.iter().zip(s.pos_value) {
+                                let e = (pk - sk as f64).abs();
+                                worst_steps = worst_steps.max(e / frame.step as f64);
+                                assert!(e <= 0.5 * frame.step as f64 * (1.0 + 1e-6), "leaf {node}");
+                            }
+                            let f = s.pos_value[3];
+                            let value = if gaussian { f * s.metric_off[2] } else { f };
+                            let stored = f32::from_bits(r[0][2]);
+                            assert!(
+                                (stored - value).abs() <= 1e-6 * value.abs(),
+                                "{stored} {value}"
+                            );
+                            assert_eq!(r[0][3], s.metric[0].to_bits());
+                        }
+                        2 => {
+                            assert_eq!(r[0], bits(s.pos_value));
+                            assert_eq!(r[1][..3], bits(s.metric)[..3]);
+                            assert_eq!(r[1][3], s.metric_off[2].to_bits(), "the weight in w");
+                        }
+                        _ => {
+                            assert_eq!(r[0], bits(s.pos_value));
+                            assert_eq!((r[1], r[2]), (bits(s.metric), bits(s.metric_off)));
+                        }
                     }
                     checked += 1;
                 }
             }
             assert_eq!(checked, tree.references);
             assert!(tree.references > 3000, "leaves share samples");
+            if stride == 1 {
+                // Rounding to the nearest step, so some record lands near half a step.
+                assert!(worst_steps > 0.4, "{worst_steps}");
+            }
         }
+    }
+
+    /// Every coordinate of a packed texel decodes to the steps packed, at both ends of the
+    /// range and across the word boundary that y straddles.
+    #[test]
+    fn packed_steps_round_trip() {
+        let frame = PackedFrame {
+            lo: [0.0; 3],
+            step: 1.0,
+        };
+        for q in [
+            [0, 0, 0],
+            [PACKED_MAX, PACKED_MAX, PACKED_MAX],
+            [1, 1 << 10, 1 << 11],
+            [PACKED_MAX, 2047, 0],
+            [12345, 1_048_577, 2_000_001],
+        ] {
+            let t = frame.pack(q.map(|v| v as f32), 0.5, 2.0);
+            assert_eq!(PackedFrame::steps(t), q);
+            assert_eq!(t[1] >> 31, 0, "bit 63 unused");
+        }
+        let f = PackedFrame::of([[1.0, -2.0, 0.5], [1.5, -2.0, 3.0]].into_iter());
+        assert_eq!(f.lo, [1.0, -2.0, 0.5]);
+        assert!(f.step as f64 * PACKED_MAX as f64 >= 2.5);
+        assert_eq!(
+            PackedFrame::steps(f.pack([1.5, -2.0, 3.0], 0.0, 0.0))[2],
+            PACKED_MAX
+        );
     }
 
     #[test]
     fn auto_takes_inline_records_only_where_they_fit() {
         let (tree, _) = octree(500);
         let texels = record_texel_count(&tree, 2);
+        assert_eq!(
+            record_texel_count(&tree, 1),
+            texels / 2 + tree.nodes.iter().filter(|n| n[0] == 0).count() as u64
+        );
         assert!(inline_chosen(&tree, 2, None, texels));
         assert!(!inline_chosen(&tree, 2, None, texels - 1));
         assert!(!inline_chosen(&tree, 2, Some(false), texels));

@@ -28,6 +28,9 @@ pub struct Variant {
     /// The octree's leaves are read as inline records, not coded references
     /// (`OCTREE_INLINE`, [`super::records`]).
     pub inline_records: bool,
+    /// Texels of an inline record (`RECORD_STRIDE`: 1 packed, 2, or 3 with full metrics;
+    /// [`super::records::record_stride`]).
+    pub record_stride: usize,
     /// The ray caster's integrator (`None` for kernels that do not integrate).
     pub method: Option<Method>,
     /// Adaptive stack entries (levels of subdivision).
@@ -111,6 +114,7 @@ impl Variant {
             },
             full_metric: field.has_full_metric(),
             inline_records: field.uses_octree() && field.octree_inline(),
+            record_stride: field.record_stride(),
             hull: false,
             hull_hits: crate::samples::bvh::MAX_HITS as u32,
             hull_cache: HullCache::Off,
@@ -181,6 +185,13 @@ impl Variant {
         ));
         d.push(("MLS_FULL_METRIC".into(), flag(self.full_metric)));
         d.push(("OCTREE_INLINE".into(), flag(self.inline_records)));
+        // The coded layout reads `Sample`s (three texels) whatever the metric.
+        let stride = if self.inline_records {
+            self.record_stride
+        } else {
+            3
+        };
+        d.push(("RECORD_STRIDE".into(), stride.to_string()));
         d.push(("GRID_SIGNED".into(), flag(self.grid.signed())));
         d.push(("MLS_GAUSSIAN".into(), flag(self.gaussian)));
         d.push(("MLS_EXACT".into(), flag(self.exact)));
@@ -276,6 +287,7 @@ impl Variant {
                 NeighbourMode::Octree => match (self.full_metric, self.inline_records) {
                     (true, true) => "octree-ellipsoid-inline",
                     (true, false) => "octree-ellipsoid",
+                    (false, true) if self.record_stride == 1 => "octree-packed",
                     (false, true) => "octree-inline",
                     (false, false) => "octree",
                 },

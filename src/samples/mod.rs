@@ -201,6 +201,16 @@ impl SampleSet {
         }
     }
 
+    /// Whether every support is a ball (`M = I / h²`): packed octree records carry one
+    /// metric term (`crate::field::records`).
+    pub fn is_isotropic(&self) -> bool {
+        let ball = |m: &Metric| !supports::is_rotated(m) && m[0] == m[1] && m[1] == m[2];
+        match &self.supports {
+            Supports::Uniform(h) => ball(&supports::diagonal(*h)),
+            Supports::PerSample(m) => m.iter().all(ball),
+        }
+    }
+
     /// A lower bound on the shortest half axis of any sample's support ellipsoid, 1/√λ_max(M)
     /// over all samples: exact for diagonal metrics; for rotated ones λ_max is bounded by the
     /// largest absolute row sum (Gershgorin), which can only shorten the bound.
