@@ -18,26 +18,37 @@ impl Field {
     /// `reconstruction.resample = "auto"` as the field sees it: [`AUTO_FACTOR`] where the
     /// fast path serves and its fine grid stores at most [`AUTO_MAX_POINTS`] points (device
     /// memory and a first-frame build both grow with them); on irregular data where that grid
-    /// does not fit, the lattice itself (factor 1: fine points at the median nearest-sample
-    /// spacing, as dense as the samples), whose accuracy the scene's pilot then judges as it
-    /// judges factor 2's; else 0 with the reason kept for `--stats`. The scene weighs the first
-    /// frame and a pilot after this (`Scene::fit_fast_path`).
+    /// does not fit, [`AUTO_FACTOR`] over a coarser lattice, as fine as the cap admits (fine
+    /// points between half the median nearest-sample spacing and that spacing), and failing
+    /// that the lattice itself (factor 1: fine points at the samples' spacing); the scene's
+    /// pilot then judges either as it judges factor 2's; else 0 with the reason kept for
+    /// `--stats`. The scene weighs the first frame and a pilot after this
+    /// (`Scene::fit_fast_path`).
     pub(super) fn resolve_auto_resample(&mut self) {
         if !self.reconstruction.resample_auto {
             return;
         }
         self.reconstruction.resample_auto = false;
         let irregular = self.grid().is_none();
-        match auto_factor(irregular, |f| self.auto_fits(f)) {
-            Ok((AUTO_FACTOR, _)) => {}
-            Ok((factor, why)) => self.note_fast_path(format!(
-                "factor {factor}: at {AUTO_FACTOR}, {}",
+        let dense = self.lattice().fine_points(AUTO_FACTOR);
+        let scale = cap_scale(dense, AUTO_MAX_POINTS);
+        match auto_factor(irregular, scale, |f, c| {
+            self.lattice_scale = c;
+            self.auto_fits(f)
+        }) {
+            Ok((AUTO_FACTOR, _, None)) => {}
+            Ok((factor, c, why)) => self.note_fast_path(format!(
+                "factor {factor} over a lattice at {c:.3}× the samples' median spacing: at \
+                 factor {AUTO_FACTOR} over their spacing, {}",
                 why.unwrap_or_default()
             )),
-            Err(why) => self.decline_fast_path(format!(
-                "\"auto\" declined the fast path: {why}; set reconstruction.resample = \
-                 {AUTO_FACTOR} to take it anyway"
-            )),
+            Err(why) => {
+                self.lattice_scale = 1.0;
+                self.decline_fast_path(format!(
+                    "\"auto\" declined the fast path: {why}; set reconstruction.resample = \
+                     {AUTO_FACTOR} to take it anyway"
+                ))
+            }
         }
     }
 
@@ -225,7 +236,8 @@ impl Field {
             },
             Positions::Scattered(_) => {
                 let (lo, hi) = self.samples.domain_box();
-                Lattice::covering(lo, hi, self.samples.spacing.max(f64::MIN_POSITIVE))
+                let spacing = self.lattice_scale * self.samples.spacing;
+                Lattice::covering(lo, hi, spacing.max(f64::MIN_POSITIVE))
             }
         }
     }
@@ -332,19 +344,39 @@ impl Field {
     }
 }
 
-/// The factor "auto" takes: [`AUTO_FACTOR`] where `fits` accepts it, else on irregular data 1
-/// where `fits` accepts that (with the reason the first failed), else the first reason.
-/// `fits` sets the factor it is asked about; the last call leaves the one returned set.
+/// The lattice scale at which `dense` fine points (factor [`AUTO_FACTOR`] over the samples'
+/// spacing) shrink to at most `cap`: 1 where they fit, else their cube root's ratio with a
+/// margin for the lattice's rounding up (whether it fits is still `auto_fits`'s to say).
+fn cap_scale(dense: u64, cap: u64) -> f64 {
+    if dense <= cap {
+        1.0
+    } else {
+        (dense as f64 / cap as f64).cbrt() * 1.01
+    }
+}
+
+/// The (factor, lattice scale) "auto" takes: ([`AUTO_FACTOR`], 1) where `fits` accepts it,
+/// else on irregular data ([`AUTO_FACTOR`], `scale`) where `scale` stays below
+/// [`AUTO_FACTOR`] (past it the fine points would be sparser than the samples) and `fits`
+/// accepts it, else (1, 1) where `fits` accepts that (with the reason the first failed), else
+/// the first reason. `fits` sets the factor and scale it is asked about; where one is
+/// returned, the last call left it set.
 fn auto_factor(
     irregular: bool,
-    mut fits: impl FnMut(u32) -> Result<(), String>,
-) -> Result<(u32, Option<String>), String> {
-    let why = match fits(AUTO_FACTOR) {
-        Ok(()) => return Ok((AUTO_FACTOR, None)),
+    scale: f64,
+    mut fits: impl FnMut(u32, f64) -> Result<(), String>,
+) -> Result<(u32, f64, Option<String>), String> {
+    let why = match fits(AUTO_FACTOR, 1.0) {
+        Ok(()) => return Ok((AUTO_FACTOR, 1.0, None)),
         Err(why) => why,
     };
-    if irregular && fits(1).is_ok() {
-        return Ok((1, Some(why)));
+    if irregular {
+        if scale > 1.0 && scale < AUTO_FACTOR as f64 && fits(AUTO_FACTOR, scale).is_ok() {
+            return Ok((AUTO_FACTOR, scale, Some(why)));
+        }
+        if fits(1, 1.0).is_ok() {
+            return Ok((1, 1.0, Some(why)));
+        }
     }
     Err(why)
 }
@@ -354,30 +386,61 @@ mod tests {
     use super::*;
 
     #[test]
-    fn auto_falls_back_to_the_lattice_itself_on_irregular_data_only() {
-        let too_big = |f: u32| {
-            if f > 1 {
-                Err(format!("factor {f} too big"))
-            } else {
-                Ok(())
+    fn auto_coarsens_the_lattice_then_falls_back_to_it_on_irregular_data_only() {
+        // Fits at factor 1, or at factor 2 over a lattice at least `min_scale` coarse.
+        let fits_from = |min_scale: f64| {
+            move |f: u32, c: f64| {
+                if f == 1 || c >= min_scale {
+                    Ok(())
+                } else {
+                    Err(format!("factor {f} at {c} too big"))
+                }
             }
         };
-        assert_eq!(auto_factor(true, |_| Ok(())), Ok((AUTO_FACTOR, None)));
+        let refused = Some("factor 2 at 1 too big".to_string());
         assert_eq!(
-            auto_factor(true, too_big),
-            Ok((1, Some("factor 2 too big".into())))
+            auto_factor(true, 1.0, |_, _| Ok(())),
+            Ok((AUTO_FACTOR, 1.0, None))
         );
-        assert_eq!(auto_factor(false, too_big), Err("factor 2 too big".into()));
         assert_eq!(
-            auto_factor(true, |f| Err(format!("factor {f} too big"))),
-            Err("factor 2 too big".into())
+            auto_factor(true, 1.3, fits_from(1.2)),
+            Ok((AUTO_FACTOR, 1.3, refused.clone()))
         );
-        // Whatever it returns, the last factor asked about is the one returned.
-        let mut last = 0;
-        let got = auto_factor(true, |f| {
-            last = f;
-            too_big(f)
-        });
-        assert_eq!(got.map(|(f, _)| f), Ok(last));
+        // A scale that does not fit, or one at which the fine points would be sparser than
+        // the samples, gives the lattice itself.
+        assert_eq!(
+            auto_factor(true, 1.3, fits_from(1.5)),
+            Ok((1, 1.0, refused.clone()))
+        );
+        assert_eq!(
+            auto_factor(true, 2.5, fits_from(1.5)),
+            Ok((1, 1.0, refused.clone()))
+        );
+        assert_eq!(
+            auto_factor(false, 1.3, fits_from(1.2)),
+            Err("factor 2 at 1 too big".into())
+        );
+        assert_eq!(
+            auto_factor(true, 1.3, |f, c| Err(format!("factor {f} at {c} too big"))),
+            Err("factor 2 at 1 too big".into())
+        );
+        // Whatever it returns, the last factor and scale asked about are the ones returned.
+        for (scale, min_scale) in [(1.3, 1.2), (1.3, 1.5), (1.0, 0.5)] {
+            let mut last = (0, 0.0);
+            let got = auto_factor(true, scale, |f, c| {
+                last = (f, c);
+                fits_from(min_scale)(f, c)
+            });
+            assert_eq!(got.map(|(f, c, _)| (f, c)), Ok(last));
+        }
+    }
+
+    #[test]
+    fn the_cap_scale_shrinks_the_fine_points_under_the_cap() {
+        assert_eq!(cap_scale(1000, 1000), 1.0);
+        let c = cap_scale(27_000, 1000);
+        assert!(c > 3.0 && c < 3.1, "{c}");
+        // A lattice whose spacing grows by c holds 1/c³ of the points, under the cap.
+        assert!(27_000.0 / (c * c * c) <= 1000.0);
     }
 }

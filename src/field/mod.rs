@@ -102,6 +102,9 @@ pub struct Field {
     fast_path_declined: Option<String>,
     /// What `reconstruction.resample = "auto"` chose beyond the factor, for `--stats`.
     fast_path_note: Option<String>,
+    /// Irregular data's fast-path lattice spacing in units of the samples' median spacing
+    /// (1 unless "auto" coarsened it to fit its cap, [`Field::lattice`]).
+    lattice_scale: f64,
     /// A piece of a decomposed field ([`Field::piece`]): the box rays integrate in
     /// (frame-relative).
     clip: Option<(DVec3, DVec3)>,
@@ -235,6 +238,7 @@ impl Field {
             blocks: std::sync::OnceLock::new(),
             fast_path_declined: None,
             fast_path_note: None,
+            lattice_scale: 1.0,
             clip,
         }
     }
