@@ -141,6 +141,41 @@ fn irregular_fast_path_stays_close_to_the_direct_solve() {
     }
 }
 
+/// Past its cap "auto" takes factor 2 over a lattice coarser than the samples' spacing
+/// (`Field::set_lattice_scale`): its fine points lie between factor 2's and factor 1's, and so
+/// does its error; the GPU's fine grid is built over the same lattice as the twin's.
+#[test]
+fn a_coarsened_lattice_errs_between_factor_two_and_the_lattice_itself() {
+    let (kind, d) = kinds().swap_remove(1);
+    assert_eq!(kind, "points");
+    let mut rmses = Vec::new();
+    for (factor, scale) in [(2u32, 1.0), (2, 1.5), (1, 1.0)] {
+        let mut f = field_of(&d, Basis::Linear, factor);
+        f.set_lattice_scale(scale);
+        // The box's extent in whole cells of at most scale × the samples' spacing.
+        let l = f.lattice();
+        let target = scale * f.samples.spacing;
+        for a in 0..3 {
+            let cells = (l.dims[a] - 1) as f64;
+            let step = l.spacing[a];
+            assert!(
+                step <= target * (1.0 + 1e-12) && step > target * (1.0 - 1.0 / cells),
+                "axis {a}: {step} for {target}"
+            );
+        }
+        let points = inside(&f, &d, 2000, 9);
+        let (rmse, max) = difference(&f, &points);
+        eprintln!("x{factor} at {scale}: rmse {rmse:.2e}, max {max:.2e}");
+        rmses.push(rmse);
+        if scale != 1.0 {
+            f.octree().expect("octree");
+            let worst = fast_path_gpu_vs_cpu(&f, &points[..1000]);
+            assert!(worst < 1e-4, "GPU vs CPU {worst:.2e} of the range");
+        }
+    }
+    assert!(rmses[0] < rmses[1] && rmses[1] < rmses[2], "{rmses:?}");
+}
+
 #[test]
 fn irregular_gpu_fine_grid_matches_the_cpu_twin() {
     for (kind, d) in kinds() {

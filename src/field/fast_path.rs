@@ -33,7 +33,7 @@ impl Field {
         let dense = self.lattice().fine_points(AUTO_FACTOR);
         let scale = cap_scale(dense, AUTO_MAX_POINTS);
         match auto_factor(irregular, scale, |f, c| {
-            self.lattice_scale = c;
+            self.set_lattice_scale(c);
             self.auto_fits(f)
         }) {
             Ok((AUTO_FACTOR, _, None)) => {}
@@ -43,7 +43,7 @@ impl Field {
                 why.unwrap_or_default()
             )),
             Err(why) => {
-                self.lattice_scale = 1.0;
+                self.set_lattice_scale(1.0);
                 self.decline_fast_path(format!(
                     "\"auto\" declined the fast path: {why}; set reconstruction.resample = \
                      {AUTO_FACTOR} to take it anyway"
@@ -76,6 +76,16 @@ impl Field {
             ));
         }
         Ok(())
+    }
+
+    /// Irregular data's fast-path lattice at `scale` times the samples' median spacing (what
+    /// "auto" sets past its cap; 1 otherwise), before anything used the fine grid. A regular
+    /// grid's lattice is its own points whatever the scale.
+    pub fn set_lattice_scale(&mut self, scale: f64) {
+        self.lattice_scale = scale;
+        self.pages = std::sync::OnceLock::new();
+        self.resampled = std::sync::OnceLock::new();
+        self.blocks = std::sync::OnceLock::new();
     }
 
     /// Solves the fast path's cells around barely determined fits directly, or not
