@@ -79,7 +79,7 @@ pub fn record_texels(s: &Sample, stride: usize) -> [[u32; 4]; 3] {
 /// too).
 pub fn record_texel_count(octree: &Octree, stride: usize) -> u64 {
     let frames = if stride == 1 {
-        octree.nodes.iter().filter(|n| n[0] == 0).count() as u64
+        octree.leaf_count() as u64
     } else {
         0
     };
@@ -189,17 +189,19 @@ impl InlineLeaves {
     pub fn build(octree: &Octree, samples: &[Sample], stride: usize, gaussian: bool) -> Self {
         let mut texels = Vec::with_capacity(record_texel_count(octree, stride) as usize);
         let mut nodes = octree.nodes.clone();
+        let mut members = Vec::new();
         for node in nodes.iter_mut().filter(|n| n[0] == 0) {
-            let members = LeafCodes::new(&octree.codes, node[1], node[2]);
+            members.clear();
+            members.extend(LeafCodes::new(&octree.codes, node[1], node[2]));
             if stride == 1 {
                 let first = texels.len();
                 let at = |i: u32| {
                     let p = samples[i as usize].pos_value;
                     [p[0], p[1], p[2]]
                 };
-                let frame = PackedFrame::of(members.clone().map(at));
+                let frame = PackedFrame::of(members.iter().map(|&i| at(i)));
                 texels.push(frame.texel());
-                for i in members {
+                for &i in &members {
                     let s = &samples[i as usize];
                     let f = s.pos_value[3];
                     let value = if gaussian {
@@ -214,7 +216,7 @@ impl InlineLeaves {
                 continue;
             }
             let first = texels.len() / stride;
-            for i in members {
+            for &i in &members {
                 let record = record_texels(&samples[i as usize], stride);
                 texels.extend_from_slice(&record[..stride]);
             }
@@ -398,7 +400,7 @@ mod tests {
         let texels = record_texel_count(&tree, 2);
         assert_eq!(
             record_texel_count(&tree, 1),
-            texels / 2 + tree.nodes.iter().filter(|n| n[0] == 0).count() as u64
+            texels / 2 + tree.leaf_count() as u64
         );
         assert!(inline_chosen(&tree, 2, None, texels));
         assert!(!inline_chosen(&tree, 2, None, texels - 1));

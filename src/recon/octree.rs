@@ -384,10 +384,15 @@ impl Octree {
 
     /// Size, redundancy, depth, memory and build time. `sample_bytes` is the GPU size of one
     /// sample.
+    /// Number of leaf nodes.
+    pub fn leaf_count(&self) -> usize {
+        self.nodes.iter().filter(|n| n[0] == 0).count()
+    }
+
     pub fn stats(&self, sample_bytes: u64) -> OctreeStats {
         OctreeStats {
             nodes: self.nodes.len(),
-            leaves: self.nodes.iter().filter(|n| n[0] == 0).count(),
+            leaves: self.leaf_count(),
             references: self.references,
             redundancy: self.references as f64 / self.samples.len().max(1) as f64,
             depth: self.depth(),
