@@ -88,7 +88,12 @@ fn fields(set: &SampleSet, r: Reconstruction) -> [Field; 2] {
 }
 
 fn gpu_evaluations(field: &Field, points: &[[f64; 3]]) -> Vec<MlsOut> {
-    let (ctx, compiler) = gpu();
+    gpu_evaluations_with(field, points, false)
+}
+
+/// As [`gpu_evaluations`], optionally uploading through staging (a discrete GPU's path).
+fn gpu_evaluations_with(field: &Field, points: &[[f64; 3]], staged: bool) -> Vec<MlsOut> {
+    let (ctx, compiler) = gpu_with(staged);
     let gf = GpuField::upload(&ctx, field).expect("upload");
     let (out, _) = evaluate(&ctx, &compiler, field, &gf, points, 1).expect("mls_eval");
     drop(gf);
@@ -210,6 +215,41 @@ fn inline_records_evaluate_to_the_coded_layouts_bits() {
             "{label}: {differing} of {} evaluations differ",
             a.len()
         );
+    }
+}
+
+/// Inline records are written straight into their buffer (`Buffer::fill`): into its mapping
+/// on unified memory, into a staging buffer on a discrete GPU. Both paths must evaluate to the
+/// same bits, packed and at stride 3.
+#[test]
+fn inline_records_written_in_place_or_through_staging_evaluate_the_same() {
+    let quadratic = recon(
+        Basis::Quadratic,
+        Weight::Wendland,
+        GradientMode::Analytic,
+        NeighbourMode::Octree,
+        2.4,
+    );
+    let balls = scattered(2000, 0, None);
+    let ellipsoids = scattered(2000, 0, Some(true));
+    for (label, set, stride) in [("packed", &balls, 1), ("full metrics", &ellipsoids, 3)] {
+        let [_, inline] = fields(set, quadratic);
+        assert_eq!(inline.record_stride(), stride, "{label}");
+        let shift = inline.frame_origin;
+        let mut rng = Lcg::new(5);
+        let points: Vec<[f64; 3]> = (0..2000)
+            .map(|_| std::array::from_fn(|a| 2.0 * rng.next_f64() - 1.0 - shift[a]))
+            .collect();
+        let mapped = gpu_evaluations_with(&inline, &points, false);
+        let staged = gpu_evaluations_with(&inline, &points, true);
+        let defined = mapped.iter().filter(|m| m.terms > 0).count();
+        assert!(defined > 1000, "{label}: {defined} defined");
+        let differing = mapped
+            .iter()
+            .zip(&staged)
+            .filter(|(x, y)| bytemuck::bytes_of(*x) != bytemuck::bytes_of(*y))
+            .count();
+        assert_eq!(differing, 0, "{label}: {differing} evaluations differ");
     }
 }
 

@@ -34,6 +34,39 @@ fn out_of_memory_is_an_error_not_a_panic() {
     finish(ctx);
 }
 
+/// `Buffer::fill` writes in place and `Buffer::view` lends the contents, on unified memory
+/// (the buffer's own mapping) and through staging (a discrete GPU's path) alike: the same
+/// words as `write` and `read`, and a fill past the buffer refused by name.
+#[test]
+fn fill_and_view_agree_with_write_and_read_on_both_paths() {
+    for staged in [false, true] {
+        let (ctx, _) = gpu_with(staged);
+        let words: Vec<[u32; 4]> = (0..1000u32).map(|i| [i, i ^ 0xA5A5, !i, i * 7]).collect();
+        let mut filled = Buffer::new(&ctx, "filled", 16_000, BufferUsage::Texel).expect("buffer");
+        let written = filled
+            .fill(&ctx, words.len(), |out: &mut [[u32; 4]]| {
+                out.copy_from_slice(&words);
+                out.len()
+            })
+            .expect("fill");
+        assert_eq!(written, 1000);
+        assert_eq!(filled.read::<[u32; 4]>(&ctx).expect("read"), words);
+        let written =
+            Buffer::from_slice_as(&ctx, "written", &words, BufferUsage::Texel).expect("w");
+        let sum = |v: &[[u32; 4]]| v.iter().map(|w| u64::from(w[3] ^ w[1])).sum::<u64>();
+        let viewed = written
+            .view(&ctx, |v: &[[u32; 4]]| (v.len(), sum(v)))
+            .expect("view");
+        assert_eq!(viewed, (1000, sum(&words)), "staged: {staged}");
+        match filled.fill(&ctx, 1001, |out: &mut [[u32; 4]]| out.len()) {
+            Err(e) => assert!(e.to_string().contains("'filled'"), "{e}"),
+            Ok(n) => panic!("a fill of {n} texels past the buffer was taken"),
+        }
+        drop((filled, written));
+        finish(ctx);
+    }
+}
+
 #[test]
 fn unknown_device_names_the_available_ones() {
     let err = Context::new(&ContextOptions {

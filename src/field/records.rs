@@ -183,24 +183,55 @@ pub struct InlineLeaves {
 }
 
 impl InlineLeaves {
+    /// Stage `octree_records` on the host: [`InlineLeaves::write`] into a vector (`None` as
+    /// there).
+    pub fn build(
+        octree: &Octree,
+        samples: &[Sample],
+        stride: usize,
+        gaussian: bool,
+    ) -> Option<Self> {
+        let mut texels = vec![[0; 4]; record_texel_count(octree, stride) as usize];
+        let nodes = Self::write(octree, samples, stride, gaussian, &mut texels)?;
+        Some(Self {
+            nodes,
+            texels,
+            stride,
+        })
+    }
+
     /// Stage `octree_records`: every leaf's members (in their coded order) copied from
-    /// `samples` (the octree's samples as uploaded, one per sample). At stride 1 a leaf's
-    /// first texel is its [`PackedFrame`], and `gaussian` stores `w f` as the value.
-    pub fn build(octree: &Octree, samples: &[Sample], stride: usize, gaussian: bool) -> Self {
-        let mut texels = Vec::with_capacity(record_texel_count(octree, stride) as usize);
+    /// `samples` (the octree's samples as uploaded, one per sample) into `out`, which the
+    /// device's buffer may be itself (`Buffer::fill`: no host copy of the records); returns
+    /// the nodes, each leaf's (first record, record count) in place of its codes' (first
+    /// word, count), or `None` where `out` is not the [`record_texel_count`] it fills
+    /// exactly. At stride 1 a leaf's first texel is its [`PackedFrame`], and `gaussian`
+    /// stores `w f` as the value.
+    pub fn write(
+        octree: &Octree,
+        samples: &[Sample],
+        stride: usize,
+        gaussian: bool,
+        out: &mut [[u32; 4]],
+    ) -> Option<Vec<[u32; 4]>> {
+        if out.len() as u64 != record_texel_count(octree, stride) {
+            return None;
+        }
+        let mut at = 0;
         let mut nodes = octree.nodes.clone();
         let mut members = Vec::new();
         for node in nodes.iter_mut().filter(|n| n[0] == 0) {
             members.clear();
             members.extend(LeafCodes::new(&octree.codes, node[1], node[2]));
+            let first = at;
             if stride == 1 {
-                let first = texels.len();
-                let at = |i: u32| {
+                let pos = |i: u32| {
                     let p = samples[i as usize].pos_value;
                     [p[0], p[1], p[2]]
                 };
-                let frame = PackedFrame::of(members.iter().map(|&i| at(i)));
-                texels.push(frame.texel());
+                let frame = PackedFrame::of(members.iter().map(|&i| pos(i)));
+                *out.get_mut(at)? = frame.texel();
+                at += 1;
                 for &i in &members {
                     let s = &samples[i as usize];
                     let f = s.pos_value[3];
@@ -209,25 +240,23 @@ impl InlineLeaves {
                     } else {
                         f
                     };
-                    texels.push(frame.pack(at(i), value, s.metric[0]));
+                    *out.get_mut(at)? = frame.pack(pos(i), value, s.metric[0]);
+                    at += 1;
                 }
                 node[1] = first as u32;
-                node[2] = (texels.len() - first - 1) as u32;
+                node[2] = (at - first - 1) as u32;
                 continue;
             }
-            let first = texels.len() / stride;
             for &i in &members {
                 let record = record_texels(&samples[i as usize], stride);
-                texels.extend_from_slice(&record[..stride]);
+                out.get_mut(at..at + stride)?
+                    .copy_from_slice(&record[..stride]);
+                at += stride;
             }
-            node[1] = first as u32;
-            node[2] = (texels.len() / stride - first) as u32;
+            node[1] = (first / stride) as u32;
+            node[2] = ((at - first) / stride) as u32;
         }
-        Self {
-            nodes,
-            texels,
-            stride,
-        }
+        (at == out.len()).then_some(nodes)
     }
 
     /// The records of leaf `node` as the kernel reads them: record r of the leaf at texel
@@ -312,11 +341,15 @@ mod tests {
         let (tree, samples) = octree(3000);
         let bits = |t: [f32; 4]| t.map(f32::to_bits);
         for (stride, gaussian) in [(1, false), (1, true), (2, false), (3, false)] {
-            let leaves = InlineLeaves::build(&tree, &samples, stride, gaussian);
-            assert_eq!(
-                leaves.texels.len() as u64,
-                record_texel_count(&tree, stride)
-            );
+            let leaves = InlineLeaves::build(&tree, &samples, stride, gaussian).expect("records");
+            let count = record_texel_count(&tree, stride) as usize;
+            assert_eq!(leaves.texels.len(), count);
+            // A buffer of another length is refused, not partly filled or overrun.
+            for wrong in [count - 1, count + 1] {
+                let mut out = vec![[0; 4]; wrong];
+                let written = InlineLeaves::write(&tree, &samples, stride, gaussian, &mut out);
+                assert_eq!(written, None, "stride {stride}, {wrong} texels for {count}");
+            }
             let mut checked = 0;
             let mut worst_steps = 0.0f64;
             for (node, n) in tree.nodes.iter().enumerate().filter(|(_, n)| n[0] == 0) {

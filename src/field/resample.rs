@@ -108,8 +108,8 @@ pub fn resample_grid(
 
 /// The skipping blocks of the GPU's fine grid ([`crate::field::skip::Blocks`]), as
 /// `vec4(min, max, 0, 0)` per block, and the host's copy (what `render.skip = "auto"` decides
-/// by): the fine grid is read back once and reduced on the host by the same function as the
-/// CPU twin's.
+/// by): the fine grid is read in place (through staging where it is not host-visible) and reduced
+/// on the host by the same function as the CPU twin's.
 pub fn block_buffer(
     ctx: &Context,
     field: &Field,
@@ -118,14 +118,15 @@ pub fn block_buffer(
     let g = field.lattice();
     let factor = field.reconstruction.resample;
     let dims = resample::fine_dims(g.dims, factor);
-    let data: Vec<[f32; 4]> = fine.read(ctx)?;
     let h = g.spacing.map(|s| s / f64::from(factor));
-    let (blocks, ranges) = resample::block_ranges(
-        dims,
-        factor as usize * crate::field::skip::SKIP_BLOCK,
-        field.fine_pages(),
-        |at| resample::point_bounds(data[at].map(f64::from), h),
-    );
+    let (blocks, ranges) = fine.view(ctx, |data: &[[f32; 4]]| {
+        resample::block_ranges(
+            dims,
+            factor as usize * crate::field::skip::SKIP_BLOCK,
+            field.fine_pages(),
+            |at| resample::point_bounds(data[at].map(f64::from), h),
+        )
+    })?;
     // Rounded outwards to f32, so that the kernel's ranges contain the f64 ones.
     let texels: Vec<[f32; 4]> = ranges
         .iter()

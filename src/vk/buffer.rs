@@ -275,6 +275,79 @@ impl Buffer {
         Ok(())
     }
 
+    /// Lets `fill` write the first `len` `T`s of the buffer in place, and returns what it
+    /// returns: into the buffer's own mapping where it is host-visible, so that contents of
+    /// hundreds of MiB (an octree's inline records) need no host copy beside the buffer
+    /// (lavapipe: every allocation is mapped), else into a staging buffer copied after. The
+    /// memory `fill` gets is not cleared: it must write all `len` elements.
+    pub fn fill<T: bytemuck::Pod, R>(
+        &mut self,
+        ctx: &Context,
+        len: usize,
+        fill: impl FnOnce(&mut [T]) -> R,
+    ) -> Result<R, VkError> {
+        let bytes = len * std::mem::size_of::<T>();
+        if bytes as u64 > self.size {
+            return Err(VkError::Usage(format!(
+                "fill of {bytes} bytes into buffer '{}' of {} bytes",
+                self.name, self.size
+            )));
+        }
+        self.shared
+            .bytes_uploaded
+            .fetch_add(bytes as u64, Ordering::Relaxed);
+        let mut staging = if self.mapped() {
+            None
+        } else {
+            let name = format!("{} (upload)", self.name);
+            Some(Buffer::new(ctx, &name, bytes as u64, BufferUsage::Staging)?)
+        };
+        let target = staging.as_mut().unwrap_or(self);
+        let name = target.name.clone();
+        let mapping = target
+            .allocation
+            .as_mut()
+            .and_then(|a| a.mapped_slice_mut())
+            .ok_or_else(|| VkError::Usage(format!("buffer '{name}' is not host-visible")))?;
+        let elements = bytemuck::try_cast_slice_mut::<u8, T>(&mut mapping[..bytes])
+            .map_err(|e| VkError::Usage(format!("buffer '{name}' cannot hold its type: {e}")))?;
+        let result = fill(elements);
+        if let Some(staging) = &staging {
+            ctx.submit(|rec| {
+                rec.copy_buffer(staging, self, bytes as u64);
+                Ok(())
+            })?;
+        }
+        Ok(result)
+    }
+
+    /// Lends the whole buffer's contents as `T`s to `view`, and returns what it returns: its
+    /// own mapping where the buffer is host-visible (lavapipe: no host copy of a fine grid of
+    /// hundreds of MiB), else a copy read back through staging.
+    pub fn view<T: bytemuck::Pod, R>(
+        &self,
+        ctx: &Context,
+        view: impl FnOnce(&[T]) -> R,
+    ) -> Result<R, VkError> {
+        if !self.mapped() {
+            return Ok(view(&self.read::<T>(ctx)?));
+        }
+        let size_of = std::mem::size_of::<T>().max(1);
+        let len = self.size as usize / size_of * size_of;
+        let mapping = self
+            .allocation
+            .as_ref()
+            .and_then(|a| a.mapped_slice())
+            .ok_or_else(|| VkError::Usage(format!("buffer '{}' is not mapped", self.name)))?;
+        let elements = bytemuck::try_cast_slice::<u8, T>(&mapping[..len]).map_err(|e| {
+            VkError::Usage(format!(
+                "buffer '{}' cannot be read as its type: {e}",
+                self.name
+            ))
+        })?;
+        Ok(view(elements))
+    }
+
     /// Reads the whole buffer back as `T`s.
     pub fn read<T: bytemuck::Pod>(&self, ctx: &Context) -> Result<Vec<T>, VkError> {
         self.read_range(ctx, 0, self.size as usize / std::mem::size_of::<T>().max(1))
