@@ -31,6 +31,7 @@
 use crate::gpu_types::Sample;
 use crate::recon::Octree;
 use crate::recon::octree_codes::LeafCodes;
+use rayon::prelude::*;
 
 /// The largest inline records "auto" takes, in bytes: beyond that the coded references serve
 /// (the 68 921 scattered points of issue 26 take 166 MB packed, 321 MB at stride 2; 250 000
@@ -206,7 +207,8 @@ impl InlineLeaves {
     /// the nodes, each leaf's (first record, record count) in place of its codes' (first
     /// word, count), or `None` where `out` is not the [`record_texel_count`] it fills
     /// exactly. At stride 1 a leaf's first texel is its [`PackedFrame`], and `gaussian`
-    /// stores `w f` as the value.
+    /// stores `w f` as the value. Leaves are counted first, then filled in parallel, each its
+    /// own part of `out`: the result does not depend on the thread count.
     pub fn write(
         octree: &Octree,
         samples: &[Sample],
@@ -217,22 +219,37 @@ impl InlineLeaves {
         if out.len() as u64 != record_texel_count(octree, stride) {
             return None;
         }
-        let mut at = 0;
+        let frame = usize::from(stride == 1);
         let mut nodes = octree.nodes.clone();
-        let mut members = Vec::new();
+        let mut parts = Vec::new();
+        let mut rest = out;
+        let mut at = 0;
         for node in nodes.iter_mut().filter(|n| n[0] == 0) {
-            members.clear();
-            members.extend(LeafCodes::new(&octree.codes, node[1], node[2]));
-            let first = at;
+            let codes = LeafCodes::new(&octree.codes, node[1], node[2]);
+            let members = codes.clone().count();
+            let len = frame + members * stride;
+            if len > rest.len() {
+                return None;
+            }
+            let (part, tail) = std::mem::take(&mut rest).split_at_mut(len);
+            rest = tail;
+            parts.push((part, codes));
+            node[1] = (at / stride) as u32;
+            node[2] = members as u32;
+            at += len;
+        }
+        if !rest.is_empty() {
+            return None;
+        }
+        parts.into_par_iter().for_each(|(part, codes)| {
             if stride == 1 {
                 let pos = |i: u32| {
                     let p = samples[i as usize].pos_value;
                     [p[0], p[1], p[2]]
                 };
-                let frame = PackedFrame::of(members.iter().map(|&i| pos(i)));
-                *out.get_mut(at)? = frame.texel();
-                at += 1;
-                for &i in &members {
+                let frame = PackedFrame::of(codes.clone().map(pos));
+                part[0] = frame.texel();
+                for (texel, i) in part[1..].iter_mut().zip(codes) {
                     let s = &samples[i as usize];
                     let f = s.pos_value[3];
                     let value = if gaussian {
@@ -240,23 +257,15 @@ impl InlineLeaves {
                     } else {
                         f
                     };
-                    *out.get_mut(at)? = frame.pack(pos(i), value, s.metric[0]);
-                    at += 1;
+                    *texel = frame.pack(pos(i), value, s.metric[0]);
                 }
-                node[1] = first as u32;
-                node[2] = (at - first - 1) as u32;
-                continue;
+            } else {
+                for (record, i) in part.chunks_exact_mut(stride).zip(codes) {
+                    record.copy_from_slice(&record_texels(&samples[i as usize], stride)[..stride]);
+                }
             }
-            for &i in &members {
-                let record = record_texels(&samples[i as usize], stride);
-                out.get_mut(at..at + stride)?
-                    .copy_from_slice(&record[..stride]);
-                at += stride;
-            }
-            node[1] = (first / stride) as u32;
-            node[2] = ((at - first) / stride) as u32;
-        }
-        (at == out.len()).then_some(nodes)
+        });
+        Some(nodes)
     }
 
     /// The records of leaf `node` as the kernel reads them: record r of the leaf at texel
