@@ -213,6 +213,11 @@ impl<'a> Recorder<'a> {
         self.barrier();
         let src_offset = src_offset.min(src.size());
         let size = size.min(src.size() - src_offset).min(dst.size());
+        if size == 0 {
+            // A copy region of size 0 is invalid (VUID-VkBufferCopy-size-01988): an empty
+            // upload copies nothing.
+            return;
+        }
         let region = [vk::BufferCopy::default().src_offset(src_offset).size(size)];
         // SAFETY: `cmd` is recording; both buffers are live with TRANSFER usage.
         unsafe {
