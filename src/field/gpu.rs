@@ -198,7 +198,8 @@ impl GpuField {
                     }
                     // Written in place (no host copy beside the buffer: 366 MB on 250 000
                     // scattered points).
-                    let mut records = Buffer::new(ctx, "octree records", texels * 16, texel)?;
+                    let bytes = texels * records::TEXEL_BYTES;
+                    let mut records = Buffer::new(ctx, "octree records", bytes, texel)?;
                     let nodes = records
                         .fill(ctx, texels as usize, |out| {
                             records::InlineLeaves::write(o, &samples, stride, gaussian, out)

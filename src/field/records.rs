@@ -39,7 +39,7 @@ use rayon::prelude::*;
 pub const AUTO_MAX_BYTES: u64 = 512 << 20;
 
 /// Bytes of one rgba32 texel.
-const TEXEL_BYTES: u64 = 16;
+pub const TEXEL_BYTES: u64 = 16;
 
 /// Bits of each packed coordinate: three fit two words.
 pub const PACKED_BITS: u32 = 21;

@@ -286,13 +286,17 @@ impl Buffer {
         len: usize,
         fill: impl FnOnce(&mut [T]) -> R,
     ) -> Result<R, VkError> {
-        let bytes = len * std::mem::size_of::<T>();
-        if bytes as u64 > self.size {
-            return Err(VkError::Usage(format!(
-                "fill of {bytes} bytes into buffer '{}' of {} bytes",
-                self.name, self.size
-            )));
-        }
+        let bytes = len
+            .checked_mul(std::mem::size_of::<T>())
+            .filter(|&b| b as u64 <= self.size)
+            .ok_or_else(|| {
+                VkError::Usage(format!(
+                    "fill of {len} elements of {} bytes into buffer '{}' of {} bytes",
+                    std::mem::size_of::<T>(),
+                    self.name,
+                    self.size
+                ))
+            })?;
         self.shared
             .bytes_uploaded
             .fetch_add(bytes as u64, Ordering::Relaxed);
