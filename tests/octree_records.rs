@@ -101,6 +101,17 @@ fn gpu_evaluations_with(field: &Field, points: &[[f64; 3]], staged: bool) -> Vec
     out
 }
 
+/// Quadratic MLS with the analytic gradient through the octree (support 2.4).
+fn quadratic_octree() -> Reconstruction {
+    recon(
+        Basis::Quadratic,
+        Weight::Wendland,
+        GradientMode::Analytic,
+        NeighbourMode::Octree,
+        2.4,
+    )
+}
+
 /// Packed records' largest error against the f64 twin, at most this times the coded layout's:
 /// a position moves by at most 2.4e-7 of its leaf's records' extent where f32 rounds a
 /// coordinate by up to 6e-8 of its magnitude, and an ill-conditioned solve (past the outermost
@@ -120,13 +131,7 @@ fn inline_records_evaluate_to_the_coded_layouts_bits() {
         NeighbourMode::Octree,
         2.4,
     );
-    let quadratic = recon(
-        Basis::Quadratic,
-        Weight::Wendland,
-        GradientMode::Analytic,
-        NeighbourMode::Octree,
-        2.4,
-    );
+    let quadratic = quadratic_octree();
     let isotropic = scattered(3000, 0, None);
     let diagonal = stretched(&isotropic);
     let anisotropic = scattered(3000, 0, Some(true));
@@ -223,13 +228,7 @@ fn inline_records_evaluate_to_the_coded_layouts_bits() {
 /// same bits, packed and at stride 3.
 #[test]
 fn inline_records_written_in_place_or_through_staging_evaluate_the_same() {
-    let quadratic = recon(
-        Basis::Quadratic,
-        Weight::Wendland,
-        GradientMode::Analytic,
-        NeighbourMode::Octree,
-        2.4,
-    );
+    let quadratic = quadratic_octree();
     let balls = scattered(2000, 0, None);
     let ellipsoids = scattered(2000, 0, Some(true));
     for (label, set, stride) in [("packed", &balls, 1), ("full metrics", &ellipsoids, 3)] {
