@@ -42,7 +42,7 @@ fn fill_and_view_agree_with_write_and_read_on_both_paths() {
     for staged in [false, true] {
         let (ctx, _) = gpu_with(staged);
         let words: Vec<[u32; 4]> = (0..1000u32).map(|i| [i, i ^ 0xA5A5, !i, i * 7]).collect();
-        let mut filled = Buffer::new(&ctx, "filled", 16_000, BufferUsage::Texel).expect("buffer");
+        let filled = Buffer::new(&ctx, "filled", 16_000, BufferUsage::Texel).expect("buffer");
         let written = filled
             .fill(&ctx, words.len(), |out: &mut [[u32; 4]]| {
                 out.copy_from_slice(&words);
@@ -63,7 +63,7 @@ fn fill_and_view_agree_with_write_and_read_on_both_paths() {
             Ok(n) => panic!("a fill of {n} texels past the buffer was taken"),
         }
         // An empty fill or upload copies nothing (a zero-sized copy is a validation error).
-        let mut empty = Buffer::new(&ctx, "empty", 0, BufferUsage::Texel).expect("buffer");
+        let empty = Buffer::new(&ctx, "empty", 0, BufferUsage::Texel).expect("buffer");
         assert_eq!(
             empty
                 .fill(&ctx, 0, |out: &mut [u32]| out.len())

@@ -199,7 +199,7 @@ impl GpuField {
                     // Written in place (no host copy beside the buffer: 366 MB on 250 000
                     // scattered points).
                     let bytes = texels * records::TEXEL_BYTES;
-                    let mut records = Buffer::new(ctx, "octree records", bytes, texel)?;
+                    let records = Buffer::new(ctx, "octree records", bytes, texel)?;
                     let nodes = records
                         .fill(ctx, texels as usize, |out| {
                             records::InlineLeaves::write(o, &samples, stride, gaussian, out)

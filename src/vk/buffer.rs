@@ -239,40 +239,13 @@ impl Buffer {
     /// hundreds of MiB).
     pub fn write_parts(&self, ctx: &Context, parts: &[&[u8]]) -> Result<(), VkError> {
         let len: usize = parts.iter().map(|p| p.len()).sum();
-        if len as u64 > self.size {
-            return Err(VkError::Usage(format!(
-                "upload of {len} bytes into buffer '{}' of {} bytes",
-                self.name, self.size
-            )));
-        }
-        self.shared
-            .bytes_uploaded
-            .fetch_add(len as u64, Ordering::Relaxed);
-        let staging = if self.mapped() {
-            None
-        } else {
-            let name = format!("{} (upload)", self.name);
-            Some(Buffer::new(ctx, &name, len as u64, BufferUsage::Staging)?)
-        };
-        let ptr = match &staging {
-            None => self.mapped_ptr()?,
-            Some(s) => s.mapped_ptr()?,
-        };
-        let mut at = 0;
-        for part in parts {
-            // SAFETY: the mapping (this buffer's, of `size` ≥ len bytes, or the staging
-            // buffer's, of len bytes) covers at + part.len() ≤ len bytes; no GPU work uses it
-            // now because every submission is waited for before returning.
-            unsafe { std::ptr::copy_nonoverlapping(part.as_ptr(), ptr.add(at), part.len()) };
-            at += part.len();
-        }
-        if let Some(staging) = &staging {
-            ctx.submit(|rec| {
-                rec.copy_buffer(staging, self, len as u64);
-                Ok(())
-            })?;
-        }
-        Ok(())
+        self.fill(ctx, len, |out: &mut [u8]| {
+            let mut at = 0;
+            for part in parts {
+                out[at..at + part.len()].copy_from_slice(part);
+                at += part.len();
+            }
+        })
     }
 
     /// Lets `fill` write the first `len` `T`s of the buffer in place, and returns what it
@@ -281,7 +254,7 @@ impl Buffer {
     /// (lavapipe: every allocation is mapped), else into a staging buffer copied after. The
     /// memory `fill` gets is not cleared: it must write all `len` elements.
     pub fn fill<T: bytemuck::Pod, R>(
-        &mut self,
+        &self,
         ctx: &Context,
         len: usize,
         fill: impl FnOnce(&mut [T]) -> R,
@@ -291,7 +264,7 @@ impl Buffer {
             .filter(|&b| b as u64 <= self.size)
             .ok_or_else(|| {
                 VkError::Usage(format!(
-                    "fill of {len} elements of {} bytes into buffer '{}' of {} bytes",
+                    "upload of {len} elements of {} bytes into buffer '{}' of {} bytes",
                     std::mem::size_of::<T>(),
                     self.name,
                     self.size
@@ -300,21 +273,24 @@ impl Buffer {
         self.shared
             .bytes_uploaded
             .fetch_add(bytes as u64, Ordering::Relaxed);
-        let mut staging = if self.mapped() {
+        let staging = if self.mapped() {
             None
         } else {
             let name = format!("{} (upload)", self.name);
             Some(Buffer::new(ctx, &name, bytes as u64, BufferUsage::Staging)?)
         };
-        let target = staging.as_mut().unwrap_or(self);
-        let name = target.name.clone();
-        let mapping = target
-            .allocation
-            .as_mut()
-            .and_then(|a| a.mapped_slice_mut())
-            .ok_or_else(|| VkError::Usage(format!("buffer '{name}' is not host-visible")))?;
-        let elements = bytemuck::try_cast_slice_mut::<u8, T>(&mut mapping[..bytes])
-            .map_err(|e| VkError::Usage(format!("buffer '{name}' cannot hold its type: {e}")))?;
+        let target = staging.as_ref().unwrap_or(self);
+        let ptr = target.mapped_ptr()?;
+        // SAFETY: the mapping (this buffer's, of `size` >= bytes, or the staging buffer's, of
+        // bytes) covers `bytes` bytes; no GPU work uses it now (every submission is waited for
+        // before returning) and no other reference into it lives during this call.
+        let mapping = unsafe { std::slice::from_raw_parts_mut(ptr, bytes) };
+        let elements = bytemuck::try_cast_slice_mut::<u8, T>(mapping).map_err(|e| {
+            VkError::Usage(format!(
+                "buffer '{}' cannot hold its type: {e}",
+                target.name
+            ))
+        })?;
         let result = fill(elements);
         if let Some(staging) = &staging {
             ctx.submit(|rec| {
