@@ -116,10 +116,32 @@ pub struct Octree {
     pub build_ms: f64,
 }
 
-/// A subtree before flattening.
+/// A subtree before flattening. A leaf holds its samples coded as soon as it is made
+/// ([`octree_codes::encode_leaf`]): 16-bit codes take about half the memory of the indices, and
+/// the tree holds every leaf at once (10⁶ scattered points: 108 M references).
 enum Built {
-    Leaf { members: Vec<u32>, scale: f32 },
+    Leaf(CodedLeaf),
     Inner(Box<[Built; 8]>),
+}
+
+/// A leaf's samples, coded, and what the flat layout needs of them.
+struct CodedLeaf {
+    words: Vec<u32>,
+    codes: usize,
+    references: usize,
+    scale: f32,
+}
+
+impl CodedLeaf {
+    fn new(members: &[u32], scale: f32) -> Self {
+        let (words, codes) = octree_codes::encode_leaf(members);
+        Self {
+            words,
+            codes,
+            references: members.len(),
+            scale,
+        }
+    }
 }
 
 /// Per-sample data the build reads.
@@ -190,19 +212,31 @@ impl Prepared<'_> {
             } else {
                 (1.0 / mean_radius) as f32
             };
-            return Built::Leaf { members, scale };
+            return Built::Leaf(CodedLeaf::new(&members, scale));
         }
+        let parallel = members.len() > 4096;
+        let reach: Vec<u8> = if parallel {
+            members
+                .par_iter()
+                .map(|&i| self.octants_reached(i, center, half))
+                .collect()
+        } else {
+            members
+                .iter()
+                .map(|&i| self.octants_reached(i, center, half))
+                .collect()
+        };
         let child = |octant: usize| {
             let h = 0.5 * half;
             let c = [0, 1, 2].map(|a| center[a] + if octant >> a & 1 == 1 { h } else { -h });
             let inside: Vec<u32> = members
                 .iter()
-                .copied()
-                .filter(|&i| self.overlaps(i, c, h))
+                .zip(&reach)
+                .filter(|&(&i, &r)| r >> octant & 1 == 1 && self.overlaps(i, c, h))
+                .map(|(&i, _)| i)
                 .collect();
             self.build(inside, c, h, depth + 1)
         };
-        let parallel = members.len() > 4096;
         let children: Vec<Built> = if parallel {
             (0..8).into_par_iter().map(child).collect()
         } else {
@@ -211,11 +245,32 @@ impl Prepared<'_> {
         match <[Built; 8]>::try_from(children) {
             Ok(c) => Built::Inner(Box::new(c)),
             // Unreachable (8 octants in, 8 out); a leaf keeps the tree valid regardless.
-            Err(_) => Built::Leaf {
-                members,
-                scale: (1.0 / mean_radius) as f32,
-            },
+            Err(_) => Built::Leaf(CodedLeaf::new(&members, (1.0 / mean_radius) as f32)),
         }
+    }
+
+    /// The octants of the cell (`center`, `half`) that sample i's support box may reach, as
+    /// bits `x | y<<1 | z<<2` (set: the upper half): every octant whose [`Self::overlaps`] does
+    /// not reject i by its axis planes, and perhaps more, so that the children's lists are
+    /// exactly those of testing all eight. The margin covers the slack and the rounding of the
+    /// child's bounds (one ulp each of its centre and half side).
+    fn octants_reached(&self, i: u32, center: [f64; 3], half: f64) -> u8 {
+        let s = &self.samples[i as usize];
+        let e = self.extent[i as usize];
+        let mut lower = 0u8;
+        let mut upper = 0u8;
+        for a in 0..3 {
+            let margin = 2.0 * self.slack + 8.0 * f64::EPSILON * (center[a].abs() + half);
+            if s.position[a] - e[a] <= center[a] + margin {
+                lower |= 1 << a;
+            }
+            if s.position[a] + e[a] >= center[a] - margin {
+                upper |= 1 << a;
+            }
+        }
+        (0..8u8)
+            .filter(|&o| (0..3).all(|a| if o >> a & 1 == 1 { upper } else { lower } >> a & 1 == 1))
+            .fold(0, |mask, o| mask | 1 << o)
     }
 }
 
@@ -300,16 +355,19 @@ impl Octree {
         };
         let built = prepared.build((0..n).collect(), root_center, root_half, 0);
         progress(0.9);
-        let mut nodes = vec![[0u32; 4]];
-        let mut codes = Vec::new();
-        let mut references = 0;
-        flatten(
-            &built,
-            0,
-            &mut nodes,
-            (&mut codes, &mut references),
-            settings.max_references,
-        )?;
+        let (node_count, words, references) = check_leaves(&built)?;
+        if words as u64 > settings.max_references {
+            return Err(ReconError::TooManyReferences {
+                refs: references as u64,
+                words: words as u64,
+                limit: settings.max_references,
+            });
+        }
+        // Sized once: growing by doubling held up to 1.5× the codes while copying them.
+        let mut nodes = Vec::with_capacity(node_count);
+        nodes.push([0u32; 4]);
+        let mut codes = Vec::with_capacity(words);
+        flatten(built, 0, &mut nodes, &mut codes);
         progress(1.0);
         Ok(Self {
             root_center,
@@ -404,50 +462,50 @@ impl Octree {
     }
 }
 
-/// Appends `built` as node `at` (already allocated) in octant order.
-fn flatten(
-    built: &Built,
-    at: usize,
-    nodes: &mut Vec<[u32; 4]>,
-    (codes, references): (&mut Vec<u32>, &mut usize),
-    max_words: u64,
-) -> Result<(), ReconError> {
+/// The flat layout's (nodes, code words, references) of `built`, after checking every leaf in
+/// octant order against [`MAX_LEAF_REFERENCES`] and [`MAX_LEAF_CODES`].
+fn check_leaves(built: &Built) -> Result<(usize, usize, usize), ReconError> {
     match built {
-        Built::Leaf { members, scale } => {
-            if members.len() > MAX_LEAF_REFERENCES {
+        Built::Leaf(leaf) => {
+            if leaf.references > MAX_LEAF_REFERENCES {
                 return Err(ReconError::LeafTooLarge {
-                    refs: members.len(),
+                    refs: leaf.references,
                     limit: MAX_LEAF_REFERENCES,
                 });
             }
-            let (begin, count) = octree_codes::encode(members, codes);
-            if count > MAX_LEAF_CODES {
+            if leaf.codes > MAX_LEAF_CODES {
                 return Err(ReconError::LeafTooLarge {
-                    refs: count,
+                    refs: leaf.codes,
                     limit: MAX_LEAF_CODES,
                 });
             }
-            let words = codes.len() as u64;
-            if words > max_words {
-                return Err(ReconError::TooManyReferences {
-                    refs: (*references + members.len()) as u64,
-                    words,
-                    limit: max_words,
-                });
-            }
-            *references += members.len();
-            nodes[at] = [0, begin as u32, count as u32, scale.to_bits()];
+            Ok((1, leaf.words.len(), leaf.references))
+        }
+        Built::Inner(children) => children.iter().try_fold((1, 0, 0), |sum, c| {
+            let (n, w, r) = check_leaves(c)?;
+            Ok((sum.0 + n, sum.1 + w, sum.2 + r))
+        }),
+    }
+}
+
+/// Appends `built` as node `at` (already allocated) in octant order, freeing each leaf's
+/// words once they are copied.
+fn flatten(built: Built, at: usize, nodes: &mut Vec<[u32; 4]>, codes: &mut Vec<u32>) {
+    match built {
+        Built::Leaf(leaf) => {
+            let begin = codes.len();
+            codes.extend_from_slice(&leaf.words);
+            nodes[at] = [0, begin as u32, leaf.codes as u32, leaf.scale.to_bits()];
         }
         Built::Inner(children) => {
             let child = nodes.len();
             nodes[at] = [child as u32, 0, 0, 0];
             nodes.extend(std::iter::repeat_n([0u32; 4], 8));
-            for (o, c) in children.iter().enumerate() {
-                flatten(c, child + o, nodes, (codes, references), max_words)?;
+            for (o, c) in (*children).into_iter().enumerate() {
+                flatten(c, child + o, nodes, codes);
             }
         }
     }
-    Ok(())
 }
 
 impl Neighbours for Octree {
@@ -460,5 +518,147 @@ impl Neighbours for Octree {
             let s = &self.samples[i as usize];
             visit(i as usize, s.position, s.value, &s.metric);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Uniform in [0, 1): a 64-bit LCG's high bits.
+    fn uniform(state: &mut u64) -> f64 {
+        *state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (*state >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// Ellipsoids of radii 0.05–0.3, a third of them rotated, around `offset`.
+    fn cloud(n: usize, offset: f64, state: &mut u64) -> Vec<SamplePoint> {
+        (0..n)
+            .map(|k| {
+                let position = [0, 1, 2].map(|_| offset + uniform(state));
+                let r = [0, 1, 2].map(|_| 0.05 + 0.25 * uniform(state));
+                let d = r.map(|r| 1.0 / (r * r));
+                // Positive definite: normalised, off-diagonals of 0.2 and -0.1 against a unit
+                // diagonal.
+                let (m01, m02) = if k % 3 == 0 {
+                    (0.2 * (d[0] * d[1]).sqrt(), -0.1 * (d[0] * d[2]).sqrt())
+                } else {
+                    (0.0, 0.0)
+                };
+                let metric = [d[0], d[1], d[2], m01, m02, 0.0];
+                SamplePoint {
+                    position,
+                    value: 0.0,
+                    metric,
+                }
+            })
+            .collect()
+    }
+
+    /// The octant pre-test drops only samples that the full test's axis planes reject: on
+    /// random ellipsoids, and on spheres whose box edge is pinned within a few ulps and slacks
+    /// of the split plane, near the origin and at 10¹², where an ulp passes the slack. It also
+    /// drops some, so a mask of all eight fails.
+    #[test]
+    fn octants_reached_keep_every_octant_the_overlap_test_accepts() {
+        let mut state = 7;
+        let slack = 1e-6;
+        for offset in [0.0, 1.0e12] {
+            let (mut accepted, mut dropped) = (0, 0);
+            for _ in 0..40 {
+                let half = 0.02 + 0.3 * uniform(&mut state);
+                let center = [0, 1, 2].map(|_| offset + uniform(&mut state));
+                let mut samples = cloud(100, offset, &mut state);
+                let ulp = f64::EPSILON * (offset + 1.0);
+                for (k, delta) in [
+                    -2.0 * slack,
+                    -slack,
+                    -4.0 * ulp,
+                    -ulp,
+                    0.0,
+                    ulp,
+                    4.0 * ulp,
+                    slack,
+                ]
+                .into_iter()
+                .enumerate()
+                {
+                    let r = 0.1;
+                    let a = k % 3;
+                    let mut position =
+                        [0, 1, 2].map(|b| center[b] + half * (uniform(&mut state) - 0.5));
+                    // The box's lower edge at the plane + delta, then its upper edge at - delta.
+                    position[a] = center[a] + r + delta;
+                    let mut upper = position;
+                    upper[a] = center[a] - r - delta;
+                    let metric = [1.0 / (r * r), 1.0 / (r * r), 1.0 / (r * r), 0.0, 0.0, 0.0];
+                    for position in [position, upper] {
+                        samples.push(SamplePoint {
+                            position,
+                            value: 0.0,
+                            metric,
+                        });
+                    }
+                }
+                let prepared = Prepared {
+                    samples: &samples,
+                    extent: samples
+                        .iter()
+                        .map(|s| supports::extent(&s.metric))
+                        .collect(),
+                    radius: samples
+                        .iter()
+                        .map(|s| supports::mean_radius(&s.metric))
+                        .collect(),
+                    slack,
+                    settings: OctreeSettings::default(),
+                };
+                for i in 0..samples.len() as u32 {
+                    let mask = prepared.octants_reached(i, center, half);
+                    for o in 0..8 {
+                        let h = 0.5 * half;
+                        let c = [0, 1, 2].map(|a| center[a] + if o >> a & 1 == 1 { h } else { -h });
+                        if prepared.overlaps(i, c, h) {
+                            accepted += 1;
+                            assert_eq!(mask >> o & 1, 1, "sample {i}, octant {o}, offset {offset}");
+                        } else if mask >> o & 1 == 0 {
+                            dropped += 1;
+                        }
+                    }
+                }
+            }
+            assert!(
+                accepted > 1000 && dropped > 5000,
+                "{accepted} accepted, {dropped} dropped"
+            );
+        }
+    }
+
+    /// The flat layout is allocated once at its length, and decodes to each leaf's members.
+    #[test]
+    fn the_flat_codes_are_sized_once_and_hold_every_leaf() {
+        let mut state = 11;
+        let samples = cloud(3000, 0.0, &mut state);
+        let tree = Octree::build(samples.clone(), &OctreeSettings::default(), |_| {}).unwrap();
+        assert_eq!(tree.codes.capacity(), tree.codes.len());
+        assert_eq!(tree.nodes.capacity(), tree.nodes.len());
+        assert!(tree.leaf_count() > 100, "{} leaves", tree.leaf_count());
+        let mut references = 0;
+        for x in (0..200).map(|_| [0, 1, 2].map(|_| uniform(&mut state))) {
+            let (leaf, _) = tree.leaf(x);
+            let members: Vec<u32> = leaf.collect();
+            assert!(members.windows(2).all(|w| w[0] < w[1]));
+            // Every sample whose support holds x is in x's leaf.
+            for (i, s) in samples.iter().enumerate() {
+                let d = [0, 1, 2].map(|a| x[a] - s.position[a]);
+                if metric_rho2(&s.metric, d) <= 1.0 {
+                    assert!(members.binary_search(&(i as u32)).is_ok(), "{i} at {x:?}");
+                    references += 1;
+                }
+            }
+        }
+        assert!(references > 1000, "{references}");
     }
 }

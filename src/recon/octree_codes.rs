@@ -17,6 +17,29 @@
 /// The code that adds 0xFFFF to the running index and names no sample.
 pub const JUMP: u32 = 0xFFFF;
 
+/// How many codes `members` (strictly ascending) take: one per member, plus a jump per 0xFFFF
+/// in each gap.
+pub fn code_count(members: &[u32]) -> usize {
+    let mut prev = members.first().copied().unwrap_or(0);
+    members
+        .iter()
+        .map(|&i| {
+            let gap = i - prev;
+            prev = i;
+            1 + (gap / JUMP) as usize
+        })
+        .sum()
+}
+
+/// How many words `members` take: the first index's, then two codes to a word; none if empty.
+pub fn word_count(members: &[u32]) -> usize {
+    if members.is_empty() {
+        0
+    } else {
+        1 + code_count(members).div_ceil(2)
+    }
+}
+
 /// Appends `members` (strictly ascending) to `words`; returns (its first word, its code count).
 /// An empty leaf takes no words.
 pub fn encode(members: &[u32], words: &mut Vec<u32>) -> (usize, usize) {
@@ -25,24 +48,38 @@ pub fn encode(members: &[u32], words: &mut Vec<u32>) -> (usize, usize) {
         return (begin, 0);
     };
     words.push(first);
-    let mut halves: Vec<u32> = Vec::with_capacity(members.len() + 1);
+    let mut codes = 0;
+    // The low half of a word whose high half is still to come.
+    let mut low: Option<u32> = None;
+    let mut put = |half: u32| {
+        codes += 1;
+        match low.take() {
+            Some(l) => words.push(l | half << 16),
+            None => low = Some(half),
+        }
+    };
     let mut prev = first;
     for &i in members {
         let mut gap = i - prev;
         while gap >= JUMP {
-            halves.push(JUMP);
+            put(JUMP);
             gap -= JUMP;
         }
-        halves.push(gap);
+        put(gap);
         prev = i;
     }
-    let codes = halves.len();
-    words.extend(
-        halves
-            .chunks(2)
-            .map(|p| p[0] | p.get(1).map_or(0, |h| h << 16)),
-    );
+    if let Some(l) = low {
+        words.push(l);
+    }
     (begin, codes)
+}
+
+/// `members` coded on their own, in words of exactly the length they need: (the words, the
+/// code count). What [`encode`] would append.
+pub fn encode_leaf(members: &[u32]) -> (Vec<u32>, usize) {
+    let mut words = Vec::with_capacity(word_count(members));
+    let (_, codes) = encode(members, &mut words);
+    (words, codes)
 }
 
 /// The indices of one leaf: `codes` codes after the first index at word `begin` of `words`.
@@ -144,5 +181,14 @@ mod tests {
         assert_eq!(at[4].1, 1 + 1 + 1 + 1 + 1067 + 1 + 64_469);
         // The gap 0xFFFF itself is one jump and a 0.
         assert_eq!(at[5].1, 1 + 1 + 2);
+        // Counted without coding, and coded alone: the same codes and words.
+        for (m, (&(begin, codes), &n)) in leaves.iter().zip(at.iter().zip(&appended)) {
+            assert_eq!(code_count(m), codes);
+            assert_eq!(word_count(m), n);
+            let (alone, alone_codes) = encode_leaf(m);
+            assert_eq!(alone_codes, codes);
+            assert_eq!(alone.capacity(), n);
+            assert_eq!(&alone[..], &words[begin..begin + n]);
+        }
     }
 }
