@@ -274,7 +274,7 @@ where
 
 /// Sample indices sorted by the Morton code of their positions over the points' bounding
 /// box (21 bits an axis; ties by index, so the order is deterministic).
-fn morton_order(positions: &[[f64; 3]]) -> Vec<u32> {
+pub fn morton_order(positions: &[[f64; 3]]) -> Vec<u32> {
     let (lo, hi) = super::points_box(positions);
     let cells = f64::from((1u32 << 21) - 1);
     let scale = [0, 1, 2].map(|a| {
