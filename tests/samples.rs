@@ -415,55 +415,6 @@ fn octree_finds_every_neighbour_of_anisotropic_supports() {
     }
 }
 
-/// A point cloud's samples are its points in the Morton order of their positions, each with
-/// its own value: the order that neighbourhood structures and kernels read fastest.
-#[test]
-fn scattered_points_are_kept_in_morton_order_with_their_values() {
-    let points = random_cloud(3000, 9);
-    let f = |p: [f64; 3]| (p[0] + 2.0 * p[1] + 4.0 * p[2]) as f32;
-    let d = point_data(
-        Geometry::Points {
-            points: points.clone(),
-        },
-        |p| f64::from(f(p)),
-    );
-    let set = samples(&d, 1.5, 8, None);
-    assert_eq!(set.len(), points.len());
-    let positions: Vec<[f64; 3]> = (0..set.len()).map(|i| set.position(i)).collect();
-    let order = vmls::samples::supports::morton_order(&positions);
-    assert!(
-        order.iter().enumerate().all(|(k, &i)| i as usize == k),
-        "the set is not in Morton order"
-    );
-    for (i, p) in positions.iter().enumerate() {
-        assert_eq!(set.values.get(i), f(*p), "sample {i} lost its value");
-    }
-    let mut sorted = positions.clone();
-    let mut given = points.clone();
-    for v in [&mut sorted, &mut given] {
-        v.sort_by(|a, b| a.partial_cmp(b).expect("finite positions"));
-    }
-    assert_eq!(sorted, given, "the set is not a permutation of the points");
-    // Consecutive samples are neighbours, as they were not in the file.
-    let step = |p: &[[f64; 3]]| {
-        p.windows(2)
-            .map(|w| {
-                (0..3)
-                    .map(|a| (w[1][a] - w[0][a]).powi(2))
-                    .sum::<f64>()
-                    .sqrt()
-            })
-            .sum::<f64>()
-            / (p.len() - 1) as f64
-    };
-    assert!(
-        step(&positions) < 0.25 * step(&points),
-        "{} against {}",
-        step(&positions),
-        step(&points)
-    );
-}
-
 #[test]
 fn coincident_samples_are_merged_with_averaged_values() {
     let mut points = random_cloud(50, 4);

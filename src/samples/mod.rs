@@ -15,14 +15,6 @@
 //! [`DUPLICATE_TOLERANCE`] × the bounding-box diagonal are merged, their values averaged, and
 //! the count reported in [`Provenance::merged`].
 //!
-//! Scattered points (a point cloud, whose order in its file means nothing) are kept in the
-//! Morton order of their positions, not the file's: every neighbourhood structure built over
-//! them (supports, the octree) and every kernel reading a leaf's samples then reads
-//! neighbours from nearby memory. On 10⁶ random points it cut the octree build by 22–28% and
-//! an MLS frame through coded references by 23% (BENCHMARKS.md, "Point clouds in Morton
-//! order"). Errors that name a point are raised on the dataset, in the file's order, before
-//! this.
-//!
 //! The layer reads `data::Dataset` and never the scene: [`SampleSettings`] is its own
 //! configuration type.
 
@@ -471,16 +463,10 @@ impl SampleSet {
                         ),
                     });
                 }
-                let order = supports::morton_order(&merged.positions);
-                let positions: Vec<[f64; 3]> = order
-                    .iter()
-                    .map(|&i| merged.positions[i as usize])
-                    .collect();
-                let values: Vec<f32> = order.iter().map(|&i| merged.values[i as usize]).collect();
-                let knn = derive_scattered(&positions, settings, &mut provenance);
+                let knn = derive_scattered(&merged.positions, settings, &mut provenance);
                 let mut set = Self {
-                    positions: Positions::Scattered(positions),
-                    values: values.into(),
+                    positions: Positions::Scattered(merged.positions),
+                    values: merged.values.into(),
                     supports: Supports::PerSample(knn.metrics),
                     domain: Domain::Box {
                         lo: [0.0; 3],
