@@ -13,7 +13,8 @@
 //! Subdivision ([OCT]): a node is split while it holds more than `leaf_budget` references, its
 //! side exceeds `leaf_size` × the mean support radius of its samples, and it is shallower than
 //! `max_depth`. Subtrees are built in parallel (rayon) and flattened in octant order, so the
-//! result does not depend on the thread count. Memory is bounded: the build fails with a clear
+//! result does not depend on the thread count. The build reads the samples in Morton order and
+//! each leaf lists their own indices, ascending. Memory is bounded: the build fails with a clear
 //! error past `max_references`.
 //!
 //! Overlap test (conservative and tight): a sample is referenced by a cell unless a separating
@@ -148,7 +149,7 @@ impl CodedLeaf {
 struct Prepared<'a> {
     /// The samples in the Morton order of their positions: a node's candidates, ascending in
     /// this order, are then read from nearby memory (a point file's own order is often random:
-    /// the build took a quarter longer on 10⁶ random points).
+    /// on 10⁶ random points this order took 14–18% off the build).
     samples: &'a [SamplePoint],
     /// Each of those samples' index in the octree's samples, which its leaves list.
     original: &'a [u32],
