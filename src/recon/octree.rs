@@ -218,7 +218,7 @@ impl Prepared<'_> {
             } else {
                 (1.0 / mean_radius) as f32
             };
-            return Built::Leaf(self.leaf(&members, scale));
+            return Built::Leaf(self.leaf(members, scale));
         }
         let parallel = members.len() > 4096;
         let reach: Vec<u8> = if parallel {
@@ -251,15 +251,17 @@ impl Prepared<'_> {
         match <[Built; 8]>::try_from(children) {
             Ok(c) => Built::Inner(Box::new(c)),
             // Unreachable (8 octants in, 8 out); a leaf keeps the tree valid regardless.
-            Err(_) => Built::Leaf(self.leaf(&members, (1.0 / mean_radius) as f32)),
+            Err(_) => Built::Leaf(self.leaf(members, (1.0 / mean_radius) as f32)),
         }
     }
 
     /// A leaf of `members` (in the build's order), listing their indices in ascending order.
-    fn leaf(&self, members: &[u32], scale: f32) -> CodedLeaf {
-        let mut listed: Vec<u32> = members.iter().map(|&m| self.original[m as usize]).collect();
-        listed.sort_unstable();
-        CodedLeaf::new(&listed, scale)
+    fn leaf(&self, mut members: Vec<u32>, scale: f32) -> CodedLeaf {
+        members
+            .iter_mut()
+            .for_each(|m| *m = self.original[*m as usize]);
+        members.sort_unstable();
+        CodedLeaf::new(&members, scale)
     }
 
     /// The octants of the cell (`center`, `half`) that sample i's support box may reach, as
@@ -270,20 +272,19 @@ impl Prepared<'_> {
     fn octants_reached(&self, i: u32, center: [f64; 3], half: f64) -> u8 {
         let s = &self.samples[i as usize];
         let e = self.extent[i as usize];
-        let mut lower = 0u8;
-        let mut upper = 0u8;
+        // The octants in the upper half along x, y, z.
+        const UPPER: [u8; 3] = [0xAA, 0xCC, 0xF0];
+        let mut mask = 0xFF;
         for a in 0..3 {
             let margin = 2.0 * self.slack + 8.0 * f64::EPSILON * (center[a].abs() + half);
-            if s.position[a] - e[a] <= center[a] + margin {
-                lower |= 1 << a;
+            if s.position[a] - e[a] > center[a] + margin {
+                mask &= UPPER[a];
             }
-            if s.position[a] + e[a] >= center[a] - margin {
-                upper |= 1 << a;
+            if s.position[a] + e[a] < center[a] - margin {
+                mask &= !UPPER[a];
             }
         }
-        (0..8u8)
-            .filter(|&o| (0..3).all(|a| if o >> a & 1 == 1 { upper } else { lower } >> a & 1 == 1))
-            .fold(0, |mask, o| mask | 1 << o)
+        mask
     }
 }
 
