@@ -545,21 +545,14 @@ impl Neighbours for Octree {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// Uniform in [0, 1): a 64-bit LCG's high bits.
-    fn uniform(state: &mut u64) -> f64 {
-        *state = state
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (*state >> 11) as f64 / (1u64 << 53) as f64
-    }
+    use crate::data::random::Lcg;
 
     /// Ellipsoids of radii 0.05–0.3, a third of them rotated, around `offset`.
-    fn cloud(n: usize, offset: f64, state: &mut u64) -> Vec<SamplePoint> {
+    fn cloud(n: usize, offset: f64, rng: &mut Lcg) -> Vec<SamplePoint> {
         (0..n)
             .map(|k| {
-                let position = [0, 1, 2].map(|_| offset + uniform(state));
-                let r = [0, 1, 2].map(|_| 0.05 + 0.25 * uniform(state));
+                let position = [0, 1, 2].map(|_| offset + rng.next_f64());
+                let r = [0, 1, 2].map(|_| 0.05 + 0.25 * rng.next_f64());
                 let d = r.map(|r| 1.0 / (r * r));
                 // Positive definite: normalised, off-diagonals of 0.2 and -0.1 against a unit
                 // diagonal.
@@ -584,14 +577,14 @@ mod tests {
     /// drops some, so a mask of all eight fails.
     #[test]
     fn octants_reached_keep_every_octant_the_overlap_test_accepts() {
-        let mut state = 7;
+        let mut rng = Lcg::new(7);
         let slack = 1e-6;
         for offset in [0.0, 1.0e12] {
             let (mut accepted, mut dropped) = (0, 0);
             for _ in 0..40 {
-                let half = 0.02 + 0.3 * uniform(&mut state);
-                let center = [0, 1, 2].map(|_| offset + uniform(&mut state));
-                let mut samples = cloud(100, offset, &mut state);
+                let half = 0.02 + 0.3 * rng.next_f64();
+                let center = [0, 1, 2].map(|_| offset + rng.next_f64());
+                let mut samples = cloud(100, offset, &mut rng);
                 let ulp = f64::EPSILON * (offset + 1.0);
                 for (k, delta) in [
                     -2.0 * slack,
@@ -608,8 +601,7 @@ mod tests {
                 {
                     let r = 0.1;
                     let a = k % 3;
-                    let mut position =
-                        [0, 1, 2].map(|b| center[b] + half * (uniform(&mut state) - 0.5));
+                    let mut position = [0, 1, 2].map(|b| center[b] + half * (rng.next_f64() - 0.5));
                     // The box's lower edge at the plane + delta, then its upper edge at - delta.
                     position[a] = center[a] + r + delta;
                     let mut upper = position;
@@ -665,8 +657,8 @@ mod tests {
     /// in another order).
     #[test]
     fn leaves_list_the_samples_as_given_whatever_their_order() {
-        let mut state = 5;
-        let samples = cloud(2000, 0.0, &mut state);
+        let mut rng = Lcg::new(5);
+        let samples = cloud(2000, 0.0, &mut rng);
         let reversed: Vec<SamplePoint> = samples.iter().rev().copied().collect();
         let settings = OctreeSettings::default();
         let a = Octree::build(samples.clone(), &settings, |_| {}).unwrap();
@@ -696,14 +688,14 @@ mod tests {
     /// The flat layout is allocated once at its length, and decodes to each leaf's members.
     #[test]
     fn the_flat_codes_are_sized_once_and_hold_every_leaf() {
-        let mut state = 11;
-        let samples = cloud(3000, 0.0, &mut state);
+        let mut rng = Lcg::new(11);
+        let samples = cloud(3000, 0.0, &mut rng);
         let tree = Octree::build(samples.clone(), &OctreeSettings::default(), |_| {}).unwrap();
         assert_eq!(tree.codes.capacity(), tree.codes.len());
         assert_eq!(tree.nodes.capacity(), tree.nodes.len());
         assert!(tree.leaf_count() > 100, "{} leaves", tree.leaf_count());
         let mut references = 0;
-        for x in (0..200).map(|_| [0, 1, 2].map(|_| uniform(&mut state))) {
+        for x in (0..200).map(|_| [0, 1, 2].map(|_| rng.next_f64())) {
             let (leaf, _) = tree.leaf(x);
             let members: Vec<u32> = leaf.collect();
             assert!(members.windows(2).all(|w| w[0] < w[1]));
